@@ -1,0 +1,408 @@
+//! `slipstream bench`: the bus against raw Zenoh, UDP and TCP, two processes on loopback, in
+//! one run so every ratio compares figures taken on the same machine at the same time.
+//!
+//! Each case starts a receiver and a sender as child processes (`slipstream bench-peer`),
+//! so a case can give both its own environment (ZENOH_RUNTIME) and nothing is shared but the
+//! loopback interface. The receiver timestamps arrival against the publish time in the
+//! message: one-way latency on one host's clock.
+
+mod peer;
+mod spec;
+
+use std::io::{BufRead, BufReader, Write};
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+use serde::Serialize;
+
+pub use peer::{run_receiver, run_sender};
+pub use spec::{Background, CaseSpec, Payload, RecvReport, SendReport, Transport};
+
+/// Zenoh runtime setting that runs its rx, tx, acceptor and app work on one handover
+/// thread pool instead of handing each message from one pool to the next.
+pub const HANDOVER_RUNTIME: &str = "(rx: (handover: tx), acc: (handover: tx), app: (handover: tx), net: (handover: tx))";
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Suite {
+    /// a. speed-size messages at 100 Hz: one-way latency per path
+    Speed,
+    /// b. 640x480 and 1280x720 RGB frames: frames/s, MB/s, one-way latency
+    Frames,
+    /// c. speed latency and losses while frames load the link
+    Contention,
+}
+
+#[derive(Debug, Clone, clap::Args)]
+pub struct BenchArgs {
+    /// Which suites to run [default: all]
+    #[arg(value_enum)]
+    pub suites: Vec<Suite>,
+    /// Runs per case; figures are medians over runs
+    #[arg(long, default_value_t = 3)]
+    pub repeat: usize,
+    /// Few messages and one run: checks that every path works (a smoke test, not figures)
+    #[arg(long)]
+    pub quick: bool,
+    /// Print the results as JSON on stdout instead of the table
+    #[arg(long)]
+    pub json: bool,
+    /// Also write the table (markdown) to this file
+    #[arg(long, value_name = "FILE")]
+    pub markdown: Option<std::path::PathBuf>,
+}
+
+/// One measured path in one suite, medians over runs.
+#[derive(Debug, Clone, Serialize)]
+pub struct Row {
+    pub suite: String,
+    pub path: String,
+    pub runs: usize,
+    pub sent: f64,
+    pub received: f64,
+    pub lost: f64,
+    pub p50_us: Option<f64>,
+    pub p99_us: Option<f64>,
+    pub max_us: Option<f64>,
+    pub frames_per_s: Option<f64>,
+    pub mb_per_s: Option<f64>,
+    pub shared_memory_frames: f64,
+    pub background_frames_per_s: Option<f64>,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct Ratio {
+    pub what: String,
+    pub value: f64,
+    pub aim: String,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct BenchReport {
+    pub command: String,
+    pub rows: Vec<Row>,
+    pub ratios: Vec<Ratio>,
+}
+
+struct Case {
+    suite: String,
+    path: String,
+    spec: CaseSpec,
+}
+
+fn speed_spec(transport: Transport, count: u64) -> CaseSpec {
+    CaseSpec {
+        transport,
+        payload: Payload::Speed,
+        count,
+        rate_hz: Some(100.0),
+        max_duration_s: count as f64 / 100.0 + 10.0,
+        qos: true,
+        shm: true,
+        lowlatency: false,
+        runtime: None,
+        background: None,
+    }
+}
+
+fn cases(suites: &[Suite], quick: bool) -> Vec<Case> {
+    let mut out = Vec::new();
+    let speed_n = if quick { 50 } else { 500 };
+    let mut push = |suite: &str, path: &str, spec: CaseSpec| out.push(Case { suite: suite.into(), path: path.into(), spec });
+
+    if suites.contains(&Suite::Speed) {
+        let s = "a. speed 100 Hz";
+        push(s, "raw UDP", speed_spec(Transport::Udp, speed_n));
+        push(s, "raw TCP", speed_spec(Transport::Tcp, speed_n));
+        push(s, "raw zenoh", speed_spec(Transport::Zenoh, speed_n));
+        push(s, "bus", speed_spec(Transport::Bus, speed_n));
+        push(s, "raw zenoh, handover runtime", CaseSpec { runtime: Some(HANDOVER_RUNTIME.into()), ..speed_spec(Transport::Zenoh, speed_n) });
+        push(s, "bus, handover runtime", CaseSpec { runtime: Some(HANDOVER_RUNTIME.into()), ..speed_spec(Transport::Bus, speed_n) });
+        push(
+            s,
+            "bus, handover + lowlatency",
+            CaseSpec { runtime: Some(HANDOVER_RUNTIME.into()), lowlatency: true, ..speed_spec(Transport::Bus, speed_n) },
+        );
+    }
+    if suites.contains(&Suite::Frames) {
+        for (w, h) in [(640u32, 480u32), (1280, 720)] {
+            let frame = |transport, shm, rate_hz: Option<f64>| CaseSpec {
+                transport,
+                payload: Payload::Frame { width: w, height: h },
+                count: match (rate_hz, quick) {
+                    (Some(_), true) => 10,
+                    (Some(_), false) => 60,
+                    (None, true) => 200,
+                    (None, false) => 20_000,
+                },
+                rate_hz,
+                max_duration_s: match (rate_hz, quick) {
+                    (Some(_), _) => 20.0,
+                    (None, true) => 1.0,
+                    (None, false) => 3.0,
+                },
+                qos: true,
+                shm,
+                lowlatency: false,
+                runtime: None,
+                background: None,
+            };
+            for (phase, rate) in [("throughput", None), ("latency @20 Hz", Some(20.0))] {
+                let s = format!("b. {w}x{h} RGB frames, {phase}");
+                push(&s, "bus, shared memory", frame(Transport::Bus, true, rate));
+                push(&s, "bus, TCP (shm off)", frame(Transport::Bus, false, rate));
+                push(&s, "raw zenoh, TCP (shm off)", frame(Transport::Zenoh, false, rate));
+                push(&s, "raw zenoh, implicit shm", frame(Transport::Zenoh, true, rate));
+                push(&s, "raw TCP", frame(Transport::Tcp, false, rate));
+            }
+        }
+    }
+    if suites.contains(&Suite::Contention) {
+        let n = if quick { 50 } else { 300 };
+        let loaded = |rate: Option<f64>, qos: bool, shm: bool| CaseSpec {
+            qos,
+            shm,
+            background: Some(Background { width: 640, height: 480, rate_hz: rate }),
+            ..speed_spec(Transport::Bus, n)
+        };
+        let s = "c. bus speed 100 Hz under 640x480 frames";
+        push(s, "unloaded", speed_spec(Transport::Bus, n));
+        push(s, "frames 30 Hz, QoS, TCP", loaded(Some(30.0), true, false));
+        push(s, "frames 30 Hz, QoS off, TCP", loaded(Some(30.0), false, false));
+        push(s, "frames saturating, QoS, TCP", loaded(None, true, false));
+        push(s, "frames saturating, QoS off, TCP", loaded(None, false, false));
+        push(s, "frames saturating, QoS, shm", loaded(None, true, true));
+    }
+    out
+}
+
+/// A child process that is killed if still running when dropped.
+struct Peer(Child);
+
+impl Drop for Peer {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+fn spawn_peer(role: &str, spec: &CaseSpec, endpoint: Option<&str>) -> Result<Peer> {
+    let exe = std::env::current_exe().context("find the slipstream binary")?;
+    let mut cmd = Command::new(exe);
+    cmd.arg("bench-peer").arg(role).arg("--spec").arg(serde_json::to_string(spec)?);
+    if let Some(ep) = endpoint {
+        cmd.arg("--endpoint").arg(ep);
+    }
+    match &spec.runtime {
+        Some(r) => cmd.env("ZENOH_RUNTIME", r),
+        None => cmd.env_remove("ZENOH_RUNTIME"),
+    };
+    // Peers log warnings only (SLIPSTREAM_BENCH_LOG overrides): progress is the parent's job.
+    cmd.env("RUST_LOG", std::env::var("SLIPSTREAM_BENCH_LOG").unwrap_or_else(|_| "warn,zenoh=error".into()));
+    cmd.stdin(Stdio::piped()).stdout(Stdio::piped()).stderr(Stdio::inherit());
+    Ok(Peer(cmd.spawn().context("spawn bench peer")?))
+}
+
+/// Reads lines until one starts with `tag`, within `timeout`.
+fn read_tagged(out: &mut BufReader<std::process::ChildStdout>, tag: &str, timeout: Duration) -> Result<String> {
+    let deadline = Instant::now() + timeout;
+    let mut line = String::new();
+    loop {
+        line.clear();
+        if out.read_line(&mut line)? == 0 {
+            bail!("peer exited before printing {tag}");
+        }
+        if let Some(rest) = line.trim_end().strip_prefix(tag) {
+            return Ok(rest.trim().to_string());
+        }
+        if Instant::now() > deadline {
+            bail!("no {tag} within {timeout:?}");
+        }
+    }
+}
+
+fn run_case(spec: &CaseSpec) -> Result<(SendReport, RecvReport)> {
+    let mut recv = spawn_peer("recv", spec, None)?;
+    let mut recv_out = BufReader::new(recv.0.stdout.take().context("receiver stdout")?);
+    let endpoint = read_tagged(&mut recv_out, "READY", Duration::from_secs(20))?;
+    let mut send = spawn_peer("send", spec, Some(&endpoint))?;
+    let mut send_out = BufReader::new(send.0.stdout.take().context("sender stdout")?);
+    let sent: SendReport = serde_json::from_str(&read_tagged(
+        &mut send_out,
+        "SENT",
+        Duration::from_secs_f64(spec.max_duration_s + 30.0),
+    )?)?;
+    std::thread::sleep(Duration::from_millis(300));
+    if let Some(mut stdin) = recv.0.stdin.take() {
+        let _ = stdin.write_all(b"stop\n");
+    }
+    let received: RecvReport = serde_json::from_str(&read_tagged(&mut recv_out, "RESULT", Duration::from_secs(30))?)?;
+    Ok((sent, received))
+}
+
+fn percentile(sorted: &[i64], p: f64) -> Option<f64> {
+    if sorted.is_empty() {
+        return None;
+    }
+    let i = ((sorted.len() - 1) as f64 * p).round() as usize;
+    Some(sorted[i] as f64 / 1000.0)
+}
+
+/// The median of the values present.
+pub fn median(values: impl IntoIterator<Item = Option<f64>>) -> Option<f64> {
+    let mut v: Vec<f64> = values.into_iter().flatten().filter(|x| x.is_finite()).collect();
+    if v.is_empty() {
+        return None;
+    }
+    v.sort_by(|a, b| a.total_cmp(b));
+    let n = v.len();
+    Some(if n % 2 == 1 { v[n / 2] } else { (v[n / 2 - 1] + v[n / 2]) / 2.0 })
+}
+
+struct RunFigures {
+    sent: f64,
+    received: f64,
+    lost: f64,
+    p50: Option<f64>,
+    p99: Option<f64>,
+    max: Option<f64>,
+    fps: Option<f64>,
+    mbps: Option<f64>,
+    shm: f64,
+    bg_fps: Option<f64>,
+}
+
+fn figures(spec: &CaseSpec, s: &SendReport, r: &RecvReport) -> RunFigures {
+    let mut lat = r.latencies_ns.clone();
+    lat.sort_unstable();
+    let throughput = spec.rate_hz.is_none() && r.received >= 2 && r.span_s > 0.0;
+    RunFigures {
+        sent: s.sent as f64,
+        received: r.received as f64,
+        lost: s.sent.saturating_sub(r.received) as f64,
+        p50: percentile(&lat, 0.5),
+        p99: percentile(&lat, 0.99),
+        max: lat.last().map(|x| *x as f64 / 1000.0),
+        fps: throughput.then(|| (r.received - 1) as f64 / r.span_s),
+        mbps: throughput.then(|| r.bytes as f64 / r.span_s / 1e6),
+        shm: r.shared_memory as f64,
+        bg_fps: spec.background.map(|_| r.background_received as f64 / s.elapsed_s.max(1e-3)),
+    }
+}
+
+/// Runs the suites; progress goes to stderr.
+pub fn run(args: &BenchArgs) -> Result<BenchReport> {
+    if cfg!(debug_assertions) {
+        eprintln!("warning: this is a debug build; figures mean little. Use `cargo run --release -- bench`.");
+    }
+    let suites = if args.suites.is_empty() { vec![Suite::Speed, Suite::Frames, Suite::Contention] } else { args.suites.clone() };
+    let repeat = if args.quick { 1 } else { args.repeat.max(1) };
+    let all = cases(&suites, args.quick);
+    let mut rows = Vec::new();
+    let total = all.len() * repeat;
+    let mut done = 0;
+    for case in &all {
+        let mut runs = Vec::new();
+        for _ in 0..repeat {
+            done += 1;
+            eprint!("[{done}/{total}] {} / {} ... ", case.suite, case.path);
+            let (s, r) = run_case(&case.spec).with_context(|| format!("{} / {}", case.suite, case.path))?;
+            let f = figures(&case.spec, &s, &r);
+            eprintln!("{} sent, {} received{}", s.sent, r.received, f.p50.map(|p| format!(", p50 {p:.0} us")).unwrap_or_default());
+            runs.push(f);
+        }
+        let med = |f: &dyn Fn(&RunFigures) -> Option<f64>| median(runs.iter().map(f));
+        rows.push(Row {
+            suite: case.suite.clone(),
+            path: case.path.clone(),
+            runs: runs.len(),
+            sent: med(&|r| Some(r.sent)).unwrap_or(0.0),
+            received: med(&|r| Some(r.received)).unwrap_or(0.0),
+            lost: med(&|r| Some(r.lost)).unwrap_or(0.0),
+            p50_us: med(&|r| r.p50),
+            p99_us: med(&|r| r.p99),
+            max_us: med(&|r| r.max),
+            frames_per_s: med(&|r| r.fps),
+            mb_per_s: med(&|r| r.mbps),
+            shared_memory_frames: med(&|r| Some(r.shm)).unwrap_or(0.0),
+            background_frames_per_s: med(&|r| r.bg_fps),
+        });
+    }
+    let ratios = ratios(&rows);
+    let command = std::env::args().collect::<Vec<_>>().join(" ");
+    Ok(BenchReport { command, rows, ratios })
+}
+
+fn find<'a>(rows: &'a [Row], suite_prefix: &str, path: &str) -> Option<&'a Row> {
+    rows.iter().find(|r| r.suite.starts_with(suite_prefix) && r.path == path)
+}
+
+fn ratios(rows: &[Row]) -> Vec<Ratio> {
+    let mut out = Vec::new();
+    let mut ratio = |what: String, a: Option<f64>, b: Option<f64>, aim: &str| {
+        if let (Some(a), Some(b)) = (a, b) {
+            if b > 0.0 {
+                out.push(Ratio { what, value: a / b, aim: aim.into() });
+            }
+        }
+    };
+    let p50 = |s: &str, p: &str| find(rows, s, p).and_then(|r| r.p50_us);
+    let p99 = |s: &str, p: &str| find(rows, s, p).and_then(|r| r.p99_us);
+    ratio("speed p50: bus / raw UDP".into(), p50("a.", "bus"), p50("a.", "raw UDP"), "<= 1.5");
+    ratio("speed p50: bus / raw zenoh".into(), p50("a.", "bus"), p50("a.", "raw zenoh"), "<= 1.1");
+    ratio(
+        "speed p50: bus, handover / raw zenoh, handover".into(),
+        p50("a.", "bus, handover runtime"),
+        p50("a.", "raw zenoh, handover runtime"),
+        "<= 1.1",
+    );
+    ratio("speed p50: bus, handover / raw UDP".into(), p50("a.", "bus, handover runtime"), p50("a.", "raw UDP"), "<= 1.5");
+    ratio("speed p50: bus, handover + lowlatency / raw UDP".into(), p50("a.", "bus, handover + lowlatency"), p50("a.", "raw UDP"), "<= 1.5");
+    for size in ["640x480", "1280x720"] {
+        let fps = |p: &str| rows.iter().find(|r| r.suite.contains(size) && r.suite.contains("throughput") && r.path == p).and_then(|r| r.frames_per_s);
+        ratio(format!("{size} frames/s: bus shm / raw TCP"), fps("bus, shared memory"), fps("raw TCP"), ">= 3");
+        ratio(format!("{size} frames/s: bus TCP / raw zenoh TCP"), fps("bus, TCP (shm off)"), fps("raw zenoh, TCP (shm off)"), ">= 0.9");
+    }
+    let c = "c.";
+    for p in ["frames 30 Hz, QoS, TCP", "frames saturating, QoS, TCP", "frames saturating, QoS off, TCP", "frames saturating, QoS, shm"] {
+        ratio(format!("speed p99 {p} / unloaded"), p99(c, p), p99(c, "unloaded"), "<= 3 (with QoS)");
+    }
+    out
+}
+
+fn fmt_opt(v: Option<f64>, digits: usize) -> String {
+    v.map(|x| format!("{x:.digits$}")).unwrap_or_else(|| "-".into())
+}
+
+/// The report as markdown tables: one per suite, then the ratios.
+pub fn markdown(report: &BenchReport) -> String {
+    let mut s = String::new();
+    let mut suite = "";
+    for r in &report.rows {
+        if r.suite != suite {
+            suite = &r.suite;
+            s.push_str(&format!("\n### {suite}\n\n| path | sent | received | lost | p50 us | p99 us | max us | frames/s | MB/s | shm frames | bg frames/s |\n|---|---|---|---|---|---|---|---|---|---|---|\n"));
+        }
+        s.push_str(&format!(
+            "| {} | {:.0} | {:.0} | {:.0} | {} | {} | {} | {} | {} | {:.0} | {} |\n",
+            r.path,
+            r.sent,
+            r.received,
+            r.lost,
+            fmt_opt(r.p50_us, 0),
+            fmt_opt(r.p99_us, 0),
+            fmt_opt(r.max_us, 0),
+            fmt_opt(r.frames_per_s, 0),
+            fmt_opt(r.mb_per_s, 0),
+            r.shared_memory_frames,
+            fmt_opt(r.background_frames_per_s, 1),
+        ));
+    }
+    if !report.ratios.is_empty() {
+        s.push_str("\n### Ratios (same run)\n\n| ratio | value | aim |\n|---|---|---|\n");
+        for r in &report.ratios {
+            s.push_str(&format!("| {} | {:.2} | {} |\n", r.what, r.value, r.aim));
+        }
+    }
+    s
+}

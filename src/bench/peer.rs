@@ -1,0 +1,476 @@
+//! The two processes of a benchmark case: a receiver that reports latencies, a sender that
+//! paces messages. Run as `slipstream bench-peer` by the orchestrator in [`super`].
+//!
+//! Raw transports (UDP, TCP, raw Zenoh) carry a 16-byte record: seq (u64 LE) then the publish
+//! wall-clock time (u64 LE ns), followed by the frame bytes for frames. The bus carries its
+//! own encoded messages.
+
+use std::io::{BufRead, Read, Write};
+use std::net::{TcpListener, TcpStream, UdpSocket};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+use parking_lot::Mutex;
+use zenoh::bytes::ZBytes;
+use zenoh::Wait;
+
+use super::spec::{Background, CaseSpec, Payload, RecvReport, SendReport, Transport};
+use crate::bus::Bus;
+use crate::config::TopicMap;
+use crate::msg::{wall_clock_ns, CameraFrameRef, ImageEncoding, Speed};
+use crate::topics;
+
+const RAW_HEADER: usize = 16;
+const SPEED_KEY: &str = "bench/speed";
+const FRAME_KEY: &str = "bench/frame";
+
+fn raw_record(seq: u64) -> [u8; RAW_HEADER] {
+    let mut r = [0u8; RAW_HEADER];
+    r[..8].copy_from_slice(&seq.to_le_bytes());
+    r[8..].copy_from_slice(&wall_clock_ns().to_le_bytes());
+    r
+}
+
+fn parse_record(b: &[u8]) -> Option<(u64, u64)> {
+    let seq = u64::from_le_bytes(b.get(..8)?.try_into().ok()?);
+    let stamp = u64::from_le_bytes(b.get(8..16)?.try_into().ok()?);
+    Some((seq, stamp))
+}
+
+/// What the receiver collects, shared with Zenoh callbacks and reader threads.
+#[derive(Default)]
+struct Collector {
+    latencies: Mutex<Vec<i64>>,
+    received: AtomicU64,
+    bytes: AtomicU64,
+    highest: Mutex<Option<u64>>,
+    first_last: Mutex<Option<(Instant, Instant)>>,
+    background: AtomicU64,
+    shm: AtomicU64,
+}
+
+impl Collector {
+    fn record(&self, seq: u64, stamp_pub_ns: u64, len: usize) {
+        let now_ns = wall_clock_ns();
+        let now = Instant::now();
+        self.latencies.lock().push(now_ns as i64 - stamp_pub_ns as i64);
+        self.received.fetch_add(1, Ordering::Relaxed);
+        self.bytes.fetch_add(len as u64, Ordering::Relaxed);
+        let mut h = self.highest.lock();
+        *h = Some(h.map_or(seq, |x| x.max(seq)));
+        let mut fl = self.first_last.lock();
+        *fl = Some(fl.map_or((now, now), |(f, _)| (f, now)));
+    }
+
+    fn report(&self) -> RecvReport {
+        RecvReport {
+            received: self.received.load(Ordering::Relaxed),
+            highest_seq: *self.highest.lock(),
+            bytes: self.bytes.load(Ordering::Relaxed),
+            latencies_ns: self.latencies.lock().clone(),
+            span_s: self.first_last.lock().map_or(0.0, |(f, l)| l.duration_since(f).as_secs_f64()),
+            background_received: self.background.load(Ordering::Relaxed),
+            shared_memory: self.shm.load(Ordering::Relaxed),
+        }
+    }
+}
+
+/// The Zenoh config of a bench peer: loopback only, no scouting, shared memory and the
+/// low-latency transport as the case says.
+pub fn peer_config(spec: &CaseSpec, listen: Option<&str>, connect: Option<&str>) -> Result<zenoh::Config> {
+    let mut c = zenoh::Config::default();
+    let set = |c: &mut zenoh::Config, k: &str, v: &str| c.insert_json5(k, v).map_err(|e| anyhow::anyhow!("{k}: {e}"));
+    set(&mut c, "mode", "\"peer\"")?;
+    set(&mut c, "scouting/multicast/enabled", "false")?;
+    set(&mut c, "scouting/gossip/enabled", "false")?;
+    set(&mut c, "listen/endpoints", &serde_json::to_string(&listen.into_iter().collect::<Vec<_>>())?)?;
+    set(&mut c, "connect/endpoints", &serde_json::to_string(&connect.into_iter().collect::<Vec<_>>())?)?;
+    set(&mut c, "transport/shared_memory/enabled", if spec.shm { "true" } else { "false" })?;
+    if spec.lowlatency {
+        set(&mut c, "transport/unicast/lowlatency", "true")?;
+        set(&mut c, "transport/unicast/qos/enabled", "false")?;
+    }
+    Ok(c)
+}
+
+/// The topic map of a bench peer: the defaults, or every topic at Zenoh's defaults
+/// (`qos: false`), and shared memory for frames as the case says.
+pub fn peer_topics(spec: &CaseSpec) -> Result<TopicMap> {
+    let flat = r#"{ priority: "data", express: false, congestion_control: "drop" }"#;
+    let topics = if spec.qos {
+        String::new()
+    } else {
+        format!(r#"topics: {{ "vehicle/speed": {flat}, "camera/front": {flat} }},"#)
+    };
+    let text = format!("{{ {topics} camera: {{ shared_memory: {} }} }}", spec.shm);
+    Ok(TopicMap::from_json5(&text, "bench case")?)
+}
+
+/// Receiver: prints `READY <endpoint>`, collects until stdin closes (or a hard limit), then
+/// prints `RESULT <json>`.
+pub async fn run_receiver(spec: CaseSpec) -> Result<()> {
+    let col = Arc::new(Collector::default());
+    let stop = Arc::new(AtomicBool::new(false));
+    let mut keep: Vec<Box<dyn std::any::Any + Send>> = Vec::new();
+    let mut threads = Vec::new();
+
+    let endpoint = match spec.transport {
+        Transport::Udp => {
+            let sock = UdpSocket::bind("127.0.0.1:0")?;
+            sock.set_read_timeout(Some(Duration::from_millis(50)))?;
+            let addr = sock.local_addr()?;
+            let (col, stop) = (col.clone(), stop.clone());
+            threads.push(std::thread::spawn(move || {
+                let mut buf = [0u8; 2048];
+                while !stop.load(Ordering::Relaxed) {
+                    if let Ok(n) = sock.recv(&mut buf) {
+                        if let Some((seq, stamp)) = parse_record(&buf[..n]) {
+                            col.record(seq, stamp, n);
+                        }
+                    }
+                }
+            }));
+            addr.to_string()
+        }
+        Transport::Tcp => {
+            let listener = TcpListener::bind("127.0.0.1:0")?;
+            let addr = listener.local_addr()?;
+            let (col, stop) = (col.clone(), stop.clone());
+            threads.push(std::thread::spawn(move || {
+                let Ok((stream, _)) = listener.accept() else { return };
+                let _ = stream.set_nodelay(true);
+                let _ = stream.set_read_timeout(Some(Duration::from_millis(200)));
+                let mut stream = std::io::BufReader::with_capacity(1 << 16, stream);
+                let mut len_buf = [0u8; 4];
+                let mut body = Vec::new();
+                while !stop.load(Ordering::Relaxed) {
+                    if stream.read_exact(&mut len_buf).is_err() {
+                        continue;
+                    }
+                    let len = u32::from_le_bytes(len_buf) as usize;
+                    body.resize(len, 0);
+                    if read_fully(&mut stream, &mut body, &stop).is_err() {
+                        return;
+                    }
+                    if let Some((seq, stamp)) = parse_record(&body) {
+                        col.record(seq, stamp, len + 4);
+                    }
+                }
+            }));
+            addr.to_string()
+        }
+        Transport::Zenoh => {
+            let session = zenoh::open(peer_config(&spec, Some("tcp/127.0.0.1:0"), None)?).await.map_err(anyhow::Error::msg)?;
+            let key = if matches!(spec.payload, Payload::Speed) { SPEED_KEY } else { FRAME_KEY };
+            let c = col.clone();
+            let sub = session
+                .declare_subscriber(key)
+                .callback(move |s| {
+                    let p = s.payload();
+                    if p.as_shm().is_some() {
+                        c.shm.fetch_add(1, Ordering::Relaxed);
+                    }
+                    let bytes = p.to_bytes();
+                    if let Some((seq, stamp)) = parse_record(&bytes) {
+                        c.record(seq, stamp, bytes.len());
+                    }
+                })
+                .await
+                .map_err(anyhow::Error::msg)?;
+            let ep = first_locator(&session).await?;
+            keep.push(Box::new(sub));
+            keep.push(Box::new(session));
+            ep
+        }
+        Transport::Bus => {
+            let session = zenoh::open(peer_config(&spec, Some("tcp/127.0.0.1:0"), None)?).await.map_err(anyhow::Error::msg)?;
+            let ep = first_locator(&session).await?;
+            let bus = Arc::new(Bus::from_session(session, peer_topics(&spec)?, "bench-recv").await?);
+            match spec.payload {
+                Payload::Speed => {
+                    let c = col.clone();
+                    let sub = bus
+                        .subscribe_with(topics::VEHICLE_SPEED, move |r| c.record(r.header.seq, r.header.stamp_pub_ns, 0))
+                        .await?;
+                    keep.push(Box::new(sub));
+                }
+                Payload::Frame { .. } => {}
+            }
+            if matches!(spec.payload, Payload::Frame { .. }) || spec.background.is_some() {
+                let sub = bus.subscriber(topics::CAMERA_FRONT).await?;
+                let (c, stop, measured) = (col.clone(), stop.clone(), matches!(spec.payload, Payload::Frame { .. }));
+                tokio::spawn(async move {
+                    while !stop.load(Ordering::Relaxed) {
+                        let Some(s) = sub.recv_sample_timeout(Duration::from_millis(100)).await else { continue };
+                        match s.decode::<CameraFrameRef>() {
+                            Ok(f) => {
+                                // Touch the pixels' last byte: the frame is really readable.
+                                let _ = std::hint::black_box(f.msg.data.last());
+                                if s.is_shared_memory() {
+                                    c.shm.fetch_add(1, Ordering::Relaxed);
+                                }
+                                if measured {
+                                    c.record(f.header.seq, f.header.stamp_pub_ns, s.bytes().len());
+                                } else {
+                                    c.background.fetch_add(1, Ordering::Relaxed);
+                                }
+                            }
+                            Err(e) => sub.report_decode_error(&e),
+                        }
+                    }
+                });
+            }
+            keep.push(Box::new(bus));
+            ep
+        }
+    };
+    if spec.transport != Transport::Bus && spec.background.is_some() {
+        bail!("background frames are measured through the bus only");
+    }
+
+    println!("READY {endpoint}");
+    std::io::stdout().flush()?;
+
+    // Wait for the orchestrator to close stdin (or a hard limit so nothing hangs).
+    let hard_limit = Duration::from_secs_f64(spec.max_duration_s + 60.0);
+    let (tx, rx) = tokio::sync::oneshot::channel();
+    std::thread::spawn(move || {
+        let mut line = String::new();
+        let _ = std::io::stdin().lock().read_line(&mut line);
+        let _ = tx.send(());
+    });
+    let _ = tokio::time::timeout(hard_limit, rx).await;
+    stop.store(true, Ordering::Relaxed);
+    for t in threads {
+        let _ = t.join();
+    }
+    let report = col.report();
+    drop(keep);
+    println!("RESULT {}", serde_json::to_string(&report)?);
+    std::io::stdout().flush()?;
+    Ok(())
+}
+
+fn read_fully(stream: &mut impl Read, buf: &mut [u8], stop: &AtomicBool) -> std::io::Result<()> {
+    let mut at = 0;
+    while at < buf.len() {
+        match stream.read(&mut buf[at..]) {
+            Ok(0) => return Err(std::io::ErrorKind::UnexpectedEof.into()),
+            Ok(n) => at += n,
+            Err(e) if matches!(e.kind(), std::io::ErrorKind::WouldBlock | std::io::ErrorKind::TimedOut) => {
+                if stop.load(Ordering::Relaxed) {
+                    return Err(e);
+                }
+            }
+            Err(e) => return Err(e),
+        }
+    }
+    Ok(())
+}
+
+async fn first_locator(session: &zenoh::Session) -> Result<String> {
+    let locators = session.info().locators().await;
+    locators.first().map(|l| l.to_string()).context("the receiver's session has no listening locator")
+}
+
+/// Paces a loop: the i-th iteration starts at start + i/rate (no drift), or at once.
+struct Pacer {
+    start: Instant,
+    period: Option<Duration>,
+}
+
+impl Pacer {
+    fn new(rate_hz: Option<f64>) -> Self {
+        Pacer { start: Instant::now(), period: rate_hz.map(|r| Duration::from_secs_f64(1.0 / r)) }
+    }
+    fn wait(&self, i: u64) {
+        if let Some(p) = self.period {
+            let due = self.start + p * i as u32;
+            let now = Instant::now();
+            if due > now {
+                std::thread::sleep(due - now);
+            }
+        }
+    }
+}
+
+/// Sender: connects to `endpoint`, sends the measured stream (and background frames), prints
+/// `SENT <json>`.
+pub async fn run_sender(spec: CaseSpec, endpoint: String) -> Result<()> {
+    let deadline = Instant::now() + Duration::from_secs_f64(spec.max_duration_s);
+    let started = Instant::now();
+    let mut report = SendReport::default();
+    match spec.transport {
+        Transport::Udp => {
+            let sock = UdpSocket::bind("127.0.0.1:0")?;
+            sock.connect(&endpoint)?;
+            let pacer = Pacer::new(spec.rate_hz);
+            for i in 0..spec.count {
+                if Instant::now() > deadline {
+                    break;
+                }
+                pacer.wait(i);
+                sock.send(&raw_record(i))?;
+                report.sent += 1;
+            }
+        }
+        Transport::Tcp => {
+            let mut stream = TcpStream::connect(&endpoint)?;
+            stream.set_nodelay(true)?;
+            let frame = match spec.payload {
+                Payload::Speed => Vec::new(),
+                Payload::Frame { width, height } => vec![7u8; (width * height * 3) as usize],
+            };
+            let pacer = Pacer::new(spec.rate_hz);
+            for i in 0..spec.count {
+                if Instant::now() > deadline {
+                    break;
+                }
+                pacer.wait(i);
+                let len = (RAW_HEADER + frame.len()) as u32;
+                let mut head = [0u8; 4 + RAW_HEADER];
+                head[..4].copy_from_slice(&len.to_le_bytes());
+                head[4..].copy_from_slice(&raw_record(i));
+                stream.write_all(&head)?;
+                if !frame.is_empty() {
+                    stream.write_all(&frame)?;
+                }
+                report.sent += 1;
+            }
+            stream.flush()?;
+        }
+        Transport::Zenoh => {
+            let session = zenoh::open(peer_config(&spec, None, Some(&endpoint))?).await.map_err(anyhow::Error::msg)?;
+            let (key, frame) = match spec.payload {
+                Payload::Speed => (SPEED_KEY, None),
+                Payload::Frame { width, height } => (FRAME_KEY, Some(ZBytes::from(vec![7u8; (width * height * 3) as usize]))),
+            };
+            let publisher = session.declare_publisher(key).await.map_err(anyhow::Error::msg)?;
+            wait_matching(&publisher).await?;
+            let pacer = Pacer::new(spec.rate_hz);
+            for i in 0..spec.count {
+                if Instant::now() > deadline {
+                    break;
+                }
+                pacer.wait(i);
+                let payload = match &frame {
+                    None => ZBytes::from(raw_record(i).to_vec()),
+                    Some(f) => {
+                        // Record then the frame: two slices, the frame shared, not copied.
+                        let mut w = ZBytes::writer();
+                        w.write_all(&raw_record(i))?;
+                        w.append(f.clone());
+                        w.finish()
+                    }
+                };
+                publisher.put(payload).wait().map_err(anyhow::Error::msg)?;
+                report.sent += 1;
+            }
+            tokio::time::sleep(Duration::from_millis(300)).await;
+            session.close().await.map_err(anyhow::Error::msg)?;
+        }
+        Transport::Bus => {
+            let bus = Bus::open(peer_config(&spec, None, Some(&endpoint))?, peer_topics(&spec)?, "bench-send").await?;
+            let bus = Arc::new(bus);
+            let done = Arc::new(AtomicBool::new(false));
+            let background = spec.background.map(|bg| {
+                let (bus, done) = (bus.clone(), done.clone());
+                tokio::spawn(async move { send_background(bus, bg, done, deadline).await })
+            });
+            match spec.payload {
+                Payload::Speed => {
+                    let publisher = bus.publisher(topics::VEHICLE_SPEED).await?;
+                    if !publisher.wait_for_subscriber(Duration::from_secs(10)).await {
+                        bail!("no subscriber matched vehicle/speed within 10 s");
+                    }
+                    let bus_for_pace = bus.clone();
+                    let count = spec.count;
+                    let rate = spec.rate_hz;
+                    let sent = tokio::task::spawn_blocking(move || {
+                        let _keep = bus_for_pace;
+                        let pacer = Pacer::new(rate);
+                        let mut sent = 0;
+                        for i in 0..count {
+                            if Instant::now() > deadline {
+                                break;
+                            }
+                            pacer.wait(i);
+                            if publisher.put(i * 10_000_000, &Speed { speed_mps: 20.0 }).is_ok() {
+                                sent += 1;
+                            }
+                        }
+                        sent
+                    })
+                    .await?;
+                    report.sent = sent;
+                }
+                Payload::Frame { width, height } => {
+                    let publisher = bus.frame_publisher().await?;
+                    if !publisher.publisher().wait_for_subscriber(Duration::from_secs(10)).await {
+                        bail!("no subscriber matched camera/front within 10 s");
+                    }
+                    let pacer = Pacer::new(spec.rate_hz);
+                    let len = (width * height * 3) as usize;
+                    for i in 0..spec.count {
+                        if Instant::now() > deadline {
+                            break;
+                        }
+                        pacer.wait(i);
+                        // The renderer would write every pixel here; the bench writes one
+                        // byte so that only transport costs are compared.
+                        let sent = publisher.put_with(i * 50_000_000, width, height, ImageEncoding::Rgb8, len, |px| px[len - 1] = i as u8)?;
+                        if sent.is_some() {
+                            report.sent += 1;
+                        }
+                    }
+                }
+            }
+            done.store(true, Ordering::Relaxed);
+            if let Some(bg) = background {
+                report.background_sent = bg.await??;
+            }
+            tokio::time::sleep(Duration::from_millis(300)).await;
+            if let Ok(bus) = Arc::try_unwrap(bus) {
+                bus.close().await?;
+            }
+        }
+    }
+    report.elapsed_s = started.elapsed().as_secs_f64();
+    println!("SENT {}", serde_json::to_string(&report)?);
+    std::io::stdout().flush()?;
+    Ok(())
+}
+
+async fn send_background(bus: Arc<Bus>, bg: Background, done: Arc<AtomicBool>, deadline: Instant) -> Result<u64> {
+    let publisher = bus.frame_publisher().await?;
+    let len = (bg.width * bg.height * 3) as usize;
+    tokio::task::spawn_blocking(move || {
+        let pacer = Pacer::new(bg.rate_hz);
+        let mut sent = 0u64;
+        let mut i = 0u64;
+        while !done.load(Ordering::Relaxed) && Instant::now() < deadline {
+            pacer.wait(i);
+            match publisher.put_with(i * 33_000_000, bg.width, bg.height, ImageEncoding::Rgb8, len, |px| px[0] = i as u8) {
+                Ok(Some(_)) => sent += 1,
+                Ok(None) => {}
+                Err(e) => return Err(anyhow::Error::from(e)),
+            }
+            i += 1;
+        }
+        Ok(sent)
+    })
+    .await?
+}
+
+async fn wait_matching(publisher: &zenoh::pubsub::Publisher<'_>) -> Result<()> {
+    let deadline = Instant::now() + Duration::from_secs(10);
+    while Instant::now() < deadline {
+        if publisher.matching_status().await.map(|s| s.matching()).unwrap_or(false) {
+            return Ok(());
+        }
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+    bail!("no subscriber matched within 10 s")
+}

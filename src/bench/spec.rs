@@ -1,0 +1,79 @@
+//! What one benchmark case runs, and what its two processes report.
+
+use serde::{Deserialize, Serialize};
+
+/// The path a message takes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Transport {
+    /// slipstream's typed bus (encode, header, QoS from the topic map, decode).
+    Bus,
+    /// Zenoh put/subscribe of the same bytes, no typed layer.
+    Zenoh,
+    /// One UDP datagram per message (the seed design's speed port).
+    Udp,
+    /// Length-prefixed messages on one TCP connection (the seed design's image port).
+    Tcp,
+}
+
+/// What flows in the measured stream.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Payload {
+    Speed,
+    Frame { width: u32, height: u32 },
+}
+
+/// Frames sent alongside the speed stream to load the link.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct Background {
+    pub width: u32,
+    pub height: u32,
+    /// None: as fast as the publisher can.
+    pub rate_hz: Option<f64>,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CaseSpec {
+    pub transport: Transport,
+    pub payload: Payload,
+    /// Messages in the measured stream.
+    pub count: u64,
+    /// None: as fast as possible.
+    pub rate_hz: Option<f64>,
+    /// The sender stops after this long even if `count` is not reached.
+    pub max_duration_s: f64,
+    /// false: every topic at Zenoh's defaults (priority data, not express).
+    pub qos: bool,
+    /// Shared memory on both sides (config and frame publisher).
+    pub shm: bool,
+    /// Zenoh's low-latency transport (no priorities, no fragmentation).
+    pub lowlatency: bool,
+    /// ZENOH_RUNTIME for both processes, None: Zenoh's default.
+    pub runtime: Option<String>,
+    pub background: Option<Background>,
+}
+
+/// The receiver's report.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct RecvReport {
+    pub received: u64,
+    /// Sequence numbers never seen (sender's count minus received, from the gaps).
+    pub highest_seq: Option<u64>,
+    pub bytes: u64,
+    /// One-way latency of every measured message, ns.
+    pub latencies_ns: Vec<i64>,
+    /// Wall-clock span between the first and the last measured message, s.
+    pub span_s: f64,
+    pub background_received: u64,
+    /// Frames delivered in shared memory.
+    pub shared_memory: u64,
+}
+
+/// The sender's report.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct SendReport {
+    pub sent: u64,
+    pub elapsed_s: f64,
+    pub background_sent: u64,
+}

@@ -1,0 +1,133 @@
+//! The typed bus over a Zenoh session.
+//!
+//! A [`Bus`] wraps one `zenoh::Session` with the [`TopicMap`] in force and the node's name. It
+//! declares typed publishers and subscribers by topic (never by key string), attaches the
+//! QoS the topic map gives, declares the node's liveliness token, and keeps statistics for
+//! every subscription.
+
+mod publisher;
+mod stats;
+mod subscriber;
+
+use std::sync::Arc;
+
+pub use publisher::{FramePublisher, FrameSent, Publisher};
+pub use stats::{StatsSnapshot, TopicStats};
+pub use subscriber::{BusSample, CallbackSubscriber, Received, Subscriber};
+
+use crate::config::{ConfigError, TopicMap};
+use crate::msg::Message;
+use crate::topics::TopicDef;
+
+/// What can go wrong on the bus. Decode errors are not here: they are counted per
+/// subscription and logged, never returned to the node as a failure of the bus.
+#[derive(Debug, thiserror::Error)]
+pub enum BusError {
+    #[error("zenoh: {context}: {source}")]
+    Zenoh { context: String, source: zenoh::Error },
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    #[error("invalid frame: {0}")]
+    InvalidFrame(String),
+    #[error("the subscription to {0} is closed")]
+    Closed(String),
+}
+
+pub(crate) fn zerr(context: impl Into<String>) -> impl FnOnce(zenoh::Error) -> BusError {
+    let context = context.into();
+    move |source| BusError::Zenoh { context, source }
+}
+
+/// A node's connection to the system: session, topic map, node name and liveliness token.
+pub struct Bus {
+    session: zenoh::Session,
+    topics: Arc<TopicMap>,
+    node: String,
+    _token: zenoh::liveliness::LivelinessToken,
+}
+
+impl Bus {
+    /// Opens a Zenoh session with `config` and joins as `node`.
+    pub async fn open(config: zenoh::Config, topics: TopicMap, node: &str) -> Result<Bus, BusError> {
+        let session = zenoh::open(config).await.map_err(zerr("open session"))?;
+        Bus::from_session(session, topics, node).await
+    }
+
+    /// Joins with an already-open session (tests hand in a loopback session).
+    pub async fn from_session(session: zenoh::Session, topics: TopicMap, node: &str) -> Result<Bus, BusError> {
+        let token_key = topics.node_key(node)?;
+        let token = session
+            .liveliness()
+            .declare_token(token_key.clone())
+            .await
+            .map_err(zerr(format!("declare liveliness token {token_key}")))?;
+        tracing::info!(node, zid = %session.zid(), namespace = topics.namespace(), "joined the bus");
+        Ok(Bus { session, topics: Arc::new(topics), node: node.to_string(), _token: token })
+    }
+
+    pub fn session(&self) -> &zenoh::Session {
+        &self.session
+    }
+
+    pub fn topics(&self) -> &TopicMap {
+        &self.topics
+    }
+
+    pub fn node(&self) -> &str {
+        &self.node
+    }
+
+    /// A typed publisher on `def`'s key with its configured QoS.
+    pub async fn publisher<M: Message>(&self, def: TopicDef<M>) -> Result<Publisher<M>, BusError> {
+        Publisher::declare(&self.session, &self.topics, def.topic).await
+    }
+
+    /// The camera-frame publisher: renders straight into shared memory when it can.
+    pub async fn frame_publisher(&self) -> Result<FramePublisher, BusError> {
+        FramePublisher::declare(&self.session, &self.topics).await
+    }
+
+    /// A typed subscriber with the topic's configured delivery (latest-only or a queue).
+    pub async fn subscriber<M: Message>(&self, def: TopicDef<M>) -> Result<Subscriber<M>, BusError> {
+        let qos = self.topics.qos(def.topic);
+        Subscriber::declare(&self.session, self.topics.key(def.topic), def.topic.name(), qos.delivery).await
+    }
+
+    /// Calls `handler` with every well-formed message of `def`, on Zenoh's receive thread
+    /// (lowest latency; keep the handler short).
+    pub async fn subscribe_with<M, F>(&self, def: TopicDef<M>, handler: F) -> Result<CallbackSubscriber, BusError>
+    where
+        M: Message + serde::de::DeserializeOwned,
+        F: Fn(Received<M>) + Send + Sync + 'static,
+    {
+        CallbackSubscriber::declare(&self.session, self.topics.key(def.topic), def.topic.name(), handler).await
+    }
+
+    /// Names of the nodes alive in this namespace (their liveliness tokens).
+    pub async fn nodes_alive(&self) -> Result<Vec<String>, BusError> {
+        let selector = self.topics.nodes_selector();
+        let replies = self
+            .session
+            .liveliness()
+            .get(selector.clone())
+            .timeout(std::time::Duration::from_secs(2))
+            .await
+            .map_err(zerr(format!("liveliness get {selector}")))?;
+        let prefix = selector.as_str().trim_end_matches("**").to_string();
+        let mut names = Vec::new();
+        while let Ok(reply) = replies.recv_async().await {
+            if let Ok(sample) = reply.result() {
+                let key = sample.key_expr().as_str();
+                names.push(key.strip_prefix(&prefix).unwrap_or(key).to_string());
+            }
+        }
+        names.sort();
+        names.dedup();
+        Ok(names)
+    }
+
+    /// Leaves the bus: undeclares everything and closes the session.
+    pub async fn close(self) -> Result<(), BusError> {
+        self.session.close().await.map_err(zerr("close session"))
+    }
+}

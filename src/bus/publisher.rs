@@ -1,0 +1,219 @@
+//! Typed publishers: seq and stamps in the header, QoS from the topic map, rate limit.
+
+use std::marker::PhantomData;
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
+
+use parking_lot::Mutex;
+use zenoh::bytes::{Encoding, ZBytes};
+use zenoh::shm::{GarbageCollect, PosixShmProviderBackend, ShmProvider, ShmProviderBuilder};
+use zenoh::Wait;
+
+use super::{zerr, BusError};
+use crate::config::TopicMap;
+use crate::msg::{self, encode_into, frame_prefix, CameraFrame, CameraFrameRef, Header, ImageEncoding, Message};
+use crate::topics::Topic;
+
+/// Publishes one message type on one topic.
+pub struct Publisher<M> {
+    inner: zenoh::pubsub::Publisher<'static>,
+    topic: Topic,
+    seq: AtomicU64,
+    /// With max_rate_hz: the smallest step of simulation time between two messages sent.
+    min_interval_ns: Option<u64>,
+    last_sim_ns: Mutex<Option<u64>>,
+    /// Size of the last encoded message, to allocate the next buffer once.
+    size_hint: AtomicUsize,
+    _msg: PhantomData<fn(&M)>,
+}
+
+impl<M: Message> Publisher<M> {
+    pub(super) async fn declare(session: &zenoh::Session, topics: &TopicMap, topic: Topic) -> Result<Self, BusError> {
+        let key = topics.key(topic);
+        let qos = topics.qos(topic);
+        let inner = session
+            .declare_publisher(key.clone())
+            .encoding(encoding_of(M::KIND))
+            .priority(qos.priority.into())
+            .express(qos.express)
+            .congestion_control(qos.congestion_control.into())
+            .reliability(qos.reliability.into())
+            .await
+            .map_err(zerr(format!("declare publisher on {key}")))?;
+        tracing::debug!(topic = topic.name(), %key, ?qos, "publisher declared");
+        Ok(Publisher {
+            inner,
+            topic,
+            seq: AtomicU64::new(0),
+            min_interval_ns: qos.max_rate_hz.map(|hz| (1e9 / hz) as u64),
+            last_sim_ns: Mutex::new(None),
+            size_hint: AtomicUsize::new(64),
+            _msg: PhantomData,
+        })
+    }
+
+    /// Stamps and sends `msg` as data of simulation time `stamp_sim_ns`. Returns the header
+    /// sent, or None when the topic's max_rate_hz dropped it (judged on simulation time, so a
+    /// fast or lockstep run keeps the same messages as a real-time one).
+    pub fn put(&self, stamp_sim_ns: u64, msg: &M) -> Result<Option<Header>, BusError> {
+        let Some(header) = self.next_header(stamp_sim_ns) else {
+            return Ok(None);
+        };
+        let mut buf = Vec::with_capacity(self.size_hint.load(Ordering::Relaxed));
+        encode_into(&mut buf, &header, msg);
+        self.size_hint.store(buf.len(), Ordering::Relaxed);
+        self.send(buf)?;
+        Ok(Some(header))
+    }
+
+    /// Allocates the next header, or None when rate-limited.
+    fn next_header(&self, stamp_sim_ns: u64) -> Option<Header> {
+        if let Some(min) = self.min_interval_ns {
+            let mut last = self.last_sim_ns.lock();
+            if let Some(prev) = *last {
+                if stamp_sim_ns >= prev && stamp_sim_ns - prev < min {
+                    return None;
+                }
+            }
+            *last = Some(stamp_sim_ns);
+        }
+        let seq = self.seq.fetch_add(1, Ordering::Relaxed);
+        Some(Header { seq, stamp_sim_ns, stamp_pub_ns: msg::wall_clock_ns() })
+    }
+
+    fn send(&self, payload: impl Into<ZBytes>) -> Result<(), BusError> {
+        self.inner.put(payload).wait().map_err(zerr(format!("put on {}", self.inner.key_expr())))
+    }
+
+    pub fn topic(&self) -> Topic {
+        self.topic
+    }
+
+    pub fn key(&self) -> &str {
+        self.inner.key_expr().as_str()
+    }
+
+    /// The underlying Zenoh publisher (its QoS, matching status).
+    pub fn zenoh(&self) -> &zenoh::pubsub::Publisher<'static> {
+        &self.inner
+    }
+
+    /// Waits until at least one subscriber matches, or the timeout passes. Returns whether one
+    /// matched.
+    pub async fn wait_for_subscriber(&self, timeout: std::time::Duration) -> bool {
+        let deadline = tokio::time::Instant::now() + timeout;
+        loop {
+            if self.inner.matching_status().await.map(|s| s.matching()).unwrap_or(false) {
+                return true;
+            }
+            if tokio::time::Instant::now() >= deadline {
+                return false;
+            }
+            tokio::time::sleep(std::time::Duration::from_millis(10)).await;
+        }
+    }
+}
+
+/// The Zenoh encoding every sample of `kind` carries.
+pub fn encoding_of(kind: msg::MessageKind) -> Encoding {
+    Encoding::APPLICATION_OCTET_STREAM.with_schema(kind.encoding_schema())
+}
+
+/// What a frame publish did.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FrameSent {
+    pub header: Header,
+    /// The frame went out in a shared-memory buffer (zero-copy for subscribers on this host).
+    pub shared_memory: bool,
+}
+
+/// Publishes camera frames. With shared memory on (the default), the payload is allocated in
+/// a shared-memory pool and the caller renders straight into it: subscribers on this host
+/// read the very bytes the renderer wrote.
+pub struct FramePublisher {
+    inner: Publisher<CameraFrame>,
+    shm: Option<ShmProvider<PosixShmProviderBackend>>,
+    heap_fallbacks: AtomicU64,
+}
+
+impl FramePublisher {
+    pub(super) async fn declare(session: &zenoh::Session, topics: &TopicMap) -> Result<Self, BusError> {
+        let inner = Publisher::declare(session, topics, Topic::CameraFront).await?;
+        let shm = if topics.camera.shared_memory {
+            match ShmProviderBuilder::default_backend(topics.camera.shm_pool_mib << 20).wait() {
+                Ok(p) => Some(p),
+                Err(e) => {
+                    tracing::warn!("shared memory unavailable, frames go through the heap: {e}");
+                    None
+                }
+            }
+        } else {
+            None
+        };
+        Ok(FramePublisher { inner, shm, heap_fallbacks: AtomicU64::new(0) })
+    }
+
+    /// Publishes a frame whose `data_len` image bytes `fill` writes in place.
+    pub fn put_with(
+        &self,
+        stamp_sim_ns: u64,
+        width: u32,
+        height: u32,
+        encoding: ImageEncoding,
+        data_len: usize,
+        fill: impl FnOnce(&mut [u8]),
+    ) -> Result<Option<FrameSent>, BusError> {
+        if let Some(expected) = encoding.expected_len(width, height) {
+            if expected != data_len {
+                return Err(BusError::InvalidFrame(format!("{width}x{height} {encoding:?} needs {expected} bytes, got {data_len}")));
+            }
+        }
+        let Some(header) = self.inner.next_header(stamp_sim_ns) else {
+            return Ok(None);
+        };
+        let prefix = frame_prefix(&header, width, height, encoding, data_len);
+        let total = prefix.len() + data_len;
+        if let Some(shm) = &self.shm {
+            match shm.alloc(total).with_policy::<GarbageCollect>().wait() {
+                Ok(mut buf) => {
+                    let bytes: &mut [u8] = &mut buf;
+                    bytes[..prefix.len()].copy_from_slice(&prefix);
+                    fill(&mut bytes[prefix.len()..]);
+                    self.inner.send(buf)?;
+                    return Ok(Some(FrameSent { header, shared_memory: true }));
+                }
+                Err(e) => {
+                    let n = self.heap_fallbacks.fetch_add(1, Ordering::Relaxed);
+                    if n.is_power_of_two() {
+                        tracing::warn!(fallbacks = n + 1, "shared-memory pool full ({e:?}), frame sent from the heap; raise camera.shm_pool_mib");
+                    }
+                }
+            }
+        }
+        let mut buf = Vec::with_capacity(total);
+        buf.extend_from_slice(&prefix);
+        buf.resize(total, 0);
+        fill(&mut buf[prefix.len()..]);
+        self.inner.send(buf)?;
+        Ok(Some(FrameSent { header, shared_memory: false }))
+    }
+
+    /// Publishes an existing image (one copy of its bytes into the payload).
+    pub fn put(&self, stamp_sim_ns: u64, frame: &CameraFrameRef<'_>) -> Result<Option<FrameSent>, BusError> {
+        self.put_with(stamp_sim_ns, frame.width, frame.height, frame.encoding, frame.data.len(), |dst| {
+            dst.copy_from_slice(frame.data)
+        })
+    }
+
+    /// Frames that had to go through the heap because the pool was full.
+    pub fn heap_fallbacks(&self) -> u64 {
+        self.heap_fallbacks.load(Ordering::Relaxed)
+    }
+
+    pub fn uses_shared_memory(&self) -> bool {
+        self.shm.is_some()
+    }
+
+    pub fn publisher(&self) -> &Publisher<CameraFrame> {
+        &self.inner
+    }
+}

@@ -1,0 +1,127 @@
+//! The connection flags every binary shares, and the Zenoh config they produce.
+
+use std::path::{Path, PathBuf};
+
+use super::{ConfigError, TopicMap};
+
+/// Where binaries look for the Zenoh config when `-c` is not given.
+pub const DEFAULT_ZENOH_CONFIG_PATH: &str = "config/zenoh.json5";
+
+/// config/zenoh.json5 as shipped, built in so a binary run from any directory behaves the same.
+pub const DEFAULT_ZENOH_CONFIG: &str = include_str!("../../config/zenoh.json5");
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ModeArg {
+    Peer,
+    Client,
+    Router,
+}
+
+/// Connection and topic flags, flattened into every binary's command line.
+#[derive(Debug, Clone, Default, clap::Args)]
+pub struct ConnectArgs {
+    /// Zenoh config file (JSON5) [default: ./config/zenoh.json5 if present, else the same
+    /// settings built in: peer mode on loopback, multicast scouting off]
+    #[arg(short = 'c', long = "config", value_name = "FILE", env = "SLIPSTREAM_ZENOH_CONFIG", global = true)]
+    pub zenoh_config: Option<PathBuf>,
+
+    /// Zenoh mode, overriding the config file
+    #[arg(short = 'm', long, value_enum, global = true)]
+    pub mode: Option<ModeArg>,
+
+    /// Endpoint to connect to, e.g. tcp/192.168.1.10:7447 (repeatable; replaces the config's list)
+    #[arg(short = 'e', long = "connect", value_name = "ENDPOINT", global = true)]
+    pub connect: Vec<String>,
+
+    /// Endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable; replaces the config's list)
+    #[arg(short = 'l', long = "listen", value_name = "ENDPOINT", global = true)]
+    pub listen: Vec<String>,
+
+    /// Turn multicast scouting off (it is already off in the default config)
+    #[arg(long, global = true)]
+    pub no_multicast_scouting: bool,
+
+    /// Set any Zenoh config key, e.g. --cfg 'transport/shared_memory/enabled:false' (value is JSON5; repeatable)
+    #[arg(long = "cfg", value_name = "KEY:VALUE", global = true)]
+    pub cfg: Vec<String>,
+
+    /// Topic config file (JSON5): namespace, key remapping, per-topic QoS
+    /// [default: ./config/slipstream.json5 if present, else built-in defaults]
+    #[arg(short = 't', long = "topics", value_name = "FILE", env = "SLIPSTREAM_CONFIG", global = true)]
+    pub topics: Option<PathBuf>,
+
+    /// Put every key under this namespace (several vehicles or simulators on one network)
+    #[arg(short = 'n', long, env = "SLIPSTREAM_NAMESPACE", global = true)]
+    pub namespace: Option<String>,
+}
+
+impl ConnectArgs {
+    /// The Zenoh config: file (or built-in default), then mode, endpoints, scouting and --cfg.
+    pub fn zenoh_config(&self) -> Result<zenoh::Config, ConfigError> {
+        let (mut config, origin) = match &self.zenoh_config {
+            Some(path) => (load_zenoh_file(path)?, ConfigError::file(path)),
+            None if Path::new(DEFAULT_ZENOH_CONFIG_PATH).is_file() => {
+                let path = Path::new(DEFAULT_ZENOH_CONFIG_PATH);
+                (load_zenoh_file(path)?, ConfigError::file(path))
+            }
+            None => (
+                zenoh::Config::from_json5(DEFAULT_ZENOH_CONFIG).map_err(|e| {
+                    ConfigError::new("built-in config/zenoh.json5", "", e.to_string(), "report this as a bug")
+                })?,
+                "built-in config/zenoh.json5".to_string(),
+            ),
+        };
+        let set = |config: &mut zenoh::Config, key: &str, value: String, flag: &str| {
+            config.insert_json5(key, &value).map_err(|e| {
+                ConfigError::new(flag, key, format!("`{value}` rejected: {e}"), format!("check the value given to {flag} (config from {origin})"))
+            })
+        };
+        if let Some(mode) = self.mode {
+            let m = match mode {
+                ModeArg::Peer => "peer",
+                ModeArg::Client => "client",
+                ModeArg::Router => "router",
+            };
+            set(&mut config, "mode", format!("\"{m}\""), "--mode")?;
+        }
+        if !self.connect.is_empty() {
+            set(&mut config, "connect/endpoints", json_list(&self.connect), "--connect")?;
+        }
+        if !self.listen.is_empty() {
+            set(&mut config, "listen/endpoints", json_list(&self.listen), "--listen")?;
+        }
+        if self.no_multicast_scouting {
+            set(&mut config, "scouting/multicast/enabled", "false".into(), "--no-multicast-scouting")?;
+        }
+        for kv in &self.cfg {
+            let Some((key, value)) = kv.split_once(':') else {
+                return Err(ConfigError::new("--cfg", kv, "missing `:` between key and value", "write --cfg 'KEY:VALUE', e.g. --cfg 'scouting/multicast/enabled:false'"));
+            };
+            set(&mut config, key, value.to_string(), "--cfg")?;
+        }
+        Ok(config)
+    }
+
+    /// The topic map: file (or default), then `--namespace`.
+    pub fn topic_map(&self) -> Result<TopicMap, ConfigError> {
+        let map = TopicMap::load_or_default(self.topics.as_deref())?;
+        match &self.namespace {
+            Some(ns) => map.with_namespace(ns),
+            None => Ok(map),
+        }
+    }
+}
+
+fn load_zenoh_file(path: &Path) -> Result<zenoh::Config, ConfigError> {
+    let origin = ConfigError::file(path);
+    if !path.is_file() {
+        return Err(ConfigError::new(&origin, "", "no such file", "give an existing file to -c/--config, or leave the flag out for the default"));
+    }
+    zenoh::Config::from_file(path).map_err(|e| {
+        ConfigError::new(origin, "", e.to_string(), "compare with the keys documented in config/zenoh.json5")
+    })
+}
+
+fn json_list(items: &[String]) -> String {
+    serde_json::to_string(items).unwrap_or_else(|_| "[]".into())
+}

@@ -1,0 +1,10 @@
+//! Configuration: the topic map (config/slipstream.json5) and the Zenoh connection
+//! (config/zenoh.json5 plus the shared command-line flags).
+
+mod connect;
+mod error;
+mod topic_map;
+
+pub use connect::{ConnectArgs, ModeArg, DEFAULT_ZENOH_CONFIG, DEFAULT_ZENOH_CONFIG_PATH};
+pub use error::ConfigError;
+pub use topic_map::{CameraEncoding, CameraSettings, ResolvedTopic, TopicMap, DEFAULT_SLIPSTREAM_CONFIG_PATH};

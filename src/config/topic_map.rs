@@ -1,0 +1,294 @@
+//! config/slipstream.json5: namespace, key remapping, per-topic QoS, camera encoding.
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use serde::Deserialize;
+use zenoh::key_expr::OwnedKeyExpr;
+
+use super::ConfigError;
+use crate::qos::{Congestion, Delivery, Priority, Reliability, TopicQos};
+use crate::topics::{Topic, NODES_PREFIX};
+
+/// Where nodes look for the topic config when no flag names one.
+pub const DEFAULT_SLIPSTREAM_CONFIG_PATH: &str = "config/slipstream.json5";
+
+/// How camera frames are put on the wire.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum CameraEncoding {
+    /// RGB8 pixels: no encode cost, zero-copy through shared memory on one host.
+    Raw,
+    /// JPEG at `jpeg_quality`: ~20x smaller, for frames that cross a LAN.
+    Jpeg,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct CameraSettings {
+    pub encoding: CameraEncoding,
+    pub jpeg_quality: u8,
+    /// Size of the shared-memory pool a frame publisher allocates frames from.
+    pub shm_pool_mib: usize,
+    /// Publish frames through shared memory when a subscriber on this host can read it.
+    pub shared_memory: bool,
+}
+
+impl Default for CameraSettings {
+    fn default() -> Self {
+        CameraSettings { encoding: CameraEncoding::Raw, jpeg_quality: 85, shm_pool_mib: 64, shared_memory: true }
+    }
+}
+
+/// One topic after namespace, remapping and QoS overrides.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ResolvedTopic {
+    /// The key as configured (without the namespace).
+    pub key: OwnedKeyExpr,
+    /// Given with a leading `/`: the namespace does not apply.
+    pub absolute: bool,
+    pub qos: TopicQos,
+}
+
+/// Logical topic -> key and QoS, for every topic; what every node consults.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TopicMap {
+    namespace: String,
+    entries: BTreeMap<Topic, ResolvedTopic>,
+    pub camera: CameraSettings,
+    /// The file it was read from, for messages.
+    pub origin: String,
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct RawFile {
+    #[serde(default)]
+    namespace: String,
+    #[serde(default)]
+    camera: RawCamera,
+    #[serde(default)]
+    topics: BTreeMap<String, RawTopic>,
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct RawCamera {
+    encoding: Option<CameraEncoding>,
+    jpeg_quality: Option<u8>,
+    shm_pool_mib: Option<usize>,
+    shared_memory: Option<bool>,
+}
+
+#[derive(Deserialize, Default)]
+#[serde(deny_unknown_fields)]
+struct RawTopic {
+    key: Option<String>,
+    priority: Option<Priority>,
+    express: Option<bool>,
+    congestion_control: Option<Congestion>,
+    reliability: Option<Reliability>,
+    max_rate_hz: Option<f64>,
+    delivery: Option<Delivery>,
+}
+
+impl Default for TopicMap {
+    fn default() -> Self {
+        let mut map = TopicMap {
+            namespace: String::new(),
+            entries: BTreeMap::new(),
+            camera: CameraSettings::default(),
+            origin: "built-in defaults".to_string(),
+        };
+        for t in Topic::ALL {
+            let key = key_expr(t.name()).expect("default topic names are valid keys");
+            map.entries.insert(t, ResolvedTopic { key, absolute: false, qos: t.default_qos() });
+        }
+        map
+    }
+}
+
+impl TopicMap {
+    /// Reads a topic config file.
+    pub fn load(path: &Path) -> Result<TopicMap, ConfigError> {
+        let origin = ConfigError::file(path);
+        let text = std::fs::read_to_string(path).map_err(|e| {
+            ConfigError::new(&origin, "", format!("cannot read the file: {e}"), "check the path given to --topics / SLIPSTREAM_CONFIG")
+        })?;
+        TopicMap::from_json5(&text, &origin)
+    }
+
+    /// Loads `path` if given, else config/slipstream.json5 if it exists, else the defaults.
+    pub fn load_or_default(path: Option<&Path>) -> Result<TopicMap, ConfigError> {
+        match path {
+            Some(p) => TopicMap::load(p),
+            None if Path::new(DEFAULT_SLIPSTREAM_CONFIG_PATH).is_file() => {
+                TopicMap::load(Path::new(DEFAULT_SLIPSTREAM_CONFIG_PATH))
+            }
+            None => Ok(TopicMap::default()),
+        }
+    }
+
+    /// Parses config text; `origin` names it in errors.
+    pub fn from_json5(text: &str, origin: &str) -> Result<TopicMap, ConfigError> {
+        let value: serde_json::Value = json5::from_str(text).map_err(|e| {
+            ConfigError::new(origin, "", format!("not valid JSON5: {e}"), "fix the syntax at the position given")
+        })?;
+        let raw: RawFile = serde_path_to_error::deserialize(value).map_err(|e| {
+            let key = e.path().to_string();
+            let key = if key == "." { String::new() } else { key };
+            ConfigError::new(origin, key, e.inner().to_string(), "see the comments in config/slipstream.json5 for every key and its allowed values")
+        })?;
+        TopicMap::from_raw(raw, origin)
+    }
+
+    fn from_raw(raw: RawFile, origin: &str) -> Result<TopicMap, ConfigError> {
+        let mut map = TopicMap { origin: origin.to_string(), ..TopicMap::default() };
+        map.set_namespace(&raw.namespace).map_err(|(problem, fix)| ConfigError::new(origin, "namespace", problem, fix))?;
+
+        let cam = raw.camera;
+        if let Some(q) = cam.jpeg_quality {
+            if !(1..=100).contains(&q) {
+                return Err(ConfigError::new(origin, "camera.jpeg_quality", format!("{q} is out of range"), "use a quality from 1 to 100"));
+            }
+            map.camera.jpeg_quality = q;
+        }
+        if let Some(mib) = cam.shm_pool_mib {
+            if !(4..=4096).contains(&mib) {
+                return Err(ConfigError::new(origin, "camera.shm_pool_mib", format!("{mib} MiB is out of range"), "use 4 to 4096 MiB; 64 holds ~70 frames of 640x480"));
+            }
+            map.camera.shm_pool_mib = mib;
+        }
+        map.camera.encoding = cam.encoding.unwrap_or(map.camera.encoding);
+        map.camera.shared_memory = cam.shared_memory.unwrap_or(map.camera.shared_memory);
+
+        for (name, over) in raw.topics {
+            let key_path = format!("topics.{name}");
+            let Some(topic) = Topic::from_name(&name) else {
+                let allowed: Vec<_> = Topic::ALL.iter().map(|t| t.name()).collect();
+                return Err(ConfigError::new(origin, key_path, format!("unknown topic `{name}`"), format!("use one of: {}", allowed.join(", "))));
+            };
+            let entry = map.entries.get_mut(&topic).expect("every topic has an entry");
+            if let Some(k) = over.key {
+                let (key, absolute) =
+                    remapped_key(&k).map_err(|(p, f)| ConfigError::new(origin, format!("{key_path}.key"), p, f))?;
+                entry.key = key;
+                entry.absolute = absolute;
+            }
+            let q = &mut entry.qos;
+            q.priority = over.priority.unwrap_or(q.priority);
+            q.express = over.express.unwrap_or(q.express);
+            q.congestion_control = over.congestion_control.unwrap_or(q.congestion_control);
+            q.reliability = over.reliability.unwrap_or(q.reliability);
+            if let Some(d) = over.delivery {
+                if d == Delivery::Queue(0) {
+                    return Err(ConfigError::new(origin, format!("{key_path}.delivery"), "a queue of 0", "use \"latest\" or { queue: N } with N >= 1"));
+                }
+                q.delivery = d;
+            }
+            if let Some(r) = over.max_rate_hz {
+                if !(r.is_finite() && r > 0.0) {
+                    return Err(ConfigError::new(origin, format!("{key_path}.max_rate_hz"), format!("{r} is not a positive rate"), "give a rate in Hz > 0, or leave the key out for no limit"));
+                }
+                q.max_rate_hz = Some(r);
+            }
+        }
+        Ok(map)
+    }
+
+    /// Replaces the namespace (the `--namespace` flag does this after loading).
+    pub fn with_namespace(mut self, namespace: &str) -> Result<TopicMap, ConfigError> {
+        self.set_namespace(namespace).map_err(|(p, f)| ConfigError::new("--namespace", "namespace", p, f))?;
+        Ok(self)
+    }
+
+    fn set_namespace(&mut self, namespace: &str) -> Result<(), (String, String)> {
+        let ns = namespace.trim_matches('/');
+        if !ns.is_empty() {
+            let ke = key_expr(ns)?;
+            if ke.as_str().contains('*') || ke.as_str().contains('$') {
+                return Err((format!("`{ns}` has a wildcard"), "a namespace is a plain key such as `car1` or `lab/rig2`".into()));
+            }
+        }
+        self.namespace = ns.to_string();
+        Ok(())
+    }
+
+    pub fn namespace(&self) -> &str {
+        &self.namespace
+    }
+
+    /// The topic's resolved entry.
+    pub fn get(&self, topic: Topic) -> &ResolvedTopic {
+        &self.entries[&topic]
+    }
+
+    /// The key a topic is published on: `<namespace>/<key>`, or the remapped key as is when it
+    /// was given absolute (leading `/`).
+    pub fn key(&self, topic: Topic) -> OwnedKeyExpr {
+        let entry = self.get(topic);
+        if entry.absolute {
+            entry.key.clone()
+        } else {
+            self.full_key(&entry.key)
+        }
+    }
+
+    pub fn qos(&self, topic: Topic) -> TopicQos {
+        self.get(topic).qos
+    }
+
+    /// Liveliness key of a node: `<namespace>/nodes/<name>`.
+    pub fn node_key(&self, node: &str) -> Result<OwnedKeyExpr, ConfigError> {
+        let rel = key_expr(&format!("{NODES_PREFIX}/{node}")).map_err(|(p, f)| ConfigError::new("node name", "", p, f))?;
+        Ok(self.full_key(&rel))
+    }
+
+    /// All node tokens under this namespace.
+    pub fn nodes_selector(&self) -> OwnedKeyExpr {
+        self.full_key(&key_expr(&format!("{NODES_PREFIX}/**")).expect("valid"))
+    }
+
+    /// Every key of this namespace (for tools that watch all topics).
+    pub fn all_selector(&self) -> OwnedKeyExpr {
+        if self.namespace.is_empty() {
+            key_expr("**").expect("valid")
+        } else {
+            key_expr(&format!("{}/**", self.namespace)).expect("valid")
+        }
+    }
+
+    /// Which topic a received key belongs to, if any.
+    pub fn topic_of(&self, key: &zenoh::key_expr::keyexpr) -> Option<Topic> {
+        Topic::ALL.into_iter().find(|t| self.key(*t).as_str() == key.as_str())
+    }
+
+    fn full_key(&self, rel: &OwnedKeyExpr) -> OwnedKeyExpr {
+        if self.namespace.is_empty() {
+            rel.clone()
+        } else {
+            key_expr(&format!("{}/{}", self.namespace, rel)).expect("namespace and key are valid")
+        }
+    }
+}
+
+fn key_expr(s: &str) -> Result<OwnedKeyExpr, (String, String)> {
+    OwnedKeyExpr::autocanonize(s.to_string()).map_err(|e| {
+        (format!("`{s}` is not a valid Zenoh key: {e}"), "use chunks of letters, digits, `-` and `_` separated by `/`".into())
+    })
+}
+
+/// A remapped key: relative (`car/speed`, namespace applies) or absolute (`/fleet/speed`).
+fn remapped_key(s: &str) -> Result<(OwnedKeyExpr, bool), (String, String)> {
+    let (absolute, body) = match s.strip_prefix('/') {
+        Some(rest) => (true, rest),
+        None => (false, s),
+    };
+    if body.is_empty() {
+        return Err(("an empty key".into(), "give a key such as `vehicle/speed`, or leave the key out".into()));
+    }
+    let ke = key_expr(body)?;
+    if ke.as_str().contains('*') || ke.as_str().contains('$') || ke.as_str().starts_with('@') || ke.as_str().contains("/@") {
+        return Err((format!("`{s}` has a wildcard or a verbatim (@) chunk"), "publish keys are plain: chunks of letters, digits, `-` and `_`".into()));
+    }
+    Ok((ke, absolute))
+}

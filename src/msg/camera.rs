@@ -1,0 +1,153 @@
+//! Camera frames and the camera's calibration.
+//!
+//! A frame's pixels are the last field of the payload, so a publisher can write the few
+//! bytes before them ([`frame_prefix`]) and render straight into the payload buffer (a shared
+//! memory buffer on one host): no copy from renderer to subscriber. [`CameraFrameRef`] decodes
+//! without copying the pixels.
+
+use serde::{Deserialize, Serialize};
+
+use super::codec::write_postcard;
+use super::{Header, Message, MessageKind, Vec3, PREAMBLE_LEN, WIRE_VERSION};
+
+/// How a frame's bytes are encoded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub enum ImageEncoding {
+    /// width x height x 3 bytes, rows top to bottom, R G B per pixel.
+    Rgb8,
+    /// A JPEG file.
+    Jpeg,
+    /// A PNG file.
+    Png,
+}
+
+impl ImageEncoding {
+    /// The byte count a frame must have, when the encoding fixes it.
+    pub fn expected_len(self, width: u32, height: u32) -> Option<usize> {
+        match self {
+            ImageEncoding::Rgb8 => Some(width as usize * height as usize * 3),
+            ImageEncoding::Jpeg | ImageEncoding::Png => None,
+        }
+    }
+}
+
+/// camera/front: one image, owned.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CameraFrame {
+    pub width: u32,
+    pub height: u32,
+    pub encoding: ImageEncoding,
+    #[serde(with = "serde_bytes")]
+    pub data: Vec<u8>,
+}
+
+/// camera/front decoded without copying: `data` borrows the received payload.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct CameraFrameRef<'a> {
+    pub width: u32,
+    pub height: u32,
+    pub encoding: ImageEncoding,
+    #[serde(borrow, with = "serde_bytes")]
+    pub data: &'a [u8],
+}
+
+fn check_frame(width: u32, height: u32, encoding: ImageEncoding, len: usize) -> Result<(), String> {
+    if width == 0 || height == 0 {
+        return Err(format!("frame size {width}x{height} is empty"));
+    }
+    match encoding.expected_len(width, height) {
+        Some(expected) if expected != len => {
+            Err(format!("{width}x{height} {encoding:?} needs {expected} bytes, got {len}"))
+        }
+        _ => Ok(()),
+    }
+}
+
+impl Message for CameraFrame {
+    const KIND: MessageKind = MessageKind::CameraFrame;
+    fn check(&self) -> Result<(), String> {
+        check_frame(self.width, self.height, self.encoding, self.data.len())
+    }
+}
+
+impl Message for CameraFrameRef<'_> {
+    const KIND: MessageKind = MessageKind::CameraFrame;
+    fn check(&self) -> Result<(), String> {
+        check_frame(self.width, self.height, self.encoding, self.data.len())
+    }
+}
+
+impl CameraFrameRef<'_> {
+    /// Copies the pixels into an owned frame (the one copy a consumer may choose to make).
+    pub fn to_owned_frame(&self) -> CameraFrame {
+        CameraFrame { width: self.width, height: self.height, encoding: self.encoding, data: self.data.to_vec() }
+    }
+}
+
+/// The bytes of a camera/front payload that precede `data_len` bytes of image data:
+/// preamble, header, width, height, encoding and the length varint. `prefix ++ data` is exactly
+/// `encode(header, &CameraFrame { .., data })`.
+pub fn frame_prefix(header: &Header, width: u32, height: u32, encoding: ImageEncoding, data_len: usize) -> Vec<u8> {
+    let mut buf = Vec::with_capacity(48);
+    buf.push(WIRE_VERSION);
+    buf.push(MessageKind::CameraFrame as u8);
+    write_postcard(&mut buf, header);
+    write_postcard(&mut buf, &width);
+    write_postcard(&mut buf, &height);
+    write_postcard(&mut buf, &encoding);
+    write_postcard(&mut buf, &(data_len as u64));
+    debug_assert!(buf.len() > PREAMBLE_LEN);
+    buf
+}
+
+/// camera/front/info: intrinsics and where the camera sits on the vehicle.
+///
+/// Pinhole model, pixel coordinates with u right and v down from the top-left corner:
+/// u = cx + fx * (-y_cam / x_cam), v = cy + fy * (-z_cam / x_cam) for a point in the camera
+/// frame (x forward, y left, z up).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct CameraInfo {
+    pub width: u32,
+    pub height: u32,
+    pub fx_px: f64,
+    pub fy_px: f64,
+    pub cx_px: f64,
+    pub cy_px: f64,
+    pub horizontal_fov_rad: f64,
+    /// Camera origin in the ego body frame.
+    pub mount_position_in_ego_m: Vec3,
+    /// Camera orientation relative to the body frame: roll, pitch (positive looks down), yaw.
+    pub mount_roll_pitch_yaw_rad: Vec3,
+    pub rate_hz: f64,
+    /// Encoding of the frames on camera/front.
+    pub encoding: ImageEncoding,
+}
+
+impl Message for CameraInfo {
+    const KIND: MessageKind = MessageKind::CameraInfo;
+    fn check(&self) -> Result<(), String> {
+        if self.width == 0 || self.height == 0 {
+            return Err(format!("image size {}x{} is empty", self.width, self.height));
+        }
+        if !(self.fx_px > 0.0 && self.fy_px > 0.0) {
+            return Err(format!("focal lengths must be positive, got fx={} fy={}", self.fx_px, self.fy_px));
+        }
+        Ok(())
+    }
+}
+
+pub(super) fn example_info() -> CameraInfo {
+    CameraInfo {
+        width: 640,
+        height: 480,
+        fx_px: 554.256,
+        fy_px: 554.256,
+        cx_px: 320.0,
+        cy_px: 240.0,
+        horizontal_fov_rad: 1.0472,
+        mount_position_in_ego_m: [1.5, 0.0, 1.4],
+        mount_roll_pitch_yaw_rad: [0.0, 0.05, 0.0],
+        rate_hz: 20.0,
+        encoding: ImageEncoding::Rgb8,
+    }
+}

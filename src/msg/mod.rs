@@ -1,0 +1,168 @@
+//! Typed messages and their one wire encoding.
+//!
+//! Every payload on the bus is
+//!
+//! ```text
+//! byte 0      wire version (WIRE_VERSION)
+//! byte 1      message kind (MessageKind as u8): a key remapped to the wrong topic is caught
+//! header      postcard(Header): seq, stamp_sim_ns, stamp_pub_ns
+//! body        postcard(the message struct)
+//! ```
+//!
+//! Decoding is strict: an empty or truncated payload, an unknown version or kind, an invalid
+//! enum tag, trailing bytes or a body that fails its own check (a camera frame whose pixel count
+//! does not match its size) is a [`DecodeError`] that says what was wrong. Nothing here panics on
+//! input. docs/wire-format.md documents the bytes for other languages.
+
+mod acc;
+mod camera;
+mod codec;
+mod objects;
+mod sim;
+mod vehicle;
+
+pub use acc::{AccCommand, AccMode, AccStatus, AccWarning, LeadInfo};
+pub use camera::{frame_prefix, CameraFrame, CameraFrameRef, CameraInfo, ImageEncoding};
+pub use codec::{decode, decode_header, encode, encode_into, DecodeError, Stamped};
+pub use objects::{BoundingBox2d, Detection, Detections, GroundTruthObject, GroundTruthObjects, ObjectClass};
+pub use sim::{SimClock, SimEvent, SimEventKind, SimMode};
+pub use vehicle::{ControlCommand, Speed, VehicleState};
+
+use serde::{Deserialize, Serialize};
+
+/// Version of the envelope and of every message layout. A decoder refuses any other value.
+pub const WIRE_VERSION: u8 = 1;
+
+/// Bytes before the header: version and kind.
+pub const PREAMBLE_LEN: usize = 2;
+
+/// Three floats in a right-handed frame (x forward, y left, z up), SI units given by the field.
+pub type Vec3 = [f64; 3];
+
+/// The header every message carries.
+///
+/// `seq` counts messages per publisher from 0 (gaps mean losses), `stamp_sim_ns` is the
+/// simulation time the data belongs to (match a frame with a speed by it), `stamp_pub_ns` is
+/// the publisher's wall clock (Unix epoch, ns) at publish time (latency = receive - publish).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+pub struct Header {
+    pub seq: u64,
+    pub stamp_sim_ns: u64,
+    pub stamp_pub_ns: u64,
+}
+
+/// Identifies the message type inside a payload (byte 1 of every payload).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+#[repr(u8)]
+pub enum MessageKind {
+    Speed = 1,
+    VehicleState = 2,
+    ControlCommand = 3,
+    CameraFrame = 4,
+    CameraInfo = 5,
+    GroundTruthObjects = 6,
+    Detections = 7,
+    SimClock = 8,
+    SimEvent = 9,
+    AccStatus = 10,
+    AccCommand = 11,
+}
+
+impl MessageKind {
+    pub const ALL: [MessageKind; 11] = [
+        MessageKind::Speed,
+        MessageKind::VehicleState,
+        MessageKind::ControlCommand,
+        MessageKind::CameraFrame,
+        MessageKind::CameraInfo,
+        MessageKind::GroundTruthObjects,
+        MessageKind::Detections,
+        MessageKind::SimClock,
+        MessageKind::SimEvent,
+        MessageKind::AccStatus,
+        MessageKind::AccCommand,
+    ];
+
+    pub fn from_u8(value: u8) -> Option<Self> {
+        Self::ALL.into_iter().find(|k| *k as u8 == value)
+    }
+
+    /// The type name, as used in docs, errors and the Zenoh encoding schema.
+    pub fn name(self) -> &'static str {
+        match self {
+            MessageKind::Speed => "Speed",
+            MessageKind::VehicleState => "VehicleState",
+            MessageKind::ControlCommand => "ControlCommand",
+            MessageKind::CameraFrame => "CameraFrame",
+            MessageKind::CameraInfo => "CameraInfo",
+            MessageKind::GroundTruthObjects => "GroundTruthObjects",
+            MessageKind::Detections => "Detections",
+            MessageKind::SimClock => "SimClock",
+            MessageKind::SimEvent => "SimEvent",
+            MessageKind::AccStatus => "AccStatus",
+            MessageKind::AccCommand => "AccCommand",
+        }
+    }
+
+    /// The Zenoh encoding attached to every sample of this kind:
+    /// `application/octet-stream;slipstream/<Name>/v<WIRE_VERSION>`.
+    pub fn encoding_schema(self) -> String {
+        format!("slipstream/{}/v{}", self.name(), WIRE_VERSION)
+    }
+}
+
+/// A message type that travels on the bus.
+pub trait Message: Serialize + std::fmt::Debug {
+    const KIND: MessageKind;
+
+    /// A semantic check run after a successful decode (sizes that must agree, ranges).
+    fn check(&self) -> Result<(), String> {
+        Ok(())
+    }
+}
+
+/// Wall-clock time now, in ns since the Unix epoch (the unit of `Header::stamp_pub_ns`).
+pub fn wall_clock_ns() -> u64 {
+    std::time::SystemTime::now()
+        .duration_since(std::time::UNIX_EPOCH)
+        .map(|d| d.as_nanos() as u64)
+        .unwrap_or(0)
+}
+
+/// One example value of every message, for docs/wire-format.md, the Python client's tests and
+/// round-trip tests. Returns (kind, header, encoded bytes).
+pub fn examples() -> Vec<(MessageKind, Vec<u8>)> {
+    let h = Header { seq: 7, stamp_sim_ns: 1_250_000_000, stamp_pub_ns: 1_700_000_000_123_456_789 };
+    let e = |kind, bytes| (kind, bytes);
+    vec![
+        e(MessageKind::Speed, encode(&h, &Speed { speed_mps: 27.5 })),
+        e(MessageKind::VehicleState, encode(&h, &vehicle::example_state())),
+        e(
+            MessageKind::ControlCommand,
+            encode(&h, &ControlCommand { throttle: 0.25, brake: 0.0, steer: -0.5, answers_step: Some(125) }),
+        ),
+        e(
+            MessageKind::CameraFrame,
+            encode(
+                &h,
+                &CameraFrame { width: 2, height: 1, encoding: ImageEncoding::Rgb8, data: vec![255, 0, 0, 0, 128, 255] },
+            ),
+        ),
+        e(MessageKind::CameraInfo, encode(&h, &camera::example_info())),
+        e(MessageKind::GroundTruthObjects, encode(&h, &objects::example_ground_truth())),
+        e(MessageKind::Detections, encode(&h, &objects::example_detections())),
+        e(
+            MessageKind::SimClock,
+            encode(&h, &SimClock { step: 125, real_time_factor: 1.0, mode: SimMode::Lockstep, physics_hz: 100.0 }),
+        ),
+        e(
+            MessageKind::SimEvent,
+            encode(&h, &SimEvent { kind: SimEventKind::Collision { other_id: 3, relative_speed_mps: 4.5 } }),
+        ),
+        e(MessageKind::AccStatus, encode(&h, &acc::example_status())),
+        e(
+            MessageKind::AccCommand,
+            encode(&h, &AccCommand { enable: Some(true), set_speed_mps: Some(25.0), time_gap_s: None }),
+        ),
+    ]
+}

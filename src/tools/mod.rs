@@ -1,0 +1,3 @@
+//! The `slipstream` command's tools that are not benchmarks.
+
+pub mod info;

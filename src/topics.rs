@@ -1,0 +1,171 @@
+//! Logical topics: the one place that knows their default keys, message types and QoS.
+//!
+//! A node never writes a key string. It names a typed topic ([`VEHICLE_SPEED`], ...) and the
+//! [`crate::config::TopicMap`] turns it into the key in force after namespace and remapping.
+
+use std::marker::PhantomData;
+
+use crate::msg::{self, Message, MessageKind};
+use crate::qos::{Delivery, Priority, TopicQos};
+
+/// Every topic the system knows.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum Topic {
+    VehicleSpeed,
+    VehicleState,
+    VehicleControl,
+    CameraFront,
+    CameraFrontInfo,
+    Objects,
+    PerceptionObjects,
+    SimClock,
+    SimEvents,
+    AccStatus,
+    AccCommand,
+}
+
+impl Topic {
+    pub const ALL: [Topic; 11] = [
+        Topic::VehicleSpeed,
+        Topic::VehicleState,
+        Topic::VehicleControl,
+        Topic::CameraFront,
+        Topic::CameraFrontInfo,
+        Topic::Objects,
+        Topic::PerceptionObjects,
+        Topic::SimClock,
+        Topic::SimEvents,
+        Topic::AccStatus,
+        Topic::AccCommand,
+    ];
+
+    /// The logical name, which is also the default key (before the namespace).
+    pub fn name(self) -> &'static str {
+        match self {
+            Topic::VehicleSpeed => "vehicle/speed",
+            Topic::VehicleState => "vehicle/state",
+            Topic::VehicleControl => "vehicle/control",
+            Topic::CameraFront => "camera/front",
+            Topic::CameraFrontInfo => "camera/front/info",
+            Topic::Objects => "objects",
+            Topic::PerceptionObjects => "perception/objects",
+            Topic::SimClock => "sim/clock",
+            Topic::SimEvents => "sim/events",
+            Topic::AccStatus => "acc/status",
+            Topic::AccCommand => "acc/command",
+        }
+    }
+
+    pub fn from_name(name: &str) -> Option<Topic> {
+        Topic::ALL.into_iter().find(|t| t.name() == name)
+    }
+
+    /// The message type this topic carries.
+    pub fn kind(self) -> MessageKind {
+        match self {
+            Topic::VehicleSpeed => MessageKind::Speed,
+            Topic::VehicleState => MessageKind::VehicleState,
+            Topic::VehicleControl => MessageKind::ControlCommand,
+            Topic::CameraFront => MessageKind::CameraFrame,
+            Topic::CameraFrontInfo => MessageKind::CameraInfo,
+            Topic::Objects => MessageKind::GroundTruthObjects,
+            Topic::PerceptionObjects => MessageKind::Detections,
+            Topic::SimClock => MessageKind::SimClock,
+            Topic::SimEvents => MessageKind::SimEvent,
+            Topic::AccStatus => MessageKind::AccStatus,
+            Topic::AccCommand => MessageKind::AccCommand,
+        }
+    }
+
+    /// QoS when the config says nothing: control-loop signals at real-time priority and
+    /// express (sent at once, never batched behind images), camera frames low priority and
+    /// dropped under congestion, read latest-only; events and calibration reliable and queued.
+    pub fn default_qos(self) -> TopicQos {
+        let base = TopicQos::default();
+        match self {
+            Topic::VehicleSpeed | Topic::VehicleControl | Topic::SimClock => {
+                TopicQos { priority: Priority::RealTime, express: true, ..base }
+            }
+            Topic::VehicleState | Topic::PerceptionObjects => {
+                TopicQos { priority: Priority::InteractiveHigh, express: true, ..base }
+            }
+            Topic::CameraFront => TopicQos {
+                priority: Priority::DataLow,
+                congestion_control: crate::qos::Congestion::Drop,
+                delivery: Delivery::Latest,
+                ..base
+            },
+            Topic::CameraFrontInfo | Topic::SimEvents | Topic::AccCommand => TopicQos {
+                congestion_control: crate::qos::Congestion::Block,
+                delivery: Delivery::Queue(64),
+                ..base
+            },
+            Topic::Objects | Topic::AccStatus => base,
+        }
+    }
+}
+
+impl std::fmt::Display for Topic {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// A topic bound to its message type at compile time, so a publisher of `Speed` cannot be
+/// declared on the camera topic.
+pub struct TopicDef<M> {
+    pub topic: Topic,
+    _msg: PhantomData<fn() -> M>,
+}
+
+impl<M> Clone for TopicDef<M> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+impl<M> Copy for TopicDef<M> {}
+
+impl<M: Message> TopicDef<M> {
+    const fn new(topic: Topic) -> Self {
+        TopicDef { topic, _msg: PhantomData }
+    }
+}
+
+pub const VEHICLE_SPEED: TopicDef<msg::Speed> = TopicDef::new(Topic::VehicleSpeed);
+pub const VEHICLE_STATE: TopicDef<msg::VehicleState> = TopicDef::new(Topic::VehicleState);
+pub const VEHICLE_CONTROL: TopicDef<msg::ControlCommand> = TopicDef::new(Topic::VehicleControl);
+pub const CAMERA_FRONT: TopicDef<msg::CameraFrame> = TopicDef::new(Topic::CameraFront);
+pub const CAMERA_FRONT_INFO: TopicDef<msg::CameraInfo> = TopicDef::new(Topic::CameraFrontInfo);
+pub const OBJECTS: TopicDef<msg::GroundTruthObjects> = TopicDef::new(Topic::Objects);
+pub const PERCEPTION_OBJECTS: TopicDef<msg::Detections> = TopicDef::new(Topic::PerceptionObjects);
+pub const SIM_CLOCK: TopicDef<msg::SimClock> = TopicDef::new(Topic::SimClock);
+pub const SIM_EVENTS: TopicDef<msg::SimEvent> = TopicDef::new(Topic::SimEvents);
+pub const ACC_STATUS: TopicDef<msg::AccStatus> = TopicDef::new(Topic::AccStatus);
+pub const ACC_COMMAND: TopicDef<msg::AccCommand> = TopicDef::new(Topic::AccCommand);
+
+/// The key prefix (under the namespace) where nodes declare liveliness tokens:
+/// `<namespace>/nodes/<node name>`.
+pub const NODES_PREFIX: &str = "nodes";
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_round_trip_and_are_unique() {
+        for t in Topic::ALL {
+            assert_eq!(Topic::from_name(t.name()), Some(t));
+        }
+        let mut names: Vec<_> = Topic::ALL.iter().map(|t| t.name()).collect();
+        names.sort();
+        names.dedup();
+        assert_eq!(names.len(), Topic::ALL.len());
+    }
+
+    #[test]
+    fn typed_constants_carry_the_right_kind() {
+        assert_eq!(VEHICLE_SPEED.topic.kind(), <msg::Speed as Message>::KIND);
+        assert_eq!(CAMERA_FRONT.topic.kind(), <msg::CameraFrame as Message>::KIND);
+        assert_eq!(ACC_COMMAND.topic.kind(), <msg::AccCommand as Message>::KIND);
+    }
+}
