@@ -19,7 +19,7 @@ use zenoh::Wait;
 use super::spec::{Background, CaseSpec, Payload, RecvReport, SendReport, Transport};
 use crate::bus::Bus;
 use crate::config::TopicMap;
-use crate::msg::{wall_clock_ns, CameraFrameRef, ImageEncoding, Speed};
+use crate::msg::{wall_clock_ns, ImageEncoding, Speed};
 use crate::topics;
 
 const RAW_HEADER: usize = 16;
@@ -199,25 +199,21 @@ pub async fn run_receiver(spec: CaseSpec) -> Result<()> {
                 Payload::Frame { .. } => {}
             }
             if matches!(spec.payload, Payload::Frame { .. }) || spec.background.is_some() {
-                let sub = bus.subscriber(topics::CAMERA_FRONT).await?;
+                let sub = bus.frame_subscriber().await?;
                 let (c, stop, measured) = (col.clone(), stop.clone(), matches!(spec.payload, Payload::Frame { .. }));
                 tokio::spawn(async move {
                     while !stop.load(Ordering::Relaxed) {
-                        let Some(s) = sub.recv_sample_timeout(Duration::from_millis(100)).await else { continue };
-                        match s.decode::<CameraFrameRef>() {
-                            Ok(f) => {
-                                // Touch the pixels' last byte: the frame is really readable.
-                                let _ = std::hint::black_box(f.msg.data.last());
-                                if s.is_shared_memory() {
-                                    c.shm.fetch_add(1, Ordering::Relaxed);
-                                }
-                                if measured {
-                                    c.record(f.header.seq, f.header.stamp_pub_ns, s.bytes().len());
-                                } else {
-                                    c.background.fetch_add(1, Ordering::Relaxed);
-                                }
-                            }
-                            Err(e) => sub.report_decode_error(&e),
+                        let Some(s) = sub.recv_timeout(Duration::from_millis(100)).await else { continue };
+                        let f = s.frame();
+                        // Touch the pixels' last byte: the frame is really readable.
+                        let _ = std::hint::black_box(f.msg.data.last());
+                        if s.is_shared_memory() {
+                            c.shm.fetch_add(1, Ordering::Relaxed);
+                        }
+                        if measured {
+                            c.record(f.header.seq, f.header.stamp_pub_ns, s.bytes().len());
+                        } else {
+                            c.background.fetch_add(1, Ordering::Relaxed);
                         }
                     }
                 });

@@ -13,7 +13,7 @@ use std::sync::Arc;
 
 pub use publisher::{FramePublisher, FrameSent, Publisher};
 pub use stats::{StatsSnapshot, TopicStats};
-pub use subscriber::{BusSample, CallbackSubscriber, Received, Subscriber};
+pub use subscriber::{CallbackSubscriber, FrameSample, FrameSubscriber, Received, Subscriber};
 
 use crate::config::{ConfigError, TopicMap};
 use crate::msg::Message;
@@ -88,9 +88,19 @@ impl Bus {
     }
 
     /// A typed subscriber with the topic's configured delivery (latest-only or a queue).
-    pub async fn subscriber<M: Message>(&self, def: TopicDef<M>) -> Result<Subscriber<M>, BusError> {
+    /// For camera frames prefer [`Bus::frame_subscriber`], which does not copy the pixels.
+    pub async fn subscriber<M>(&self, def: TopicDef<M>) -> Result<Subscriber<M>, BusError>
+    where
+        M: Message + serde::de::DeserializeOwned + Send + 'static,
+    {
         let qos = self.topics.qos(def.topic);
         Subscriber::declare(&self.session, self.topics.key(def.topic), def.topic.name(), qos.delivery).await
+    }
+
+    /// The camera/front subscriber: frames are read in place (shared memory on one host).
+    pub async fn frame_subscriber(&self) -> Result<FrameSubscriber, BusError> {
+        let topic = crate::topics::CAMERA_FRONT.topic;
+        FrameSubscriber::declare(&self.session, self.topics.key(topic), topic.name(), self.topics.qos(topic).delivery).await
     }
 
     /// Calls `handler` with every well-formed message of `def`, on Zenoh's receive thread

@@ -1,0 +1,253 @@
+//! The bus across two Zenoh sessions on tcp/127.0.0.1 with scouting off.
+
+mod common;
+
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+
+use common::{bus_pair, map, TIMEOUT};
+use slipstream::msg::{ControlCommand, ImageEncoding, Speed};
+use slipstream::topics::{CAMERA_FRONT, VEHICLE_CONTROL, VEHICLE_SPEED};
+use slipstream::TopicMap;
+use zenoh::Wait;
+
+#[tokio::test(flavor = "multi_thread")]
+async fn typed_messages_cross_sessions_with_headers_and_stats() {
+    let (a, b) = bus_pair(TopicMap::default(), TopicMap::default()).await;
+    let sub = b.subscriber(VEHICLE_SPEED).await.unwrap();
+    let publisher = a.publisher(VEHICLE_SPEED).await.unwrap();
+    assert!(publisher.wait_for_subscriber(TIMEOUT).await);
+    for i in 0..5u64 {
+        let h = publisher.put(i * 10_000_000, &Speed { speed_mps: i as f64 }).unwrap().unwrap();
+        assert_eq!(h.seq, i);
+    }
+    for i in 0..5u64 {
+        let r = within!(sub.recv());
+        assert_eq!(r.header.seq, i);
+        assert_eq!(r.header.stamp_sim_ns, i * 10_000_000);
+        assert_eq!(r.msg, Speed { speed_mps: i as f64 });
+        assert!(r.header.stamp_pub_ns > 0);
+    }
+    let s = sub.stats().snapshot();
+    assert_eq!((s.received, s.lost, s.decode_errors), (5, 0, 0));
+    assert!(s.latency_p50_us.is_some());
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn namespace_and_remap_select_who_receives() {
+    // b shares a's namespace and remap; c has another namespace; d has the default keys.
+    let cfg_a = r#"{ namespace: "car1", topics: { "vehicle/speed": { key: "ego/v" } } }"#;
+    let (a, b) = bus_pair(map(cfg_a), map(cfg_a)).await;
+    let c = slipstream::Bus::from_session(
+        common::connected_session(&a.session().info().locators().await[0].to_string()).await,
+        map(r#"{ namespace: "car2", topics: { "vehicle/speed": { key: "ego/v" } } }"#),
+        "node-c",
+    )
+    .await
+    .unwrap();
+    let d = slipstream::Bus::from_session(
+        common::connected_session(&a.session().info().locators().await[0].to_string()).await,
+        TopicMap::default(),
+        "node-d",
+    )
+    .await
+    .unwrap();
+    let sub_b = b.subscriber(VEHICLE_SPEED).await.unwrap();
+    let sub_c = c.subscriber(VEHICLE_SPEED).await.unwrap();
+    let sub_d = d.subscriber(VEHICLE_SPEED).await.unwrap();
+    assert_eq!(sub_b.key(), "car1/ego/v");
+    let publisher = a.publisher(VEHICLE_SPEED).await.unwrap();
+    assert_eq!(publisher.key(), "car1/ego/v");
+    assert!(publisher.wait_for_subscriber(TIMEOUT).await);
+    publisher.put(0, &Speed { speed_mps: 3.0 }).unwrap();
+    assert_eq!(within!(sub_b.recv()).msg.speed_mps, 3.0);
+    // Give the others time to have received it if they were (wrongly) matched.
+    tokio::time::sleep(Duration::from_millis(500)).await;
+    assert!(sub_c.try_recv().is_none(), "another namespace must not receive");
+    assert!(sub_d.try_recv().is_none(), "default keys must not receive a remapped topic");
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn configured_qos_reaches_the_wire() {
+    let cfg = r#"{ topics: { "vehicle/control": { priority: "interactive-low", express: false, congestion_control: "block" } } }"#;
+    let (a, b) = bus_pair(map(cfg), TopicMap::default()).await;
+    // Raw zenoh subscribers see the QoS each sample was sent with.
+    let seen = Arc::new(parking_lot::Mutex::new(Vec::new()));
+    let s2 = seen.clone();
+    let _raw = b
+        .session()
+        .declare_subscriber("**")
+        .callback(move |s| s2.lock().push((s.key_expr().to_string(), s.priority(), s.express(), s.congestion_control())))
+        .await
+        .unwrap();
+    let speed = a.publisher(VEHICLE_SPEED).await.unwrap();
+    let control = a.publisher(VEHICLE_CONTROL).await.unwrap();
+    assert!(speed.wait_for_subscriber(TIMEOUT).await && control.wait_for_subscriber(TIMEOUT).await);
+    assert_eq!(control.zenoh().priority(), zenoh::qos::Priority::InteractiveLow);
+    assert_eq!(control.zenoh().congestion_control(), zenoh::qos::CongestionControl::Block);
+    speed.put(0, &Speed { speed_mps: 1.0 }).unwrap();
+    control.put(0, &ControlCommand::NEUTRAL).unwrap();
+    within!(async {
+        while seen.lock().len() < 2 {
+            tokio::time::sleep(Duration::from_millis(10)).await;
+        }
+    });
+    let seen = seen.lock().clone();
+    let of = |k: &str| seen.iter().find(|s| s.0 == k).cloned().unwrap();
+    let (_, p, e, _) = of("vehicle/speed");
+    assert_eq!((p, e), (zenoh::qos::Priority::RealTime, true), "default speed QoS");
+    let (_, p, e, cc) = of("vehicle/control");
+    assert_eq!((p, e, cc), (zenoh::qos::Priority::InteractiveLow, false, zenoh::qos::CongestionControl::Block));
+}
+
+async fn send_frames(bus: &slipstream::Bus, n: u64) -> slipstream::bus::FramePublisher {
+    let publisher = bus.frame_publisher().await.unwrap();
+    assert!(publisher.publisher().wait_for_subscriber(TIMEOUT).await);
+    for i in 0..n {
+        publisher.put_with(i, 4, 2, ImageEncoding::Rgb8, 24, |px| px.fill(i as u8)).unwrap().unwrap();
+    }
+    publisher
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn latest_only_delivery_keeps_the_newest_and_counts_skips() {
+    let (a, b) = bus_pair(TopicMap::default(), TopicMap::default()).await;
+    let sub = b.frame_subscriber().await.unwrap();
+    let _p = send_frames(&a, 10).await;
+    // Wait until all ten arrived (counted on arrival), then read once.
+    within!(async {
+        while sub.stats().snapshot().received < 10 {
+            tokio::time::sleep(Duration::from_millis(10)).await;
+        }
+    });
+    let s = within!(sub.recv());
+    let frame = s.frame();
+    assert_eq!(frame.header.seq, 9, "the newest frame");
+    assert!(frame.msg.data.iter().all(|&b| b == 9));
+    assert!(sub.try_recv().is_none(), "nothing older is left");
+    assert_eq!(sub.stats().snapshot().skipped, 9);
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn a_queue_keeps_the_newest_n_in_order() {
+    let cfg = r#"{ topics: { "camera/front": { delivery: { queue: 4 } } } }"#;
+    let (a, b) = bus_pair(map(cfg), map(cfg)).await;
+    let sub = b.subscriber(CAMERA_FRONT).await.unwrap();
+    let _p = send_frames(&a, 10).await;
+    within!(async {
+        while sub.stats().snapshot().received < 10 {
+            tokio::time::sleep(Duration::from_millis(10)).await;
+        }
+    });
+    let seqs: Vec<u64> = std::iter::from_fn(|| sub.try_recv().map(|r| r.header.seq)).collect();
+    assert_eq!(seqs, vec![6, 7, 8, 9]);
+    assert_eq!(sub.stats().snapshot().skipped, 6);
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn frames_go_through_shared_memory_when_enabled() {
+    for shm in [true, false] {
+        let cfg = format!("{{ camera: {{ shared_memory: {shm} }} }}");
+        let (a, b) = bus_pair(map(&cfg), map(&cfg)).await;
+        let sub = b.frame_subscriber().await.unwrap();
+        let publisher = a.frame_publisher().await.unwrap();
+        assert_eq!(publisher.uses_shared_memory(), shm);
+        assert!(publisher.publisher().wait_for_subscriber(TIMEOUT).await);
+        let (w, h) = (640u32, 480u32);
+        let sent = publisher
+            .put_with(5, w, h, ImageEncoding::Rgb8, (w * h * 3) as usize, |px| {
+                px.iter_mut().enumerate().for_each(|(i, b)| *b = (i % 251) as u8)
+            })
+            .unwrap()
+            .unwrap();
+        assert_eq!(sent.shared_memory, shm);
+        let s = within!(sub.recv());
+        assert_eq!(s.is_shared_memory(), shm, "shm={shm}");
+        assert_eq!(s.was_joined(), !shm, "in shared memory the frame is one piece; over TCP it is reassembled");
+        let f = s.frame();
+        assert_eq!((f.msg.width, f.msg.height, f.header.stamp_sim_ns), (w, h, 5));
+        assert!(f.msg.data.iter().enumerate().all(|(i, b)| *b == (i % 251) as u8));
+    }
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn malformed_payloads_are_counted_and_the_stream_goes_on() {
+    let (a, b) = bus_pair(TopicMap::default(), TopicMap::default()).await;
+    let sub = b.subscriber(VEHICLE_SPEED).await.unwrap();
+    let got = Arc::new(AtomicU64::new(0));
+    let g = got.clone();
+    let cb = b.subscribe_with(VEHICLE_SPEED, move |_r| { g.fetch_add(1, Ordering::Relaxed); }).await.unwrap();
+    let raw = a.session().declare_publisher("vehicle/speed").await.unwrap();
+    let typed = a.publisher(VEHICLE_SPEED).await.unwrap();
+    assert!(typed.wait_for_subscriber(TIMEOUT).await);
+    let good = slipstream::msg::encode(&Default::default(), &Speed { speed_mps: 1.0 });
+    let bad: Vec<Vec<u8>> = vec![
+        vec![],
+        vec![0xff; 40],
+        good[..good.len() - 3].to_vec(),
+        [good.clone(), vec![0]].concat(),
+        slipstream::msg::encode(&Default::default(), &ControlCommand::NEUTRAL),
+    ];
+    for payload in &bad {
+        raw.put(payload.clone()).wait().unwrap();
+    }
+    typed.put(1, &Speed { speed_mps: 2.0 }).unwrap();
+    // The good message is real-time priority and may overtake the bad ones (default
+    // priority): wait for both.
+    let r = within!(sub.recv());
+    assert_eq!(r.msg.speed_mps, 2.0, "the good message gets through");
+    within!(async {
+        while sub.stats().snapshot().decode_errors < bad.len() as u64 {
+            tokio::time::sleep(Duration::from_millis(10)).await;
+        }
+    });
+    let s = sub.stats().snapshot();
+    assert_eq!((s.decode_errors, s.received), (bad.len() as u64, 1), "{s:?}");
+    assert!(s.latency_p99_us.unwrap() < 10e6, "bad payloads never reach the latency figures: {s:?}");
+    within!(async {
+        while got.load(Ordering::Relaxed) < 1 || cb.stats().snapshot().decode_errors < bad.len() as u64 {
+            tokio::time::sleep(Duration::from_millis(10)).await;
+        }
+    });
+    assert_eq!(got.load(Ordering::Relaxed), 1);
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn rate_limit_judges_simulation_time() {
+    let cfg = r#"{ topics: { "vehicle/speed": { max_rate_hz: 20 } } }"#;
+    let (a, b) = bus_pair(map(cfg), map(cfg)).await;
+    let sub = b.subscriber(VEHICLE_SPEED).await.unwrap();
+    let publisher = a.publisher(VEHICLE_SPEED).await.unwrap();
+    assert!(publisher.wait_for_subscriber(TIMEOUT).await);
+    // 100 messages, 10 ms of simulation time apart, sent as fast as possible: 1 s at 20 Hz.
+    let sent = (0..100u64).filter(|i| publisher.put(i * 10_000_000, &Speed { speed_mps: 0.0 }).unwrap().is_some()).count();
+    assert_eq!(sent, 20);
+    let mut seqs = Vec::new();
+    while seqs.len() < 16 {
+        seqs.push(within!(sub.recv()).header.seq);
+    }
+    assert_eq!(seqs, (0..16).collect::<Vec<_>>(), "no gaps: rate-limited messages take no seq");
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn liveliness_lists_the_nodes_alive() {
+    let (a, b) = bus_pair(map(r#"{ namespace: "rig" }"#), map(r#"{ namespace: "rig" }"#)).await;
+    let mut nodes = Vec::new();
+    within!(async {
+        loop {
+            nodes = a.nodes_alive().await.unwrap();
+            if nodes.len() == 2 {
+                break;
+            }
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+    });
+    assert_eq!(nodes, vec!["node-a".to_string(), "node-b".to_string()]);
+    b.close().await.unwrap();
+    within!(async {
+        while a.nodes_alive().await.unwrap() != vec!["node-a".to_string()] {
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+    });
+}

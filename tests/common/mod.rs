@@ -1,0 +1,56 @@
+//! Test helpers: loopback sessions with scouting off, timeouts on every await.
+#![allow(dead_code)]
+
+use std::time::Duration;
+
+use slipstream::{Bus, TopicMap};
+
+/// Every await in a test gets this long before the test fails instead of hanging CI.
+pub const TIMEOUT: Duration = Duration::from_secs(20);
+
+#[macro_export]
+macro_rules! within {
+    ($fut:expr) => {
+        tokio::time::timeout($crate::common::TIMEOUT, $fut).await.expect("timed out")
+    };
+}
+
+fn base_config() -> zenoh::Config {
+    let mut c = zenoh::Config::default();
+    for (k, v) in [
+        ("mode", "\"peer\""),
+        ("scouting/multicast/enabled", "false"),
+        ("scouting/gossip/enabled", "true"),
+    ] {
+        c.insert_json5(k, v).unwrap();
+    }
+    c
+}
+
+/// A session listening on an OS-chosen loopback port.
+pub async fn listening_session() -> (zenoh::Session, String) {
+    let mut c = base_config();
+    c.insert_json5("listen/endpoints", r#"["tcp/127.0.0.1:0"]"#).unwrap();
+    let s = zenoh::open(c).await.unwrap();
+    let ep = s.info().locators().await.first().expect("a locator").to_string();
+    (s, ep)
+}
+
+/// A session that connects to `endpoint`.
+pub async fn connected_session(endpoint: &str) -> zenoh::Session {
+    let mut c = base_config();
+    c.insert_json5("listen/endpoints", "[]").unwrap();
+    c.insert_json5("connect/endpoints", &format!(r#"["{endpoint}"]"#)).unwrap();
+    zenoh::open(c).await.unwrap()
+}
+
+/// Two buses on two sessions joined over tcp/127.0.0.1.
+pub async fn bus_pair(a: TopicMap, b: TopicMap) -> (Bus, Bus) {
+    let (s1, ep) = listening_session().await;
+    let s2 = connected_session(&ep).await;
+    (Bus::from_session(s1, a, "node-a").await.unwrap(), Bus::from_session(s2, b, "node-b").await.unwrap())
+}
+
+pub fn map(json5: &str) -> TopicMap {
+    TopicMap::from_json5(json5, "test config").unwrap()
+}

@@ -1,0 +1,136 @@
+//! Topic map and Zenoh config: defaults, namespace, remapping, QoS, and errors that name the
+//! file, the key and the fix.
+
+use slipstream::config::{ConnectArgs, TopicMap};
+use slipstream::qos::{Congestion, Delivery, Priority};
+use slipstream::topics::Topic;
+
+#[test]
+fn defaults_give_logical_names_and_control_qos() {
+    let m = TopicMap::default();
+    assert_eq!(m.key(Topic::VehicleSpeed).as_str(), "vehicle/speed");
+    assert_eq!(m.key(Topic::CameraFrontInfo).as_str(), "camera/front/info");
+    let speed = m.qos(Topic::VehicleSpeed);
+    assert_eq!((speed.priority, speed.express), (Priority::RealTime, true));
+    let cam = m.qos(Topic::CameraFront);
+    assert_eq!((cam.congestion_control, cam.delivery), (Congestion::Drop, Delivery::Latest));
+    assert!(cam.priority != Priority::RealTime);
+}
+
+#[test]
+fn namespace_and_remapping() {
+    let m = TopicMap::from_json5(
+        r#"{
+            namespace: "car1",
+            topics: {
+                "vehicle/speed": { key: "ego/v" },
+                "sim/clock": { key: "/fleet/clock" },   // absolute: no namespace
+                "camera/front": { delivery: { queue: 3 }, max_rate_hz: 10, priority: "background" },
+            },
+        }"#,
+        "t.json5",
+    )
+    .unwrap();
+    assert_eq!(m.key(Topic::VehicleSpeed).as_str(), "car1/ego/v");
+    assert_eq!(m.key(Topic::SimClock).as_str(), "fleet/clock");
+    assert_eq!(m.key(Topic::Objects).as_str(), "car1/objects");
+    let cam = m.qos(Topic::CameraFront);
+    assert_eq!((cam.delivery, cam.max_rate_hz, cam.priority), (Delivery::Queue(3), Some(10.0), Priority::Background));
+    assert_eq!(m.node_key("sim").unwrap().as_str(), "car1/nodes/sim");
+    assert_eq!(m.topic_of(zenoh::key_expr::keyexpr::new("car1/ego/v").unwrap()), Some(Topic::VehicleSpeed));
+    // --namespace replaces the file's namespace.
+    let m = m.with_namespace("car2").unwrap();
+    assert_eq!(m.key(Topic::VehicleSpeed).as_str(), "car2/ego/v");
+}
+
+fn err(text: &str) -> String {
+    TopicMap::from_json5(text, "config/slipstream.json5").unwrap_err().to_string()
+}
+
+#[test]
+fn errors_name_file_key_and_what_is_allowed() {
+    let e = err(r#"{ topics: { "vehicle/speed": { priority: "fast" } } }"#);
+    assert!(e.starts_with("config/slipstream.json5: key `topics.vehicle/speed.priority`"), "{e}");
+    assert!(e.contains("real-time") && e.contains("background"), "lists the allowed values: {e}");
+
+    let e = err(r#"{ topics: { "vehicle/sped": {} } }"#);
+    assert!(e.contains("`topics.vehicle/sped`") && e.contains("unknown topic") && e.contains("vehicle/speed"), "{e}");
+
+    let e = err(r#"{ topics: { "objects": { prio: "data" } } }"#);
+    assert!(e.contains("`topics.objects.prio`") || e.contains("`topics.objects`"), "{e}");
+    assert!(e.contains("unknown field `prio`"), "{e}");
+
+    let e = err(r#"{ camera: { jpeg_quality: 0 } }"#);
+    assert!(e.contains("`camera.jpeg_quality`") && e.contains("1 to 100"), "{e}");
+
+    let e = err(r#"{ topics: { "objects": { key: "a/*/b" } } }"#);
+    assert!(e.contains("`topics.objects.key`") && e.contains("wildcard"), "{e}");
+
+    let e = err(r#"{ topics: { "objects": { delivery: { queue: 0 } } } }"#);
+    assert!(e.contains("`topics.objects.delivery`"), "{e}");
+
+    let e = err(r#"{ topics: { "objects": { max_rate_hz: -1 } } }"#);
+    assert!(e.contains("max_rate_hz") && e.contains("positive"), "{e}");
+
+    let e = err(r#"{ namespace: "a/**" }"#);
+    assert!(e.contains("`namespace`"), "{e}");
+
+    let e = err(r#"{ topics: { "#);
+    assert!(e.starts_with("config/slipstream.json5: not valid JSON5"), "{e}");
+
+    let e = TopicMap::load(std::path::Path::new("/nonexistent/slipstream.json5")).unwrap_err().to_string();
+    assert!(e.contains("/nonexistent/slipstream.json5") && e.contains("cannot read"), "{e}");
+}
+
+fn repo_file(rel: &str) -> std::path::PathBuf {
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(rel)
+}
+
+#[test]
+fn shipped_topic_config_is_the_defaults() {
+    let m = TopicMap::load(&repo_file("config/slipstream.json5")).unwrap();
+    for t in Topic::ALL {
+        assert_eq!(m.key(t), TopicMap::default().key(t));
+        assert_eq!(m.qos(t), t.default_qos(), "{t}: the file documents the defaults");
+    }
+}
+
+#[test]
+fn shipped_zenoh_configs_parse() {
+    for f in ["config/zenoh.json5", "config/lan-peer.json5", "config/client.json5", "config/router.json5"] {
+        let args = ConnectArgs { zenoh_config: Some(repo_file(f)), ..Default::default() };
+        args.zenoh_config().unwrap_or_else(|e| panic!("{f}: {e}"));
+    }
+    // The default keeps everything on this machine.
+    let c = ConnectArgs::default().zenoh_config().unwrap();
+    assert_eq!(c.get_json("scouting/multicast/enabled").unwrap(), "false");
+    assert!(c.get_json("listen/endpoints").unwrap().contains("127.0.0.1"));
+    // The lan-peer config turns multicast scouting on, the router listens beyond loopback.
+    let lan = ConnectArgs { zenoh_config: Some(repo_file("config/lan-peer.json5")), ..Default::default() };
+    assert_eq!(lan.zenoh_config().unwrap().get_json("scouting/multicast/enabled").unwrap(), "true");
+}
+
+#[test]
+fn connection_flags_override_the_file() {
+    let args = ConnectArgs {
+        mode: Some(slipstream::config::ModeArg::Client),
+        connect: vec!["tcp/127.0.0.1:7500".into()],
+        listen: vec!["tcp/127.0.0.1:7501".into()],
+        cfg: vec!["transport/shared_memory/enabled:false".into()],
+        ..Default::default()
+    };
+    let c = args.zenoh_config().unwrap();
+    assert_eq!(c.get_json("mode").unwrap(), "\"client\"");
+    assert!(c.get_json("connect/endpoints").unwrap().contains("7500"));
+    assert!(c.get_json("listen/endpoints").unwrap().contains("7501"));
+    assert_eq!(c.get_json("transport/shared_memory/enabled").unwrap(), "false");
+
+    let bad = ConnectArgs { cfg: vec!["transport/shared_memory/enabled:maybe".into()], ..Default::default() };
+    let e = bad.zenoh_config().unwrap_err().to_string();
+    assert!(e.contains("--cfg") && e.contains("transport/shared_memory/enabled") && e.contains("maybe"), "{e}");
+    let bad = ConnectArgs { cfg: vec!["no-colon".into()], ..Default::default() };
+    assert!(bad.zenoh_config().unwrap_err().to_string().contains("KEY:VALUE"));
+    let missing = ConnectArgs { zenoh_config: Some("/nonexistent/z.json5".into()), ..Default::default() };
+    let e = missing.zenoh_config().unwrap_err().to_string();
+    assert!(e.contains("/nonexistent/z.json5") && e.contains("no such file"), "{e}");
+}
