@@ -265,3 +265,13 @@ fn frame_prefix_plus_pixels_is_the_encoded_frame() {
     let at = assembled.len() - data.len();
     assert_eq!(view.msg.data.as_ptr(), assembled[at..].as_ptr());
 }
+
+/// docs/wire-format.md quotes every example byte for byte: the doc cannot drift from the code.
+#[test]
+fn the_wire_format_doc_quotes_every_example() {
+    let doc = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/docs/wire-format.md")).unwrap();
+    for (kind, bytes) in examples() {
+        let hex = hex_lines(&bytes);
+        assert!(doc.contains(&hex), "docs/wire-format.md lacks the {} example:\n{hex}\n", kind.name());
+    }
+}

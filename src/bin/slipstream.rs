@@ -21,6 +21,9 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Run a publisher and a subscriber as two processes and show what flows (until
+    /// `slipstream up` exists, the quickest way to see the bus work)
+    Demo(slipstream::tools::demo::DemoArgs),
     /// Measure the bus against raw Zenoh, UDP and TCP (two processes on loopback; use --release)
     Bench(BenchArgs),
     /// Show the key of every topic after namespace and remapping, its QoS, and the Zenoh
@@ -30,6 +33,9 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Print the example payload of every message type (hex, as in docs/wire-format.md)
+    #[command(hide = true)]
+    WireExamples,
     /// One side of a benchmark case (started by `slipstream bench`)
     #[command(hide = true)]
     BenchPeer {
@@ -40,6 +46,49 @@ enum Command {
         #[arg(long)]
         endpoint: Option<String>,
     },
+}
+
+fn demo(connect: &ConnectArgs, args: &slipstream::tools::demo::DemoArgs) -> Result<()> {
+    use slipstream::tools::demo::{self, Role};
+    let duration = std::time::Duration::from_secs_f64(args.duration);
+    if args.role == Role::Both {
+        // Two real processes, started separately, as nodes will be: same flags, one role each.
+        let exe = std::env::current_exe()?;
+        let mut passed: Vec<String> = Vec::new();
+        let mut it = std::env::args().skip(1);
+        while let Some(a) = it.next() {
+            if a == "--role" {
+                it.next();
+            } else if !a.starts_with("--role=") {
+                passed.push(a);
+            }
+        }
+        let spawn = |role: &str| std::process::Command::new(&exe).args(&passed).args(["--role", role]).spawn();
+        let mut publisher = spawn("pub").context("start the publisher")?;
+        let subscriber = spawn("sub").context("start the subscriber")?;
+        let status = subscriber.wait_with_output()?.status;
+        let _ = publisher.wait();
+        anyhow::ensure!(status.success(), "the subscriber failed");
+        return Ok(());
+    }
+    let rt = tokio::runtime::Runtime::new()?;
+    rt.block_on(async {
+        let node = if args.role == Role::Pub { "demo-pub" } else { "demo-sub" };
+        let bus = slipstream::Bus::open(connect.zenoh_config()?, connect.topic_map()?, node).await?;
+        if args.role == Role::Pub {
+            demo::publish(&bus, duration).await?;
+        } else {
+            let summary = demo::subscribe(&bus, duration).await?;
+            if args.json {
+                println!("{}", serde_json::to_string_pretty(&summary)?);
+            } else {
+                println!("{}", demo::render(&summary));
+            }
+            demo::verdict(&summary)?;
+        }
+        bus.close().await?;
+        Ok(())
+    })
 }
 
 fn main() -> Result<()> {
@@ -60,6 +109,7 @@ fn main() -> Result<()> {
             }
             Ok(())
         }
+        Command::Demo(args) => demo(&cli.connect, &args),
         Command::Info { json } => {
             let info = slipstream::tools::info::gather(&cli.connect)?;
             if json {
@@ -67,6 +117,14 @@ fn main() -> Result<()> {
             } else {
                 print!("{}", slipstream::tools::info::render(&info));
             }
+            Ok(())
+        }
+        Command::WireExamples => {
+            let all: Vec<_> = slipstream::msg::examples()
+                .into_iter()
+                .map(|(kind, bytes)| serde_json::json!({ "kind": kind.name(), "hex": slipstream::msg::hex_lines(&bytes).replace('\n', " ") }))
+                .collect();
+            println!("{}", serde_json::to_string_pretty(&all)?);
             Ok(())
         }
         Command::BenchPeer { role, spec, endpoint } => {

@@ -121,6 +121,16 @@ pub trait Message: Serialize + std::fmt::Debug {
     }
 }
 
+/// Bytes as lowercase hex pairs separated by spaces, 16 per line (the form docs/wire-format.md
+/// quotes).
+pub fn hex_lines(bytes: &[u8]) -> String {
+    bytes
+        .chunks(16)
+        .map(|c| c.iter().map(|b| format!("{b:02x}")).collect::<Vec<_>>().join(" "))
+        .collect::<Vec<_>>()
+        .join("\n")
+}
+
 /// Wall-clock time now, in ns since the Unix epoch (the unit of `Header::stamp_pub_ns`).
 pub fn wall_clock_ns() -> u64 {
     std::time::SystemTime::now()

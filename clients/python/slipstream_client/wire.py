@@ -1,0 +1,274 @@
+"""slipstream wire format v1 in pure Python, written from docs/wire-format.md alone.
+
+decode(payload) -> (kind_name, header, body) and encode(kind_name, header, body) -> bytes.
+Bodies are dicts keyed by the field names of the doc; enums are their variant names
+(SimEventKind variants are {"variant": name, **fields}); bytes fields are bytes.
+Decoding is strict, like the Rust side: any malformed payload raises WireError.
+"""
+
+import struct
+
+WIRE_VERSION = 1
+
+
+class WireError(ValueError):
+    """A payload that is not a valid slipstream v1 message."""
+
+
+# Type language: "u8" "u32" "u64" "i32" "f32" "f64" "bool" "str" "bytes",
+# ("opt", T), ("seq", T), ("arr", T, N), ("enum", [names]), ("struct", NAME), ("variants", NAME).
+VEC3 = ("arr", "f64", 3)
+IMAGE_ENCODING = ("enum", ["Rgb8", "Jpeg", "Png"])
+OBJECT_CLASS = ("enum", ["Unknown", "Car", "Van", "Truck"])
+
+STRUCTS = {
+    "Header": [("seq", "u64"), ("stamp_sim_ns", "u64"), ("stamp_pub_ns", "u64")],
+    "Speed": [("speed_mps", "f64")],
+    "ControlCommand": [("throttle", "f32"), ("brake", "f32"), ("steer", "f32"), ("answers_step", ("opt", "u64"))],
+    "VehicleState": [
+        ("step", "u64"), ("position_in_world_m", VEC3), ("yaw_in_world_rad", "f64"), ("pitch_rad", "f64"),
+        ("roll_rad", "f64"), ("velocity_in_world_mps", VEC3), ("acceleration_in_body_mps2", VEC3),
+        ("yaw_rate_radps", "f64"), ("speed_mps", "f64"), ("lane", "i32"), ("applied", ("struct", "ControlCommand")),
+    ],
+    "CameraFrame": [("width", "u32"), ("height", "u32"), ("encoding", IMAGE_ENCODING), ("data", "bytes")],
+    "CameraInfo": [
+        ("width", "u32"), ("height", "u32"), ("fx_px", "f64"), ("fy_px", "f64"), ("cx_px", "f64"), ("cy_px", "f64"),
+        ("horizontal_fov_rad", "f64"), ("mount_position_in_ego_m", VEC3), ("mount_roll_pitch_yaw_rad", VEC3),
+        ("rate_hz", "f64"), ("encoding", IMAGE_ENCODING),
+    ],
+    "BoundingBox2d": [("u_min_px", "f32"), ("v_min_px", "f32"), ("u_max_px", "f32"), ("v_max_px", "f32")],
+    "GroundTruthObject": [
+        ("id", "u32"), ("class", OBJECT_CLASS), ("size_m", VEC3), ("lane", "i32"), ("position_in_world_m", VEC3),
+        ("yaw_in_world_rad", "f64"), ("velocity_in_world_mps", VEC3), ("position_in_ego_m", VEC3),
+        ("yaw_in_ego_rad", "f64"), ("velocity_in_ego_mps", VEC3), ("bbox", ("opt", ("struct", "BoundingBox2d"))),
+        ("visible_fraction", "f32"),
+    ],
+    "GroundTruthObjects": [("step", "u64"), ("objects", ("seq", ("struct", "GroundTruthObject")))],
+    "Detection": [
+        ("track_id", "u32"), ("class", OBJECT_CLASS), ("bbox", ("struct", "BoundingBox2d")), ("confidence", "f32"),
+        ("distance_m", "f64"), ("lateral_offset_m", "f64"), ("relative_speed_mps", "f64"),
+    ],
+    "Detections": [("frame_seq", "u64"), ("frame_stamp_pub_ns", "u64"), ("detections", ("seq", ("struct", "Detection")))],
+    "SimClock": [("step", "u64"), ("real_time_factor", "f32"), ("mode", ("enum", ["Realtime", "Fast", "Lockstep"])), ("physics_hz", "f64")],
+    "SimEvent": [("kind", ("variants", "SimEventKind"))],
+    "LeadInfo": [("id", "u32"), ("gap_m", "f64"), ("desired_gap_m", "f64"), ("relative_speed_mps", "f64"), ("ttc_s", ("opt", "f64"))],
+    "AccStatus": [
+        ("mode", ("enum", ["Off", "Speed", "Follow", "Stale", "Emergency"])), ("set_speed_mps", "f64"), ("time_gap_s", "f64"),
+        ("target_accel_mps2", "f64"), ("lead", ("opt", ("struct", "LeadInfo"))),
+        ("warnings", ("seq", ("enum", ["ForwardCollision", "StaleSpeed", "StalePerception", "PerceptionLost"]))),
+    ],
+    "AccCommand": [("enable", ("opt", "bool")), ("set_speed_mps", ("opt", "f64")), ("time_gap_s", ("opt", "f64"))],
+}
+
+VARIANTS = {
+    "SimEventKind": [
+        ("ScenarioStart", [("name", "str"), ("seed", "u64")]),
+        ("ScenarioEnd", [("reason", "str"), ("success", "bool")]),
+        ("Collision", [("other_id", "u32"), ("relative_speed_mps", "f64")]),
+        ("ControlTimeout", [("late", ("seq", "str"))]),
+    ],
+}
+
+KINDS = {
+    1: "Speed", 2: "VehicleState", 3: "ControlCommand", 4: "CameraFrame", 5: "CameraInfo", 6: "GroundTruthObjects",
+    7: "Detections", 8: "SimClock", 9: "SimEvent", 10: "AccStatus", 11: "AccCommand",
+}
+KIND_IDS = {name: kid for kid, name in KINDS.items()}
+
+# Default keys (docs/wire-format.md); a namespace prefixes them, config may remap them.
+DEFAULT_KEYS = {
+    "vehicle/speed": "Speed", "vehicle/state": "VehicleState", "vehicle/control": "ControlCommand",
+    "camera/front": "CameraFrame", "camera/front/info": "CameraInfo", "objects": "GroundTruthObjects",
+    "perception/objects": "Detections", "sim/clock": "SimClock", "sim/events": "SimEvent",
+    "acc/status": "AccStatus", "acc/command": "AccCommand",
+}
+
+_VARINT_MAX = {"u32": 5, "u64": 10}
+_BITS = {"u32": 32, "u64": 64}
+
+
+class _Reader:
+    def __init__(self, data):
+        self.data = memoryview(data)
+        self.at = 0
+
+    def take(self, n):
+        if self.at + n > len(self.data):
+            raise WireError("truncated: payload ended inside a field")
+        chunk = self.data[self.at:self.at + n]
+        self.at += n
+        return chunk
+
+    def varint(self, ty):
+        value, shift = 0, 0
+        for i in range(_VARINT_MAX[ty]):
+            b = self.take(1)[0]
+            value |= (b & 0x7F) << shift
+            if not b & 0x80:
+                if value >= 1 << _BITS[ty]:
+                    raise WireError(f"varint too large for {ty}")
+                return value
+            shift += 7
+        raise WireError(f"varint longer than {ty} allows")
+
+    def read(self, ty):
+        if ty == "u8":
+            return self.take(1)[0]
+        if ty in ("u32", "u64"):
+            return self.varint(ty)
+        if ty == "i32":
+            z = self.varint("u32")
+            return (z >> 1) ^ -(z & 1)
+        if ty == "f32":
+            return struct.unpack("<f", self.take(4))[0]
+        if ty == "f64":
+            return struct.unpack("<d", self.take(8))[0]
+        if ty == "bool":
+            b = self.take(1)[0]
+            if b > 1:
+                raise WireError(f"bool byte {b} is neither 0 nor 1")
+            return b == 1
+        if ty == "bytes":
+            return bytes(self.take(self.varint("u64")))
+        if ty == "str":
+            raw = bytes(self.take(self.varint("u64")))
+            try:
+                return raw.decode("utf-8")
+            except UnicodeDecodeError as e:
+                raise WireError(f"invalid UTF-8: {e}") from None
+        tag = ty[0]
+        if tag == "opt":
+            b = self.take(1)[0]
+            if b > 1:
+                raise WireError(f"option tag {b} is neither 0 nor 1")
+            return self.read(ty[1]) if b == 1 else None
+        if tag == "seq":
+            n = self.varint("u64")
+            if n > len(self.data) - self.at:  # every element takes at least one byte
+                raise WireError("truncated: sequence longer than the payload")
+            return [self.read(ty[1]) for _ in range(n)]
+        if tag == "arr":
+            return [self.read(ty[1]) for _ in range(ty[2])]
+        if tag == "enum":
+            i = self.varint("u32")
+            if i >= len(ty[1]):
+                raise WireError(f"enum index {i} names no variant")
+            return ty[1][i]
+        if tag == "struct":
+            return {name: self.read(fty) for name, fty in STRUCTS[ty[1]]}
+        if tag == "variants":
+            i = self.varint("u32")
+            variants = VARIANTS[ty[1]]
+            if i >= len(variants):
+                raise WireError(f"enum index {i} names no variant")
+            name, fields = variants[i]
+            return {"variant": name, **{f: self.read(fty) for f, fty in fields}}
+        raise AssertionError(f"unknown type {ty}")
+
+
+def _varint(value):
+    out = bytearray()
+    while True:
+        b = value & 0x7F
+        value >>= 7
+        if value:
+            out.append(b | 0x80)
+        else:
+            out.append(b)
+            return bytes(out)
+
+
+def _write(out, ty, v):
+    if ty == "u8":
+        out.append(v)
+    elif ty in ("u32", "u64"):
+        out += _varint(v)
+    elif ty == "i32":
+        out += _varint(((v << 1) ^ (v >> 31)) & 0xFFFFFFFF)
+    elif ty == "f32":
+        out += struct.pack("<f", v)
+    elif ty == "f64":
+        out += struct.pack("<d", v)
+    elif ty == "bool":
+        out.append(1 if v else 0)
+    elif ty == "bytes":
+        out += _varint(len(v)) + bytes(v)
+    elif ty == "str":
+        raw = v.encode("utf-8")
+        out += _varint(len(raw)) + raw
+    elif ty[0] == "opt":
+        if v is None:
+            out.append(0)
+        else:
+            out.append(1)
+            _write(out, ty[1], v)
+    elif ty[0] == "seq":
+        out += _varint(len(v))
+        for item in v:
+            _write(out, ty[1], item)
+    elif ty[0] == "arr":
+        if len(v) != ty[2]:
+            raise WireError(f"array needs {ty[2]} values, got {len(v)}")
+        for item in v:
+            _write(out, ty[1], item)
+    elif ty[0] == "enum":
+        out += _varint(ty[1].index(v))
+    elif ty[0] == "struct":
+        for name, fty in STRUCTS[ty[1]]:
+            _write(out, fty, v[name])
+    elif ty[0] == "variants":
+        names = [n for n, _ in VARIANTS[ty[1]]]
+        i = names.index(v["variant"])
+        out += _varint(i)
+        for name, fty in VARIANTS[ty[1]][i][1]:
+            _write(out, fty, v[name])
+    else:
+        raise AssertionError(f"unknown type {ty}")
+
+
+def _check(kind, body):
+    if kind == "CameraFrame":
+        if body["width"] == 0 or body["height"] == 0:
+            raise WireError("frame size is empty")
+        if body["encoding"] == "Rgb8" and len(body["data"]) != body["width"] * body["height"] * 3:
+            raise WireError("Rgb8 frame length does not match its size")
+    if kind == "ControlCommand":
+        for f, lo, hi in (("throttle", 0, 1), ("brake", 0, 1), ("steer", -1, 1)):
+            if not lo <= body[f] <= hi:
+                raise WireError(f"{f} {body[f]} is outside {lo}..{hi}")
+
+
+def decode(payload, expected=None):
+    """Decodes one payload strictly. Returns (kind, header, body)."""
+    if len(payload) == 0:
+        raise WireError("empty payload")
+    if payload[0] != WIRE_VERSION:
+        raise WireError(f"unknown wire version {payload[0]}")
+    if len(payload) < 2:
+        raise WireError("truncated in the preamble")
+    kind = KINDS.get(payload[1])
+    if kind is None:
+        raise WireError(f"unknown message kind {payload[1]}")
+    if expected is not None and kind != expected:
+        raise WireError(f"payload holds a {kind} message, expected {expected}")
+    r = _Reader(payload)
+    r.at = 2
+    header = r.read(("struct", "Header"))
+    body = r.read(("struct", kind))
+    if r.at != len(payload):
+        raise WireError(f"{len(payload) - r.at} trailing bytes after a complete message")
+    _check(kind, body)
+    return kind, header, body
+
+
+def encode(kind, header, body):
+    """Encodes a message; header is {"seq", "stamp_sim_ns", "stamp_pub_ns"}."""
+    out = bytearray([WIRE_VERSION, KIND_IDS[kind]])
+    _write(out, ("struct", "Header"), header)
+    _write(out, ("struct", kind), body)
+    return bytes(out)
+
+
+def encoding_schema(kind):
+    """The Zenoh encoding schema every sample of `kind` carries."""
+    return f"slipstream/{kind}/v{WIRE_VERSION}"

@@ -1,0 +1,41 @@
+#!/usr/bin/env bash
+# Runs every slipstream test, installing what the tests need first:
+#   - system packages: iproute2 (network-namespace tests), python3 venv support;
+#   - a Python venv in .venv with eclipse-zenoh 1.10 and pytest (the wire format is proved
+#     from Python);
+#   - the Rust tests in the release profile (the one profile we build: benches use it too,
+#     so zenoh is compiled once);
+#   - the Python tests against the release binaries.
+# Safe to run again: it installs only what is missing.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+step() { printf '\n== %s\n' "$*"; }
+
+step "system packages"
+missing=()
+command -v ip >/dev/null 2>&1 || missing+=(iproute2)
+python3 -c 'import venv, ensurepip' >/dev/null 2>&1 || missing+=(python3-venv)
+if ((${#missing[@]})); then
+  if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${missing[@]}"
+  else
+    echo "missing packages: ${missing[*]} (install them, e.g. sudo apt-get install ${missing[*]})" >&2
+    exit 1
+  fi
+fi
+echo "ok"
+
+step "python venv (.venv) with eclipse-zenoh 1.10"
+if ! .venv/bin/python -c 'import zenoh, pytest' >/dev/null 2>&1; then
+  python3 -m venv .venv
+  .venv/bin/pip install --quiet --disable-pip-version-check 'eclipse-zenoh==1.10.*' pytest
+fi
+.venv/bin/python -c 'import zenoh; print("eclipse-zenoh", zenoh.__version__ if hasattr(zenoh, "__version__") else "installed")'
+
+step "rust tests (cargo test --release)"
+cargo test --release
+
+step "python tests (against target/release/slipstream)"
+cargo build --release --bins
+SLIPSTREAM_BIN="$PWD/target/release/slipstream" .venv/bin/python -m pytest -q tests/python

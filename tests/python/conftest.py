@@ -1,0 +1,26 @@
+"""Shared fixtures: the Rust binary under test and the Python client on the path."""
+
+import os
+import pathlib
+import socket
+import sys
+
+import pytest
+
+ROOT = pathlib.Path(__file__).resolve().parents[2]
+sys.path.insert(0, str(ROOT / "clients" / "python"))
+
+
+@pytest.fixture(scope="session")
+def slipstream_bin():
+    path = pathlib.Path(os.environ.get("SLIPSTREAM_BIN", ROOT / "target" / "release" / "slipstream"))
+    if not path.is_file():
+        pytest.fail(f"{path} is missing: build it with `cargo build --release` (scripts/test.sh does)")
+    return str(path)
+
+
+@pytest.fixture
+def free_port():
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]

@@ -1,0 +1,56 @@
+"""A Python eclipse-zenoh subscriber reads what the Rust nodes publish, with no Rust code."""
+
+import subprocess
+import threading
+import time
+
+import zenoh
+
+from slipstream_client import decode, encoding_schema
+
+
+def test_python_subscriber_decodes_rust_publications(slipstream_bin, free_port):
+    endpoint = f"tcp/127.0.0.1:{free_port}"
+    publisher = subprocess.Popen(
+        [slipstream_bin, "demo", "--role", "pub", "--duration", "8", "-l", endpoint, "-e", endpoint],
+        stdout=subprocess.DEVNULL,
+    )
+    try:
+        conf = zenoh.Config()
+        conf.insert_json5("mode", '"peer"')
+        conf.insert_json5("scouting/multicast/enabled", "false")
+        conf.insert_json5("listen/endpoints", "[]")
+        conf.insert_json5("connect/endpoints", f'["{endpoint}"]')
+        got = {"Speed": [], "CameraFrame": [], "SimClock": []}
+        encodings = set()
+        lock = threading.Lock()
+
+        def on_sample(sample):
+            kind, header, body = decode(sample.payload.to_bytes())
+            with lock:
+                got[kind].append((header, body))
+                encodings.add(str(sample.encoding))
+
+        with zenoh.open(conf) as session:
+            subs = [session.declare_subscriber(k, on_sample) for k in ("vehicle/speed", "camera/front", "sim/clock")]
+            deadline = time.time() + 20
+            while time.time() < deadline:
+                with lock:
+                    if len(got["Speed"]) >= 100 and len(got["CameraFrame"]) >= 10:
+                        break
+                time.sleep(0.1)
+            for s in subs:
+                s.undeclare()
+        assert len(got["Speed"]) >= 100, {k: len(v) for k, v in got.items()}
+        assert len(got["CameraFrame"]) >= 10
+        seqs = [h["seq"] for h, _ in got["Speed"]]
+        assert seqs == sorted(seqs) and seqs[-1] - seqs[0] == len(seqs) - 1, "in order, none lost"
+        assert all(15.0 <= b["speed_mps"] <= 25.0 for _, b in got["Speed"])
+        h, frame = got["CameraFrame"][-1]
+        assert (frame["width"], frame["height"], frame["encoding"]) == (640, 480, "Rgb8")
+        assert len(frame["data"]) == 640 * 480 * 3
+        assert 0 < h["stamp_pub_ns"] <= time.time_ns()
+        assert f"application/octet-stream;{encoding_schema('Speed')}" in encodings, encodings
+    finally:
+        publisher.kill()
+        publisher.wait(timeout=10)
