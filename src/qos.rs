@@ -97,6 +97,9 @@ pub struct TopicQos {
     /// Publishers drop messages that come sooner than 1/rate after the last one sent.
     pub max_rate_hz: Option<f64>,
     pub delivery: Delivery,
+    /// The publisher keeps its last message (zenoh-ext advanced publisher with a cache of one)
+    /// and a subscriber that starts later receives it first: calibration, configuration.
+    pub latched: bool,
 }
 
 impl Default for TopicQos {
@@ -108,6 +111,7 @@ impl Default for TopicQos {
             reliability: Reliability::Reliable,
             max_rate_hz: None,
             delivery: Delivery::Queue(16),
+            latched: false,
         }
     }
 }

@@ -79,7 +79,8 @@ impl Topic {
 
     /// QoS when the config says nothing: control-loop signals at real-time priority and
     /// express (sent at once, never batched behind images), camera frames low priority and
-    /// dropped under congestion, read latest-only; events and calibration reliable and queued.
+    /// dropped under congestion, read latest-only; events and calibration never dropped and
+    /// queued; calibration latched so a late subscriber still gets it.
     pub fn default_qos(self) -> TopicQos {
         let base = TopicQos::default();
         match self {
@@ -95,7 +96,13 @@ impl Topic {
                 delivery: Delivery::Latest,
                 ..base
             },
-            Topic::CameraFrontInfo | Topic::SimEvents | Topic::AccCommand => TopicQos {
+            Topic::CameraFrontInfo => TopicQos {
+                congestion_control: crate::qos::Congestion::Block,
+                delivery: Delivery::Queue(64),
+                latched: true,
+                ..base
+            },
+            Topic::SimEvents | Topic::AccCommand => TopicQos {
                 congestion_control: crate::qos::Congestion::Block,
                 delivery: Delivery::Queue(64),
                 ..base

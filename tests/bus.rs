@@ -84,8 +84,8 @@ async fn configured_qos_reaches_the_wire() {
     let speed = a.publisher(VEHICLE_SPEED).await.unwrap();
     let control = a.publisher(VEHICLE_CONTROL).await.unwrap();
     assert!(speed.wait_for_subscriber(TIMEOUT).await && control.wait_for_subscriber(TIMEOUT).await);
-    assert_eq!(control.zenoh().priority(), zenoh::qos::Priority::InteractiveLow);
-    assert_eq!(control.zenoh().congestion_control(), zenoh::qos::CongestionControl::Block);
+    assert_eq!(control.priority(), zenoh::qos::Priority::InteractiveLow);
+    assert_eq!(control.congestion_control(), zenoh::qos::CongestionControl::Block);
     speed.put(0, &Speed { speed_mps: 1.0 }).unwrap();
     control.put(0, &ControlCommand::NEUTRAL).unwrap();
     within!(async {
@@ -250,4 +250,39 @@ async fn liveliness_lists_the_nodes_alive() {
             tokio::time::sleep(Duration::from_millis(50)).await;
         }
     });
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn a_late_subscriber_gets_the_latched_camera_info() {
+    use slipstream::msg::CameraInfo;
+    use slipstream::topics::CAMERA_FRONT_INFO;
+    let (a, b) = bus_pair(TopicMap::default(), TopicMap::default()).await;
+    let publisher = a.publisher(CAMERA_FRONT_INFO).await.unwrap();
+    assert!(publisher.is_latched());
+    let info = |w| CameraInfo {
+        width: w,
+        height: 480,
+        fx_px: 500.0,
+        fy_px: 500.0,
+        cx_px: 320.0,
+        cy_px: 240.0,
+        horizontal_fov_rad: 1.0,
+        mount_position_in_ego_m: [1.5, 0.0, 1.4],
+        mount_roll_pitch_yaw_rad: [0.0; 3],
+        rate_hz: 20.0,
+        encoding: ImageEncoding::Rgb8,
+    };
+    // Published before anyone subscribes: only the latest is kept.
+    publisher.put(1, &info(320)).unwrap();
+    publisher.put(2, &info(640)).unwrap();
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    let late = b.subscriber(CAMERA_FRONT_INFO).await.unwrap();
+    let r = within!(late.recv());
+    assert_eq!((r.msg.width, r.header.seq), (640, 1), "the last message published before the subscriber existed");
+    // And a non-latched topic does not replay.
+    let speed = a.publisher(VEHICLE_SPEED).await.unwrap();
+    speed.put(0, &Speed { speed_mps: 1.0 }).unwrap();
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    let late_speed = b.subscriber(VEHICLE_SPEED).await.unwrap();
+    assert!(late_speed.recv_timeout(Duration::from_millis(500)).await.is_none());
 }

@@ -19,9 +19,9 @@ use serde::Serialize;
 pub use peer::{run_receiver, run_sender};
 pub use spec::{Background, CaseSpec, Payload, RecvReport, SendReport, Transport};
 
-/// Zenoh runtime setting that runs its rx, tx, acceptor and app work on one handover
-/// thread pool instead of handing each message from one pool to the next.
-pub const HANDOVER_RUNTIME: &str = "(rx: (handover: tx), acc: (handover: tx), app: (handover: tx), net: (handover: tx))";
+/// ZENOH_RUNTIME value that gives Zenoh's own thread layout (a pool per role) instead of
+/// slipstream's default handover layout (`crate::cli::ZENOH_RUNTIME_DEFAULT`).
+pub const ZENOH_OWN_RUNTIME: &str = "()";
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum Suite {
@@ -101,6 +101,7 @@ fn speed_spec(transport: Transport, count: u64) -> CaseSpec {
         shm: true,
         lowlatency: false,
         runtime: None,
+        tcp_buffer: None,
         background: None,
     }
 }
@@ -116,13 +117,10 @@ fn cases(suites: &[Suite], quick: bool) -> Vec<Case> {
         push(s, "raw TCP", speed_spec(Transport::Tcp, speed_n));
         push(s, "raw zenoh", speed_spec(Transport::Zenoh, speed_n));
         push(s, "bus", speed_spec(Transport::Bus, speed_n));
-        push(s, "raw zenoh, handover runtime", CaseSpec { runtime: Some(HANDOVER_RUNTIME.into()), ..speed_spec(Transport::Zenoh, speed_n) });
-        push(s, "bus, handover runtime", CaseSpec { runtime: Some(HANDOVER_RUNTIME.into()), ..speed_spec(Transport::Bus, speed_n) });
-        push(
-            s,
-            "bus, handover + lowlatency",
-            CaseSpec { runtime: Some(HANDOVER_RUNTIME.into()), lowlatency: true, ..speed_spec(Transport::Bus, speed_n) },
-        );
+        let zenoh_rt = || Some(ZENOH_OWN_RUNTIME.to_string());
+        push(s, "raw zenoh, zenoh's runtime", CaseSpec { runtime: zenoh_rt(), ..speed_spec(Transport::Zenoh, speed_n) });
+        push(s, "bus, zenoh's runtime", CaseSpec { runtime: zenoh_rt(), ..speed_spec(Transport::Bus, speed_n) });
+        push(s, "bus, lowlatency transport", CaseSpec { lowlatency: true, ..speed_spec(Transport::Bus, speed_n) });
     }
     if suites.contains(&Suite::Frames) {
         for (w, h) in [(640u32, 480u32), (1280, 720)] {
@@ -145,6 +143,7 @@ fn cases(suites: &[Suite], quick: bool) -> Vec<Case> {
                 shm,
                 lowlatency: false,
                 runtime: None,
+                tcp_buffer: None,
                 background: None,
             };
             for (phase, rate) in [("throughput", None), ("latency @20 Hz", Some(20.0))] {
@@ -154,6 +153,11 @@ fn cases(suites: &[Suite], quick: bool) -> Vec<Case> {
                 push(&s, "raw zenoh, TCP (shm off)", frame(Transport::Zenoh, false, rate));
                 push(&s, "raw zenoh, implicit shm", frame(Transport::Zenoh, true, rate));
                 push(&s, "raw TCP", frame(Transport::Tcp, false, rate));
+                if rate.is_none() {
+                    let zrt = |spec: CaseSpec| CaseSpec { runtime: Some(ZENOH_OWN_RUNTIME.into()), ..spec };
+                    push(&s, "bus, shared memory, zenoh's runtime", zrt(frame(Transport::Bus, true, rate)));
+                    push(&s, "bus, TCP (shm off), zenoh's runtime", zrt(frame(Transport::Bus, false, rate)));
+                }
             }
         }
     }
@@ -172,6 +176,18 @@ fn cases(suites: &[Suite], quick: bool) -> Vec<Case> {
         push(s, "frames saturating, QoS, TCP", loaded(None, true, false));
         push(s, "frames saturating, QoS off, TCP", loaded(None, false, false));
         push(s, "frames saturating, QoS, shm", loaded(None, true, true));
+        for kib in [64u32, 256] {
+            push(
+                s,
+                &format!("frames saturating, QoS, TCP, {kib} KiB socket buffers"),
+                CaseSpec { tcp_buffer: Some(kib * 1024), ..loaded(None, true, false) },
+            );
+        }
+        push(
+            s,
+            "frames saturating, QoS, TCP, zenoh's runtime",
+            CaseSpec { runtime: Some(ZENOH_OWN_RUNTIME.into()), ..loaded(None, true, false) },
+        );
     }
     out
 }
@@ -193,6 +209,7 @@ fn spawn_peer(role: &str, spec: &CaseSpec, endpoint: Option<&str>) -> Result<Pee
     if let Some(ep) = endpoint {
         cmd.arg("--endpoint").arg(ep);
     }
+    // None: the peer applies slipstream's default layout itself.
     match &spec.runtime {
         Some(r) => cmd.env("ZENOH_RUNTIME", r),
         None => cmd.env_remove("ZENOH_RUNTIME"),
@@ -350,18 +367,16 @@ fn ratios(rows: &[Row]) -> Vec<Ratio> {
     let p99 = |s: &str, p: &str| find(rows, s, p).and_then(|r| r.p99_us);
     ratio("speed p50: bus / raw UDP".into(), p50("a.", "bus"), p50("a.", "raw UDP"), "<= 1.5");
     ratio("speed p50: bus / raw zenoh".into(), p50("a.", "bus"), p50("a.", "raw zenoh"), "<= 1.1");
-    ratio(
-        "speed p50: bus, handover / raw zenoh, handover".into(),
-        p50("a.", "bus, handover runtime"),
-        p50("a.", "raw zenoh, handover runtime"),
-        "<= 1.1",
-    );
-    ratio("speed p50: bus, handover / raw UDP".into(), p50("a.", "bus, handover runtime"), p50("a.", "raw UDP"), "<= 1.5");
-    ratio("speed p50: bus, handover + lowlatency / raw UDP".into(), p50("a.", "bus, handover + lowlatency"), p50("a.", "raw UDP"), "<= 1.5");
+    ratio("speed p50: bus / raw TCP".into(), p50("a.", "bus"), p50("a.", "raw TCP"), "-");
+    ratio("speed p99: bus / raw UDP".into(), p99("a.", "bus"), p99("a.", "raw UDP"), "-");
+    ratio("speed p50: bus, zenoh's runtime / raw zenoh, zenoh's runtime".into(), p50("a.", "bus, zenoh's runtime"), p50("a.", "raw zenoh, zenoh's runtime"), "<= 1.1");
+    ratio("speed p50: bus, zenoh's runtime / bus".into(), p50("a.", "bus, zenoh's runtime"), p50("a.", "bus"), "-");
+    ratio("speed p50: bus, lowlatency transport / raw UDP".into(), p50("a.", "bus, lowlatency transport"), p50("a.", "raw UDP"), "<= 1.5");
     for size in ["640x480", "1280x720"] {
         let fps = |p: &str| rows.iter().find(|r| r.suite.contains(size) && r.suite.contains("throughput") && r.path == p).and_then(|r| r.frames_per_s);
         ratio(format!("{size} frames/s: bus shm / raw TCP"), fps("bus, shared memory"), fps("raw TCP"), ">= 3");
         ratio(format!("{size} frames/s: bus TCP / raw zenoh TCP"), fps("bus, TCP (shm off)"), fps("raw zenoh, TCP (shm off)"), ">= 0.9");
+        ratio(format!("{size} frames/s: bus shm / raw zenoh implicit shm"), fps("bus, shared memory"), fps("raw zenoh, implicit shm"), "-");
     }
     let c = "c.";
     for p in ["frames 30 Hz, QoS, TCP", "frames saturating, QoS, TCP", "frames saturating, QoS off, TCP", "frames saturating, QoS, shm"] {

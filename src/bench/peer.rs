@@ -88,6 +88,10 @@ pub fn peer_config(spec: &CaseSpec, listen: Option<&str>, connect: Option<&str>)
     set(&mut c, "listen/endpoints", &serde_json::to_string(&listen.into_iter().collect::<Vec<_>>())?)?;
     set(&mut c, "connect/endpoints", &serde_json::to_string(&connect.into_iter().collect::<Vec<_>>())?)?;
     set(&mut c, "transport/shared_memory/enabled", if spec.shm { "true" } else { "false" })?;
+    if let Some(b) = spec.tcp_buffer {
+        set(&mut c, "transport/link/tcp/so_sndbuf", &b.to_string())?;
+        set(&mut c, "transport/link/tcp/so_rcvbuf", &b.to_string())?;
+    }
     if spec.lowlatency {
         set(&mut c, "transport/unicast/lowlatency", "true")?;
         set(&mut c, "transport/unicast/qos/enabled", "false")?;
@@ -145,9 +149,11 @@ pub async fn run_receiver(spec: CaseSpec) -> Result<()> {
                 let mut stream = std::io::BufReader::with_capacity(1 << 16, stream);
                 let mut len_buf = [0u8; 4];
                 let mut body = Vec::new();
+                // read_fully keeps partial progress across read timeouts (read_exact would
+                // lose a half-read length prefix and desynchronise the stream).
                 while !stop.load(Ordering::Relaxed) {
-                    if stream.read_exact(&mut len_buf).is_err() {
-                        continue;
+                    if read_fully(&mut stream, &mut len_buf, &stop).is_err() {
+                        return;
                     }
                     let len = u32::from_le_bytes(len_buf) as usize;
                     body.resize(len, 0);
@@ -343,7 +349,17 @@ pub async fn run_sender(spec: CaseSpec, endpoint: String) -> Result<()> {
                 Payload::Speed => (SPEED_KEY, None),
                 Payload::Frame { width, height } => (FRAME_KEY, Some(ZBytes::from(vec![7u8; (width * height * 3) as usize]))),
             };
-            let publisher = session.declare_publisher(key).await.map_err(anyhow::Error::msg)?;
+            // The same QoS the bus gives the topic (or Zenoh's defaults with qos off): the
+            // comparison isolates the typed layer.
+            let topic = if frame.is_none() { crate::topics::Topic::VehicleSpeed } else { crate::topics::Topic::CameraFront };
+            let qos = peer_topics(&spec)?.qos(topic);
+            let publisher = session
+                .declare_publisher(key)
+                .priority(qos.priority.into())
+                .express(qos.express)
+                .congestion_control(qos.congestion_control.into())
+                .await
+                .map_err(anyhow::Error::msg)?;
             wait_matching(&publisher).await?;
             let pacer = Pacer::new(spec.rate_hz);
             for i in 0..spec.count {

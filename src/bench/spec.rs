@@ -49,8 +49,12 @@ pub struct CaseSpec {
     pub shm: bool,
     /// Zenoh's low-latency transport (no priorities, no fragmentation).
     pub lowlatency: bool,
-    /// ZENOH_RUNTIME for both processes, None: Zenoh's default.
+    /// ZENOH_RUNTIME for both processes, None: slipstream's default.
     pub runtime: Option<String>,
+    /// TCP send and receive buffer size (so_sndbuf/so_rcvbuf) for Zenoh's links, None: the
+    /// kernel's default.
+    #[serde(default)]
+    pub tcp_buffer: Option<u32>,
     pub background: Option<Background>,
 }
 

@@ -92,6 +92,7 @@ fn demo(connect: &ConnectArgs, args: &slipstream::tools::demo::DemoArgs) -> Resu
 }
 
 fn main() -> Result<()> {
+    slipstream::cli::apply_zenoh_runtime_default();
     let cli = Cli::parse();
     slipstream::cli::init_tracing();
     match cli.command {

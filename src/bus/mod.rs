@@ -93,14 +93,13 @@ impl Bus {
     where
         M: Message + serde::de::DeserializeOwned + Send + 'static,
     {
-        let qos = self.topics.qos(def.topic);
-        Subscriber::declare(&self.session, self.topics.key(def.topic), def.topic.name(), qos.delivery).await
+        Subscriber::declare(&self.session, self.topics.key(def.topic), def.topic.name(), self.topics.qos(def.topic)).await
     }
 
     /// The camera/front subscriber: frames are read in place (shared memory on one host).
     pub async fn frame_subscriber(&self) -> Result<FrameSubscriber, BusError> {
         let topic = crate::topics::CAMERA_FRONT.topic;
-        FrameSubscriber::declare(&self.session, self.topics.key(topic), topic.name(), self.topics.qos(topic).delivery).await
+        FrameSubscriber::declare(&self.session, self.topics.key(topic), topic.name(), self.topics.qos(topic)).await
     }
 
     /// Calls `handler` with every well-formed message of `def`, on Zenoh's receive thread
@@ -110,7 +109,7 @@ impl Bus {
         M: Message + serde::de::DeserializeOwned,
         F: Fn(Received<M>) + Send + Sync + 'static,
     {
-        CallbackSubscriber::declare(&self.session, self.topics.key(def.topic), def.topic.name(), handler).await
+        CallbackSubscriber::declare(&self.session, self.topics.key(def.topic), def.topic.name(), self.topics.qos(def.topic), handler).await
     }
 
     /// Names of the nodes alive in this namespace (their liveliness tokens).

@@ -13,9 +13,16 @@ use crate::config::TopicMap;
 use crate::msg::{self, encode_into, frame_prefix, CameraFrame, CameraFrameRef, Header, ImageEncoding, Message};
 use crate::topics::Topic;
 
+/// The Zenoh publisher underneath: plain, or an advanced one that keeps the last message for
+/// late subscribers (latched topics).
+enum Inner {
+    Plain(zenoh::pubsub::Publisher<'static>),
+    Latched(zenoh_ext::AdvancedPublisher<'static>),
+}
+
 /// Publishes one message type on one topic.
 pub struct Publisher<M> {
-    inner: zenoh::pubsub::Publisher<'static>,
+    inner: Inner,
     topic: Topic,
     seq: AtomicU64,
     /// With max_rate_hz: the smallest step of simulation time between two messages sent.
@@ -30,15 +37,28 @@ impl<M: Message> Publisher<M> {
     pub(super) async fn declare(session: &zenoh::Session, topics: &TopicMap, topic: Topic) -> Result<Self, BusError> {
         let key = topics.key(topic);
         let qos = topics.qos(topic);
-        let inner = session
+        let builder = session
             .declare_publisher(key.clone())
             .encoding(encoding_of(M::KIND))
             .priority(qos.priority.into())
             .express(qos.express)
             .congestion_control(qos.congestion_control.into())
-            .reliability(qos.reliability.into())
-            .await
-            .map_err(zerr(format!("declare publisher on {key}")))?;
+            .reliability(qos.reliability.into());
+        let inner = if qos.latched {
+            use zenoh_ext::AdvancedPublisherBuilderExt;
+            let cache = zenoh_ext::CacheConfig::default().max_samples(1);
+            // Sequence numbers (miss detection) rather than timestamps order the cache, so
+            // latching works whatever the Zenoh config says about timestamping.
+            let latched = builder
+                .cache(cache)
+                .sample_miss_detection(zenoh_ext::MissDetectionConfig::default())
+                .publisher_detection()
+                .await
+                .map_err(zerr(format!("declare publisher on {key}")))?;
+            Inner::Latched(latched)
+        } else {
+            Inner::Plain(builder.await.map_err(zerr(format!("declare publisher on {key}")))?)
+        };
         tracing::debug!(topic = topic.name(), %key, ?qos, "publisher declared");
         Ok(Publisher {
             inner,
@@ -81,7 +101,11 @@ impl<M: Message> Publisher<M> {
     }
 
     fn send(&self, payload: impl Into<ZBytes>) -> Result<(), BusError> {
-        self.inner.put(payload).wait().map_err(zerr(format!("put on {}", self.inner.key_expr())))
+        let sent = match &self.inner {
+            Inner::Plain(p) => p.put(payload).wait(),
+            Inner::Latched(p) => p.put(payload).wait(),
+        };
+        sent.map_err(zerr(format!("put on {}", self.key())))
     }
 
     pub fn topic(&self) -> Topic {
@@ -89,12 +113,39 @@ impl<M: Message> Publisher<M> {
     }
 
     pub fn key(&self) -> &str {
-        self.inner.key_expr().as_str()
+        match &self.inner {
+            Inner::Plain(p) => p.key_expr().as_str(),
+            Inner::Latched(p) => p.key_expr().as_str(),
+        }
     }
 
-    /// The underlying Zenoh publisher (its QoS, matching status).
-    pub fn zenoh(&self) -> &zenoh::pubsub::Publisher<'static> {
-        &self.inner
+    /// The priority the publisher was declared with.
+    pub fn priority(&self) -> zenoh::qos::Priority {
+        match &self.inner {
+            Inner::Plain(p) => p.priority(),
+            Inner::Latched(p) => p.priority(),
+        }
+    }
+
+    /// The congestion control the publisher was declared with.
+    pub fn congestion_control(&self) -> zenoh::qos::CongestionControl {
+        match &self.inner {
+            Inner::Plain(p) => p.congestion_control(),
+            Inner::Latched(p) => p.congestion_control(),
+        }
+    }
+
+    /// Whether the publisher keeps its last message for late subscribers.
+    pub fn is_latched(&self) -> bool {
+        matches!(self.inner, Inner::Latched(_))
+    }
+
+    async fn matching(&self) -> bool {
+        let status = match &self.inner {
+            Inner::Plain(p) => p.matching_status().await,
+            Inner::Latched(p) => p.matching_status().await,
+        };
+        status.map(|s| s.matching()).unwrap_or(false)
     }
 
     /// Waits until at least one subscriber matches, or the timeout passes. Returns whether one
@@ -102,7 +153,7 @@ impl<M: Message> Publisher<M> {
     pub async fn wait_for_subscriber(&self, timeout: std::time::Duration) -> bool {
         let deadline = tokio::time::Instant::now() + timeout;
         loop {
-            if self.inner.matching_status().await.map(|s| s.matching()).unwrap_or(false) {
+            if self.matching().await {
                 return true;
             }
             if tokio::time::Instant::now() >= deadline {

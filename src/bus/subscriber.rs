@@ -23,7 +23,7 @@ use zenoh::sample::Sample;
 
 use super::{zerr, BusError, TopicStats};
 use crate::msg::{self, CameraFrameRef, DecodeError, Header, Message, Stamped};
-use crate::qos::Delivery;
+use crate::qos::{Delivery, TopicQos};
 
 /// A received message, decoded.
 #[derive(Debug, Clone, PartialEq)]
@@ -73,44 +73,63 @@ impl<T> Inbox<T> {
     }
 }
 
-/// Declares a Zenoh subscriber whose callback validates with `accept` and fills `inbox`.
+/// Keeps a declared Zenoh subscriber (plain or advanced) alive; dropping it undeclares.
+type Declared = Box<dyn std::any::Any + Send + Sync>;
+
+/// Declares a Zenoh subscriber calling `callback`; for a latched topic an advanced subscriber
+/// that first fetches the last message of every publisher, including ones that start later.
+async fn declare_callback<F>(session: &zenoh::Session, key: &OwnedKeyExpr, latched: bool, callback: F) -> Result<Declared, BusError>
+where
+    F: Fn(Sample) + Send + Sync + 'static,
+{
+    let builder = session.declare_subscriber(key.clone());
+    let declared: Declared = if latched {
+        use zenoh_ext::AdvancedSubscriberBuilderExt;
+        let history = zenoh_ext::HistoryConfig::default().detect_late_publishers().max_samples(1);
+        Box::new(builder.history(history).callback(callback).await.map_err(zerr(format!("declare subscriber on {key}")))?)
+    } else {
+        Box::new(builder.callback(callback).await.map_err(zerr(format!("declare subscriber on {key}")))?)
+    };
+    Ok(declared)
+}
+
+/// Declares a subscriber whose callback validates with `accept` and fills `inbox`.
 async fn declare_inbox<T, F>(
     session: &zenoh::Session,
     key: &OwnedKeyExpr,
+    latched: bool,
     stats: Arc<TopicStats>,
     inbox: Arc<Inbox<T>>,
     accept: F,
-) -> Result<zenoh::pubsub::Subscriber<()>, BusError>
+) -> Result<Declared, BusError>
 where
     T: Send + 'static,
     F: Fn(Sample) -> Result<(Header, usize, T), DecodeError> + Send + Sync + 'static,
 {
-    session
-        .declare_subscriber(key.clone())
-        .callback(move |sample: Sample| match accept(sample) {
-            Ok((header, len, item)) => {
-                stats.on_message(&header, len, msg::wall_clock_ns());
-                inbox.push(item, &stats);
-            }
-            Err(e) => stats.on_decode_error(&e),
-        })
-        .await
-        .map_err(zerr(format!("declare subscriber on {key}")))
+    declare_callback(session, key, latched, move |sample: Sample| match accept(sample) {
+        Ok((header, len, item)) => {
+            stats.on_message(&header, len, msg::wall_clock_ns());
+            inbox.push(item, &stats);
+        }
+        Err(e) => stats.on_decode_error(&e),
+    })
+    .await
 }
 
 /// A subscription to one topic, delivering decoded messages.
 pub struct Subscriber<M> {
-    _inner: zenoh::pubsub::Subscriber<()>,
+    _inner: Declared,
     inbox: Arc<Inbox<Received<M>>>,
     stats: Arc<TopicStats>,
     key: String,
 }
 
 impl<M: Message + DeserializeOwned + Send + 'static> Subscriber<M> {
-    pub(crate) async fn declare(session: &zenoh::Session, key: OwnedKeyExpr, name: &str, delivery: Delivery) -> Result<Self, BusError> {
+    pub(crate) async fn declare(session: &zenoh::Session, key: OwnedKeyExpr, name: &str, qos: TopicQos) -> Result<Self, BusError> {
         let stats = Arc::new(TopicStats::new(name));
-        let inbox = Arc::new(Inbox::new(delivery));
-        let inner = declare_inbox(session, &key, stats.clone(), inbox.clone(), |sample| {
+        let inbox = Arc::new(Inbox::new(qos.delivery));
+        let delivery = qos.delivery;
+        let inner = declare_inbox(session, &key, qos.latched, stats.clone(), inbox.clone(), |sample| {
             let payload = sample.payload();
             let bytes = payload.to_bytes();
             let Stamped { header, msg } = msg::decode::<M>(&bytes)?;
@@ -190,17 +209,17 @@ impl FrameSample {
 
 /// The camera subscription: zero-copy frames.
 pub struct FrameSubscriber {
-    _inner: zenoh::pubsub::Subscriber<()>,
+    _inner: Declared,
     inbox: Arc<Inbox<FrameSample>>,
     stats: Arc<TopicStats>,
     key: String,
 }
 
 impl FrameSubscriber {
-    pub(crate) async fn declare(session: &zenoh::Session, key: OwnedKeyExpr, name: &str, delivery: Delivery) -> Result<Self, BusError> {
+    pub(crate) async fn declare(session: &zenoh::Session, key: OwnedKeyExpr, name: &str, qos: TopicQos) -> Result<Self, BusError> {
         let stats = Arc::new(TopicStats::new(name));
-        let inbox = Arc::new(Inbox::new(delivery));
-        let inner = declare_inbox(session, &key, stats.clone(), inbox.clone(), |sample| {
+        let inbox = Arc::new(Inbox::new(qos.delivery));
+        let inner = declare_inbox(session, &key, qos.latched, stats.clone(), inbox.clone(), |sample| {
             let payload = sample.payload();
             let joined = if payload.slices().nth(1).is_some() { Some(payload.to_bytes().into_owned()) } else { None };
             let len = payload.len();
@@ -241,33 +260,30 @@ impl FrameSubscriber {
 /// thread: no inbox, no thread handoff. For small hot-path messages (speed, control) whose
 /// handler is quick; a slow handler here delays every message on the same link.
 pub struct CallbackSubscriber {
-    _inner: zenoh::pubsub::Subscriber<()>,
+    _inner: Declared,
     stats: Arc<TopicStats>,
 }
 
 impl CallbackSubscriber {
-    pub(crate) async fn declare<M, F>(session: &zenoh::Session, key: OwnedKeyExpr, name: &str, handler: F) -> Result<Self, BusError>
+    pub(crate) async fn declare<M, F>(session: &zenoh::Session, key: OwnedKeyExpr, name: &str, qos: TopicQos, handler: F) -> Result<Self, BusError>
     where
         M: Message + DeserializeOwned,
         F: Fn(Received<M>) + Send + Sync + 'static,
     {
         let stats = Arc::new(TopicStats::new(name));
         let st = stats.clone();
-        let inner = session
-            .declare_subscriber(key.clone())
-            .callback(move |sample: Sample| {
-                let payload = sample.payload();
-                let bytes = payload.to_bytes();
-                match msg::decode::<M>(&bytes) {
-                    Ok(Stamped { header, msg }) => {
-                        st.on_message(&header, bytes.len(), msg::wall_clock_ns());
-                        handler(Received { header, msg });
-                    }
-                    Err(e) => st.on_decode_error(&e),
+        let inner = declare_callback(session, &key, qos.latched, move |sample: Sample| {
+            let payload = sample.payload();
+            let bytes = payload.to_bytes();
+            match msg::decode::<M>(&bytes) {
+                Ok(Stamped { header, msg }) => {
+                    st.on_message(&header, bytes.len(), msg::wall_clock_ns());
+                    handler(Received { header, msg });
                 }
-            })
-            .await
-            .map_err(zerr(format!("declare subscriber on {key}")))?;
+                Err(e) => st.on_decode_error(&e),
+            }
+        })
+        .await?;
         Ok(CallbackSubscriber { _inner: inner, stats })
     }
 

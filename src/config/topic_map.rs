@@ -89,6 +89,7 @@ struct RawTopic {
     reliability: Option<Reliability>,
     max_rate_hz: Option<f64>,
     delivery: Option<Delivery>,
+    latched: Option<bool>,
 }
 
 impl Default for TopicMap {
@@ -179,6 +180,7 @@ impl TopicMap {
             q.express = over.express.unwrap_or(q.express);
             q.congestion_control = over.congestion_control.unwrap_or(q.congestion_control);
             q.reliability = over.reliability.unwrap_or(q.reliability);
+            q.latched = over.latched.unwrap_or(q.latched);
             if let Some(d) = over.delivery {
                 if d == Delivery::Queue(0) {
                     return Err(ConfigError::new(origin, format!("{key_path}.delivery"), "a queue of 0", "use \"latest\" or { queue: N } with N >= 1"));

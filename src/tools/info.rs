@@ -19,6 +19,7 @@ pub struct TopicInfo {
     pub reliability: Reliability,
     pub max_rate_hz: Option<f64>,
     pub delivery: Delivery,
+    pub latched: bool,
 }
 
 #[derive(Debug, Serialize)]
@@ -53,6 +54,7 @@ pub fn gather(args: &ConnectArgs) -> Result<Info, ConfigError> {
                 reliability: q.reliability,
                 max_rate_hz: q.max_rate_hz,
                 delivery: q.delivery,
+                latched: q.latched,
             }
         })
         .collect();
@@ -86,7 +88,10 @@ pub fn render(info: &Info) -> String {
             Delivery::Latest => "latest".to_string(),
             Delivery::Queue(n) => format!("queue {n}"),
         };
-        let rate = t.max_rate_hz.map(|r| format!(", max {r} Hz")).unwrap_or_default();
+        let mut rate = t.max_rate_hz.map(|r| format!(", max {r} Hz")).unwrap_or_default();
+        if t.latched {
+            rate.push_str(", latched");
+        }
         s.push_str(&format!(
             "{:<20} {:<28} {:<19} {:<17} {:<7} {:<6} {:<11} {}{}\n",
             t.topic,

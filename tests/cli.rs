@@ -1,0 +1,121 @@
+//! The `slipstream` binary as a user runs it: demo across two processes, info, config errors,
+//! and the bench harness (quick mode: every path delivers; figures are not judged here).
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+use std::time::Duration;
+
+fn bin() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_slipstream"));
+    c.env_remove("RUST_LOG").env_remove("SLIPSTREAM_CONFIG").env_remove("SLIPSTREAM_NAMESPACE");
+    c
+}
+
+/// Runs a command with a deadline; kills it and fails the test if it overruns.
+fn run(mut cmd: Command, limit: Duration) -> Output {
+    let child = cmd.stdout(std::process::Stdio::piped()).stderr(std::process::Stdio::piped()).spawn().unwrap();
+    let id = child.id();
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let _ = tx.send(child.wait_with_output());
+    });
+    match rx.recv_timeout(limit) {
+        Ok(out) => out.unwrap(),
+        Err(_) => {
+            let _ = Command::new("kill").arg("-9").arg(id.to_string()).status();
+            panic!("{cmd:?} ran longer than {limit:?}");
+        }
+    }
+}
+
+fn free_endpoint() -> String {
+    let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+    format!("tcp/127.0.0.1:{port}")
+}
+
+fn temp_file(name: &str, text: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("slipstream-test-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join(name);
+    std::fs::write(&path, text).unwrap();
+    path
+}
+
+#[test]
+fn demo_runs_two_processes_that_find_each_other() {
+    let ep = free_endpoint();
+    let mut cmd = bin();
+    cmd.args(["demo", "--duration", "4", "--json", "-l", &ep, "-e", &ep]);
+    let out = run(cmd, Duration::from_secs(60));
+    assert!(out.status.success(), "stderr: {}", String::from_utf8_lossy(&out.stderr));
+    let summary: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let topic = |name: &str| summary["topics"].as_array().unwrap().iter().find(|t| t["topic"] == name).unwrap().clone();
+    assert!(topic("vehicle/speed")["received"].as_u64().unwrap() > 100, "{summary}");
+    assert!(topic("camera/front")["received"].as_u64().unwrap() > 10, "{summary}");
+    assert_eq!(topic("vehicle/speed")["decode_errors"], 0);
+    assert!(summary["shared_memory_frames"].as_u64().unwrap() > 10, "frames went through shared memory: {summary}");
+    let nodes: Vec<_> = summary["nodes_seen"].as_array().unwrap().iter().map(|n| n.as_str().unwrap().to_string()).collect();
+    assert_eq!(nodes, vec!["demo-pub", "demo-sub"]);
+}
+
+#[test]
+fn info_shows_namespace_remapping_and_qos() {
+    let topics = temp_file("info.json5", r#"{ topics: { "vehicle/speed": { key: "ego/v", priority: "data-high" } } }"#);
+    let mut cmd = bin();
+    cmd.args(["info", "--json", "-n", "car7", "-t"]).arg(&topics);
+    let out = run(cmd, Duration::from_secs(30));
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let info: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let speed = info["topics"].as_array().unwrap().iter().find(|t| t["topic"] == "vehicle/speed").unwrap();
+    assert_eq!(speed["key"], "car7/ego/v");
+    assert_eq!(speed["priority"], "data-high");
+    assert_eq!(speed["encoding"], "application/octet-stream;slipstream/Speed/v1");
+    assert_eq!(info["zenoh_mode"], "peer");
+    assert_eq!(info["multicast_scouting"], false);
+}
+
+#[test]
+fn a_bad_config_fails_with_file_key_and_fix() {
+    let topics = temp_file("bad.json5", r#"{ topics: { "camera/front": { congestion_control: "wait" } } }"#);
+    let mut cmd = bin();
+    cmd.args(["info", "-t"]).arg(&topics);
+    let out = run(cmd, Duration::from_secs(30));
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("bad.json5") && err.contains("topics.camera/front.congestion_control"), "{err}");
+    assert!(err.contains("drop") && err.contains("block"), "names the allowed values: {err}");
+}
+
+/// The bench harness, quick: every path of every suite delivers, shared-memory paths use
+/// shared memory and the others do not. Latency and throughput are not judged here.
+#[test]
+fn bench_quick_every_path_delivers() {
+    let mut cmd = bin();
+    cmd.args(["bench", "--quick", "--json"]);
+    let out = run(cmd, Duration::from_secs(600));
+    assert!(out.status.success(), "stderr: {}", String::from_utf8_lossy(&out.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let rows = report["rows"].as_array().unwrap();
+    assert!(rows.len() >= 30, "{} rows", rows.len());
+    for r in rows {
+        let (suite, path) = (r["suite"].as_str().unwrap(), r["path"].as_str().unwrap());
+        let received = r["received"].as_f64().unwrap();
+        assert!(received > 0.0, "{suite} / {path}: nothing received");
+        if suite.starts_with("a.") || suite.contains("latency") {
+            assert_eq!(received, r["sent"].as_f64().unwrap(), "{suite} / {path}: paced loopback traffic is not lost");
+            assert!(r["p50_us"].as_f64().is_some(), "{suite} / {path}");
+        }
+        if suite.starts_with("b.") && path.starts_with("bus") {
+            let shm = r["shared_memory_frames"].as_f64().unwrap();
+            if path.contains("shared memory") {
+                assert!(shm > 0.0, "{suite} / {path}: no frame in shared memory");
+            } else {
+                assert_eq!(shm, 0.0, "{suite} / {path}: shared memory was off");
+            }
+        }
+        if suite.starts_with("c.") && path != "unloaded" {
+            assert!(r["background_frames_per_s"].as_f64().unwrap() > 0.0, "{suite} / {path}: frames flowed");
+        }
+    }
+    assert!(!report["ratios"].as_array().unwrap().is_empty());
+}
