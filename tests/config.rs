@@ -105,6 +105,9 @@ fn shipped_zenoh_configs_parse() {
     let c = ConnectArgs::default().zenoh_config().unwrap();
     assert_eq!(c.get_json("scouting/multicast/enabled").unwrap(), "false");
     assert!(c.get_json("listen/endpoints").unwrap().contains("127.0.0.1"));
+    // Small socket buffers, so real-time messages do not queue behind frames in the kernel.
+    assert_eq!(c.get_json("transport/link/tcp/so_sndbuf").unwrap(), "65536");
+    assert_eq!(c.get_json("transport/link/tcp/so_rcvbuf").unwrap(), "65536");
     // The lan-peer config turns multicast scouting on, the router listens beyond loopback.
     let lan = ConnectArgs { zenoh_config: Some(repo_file("config/lan-peer.json5")), ..Default::default() };
     assert_eq!(lan.zenoh_config().unwrap().get_json("scouting/multicast/enabled").unwrap(), "true");

@@ -17,7 +17,7 @@ use anyhow::{bail, Context, Result};
 use serde::Serialize;
 
 pub use peer::{run_receiver, run_sender};
-pub use spec::{Background, CaseSpec, Payload, RecvReport, SendReport, Transport};
+pub use spec::{Background, CaseSpec, Payload, RecvReport, SendReport, TcpBuffer, Transport};
 
 /// ZENOH_RUNTIME value that gives Zenoh's own thread layout (a pool per role) instead of
 /// slipstream's default handover layout (`crate::cli::ZENOH_RUNTIME_DEFAULT`).
@@ -101,7 +101,7 @@ fn speed_spec(transport: Transport, count: u64) -> CaseSpec {
         shm: true,
         lowlatency: false,
         runtime: None,
-        tcp_buffer: None,
+        tcp_buffer: TcpBuffer::Default,
         background: None,
     }
 }
@@ -143,7 +143,7 @@ fn cases(suites: &[Suite], quick: bool) -> Vec<Case> {
                 shm,
                 lowlatency: false,
                 runtime: None,
-                tcp_buffer: None,
+                tcp_buffer: TcpBuffer::Default,
                 background: None,
             };
             for (phase, rate) in [("throughput", None), ("latency @20 Hz", Some(20.0))] {
@@ -176,13 +176,11 @@ fn cases(suites: &[Suite], quick: bool) -> Vec<Case> {
         push(s, "frames saturating, QoS, TCP", loaded(None, true, false));
         push(s, "frames saturating, QoS off, TCP", loaded(None, false, false));
         push(s, "frames saturating, QoS, shm", loaded(None, true, true));
-        for kib in [64u32, 256] {
-            push(
-                s,
-                &format!("frames saturating, QoS, TCP, {kib} KiB socket buffers"),
-                CaseSpec { tcp_buffer: Some(kib * 1024), ..loaded(None, true, false) },
-            );
-        }
+        push(
+            s,
+            "frames saturating, QoS, TCP, kernel socket buffers",
+            CaseSpec { tcp_buffer: TcpBuffer::Kernel, ..loaded(None, true, false) },
+        );
         push(
             s,
             "frames saturating, QoS, TCP, zenoh's runtime",
@@ -379,7 +377,13 @@ fn ratios(rows: &[Row]) -> Vec<Ratio> {
         ratio(format!("{size} frames/s: bus shm / raw zenoh implicit shm"), fps("bus, shared memory"), fps("raw zenoh, implicit shm"), "-");
     }
     let c = "c.";
-    for p in ["frames 30 Hz, QoS, TCP", "frames saturating, QoS, TCP", "frames saturating, QoS off, TCP", "frames saturating, QoS, shm"] {
+    for p in [
+        "frames 30 Hz, QoS, TCP",
+        "frames saturating, QoS, TCP",
+        "frames saturating, QoS off, TCP",
+        "frames saturating, QoS, TCP, kernel socket buffers",
+        "frames saturating, QoS, shm",
+    ] {
         ratio(format!("speed p99 {p} / unloaded"), p99(c, p), p99(c, "unloaded"), "<= 3 (with QoS)");
     }
     out

@@ -16,7 +16,7 @@ use parking_lot::Mutex;
 use zenoh::bytes::ZBytes;
 use zenoh::Wait;
 
-use super::spec::{Background, CaseSpec, Payload, RecvReport, SendReport, Transport};
+use super::spec::{Background, CaseSpec, Payload, RecvReport, SendReport, TcpBuffer, Transport};
 use crate::bus::Bus;
 use crate::config::TopicMap;
 use crate::msg::{wall_clock_ns, ImageEncoding, Speed};
@@ -77,20 +77,30 @@ impl Collector {
     }
 }
 
-/// The Zenoh config of a bench peer: loopback only, no scouting, shared memory and the
-/// low-latency transport as the case says.
+/// The Zenoh config of a bench peer: the shipped default (config/zenoh.json5, so the bench
+/// measures what users run) with loopback endpoints of its own, no scouting, and the case's
+/// shared memory, transport and socket-buffer choices.
 pub fn peer_config(spec: &CaseSpec, listen: Option<&str>, connect: Option<&str>) -> Result<zenoh::Config> {
-    let mut c = zenoh::Config::default();
+    let mut c = zenoh::Config::from_json5(crate::config::DEFAULT_ZENOH_CONFIG).map_err(|e| anyhow::anyhow!("default config: {e}"))?;
     let set = |c: &mut zenoh::Config, k: &str, v: &str| c.insert_json5(k, v).map_err(|e| anyhow::anyhow!("{k}: {e}"));
-    set(&mut c, "mode", "\"peer\"")?;
-    set(&mut c, "scouting/multicast/enabled", "false")?;
     set(&mut c, "scouting/gossip/enabled", "false")?;
+    // The default binds listeners in the background (the rendezvous may be busy); a bench
+    // receiver's own port must be bound when the session opens.
+    set(&mut c, "listen/timeout_ms", "0")?;
+    set(&mut c, "listen/exit_on_failure", "true")?;
     set(&mut c, "listen/endpoints", &serde_json::to_string(&listen.into_iter().collect::<Vec<_>>())?)?;
     set(&mut c, "connect/endpoints", &serde_json::to_string(&connect.into_iter().collect::<Vec<_>>())?)?;
     set(&mut c, "transport/shared_memory/enabled", if spec.shm { "true" } else { "false" })?;
-    if let Some(b) = spec.tcp_buffer {
-        set(&mut c, "transport/link/tcp/so_sndbuf", &b.to_string())?;
-        set(&mut c, "transport/link/tcp/so_rcvbuf", &b.to_string())?;
+    match spec.tcp_buffer {
+        TcpBuffer::Default => {}
+        TcpBuffer::Kernel => {
+            set(&mut c, "transport/link/tcp/so_sndbuf", "null")?;
+            set(&mut c, "transport/link/tcp/so_rcvbuf", "null")?;
+        }
+        TcpBuffer::Bytes(b) => {
+            set(&mut c, "transport/link/tcp/so_sndbuf", &b.to_string())?;
+            set(&mut c, "transport/link/tcp/so_rcvbuf", &b.to_string())?;
+        }
     }
     if spec.lowlatency {
         set(&mut c, "transport/unicast/lowlatency", "true")?;

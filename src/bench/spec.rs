@@ -33,6 +33,17 @@ pub struct Background {
     pub rate_hz: Option<f64>,
 }
 
+/// TCP socket buffer sizes (so_sndbuf, so_rcvbuf) of Zenoh's links.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum TcpBuffer {
+    /// As config/zenoh.json5 sets them.
+    Default,
+    /// The kernel's defaults.
+    Kernel,
+    Bytes(u32),
+}
+
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct CaseSpec {
     pub transport: Transport,
@@ -51,10 +62,8 @@ pub struct CaseSpec {
     pub lowlatency: bool,
     /// ZENOH_RUNTIME for both processes, None: slipstream's default.
     pub runtime: Option<String>,
-    /// TCP send and receive buffer size (so_sndbuf/so_rcvbuf) for Zenoh's links, None: the
-    /// kernel's default.
-    #[serde(default)]
-    pub tcp_buffer: Option<u32>,
+    /// TCP send and receive buffer sizes of Zenoh's links.
+    pub tcp_buffer: TcpBuffer,
     pub background: Option<Background>,
 }
 
