@@ -10,7 +10,8 @@ use tracing_subscriber::{EnvFilter, Layer};
 /// over to the tx pool instead of each having its own. Fewer thread wake-ups per message: on
 /// the 2-core machines of docs/performance.md the 100 Hz speed message's median one-way
 /// latency drops from ~215 to ~175 us and its p99 from ~1.1 ms to ~0.3 ms.
-pub const ZENOH_RUNTIME_DEFAULT: &str = "(rx: (handover: tx), acc: (handover: tx), app: (handover: tx), net: (handover: tx))";
+pub const ZENOH_RUNTIME_DEFAULT: &str =
+    "(rx: (handover: tx), acc: (handover: tx), app: (handover: tx), net: (handover: tx))";
 
 /// Sets ZENOH_RUNTIME to [`ZENOH_RUNTIME_DEFAULT`] unless the user set it (`ZENOH_RUNTIME='()'`
 /// restores Zenoh's own layout). Call first in `main`, before any thread or Zenoh starts:
@@ -27,7 +28,8 @@ pub fn apply_zenoh_runtime_default() {
 /// (see config/zenoh.json5).
 pub fn init_tracing() {
     let env = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info,zenoh=warn,zenoh_ext=warn"));
-    let layer = tracing_subscriber::fmt::layer().with_writer(std::io::stderr).with_filter(RendezvousNoise).with_filter(env);
+    let layer =
+        tracing_subscriber::fmt::layer().with_writer(std::io::stderr).with_filter(RendezvousNoise).with_filter(env);
     let _ = tracing_subscriber::registry().with(layer).try_init();
 }
 

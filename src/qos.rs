@@ -86,8 +86,8 @@ impl Delivery {
     }
 }
 
-/// The QoS of one topic, after defaults and config.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// The QoS of one topic, after defaults and config (serialized with the config's key names).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct TopicQos {
     pub priority: Priority,
     /// Send at once instead of waiting to fill a batch.

@@ -102,11 +102,9 @@ impl Topic {
                 latched: true,
                 ..base
             },
-            Topic::SimEvents | Topic::AccCommand => TopicQos {
-                congestion_control: crate::qos::Congestion::Block,
-                delivery: Delivery::Queue(64),
-                ..base
-            },
+            Topic::SimEvents | Topic::AccCommand => {
+                TopicQos { congestion_control: crate::qos::Congestion::Block, delivery: Delivery::Queue(64), ..base }
+            }
             Topic::Objects | Topic::AccStatus => base,
         }
     }

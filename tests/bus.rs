@@ -78,7 +78,9 @@ async fn configured_qos_reaches_the_wire() {
     let _raw = b
         .session()
         .declare_subscriber("**")
-        .callback(move |s| s2.lock().push((s.key_expr().to_string(), s.priority(), s.express(), s.congestion_control())))
+        .callback(move |s| {
+            s2.lock().push((s.key_expr().to_string(), s.priority(), s.express(), s.congestion_control()))
+        })
         .await
         .unwrap();
     let speed = a.publisher(VEHICLE_SPEED).await.unwrap();
@@ -177,7 +179,12 @@ async fn malformed_payloads_are_counted_and_the_stream_goes_on() {
     let sub = b.subscriber(VEHICLE_SPEED).await.unwrap();
     let got = Arc::new(AtomicU64::new(0));
     let g = got.clone();
-    let cb = b.subscribe_with(VEHICLE_SPEED, move |_r| { g.fetch_add(1, Ordering::Relaxed); }).await.unwrap();
+    let cb = b
+        .subscribe_with(VEHICLE_SPEED, move |_r| {
+            g.fetch_add(1, Ordering::Relaxed);
+        })
+        .await
+        .unwrap();
     let raw = a.session().declare_publisher("vehicle/speed").await.unwrap();
     let typed = a.publisher(VEHICLE_SPEED).await.unwrap();
     assert!(typed.wait_for_subscriber(TIMEOUT).await);
@@ -221,7 +228,8 @@ async fn rate_limit_judges_simulation_time() {
     let publisher = a.publisher(VEHICLE_SPEED).await.unwrap();
     assert!(publisher.wait_for_subscriber(TIMEOUT).await);
     // 100 messages, 10 ms of simulation time apart, sent as fast as possible: 1 s at 20 Hz.
-    let sent = (0..100u64).filter(|i| publisher.put(i * 10_000_000, &Speed { speed_mps: 0.0 }).unwrap().is_some()).count();
+    let sent =
+        (0..100u64).filter(|i| publisher.put(i * 10_000_000, &Speed { speed_mps: 0.0 }).unwrap().is_some()).count();
     assert_eq!(sent, 20);
     let mut seqs = Vec::new();
     while seqs.len() < 16 {

@@ -54,7 +54,8 @@ fn demo_runs_two_processes_that_find_each_other() {
     assert!(topic("camera/front")["received"].as_u64().unwrap() > 10, "{summary}");
     assert_eq!(topic("vehicle/speed")["decode_errors"], 0);
     assert!(summary["shared_memory_frames"].as_u64().unwrap() > 10, "frames went through shared memory: {summary}");
-    let nodes: Vec<_> = summary["nodes_seen"].as_array().unwrap().iter().map(|n| n.as_str().unwrap().to_string()).collect();
+    let nodes: Vec<_> =
+        summary["nodes_seen"].as_array().unwrap().iter().map(|n| n.as_str().unwrap().to_string()).collect();
     assert_eq!(nodes, vec!["demo-pub", "demo-sub"]);
 }
 

@@ -4,7 +4,11 @@ use proptest::prelude::*;
 use slipstream::msg::*;
 
 fn header() -> impl Strategy<Value = Header> {
-    (any::<u64>(), any::<u64>(), any::<u64>()).prop_map(|(seq, stamp_sim_ns, stamp_pub_ns)| Header { seq, stamp_sim_ns, stamp_pub_ns })
+    (any::<u64>(), any::<u64>(), any::<u64>()).prop_map(|(seq, stamp_sim_ns, stamp_pub_ns)| Header {
+        seq,
+        stamp_sim_ns,
+        stamp_pub_ns,
+    })
 }
 fn v3() -> impl Strategy<Value = [f64; 3]> {
     [-1e6f64..1e6, -1e6f64..1e6, -1e6f64..1e6]
@@ -16,7 +20,12 @@ fn class() -> impl Strategy<Value = ObjectClass> {
     prop_oneof![Just(ObjectClass::Unknown), Just(ObjectClass::Car), Just(ObjectClass::Van), Just(ObjectClass::Truck)]
 }
 fn bbox() -> impl Strategy<Value = BoundingBox2d> {
-    (0f32..2000., 0f32..2000., 0f32..2000., 0f32..2000.).prop_map(|(a, b, c, d)| BoundingBox2d { u_min_px: a, v_min_px: b, u_max_px: c, v_max_px: d })
+    (0f32..2000., 0f32..2000., 0f32..2000., 0f32..2000.).prop_map(|(a, b, c, d)| BoundingBox2d {
+        u_min_px: a,
+        v_min_px: b,
+        u_max_px: c,
+        v_max_px: d,
+    })
 }
 fn control() -> impl Strategy<Value = ControlCommand> {
     (unit(), unit(), -1.0f32..=1.0, proptest::option::of(any::<u64>()))
@@ -43,8 +52,12 @@ fn frame() -> impl Strategy<Value = CameraFrame> {
     prop_oneof![
         (1u32..8, 1u32..8).prop_flat_map(|(w, h)| proptest::collection::vec(any::<u8>(), (w * h * 3) as usize)
             .prop_map(move |data| CameraFrame { width: w, height: h, encoding: ImageEncoding::Rgb8, data })),
-        proptest::collection::vec(any::<u8>(), 0..64)
-            .prop_map(|data| CameraFrame { width: 640, height: 480, encoding: ImageEncoding::Jpeg, data }),
+        proptest::collection::vec(any::<u8>(), 0..64).prop_map(|data| CameraFrame {
+            width: 640,
+            height: 480,
+            encoding: ImageEncoding::Jpeg,
+            data
+        }),
     ]
 }
 fn gt_object() -> impl Strategy<Value = GroundTruthObject> {
@@ -88,7 +101,13 @@ fn event() -> impl Strategy<Value = SimEvent> {
     .prop_map(|kind| SimEvent { kind })
 }
 fn acc_status() -> impl Strategy<Value = AccStatus> {
-    let mode = prop_oneof![Just(AccMode::Off), Just(AccMode::Speed), Just(AccMode::Follow), Just(AccMode::Stale), Just(AccMode::Emergency)];
+    let mode = prop_oneof![
+        Just(AccMode::Off),
+        Just(AccMode::Speed),
+        Just(AccMode::Follow),
+        Just(AccMode::Stale),
+        Just(AccMode::Emergency)
+    ];
     let warning = prop_oneof![
         Just(AccWarning::ForwardCollision),
         Just(AccWarning::StaleSpeed),
@@ -96,18 +115,23 @@ fn acc_status() -> impl Strategy<Value = AccStatus> {
         Just(AccWarning::PerceptionLost)
     ];
     let lead = (any::<u32>(), 0f64..200., 0f64..200., -30f64..30., proptest::option::of(0f64..100.)).prop_map(
-        |(id, gap_m, desired_gap_m, relative_speed_mps, ttc_s)| LeadInfo { id, gap_m, desired_gap_m, relative_speed_mps, ttc_s },
+        |(id, gap_m, desired_gap_m, relative_speed_mps, ttc_s)| LeadInfo {
+            id,
+            gap_m,
+            desired_gap_m,
+            relative_speed_mps,
+            ttc_s,
+        },
     );
-    (mode, 0f64..60., 0.5f64..3., -9f64..3., proptest::option::of(lead), proptest::collection::vec(warning, 0..4)).prop_map(
-        |(mode, set_speed_mps, time_gap_s, target_accel_mps2, lead, warnings)| AccStatus {
+    (mode, 0f64..60., 0.5f64..3., -9f64..3., proptest::option::of(lead), proptest::collection::vec(warning, 0..4))
+        .prop_map(|(mode, set_speed_mps, time_gap_s, target_accel_mps2, lead, warnings)| AccStatus {
             mode,
             set_speed_mps,
             time_gap_s,
             target_accel_mps2,
             lead,
             warnings,
-        },
-    )
+        })
 }
 
 /// Encodes, decodes, compares; then every strict prefix must fail, never panic.

@@ -109,7 +109,8 @@ fn speed_spec(transport: Transport, count: u64) -> CaseSpec {
 fn cases(suites: &[Suite], quick: bool) -> Vec<Case> {
     let mut out = Vec::new();
     let speed_n = if quick { 50 } else { 500 };
-    let mut push = |suite: &str, path: &str, spec: CaseSpec| out.push(Case { suite: suite.into(), path: path.into(), spec });
+    let mut push =
+        |suite: &str, path: &str, spec: CaseSpec| out.push(Case { suite: suite.into(), path: path.into(), spec });
 
     if suites.contains(&Suite::Speed) {
         let s = "a. speed 100 Hz";
@@ -118,7 +119,11 @@ fn cases(suites: &[Suite], quick: bool) -> Vec<Case> {
         push(s, "raw zenoh", speed_spec(Transport::Zenoh, speed_n));
         push(s, "bus", speed_spec(Transport::Bus, speed_n));
         let zenoh_rt = || Some(ZENOH_OWN_RUNTIME.to_string());
-        push(s, "raw zenoh, zenoh's runtime", CaseSpec { runtime: zenoh_rt(), ..speed_spec(Transport::Zenoh, speed_n) });
+        push(
+            s,
+            "raw zenoh, zenoh's runtime",
+            CaseSpec { runtime: zenoh_rt(), ..speed_spec(Transport::Zenoh, speed_n) },
+        );
         push(s, "bus, zenoh's runtime", CaseSpec { runtime: zenoh_rt(), ..speed_spec(Transport::Bus, speed_n) });
         push(s, "bus, lowlatency transport", CaseSpec { lowlatency: true, ..speed_spec(Transport::Bus, speed_n) });
     }
@@ -310,7 +315,8 @@ pub fn run(args: &BenchArgs) -> Result<BenchReport> {
     if cfg!(debug_assertions) {
         eprintln!("warning: this is a debug build; figures mean little. Use `cargo run --release -- bench`.");
     }
-    let suites = if args.suites.is_empty() { vec![Suite::Speed, Suite::Frames, Suite::Contention] } else { args.suites.clone() };
+    let suites =
+        if args.suites.is_empty() { vec![Suite::Speed, Suite::Frames, Suite::Contention] } else { args.suites.clone() };
     let repeat = if args.quick { 1 } else { args.repeat.max(1) };
     let all = cases(&suites, args.quick);
     let mut rows = Vec::new();
@@ -323,7 +329,12 @@ pub fn run(args: &BenchArgs) -> Result<BenchReport> {
             eprint!("[{done}/{total}] {} / {} ... ", case.suite, case.path);
             let (s, r) = run_case(&case.spec).with_context(|| format!("{} / {}", case.suite, case.path))?;
             let f = figures(&case.spec, &s, &r);
-            eprintln!("{} sent, {} received{}", s.sent, r.received, f.p50.map(|p| format!(", p50 {p:.0} us")).unwrap_or_default());
+            eprintln!(
+                "{} sent, {} received{}",
+                s.sent,
+                r.received,
+                f.p50.map(|p| format!(", p50 {p:.0} us")).unwrap_or_default()
+            );
             runs.push(f);
         }
         let med = |f: &dyn Fn(&RunFigures) -> Option<f64>| median(runs.iter().map(f));
@@ -367,14 +378,38 @@ fn ratios(rows: &[Row]) -> Vec<Ratio> {
     ratio("speed p50: bus / raw zenoh".into(), p50("a.", "bus"), p50("a.", "raw zenoh"), "<= 1.1");
     ratio("speed p50: bus / raw TCP".into(), p50("a.", "bus"), p50("a.", "raw TCP"), "-");
     ratio("speed p99: bus / raw UDP".into(), p99("a.", "bus"), p99("a.", "raw UDP"), "-");
-    ratio("speed p50: bus, zenoh's runtime / raw zenoh, zenoh's runtime".into(), p50("a.", "bus, zenoh's runtime"), p50("a.", "raw zenoh, zenoh's runtime"), "<= 1.1");
+    ratio(
+        "speed p50: bus, zenoh's runtime / raw zenoh, zenoh's runtime".into(),
+        p50("a.", "bus, zenoh's runtime"),
+        p50("a.", "raw zenoh, zenoh's runtime"),
+        "<= 1.1",
+    );
     ratio("speed p50: bus, zenoh's runtime / bus".into(), p50("a.", "bus, zenoh's runtime"), p50("a.", "bus"), "-");
-    ratio("speed p50: bus, lowlatency transport / raw UDP".into(), p50("a.", "bus, lowlatency transport"), p50("a.", "raw UDP"), "<= 1.5");
+    ratio(
+        "speed p50: bus, lowlatency transport / raw UDP".into(),
+        p50("a.", "bus, lowlatency transport"),
+        p50("a.", "raw UDP"),
+        "<= 1.5",
+    );
     for size in ["640x480", "1280x720"] {
-        let fps = |p: &str| rows.iter().find(|r| r.suite.contains(size) && r.suite.contains("throughput") && r.path == p).and_then(|r| r.frames_per_s);
+        let fps = |p: &str| {
+            rows.iter()
+                .find(|r| r.suite.contains(size) && r.suite.contains("throughput") && r.path == p)
+                .and_then(|r| r.frames_per_s)
+        };
         ratio(format!("{size} frames/s: bus shm / raw TCP"), fps("bus, shared memory"), fps("raw TCP"), ">= 3");
-        ratio(format!("{size} frames/s: bus TCP / raw zenoh TCP"), fps("bus, TCP (shm off)"), fps("raw zenoh, TCP (shm off)"), ">= 0.9");
-        ratio(format!("{size} frames/s: bus shm / raw zenoh implicit shm"), fps("bus, shared memory"), fps("raw zenoh, implicit shm"), "-");
+        ratio(
+            format!("{size} frames/s: bus TCP / raw zenoh TCP"),
+            fps("bus, TCP (shm off)"),
+            fps("raw zenoh, TCP (shm off)"),
+            ">= 0.9",
+        );
+        ratio(
+            format!("{size} frames/s: bus shm / raw zenoh implicit shm"),
+            fps("bus, shared memory"),
+            fps("raw zenoh, implicit shm"),
+            "-",
+        );
     }
     let c = "c.";
     for p in [

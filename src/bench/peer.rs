@@ -81,7 +81,8 @@ impl Collector {
 /// measures what users run) with loopback endpoints of its own, no scouting, and the case's
 /// shared memory, transport and socket-buffer choices.
 pub fn peer_config(spec: &CaseSpec, listen: Option<&str>, connect: Option<&str>) -> Result<zenoh::Config> {
-    let mut c = zenoh::Config::from_json5(crate::config::DEFAULT_ZENOH_CONFIG).map_err(|e| anyhow::anyhow!("default config: {e}"))?;
+    let mut c = zenoh::Config::from_json5(crate::config::DEFAULT_ZENOH_CONFIG)
+        .map_err(|e| anyhow::anyhow!("default config: {e}"))?;
     let set = |c: &mut zenoh::Config, k: &str, v: &str| c.insert_json5(k, v).map_err(|e| anyhow::anyhow!("{k}: {e}"));
     set(&mut c, "scouting/gossip/enabled", "false")?;
     // The default binds listeners in the background (the rendezvous may be busy); a bench
@@ -178,7 +179,8 @@ pub async fn run_receiver(spec: CaseSpec) -> Result<()> {
             addr.to_string()
         }
         Transport::Zenoh => {
-            let session = zenoh::open(peer_config(&spec, Some("tcp/127.0.0.1:0"), None)?).await.map_err(anyhow::Error::msg)?;
+            let session =
+                zenoh::open(peer_config(&spec, Some("tcp/127.0.0.1:0"), None)?).await.map_err(anyhow::Error::msg)?;
             let key = if matches!(spec.payload, Payload::Speed) { SPEED_KEY } else { FRAME_KEY };
             let c = col.clone();
             let sub = session
@@ -201,27 +203,47 @@ pub async fn run_receiver(spec: CaseSpec) -> Result<()> {
             ep
         }
         Transport::Bus => {
-            let session = zenoh::open(peer_config(&spec, Some("tcp/127.0.0.1:0"), None)?).await.map_err(anyhow::Error::msg)?;
+            let session =
+                zenoh::open(peer_config(&spec, Some("tcp/127.0.0.1:0"), None)?).await.map_err(anyhow::Error::msg)?;
             let ep = first_locator(&session).await?;
             let bus = Arc::new(Bus::from_session(session, peer_topics(&spec)?, "bench-recv").await?);
             match spec.payload {
                 Payload::Speed => {
                     let c = col.clone();
                     let sub = bus
-                        .subscribe_with(topics::VEHICLE_SPEED, move |r| c.record(r.header.seq, r.header.stamp_pub_ns, 0))
+                        .subscribe_with(topics::VEHICLE_SPEED, move |r| {
+                            c.record(r.header.seq, r.header.stamp_pub_ns, 0)
+                        })
                         .await?;
                     keep.push(Box::new(sub));
                 }
                 Payload::Frame { .. } => {}
             }
-            if matches!(spec.payload, Payload::Frame { .. }) || spec.background.is_some() {
+            let frames_measured = matches!(spec.payload, Payload::Frame { .. });
+            if frames_measured && spec.rate_hz.is_none() {
+                // Throughput: count frames where raw zenoh does, in the receive callback
+                // (validated, zero-copy), touching the last byte.
+                let c = col.clone();
+                let sub = bus
+                    .subscribe_frames_with(move |s| {
+                        let f = s.frame();
+                        let _ = std::hint::black_box(f.msg.data.last());
+                        if s.is_shared_memory() {
+                            c.shm.fetch_add(1, Ordering::Relaxed);
+                        }
+                        c.record(f.header.seq, f.header.stamp_pub_ns, s.bytes().len());
+                    })
+                    .await?;
+                keep.push(Box::new(sub));
+            } else if frames_measured || spec.background.is_some() {
+                // Latency and background load: the application's path, a latest-only
+                // FrameSubscriber read by its own task.
                 let sub = bus.frame_subscriber().await?;
-                let (c, stop, measured) = (col.clone(), stop.clone(), matches!(spec.payload, Payload::Frame { .. }));
+                let (c, stop, measured) = (col.clone(), stop.clone(), frames_measured);
                 tokio::spawn(async move {
                     while !stop.load(Ordering::Relaxed) {
                         let Some(s) = sub.recv_timeout(Duration::from_millis(100)).await else { continue };
                         let f = s.frame();
-                        // Touch the pixels' last byte: the frame is really readable.
                         let _ = std::hint::black_box(f.msg.data.last());
                         if s.is_shared_memory() {
                             c.shm.fetch_add(1, Ordering::Relaxed);
@@ -357,11 +379,14 @@ pub async fn run_sender(spec: CaseSpec, endpoint: String) -> Result<()> {
             let session = zenoh::open(peer_config(&spec, None, Some(&endpoint))?).await.map_err(anyhow::Error::msg)?;
             let (key, frame) = match spec.payload {
                 Payload::Speed => (SPEED_KEY, None),
-                Payload::Frame { width, height } => (FRAME_KEY, Some(ZBytes::from(vec![7u8; (width * height * 3) as usize]))),
+                Payload::Frame { width, height } => {
+                    (FRAME_KEY, Some(ZBytes::from(vec![7u8; (width * height * 3) as usize])))
+                }
             };
             // The same QoS the bus gives the topic (or Zenoh's defaults with qos off): the
             // comparison isolates the typed layer.
-            let topic = if frame.is_none() { crate::topics::Topic::VehicleSpeed } else { crate::topics::Topic::CameraFront };
+            let topic =
+                if frame.is_none() { crate::topics::Topic::VehicleSpeed } else { crate::topics::Topic::CameraFront };
             let qos = peer_topics(&spec)?.qos(topic);
             let publisher = session
                 .declare_publisher(key)
@@ -442,7 +467,10 @@ pub async fn run_sender(spec: CaseSpec, endpoint: String) -> Result<()> {
                         pacer.wait(i);
                         // The renderer would write every pixel here; the bench writes one
                         // byte so that only transport costs are compared.
-                        let sent = publisher.put_with(i * 50_000_000, width, height, ImageEncoding::Rgb8, len, |px| px[len - 1] = i as u8)?;
+                        let sent =
+                            publisher.put_with(i * 50_000_000, width, height, ImageEncoding::Rgb8, len, |px| {
+                                px[len - 1] = i as u8
+                            })?;
                         if sent.is_some() {
                             report.sent += 1;
                         }
@@ -474,7 +502,9 @@ async fn send_background(bus: Arc<Bus>, bg: Background, done: Arc<AtomicBool>, d
         let mut i = 0u64;
         while !done.load(Ordering::Relaxed) && Instant::now() < deadline {
             pacer.wait(i);
-            match publisher.put_with(i * 33_000_000, bg.width, bg.height, ImageEncoding::Rgb8, len, |px| px[0] = i as u8) {
+            match publisher
+                .put_with(i * 33_000_000, bg.width, bg.height, ImageEncoding::Rgb8, len, |px| px[0] = i as u8)
+            {
                 Ok(Some(_)) => sent += 1,
                 Ok(None) => {}
                 Err(e) => return Err(anyhow::Error::from(e)),

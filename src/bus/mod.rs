@@ -93,7 +93,8 @@ impl Bus {
     where
         M: Message + serde::de::DeserializeOwned + Send + 'static,
     {
-        Subscriber::declare(&self.session, self.topics.key(def.topic), def.topic.name(), self.topics.qos(def.topic)).await
+        Subscriber::declare(&self.session, self.topics.key(def.topic), def.topic.name(), self.topics.qos(def.topic))
+            .await
     }
 
     /// The camera/front subscriber: frames are read in place (shared memory on one host).
@@ -109,7 +110,31 @@ impl Bus {
         M: Message + serde::de::DeserializeOwned,
         F: Fn(Received<M>) + Send + Sync + 'static,
     {
-        CallbackSubscriber::declare(&self.session, self.topics.key(def.topic), def.topic.name(), self.topics.qos(def.topic), handler).await
+        CallbackSubscriber::declare(
+            &self.session,
+            self.topics.key(def.topic),
+            def.topic.name(),
+            self.topics.qos(def.topic),
+            handler,
+        )
+        .await
+    }
+
+    /// Calls `handler` with every valid camera frame on Zenoh's receive thread (zero-copy,
+    /// no inbox): for consumers that queue or hand frames off themselves, such as a recorder.
+    pub async fn subscribe_frames_with<F>(&self, handler: F) -> Result<CallbackSubscriber, BusError>
+    where
+        F: Fn(FrameSample) + Send + Sync + 'static,
+    {
+        let topic = crate::topics::CAMERA_FRONT.topic;
+        CallbackSubscriber::declare_frames(
+            &self.session,
+            self.topics.key(topic),
+            topic.name(),
+            self.topics.qos(topic),
+            handler,
+        )
+        .await
     }
 
     /// Names of the nodes alive in this namespace (their liveliness tokens).

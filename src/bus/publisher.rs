@@ -215,7 +215,9 @@ impl FramePublisher {
     ) -> Result<Option<FrameSent>, BusError> {
         if let Some(expected) = encoding.expected_len(width, height) {
             if expected != data_len {
-                return Err(BusError::InvalidFrame(format!("{width}x{height} {encoding:?} needs {expected} bytes, got {data_len}")));
+                return Err(BusError::InvalidFrame(format!(
+                    "{width}x{height} {encoding:?} needs {expected} bytes, got {data_len}"
+                )));
             }
         }
         let Some(header) = self.inner.next_header(stamp_sim_ns) else {
@@ -235,7 +237,10 @@ impl FramePublisher {
                 Err(e) => {
                     let n = self.heap_fallbacks.fetch_add(1, Ordering::Relaxed);
                     if n.is_power_of_two() {
-                        tracing::warn!(fallbacks = n + 1, "shared-memory pool full ({e:?}), frame sent from the heap; raise camera.shm_pool_mib");
+                        tracing::warn!(
+                            fallbacks = n + 1,
+                            "shared-memory pool full ({e:?}), frame sent from the heap; raise camera.shm_pool_mib"
+                        );
                     }
                 }
             }

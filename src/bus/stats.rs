@@ -118,8 +118,7 @@ impl TopicStats {
             let i = ((lat.len() - 1) as f64 * p).round() as usize;
             Some(lat[i] as f64 / 1_000.0)
         };
-        let in_window: Vec<_> =
-            s.arrivals.iter().filter(|(t, _)| now.duration_since(*t) <= RATE_WINDOW).collect();
+        let in_window: Vec<_> = s.arrivals.iter().filter(|(t, _)| now.duration_since(*t) <= RATE_WINDOW).collect();
         let (rate_hz, bandwidth_bps) = match (in_window.first(), in_window.len()) {
             (Some((first, _)), n) if n >= 2 => {
                 let span = now.duration_since(*first).as_secs_f64().max(1e-3);

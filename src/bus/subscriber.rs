@@ -78,7 +78,12 @@ type Declared = Box<dyn std::any::Any + Send + Sync>;
 
 /// Declares a Zenoh subscriber calling `callback`; for a latched topic an advanced subscriber
 /// that first fetches the last message of every publisher, including ones that start later.
-async fn declare_callback<F>(session: &zenoh::Session, key: &OwnedKeyExpr, latched: bool, callback: F) -> Result<Declared, BusError>
+async fn declare_callback<F>(
+    session: &zenoh::Session,
+    key: &OwnedKeyExpr,
+    latched: bool,
+    callback: F,
+) -> Result<Declared, BusError>
 where
     F: Fn(Sample) + Send + Sync + 'static,
 {
@@ -86,7 +91,9 @@ where
     let declared: Declared = if latched {
         use zenoh_ext::AdvancedSubscriberBuilderExt;
         let history = zenoh_ext::HistoryConfig::default().detect_late_publishers().max_samples(1);
-        Box::new(builder.history(history).callback(callback).await.map_err(zerr(format!("declare subscriber on {key}")))?)
+        Box::new(
+            builder.history(history).callback(callback).await.map_err(zerr(format!("declare subscriber on {key}")))?,
+        )
     } else {
         Box::new(builder.callback(callback).await.map_err(zerr(format!("declare subscriber on {key}")))?)
     };
@@ -125,7 +132,12 @@ pub struct Subscriber<M> {
 }
 
 impl<M: Message + DeserializeOwned + Send + 'static> Subscriber<M> {
-    pub(crate) async fn declare(session: &zenoh::Session, key: OwnedKeyExpr, name: &str, qos: TopicQos) -> Result<Self, BusError> {
+    pub(crate) async fn declare(
+        session: &zenoh::Session,
+        key: OwnedKeyExpr,
+        name: &str,
+        qos: TopicQos,
+    ) -> Result<Self, BusError> {
         let stats = Arc::new(TopicStats::new(name));
         let inbox = Arc::new(Inbox::new(qos.delivery));
         let delivery = qos.delivery;
@@ -215,22 +227,29 @@ pub struct FrameSubscriber {
     key: String,
 }
 
+/// Validates a camera payload as a frame (joining fragments if Zenoh delivered it in pieces).
+fn accept_frame(sample: Sample) -> Result<(Header, usize, FrameSample), DecodeError> {
+    let payload = sample.payload();
+    let joined = if payload.slices().nth(1).is_some() { Some(payload.to_bytes().into_owned()) } else { None };
+    let len = payload.len();
+    let bytes = match &joined {
+        Some(v) => v.as_slice(),
+        None => payload.slices().next().unwrap_or(&[]),
+    };
+    let header = msg::decode::<CameraFrameRef>(bytes)?.header;
+    Ok((header, len, FrameSample { sample, header, joined }))
+}
+
 impl FrameSubscriber {
-    pub(crate) async fn declare(session: &zenoh::Session, key: OwnedKeyExpr, name: &str, qos: TopicQos) -> Result<Self, BusError> {
+    pub(crate) async fn declare(
+        session: &zenoh::Session,
+        key: OwnedKeyExpr,
+        name: &str,
+        qos: TopicQos,
+    ) -> Result<Self, BusError> {
         let stats = Arc::new(TopicStats::new(name));
         let inbox = Arc::new(Inbox::new(qos.delivery));
-        let inner = declare_inbox(session, &key, qos.latched, stats.clone(), inbox.clone(), |sample| {
-            let payload = sample.payload();
-            let joined = if payload.slices().nth(1).is_some() { Some(payload.to_bytes().into_owned()) } else { None };
-            let len = payload.len();
-            let bytes = match &joined {
-                Some(v) => v.as_slice(),
-                None => payload.slices().next().unwrap_or(&[]),
-            };
-            let header = msg::decode::<CameraFrameRef>(bytes)?.header;
-            Ok((header, len, FrameSample { sample, header, joined }))
-        })
-        .await?;
+        let inner = declare_inbox(session, &key, qos.latched, stats.clone(), inbox.clone(), accept_frame).await?;
         Ok(FrameSubscriber { _inner: inner, inbox, stats, key: key.to_string() })
     }
 
@@ -265,7 +284,13 @@ pub struct CallbackSubscriber {
 }
 
 impl CallbackSubscriber {
-    pub(crate) async fn declare<M, F>(session: &zenoh::Session, key: OwnedKeyExpr, name: &str, qos: TopicQos, handler: F) -> Result<Self, BusError>
+    pub(crate) async fn declare<M, F>(
+        session: &zenoh::Session,
+        key: OwnedKeyExpr,
+        name: &str,
+        qos: TopicQos,
+        handler: F,
+    ) -> Result<Self, BusError>
     where
         M: Message + DeserializeOwned,
         F: Fn(Received<M>) + Send + Sync + 'static,
@@ -289,5 +314,28 @@ impl CallbackSubscriber {
 
     pub fn stats(&self) -> &Arc<TopicStats> {
         &self.stats
+    }
+
+    pub(crate) async fn declare_frames<F>(
+        session: &zenoh::Session,
+        key: OwnedKeyExpr,
+        name: &str,
+        qos: TopicQos,
+        handler: F,
+    ) -> Result<Self, BusError>
+    where
+        F: Fn(FrameSample) + Send + Sync + 'static,
+    {
+        let stats = Arc::new(TopicStats::new(name));
+        let st = stats.clone();
+        let inner = declare_callback(session, &key, qos.latched, move |sample: Sample| match accept_frame(sample) {
+            Ok((header, len, frame)) => {
+                st.on_message(&header, len, msg::wall_clock_ns());
+                handler(frame);
+            }
+            Err(e) => st.on_decode_error(&e),
+        })
+        .await?;
+        Ok(CallbackSubscriber { _inner: inner, stats })
     }
 }

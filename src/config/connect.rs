@@ -73,7 +73,12 @@ impl ConnectArgs {
         };
         let set = |config: &mut zenoh::Config, key: &str, value: String, flag: &str| {
             config.insert_json5(key, &value).map_err(|e| {
-                ConfigError::new(flag, key, format!("`{value}` rejected: {e}"), format!("check the value given to {flag} (config from {origin})"))
+                ConfigError::new(
+                    flag,
+                    key,
+                    format!("`{value}` rejected: {e}"),
+                    format!("check the value given to {flag} (config from {origin})"),
+                )
             })
         };
         if let Some(mode) = self.mode {
@@ -95,7 +100,12 @@ impl ConnectArgs {
         }
         for kv in &self.cfg {
             let Some((key, value)) = kv.split_once(':') else {
-                return Err(ConfigError::new("--cfg", kv, "missing `:` between key and value", "write --cfg 'KEY:VALUE', e.g. --cfg 'scouting/multicast/enabled:false'"));
+                return Err(ConfigError::new(
+                    "--cfg",
+                    kv,
+                    "missing `:` between key and value",
+                    "write --cfg 'KEY:VALUE', e.g. --cfg 'scouting/multicast/enabled:false'",
+                ));
             };
             set(&mut config, key, value.to_string(), "--cfg")?;
         }
@@ -115,7 +125,12 @@ impl ConnectArgs {
 fn load_zenoh_file(path: &Path) -> Result<zenoh::Config, ConfigError> {
     let origin = ConfigError::file(path);
     if !path.is_file() {
-        return Err(ConfigError::new(&origin, "", "no such file", "give an existing file to -c/--config, or leave the flag out for the default"));
+        return Err(ConfigError::new(
+            &origin,
+            "",
+            "no such file",
+            "give an existing file to -c/--config, or leave the flag out for the default",
+        ));
     }
     zenoh::Config::from_file(path).map_err(|e| {
         ConfigError::new(origin, "", e.to_string(), "compare with the keys documented in config/zenoh.json5")

@@ -13,7 +13,12 @@ pub struct ConfigError {
 }
 
 impl ConfigError {
-    pub fn new(origin: impl Into<String>, key: impl Into<String>, problem: impl Into<String>, fix: impl Into<String>) -> Self {
+    pub fn new(
+        origin: impl Into<String>,
+        key: impl Into<String>,
+        problem: impl Into<String>,
+        fix: impl Into<String>,
+    ) -> Self {
         ConfigError { origin: origin.into(), key: key.into(), problem: problem.into(), fix: fix.into() }
     }
 

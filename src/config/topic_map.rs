@@ -113,7 +113,12 @@ impl TopicMap {
     pub fn load(path: &Path) -> Result<TopicMap, ConfigError> {
         let origin = ConfigError::file(path);
         let text = std::fs::read_to_string(path).map_err(|e| {
-            ConfigError::new(&origin, "", format!("cannot read the file: {e}"), "check the path given to --topics / SLIPSTREAM_CONFIG")
+            ConfigError::new(
+                &origin,
+                "",
+                format!("cannot read the file: {e}"),
+                "check the path given to --topics / SLIPSTREAM_CONFIG",
+            )
         })?;
         TopicMap::from_json5(&text, &origin)
     }
@@ -137,25 +142,41 @@ impl TopicMap {
         let raw: RawFile = serde_path_to_error::deserialize(value).map_err(|e| {
             let key = e.path().to_string();
             let key = if key == "." { String::new() } else { key };
-            ConfigError::new(origin, key, e.inner().to_string(), "see the comments in config/slipstream.json5 for every key and its allowed values")
+            ConfigError::new(
+                origin,
+                key,
+                e.inner().to_string(),
+                "see the comments in config/slipstream.json5 for every key and its allowed values",
+            )
         })?;
         TopicMap::from_raw(raw, origin)
     }
 
     fn from_raw(raw: RawFile, origin: &str) -> Result<TopicMap, ConfigError> {
         let mut map = TopicMap { origin: origin.to_string(), ..TopicMap::default() };
-        map.set_namespace(&raw.namespace).map_err(|(problem, fix)| ConfigError::new(origin, "namespace", problem, fix))?;
+        map.set_namespace(&raw.namespace)
+            .map_err(|(problem, fix)| ConfigError::new(origin, "namespace", problem, fix))?;
 
         let cam = raw.camera;
         if let Some(q) = cam.jpeg_quality {
             if !(1..=100).contains(&q) {
-                return Err(ConfigError::new(origin, "camera.jpeg_quality", format!("{q} is out of range"), "use a quality from 1 to 100"));
+                return Err(ConfigError::new(
+                    origin,
+                    "camera.jpeg_quality",
+                    format!("{q} is out of range"),
+                    "use a quality from 1 to 100",
+                ));
             }
             map.camera.jpeg_quality = q;
         }
         if let Some(mib) = cam.shm_pool_mib {
             if !(4..=4096).contains(&mib) {
-                return Err(ConfigError::new(origin, "camera.shm_pool_mib", format!("{mib} MiB is out of range"), "use 4 to 4096 MiB; 64 holds ~70 frames of 640x480"));
+                return Err(ConfigError::new(
+                    origin,
+                    "camera.shm_pool_mib",
+                    format!("{mib} MiB is out of range"),
+                    "use 4 to 4096 MiB; 64 holds ~70 frames of 640x480",
+                ));
             }
             map.camera.shm_pool_mib = mib;
         }
@@ -166,7 +187,12 @@ impl TopicMap {
             let key_path = format!("topics.{name}");
             let Some(topic) = Topic::from_name(&name) else {
                 let allowed: Vec<_> = Topic::ALL.iter().map(|t| t.name()).collect();
-                return Err(ConfigError::new(origin, key_path, format!("unknown topic `{name}`"), format!("use one of: {}", allowed.join(", "))));
+                return Err(ConfigError::new(
+                    origin,
+                    key_path,
+                    format!("unknown topic `{name}`"),
+                    format!("use one of: {}", allowed.join(", ")),
+                ));
             };
             let entry = map.entries.get_mut(&topic).expect("every topic has an entry");
             if let Some(k) = over.key {
@@ -183,13 +209,23 @@ impl TopicMap {
             q.latched = over.latched.unwrap_or(q.latched);
             if let Some(d) = over.delivery {
                 if d == Delivery::Queue(0) {
-                    return Err(ConfigError::new(origin, format!("{key_path}.delivery"), "a queue of 0", "use \"latest\" or { queue: N } with N >= 1"));
+                    return Err(ConfigError::new(
+                        origin,
+                        format!("{key_path}.delivery"),
+                        "a queue of 0",
+                        "use \"latest\" or { queue: N } with N >= 1",
+                    ));
                 }
                 q.delivery = d;
             }
             if let Some(r) = over.max_rate_hz {
                 if !(r.is_finite() && r > 0.0) {
-                    return Err(ConfigError::new(origin, format!("{key_path}.max_rate_hz"), format!("{r} is not a positive rate"), "give a rate in Hz > 0, or leave the key out for no limit"));
+                    return Err(ConfigError::new(
+                        origin,
+                        format!("{key_path}.max_rate_hz"),
+                        format!("{r} is not a positive rate"),
+                        "give a rate in Hz > 0, or leave the key out for no limit",
+                    ));
                 }
                 q.max_rate_hz = Some(r);
             }
@@ -208,7 +244,10 @@ impl TopicMap {
         if !ns.is_empty() {
             let ke = key_expr(ns)?;
             if ke.as_str().contains('*') || ke.as_str().contains('$') {
-                return Err((format!("`{ns}` has a wildcard"), "a namespace is a plain key such as `car1` or `lab/rig2`".into()));
+                return Err((
+                    format!("`{ns}` has a wildcard"),
+                    "a namespace is a plain key such as `car1` or `lab/rig2`".into(),
+                ));
             }
         }
         self.namespace = ns.to_string();
@@ -241,7 +280,8 @@ impl TopicMap {
 
     /// Liveliness key of a node: `<namespace>/nodes/<name>`.
     pub fn node_key(&self, node: &str) -> Result<OwnedKeyExpr, ConfigError> {
-        let rel = key_expr(&format!("{NODES_PREFIX}/{node}")).map_err(|(p, f)| ConfigError::new("node name", "", p, f))?;
+        let rel =
+            key_expr(&format!("{NODES_PREFIX}/{node}")).map_err(|(p, f)| ConfigError::new("node name", "", p, f))?;
         Ok(self.full_key(&rel))
     }
 
@@ -275,7 +315,10 @@ impl TopicMap {
 
 fn key_expr(s: &str) -> Result<OwnedKeyExpr, (String, String)> {
     OwnedKeyExpr::autocanonize(s.to_string()).map_err(|e| {
-        (format!("`{s}` is not a valid Zenoh key: {e}"), "use chunks of letters, digits, `-` and `_` separated by `/`".into())
+        (
+            format!("`{s}` is not a valid Zenoh key: {e}"),
+            "use chunks of letters, digits, `-` and `_` separated by `/`".into(),
+        )
     })
 }
 
@@ -289,8 +332,15 @@ fn remapped_key(s: &str) -> Result<(OwnedKeyExpr, bool), (String, String)> {
         return Err(("an empty key".into(), "give a key such as `vehicle/speed`, or leave the key out".into()));
     }
     let ke = key_expr(body)?;
-    if ke.as_str().contains('*') || ke.as_str().contains('$') || ke.as_str().starts_with('@') || ke.as_str().contains("/@") {
-        return Err((format!("`{s}` has a wildcard or a verbatim (@) chunk"), "publish keys are plain: chunks of letters, digits, `-` and `_`".into()));
+    if ke.as_str().contains('*')
+        || ke.as_str().contains('$')
+        || ke.as_str().starts_with('@')
+        || ke.as_str().contains("/@")
+    {
+        return Err((
+            format!("`{s}` has a wildcard or a verbatim (@) chunk"),
+            "publish keys are plain: chunks of letters, digits, `-` and `_`".into(),
+        ));
     }
     Ok((ke, absolute))
 }

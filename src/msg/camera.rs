@@ -144,7 +144,7 @@ pub(super) fn example_info() -> CameraInfo {
         fy_px: 554.256,
         cx_px: 320.0,
         cy_px: 240.0,
-        horizontal_fov_rad: 1.0472,
+        horizontal_fov_rad: std::f64::consts::FRAC_PI_3,
         mount_position_in_ego_m: [1.5, 0.0, 1.4],
         mount_roll_pitch_yaw_rad: [0.0, 0.05, 0.0],
         rate_hz: 20.0,

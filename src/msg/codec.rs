@@ -104,7 +104,9 @@ fn postcard_error(e: postcard::Error, expected: &'static str, part: &'static str
         P::DeserializeBadOption => "an option tag is neither 0 nor 1".to_string(),
         // serde's derived enums report an unknown tag through a custom error, whose text
         // postcard does not keep.
-        P::DeserializeBadEnum | P::SerdeDeCustom => "an enum tag names no variant, or a value is invalid for its type".to_string(),
+        P::DeserializeBadEnum | P::SerdeDeCustom => {
+            "an enum tag names no variant, or a value is invalid for its type".to_string()
+        }
         P::DeserializeBadUtf8 | P::DeserializeBadChar => "a string is not valid UTF-8".to_string(),
         other => other.to_string(),
     };

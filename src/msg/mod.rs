@@ -133,10 +133,7 @@ pub fn hex_lines(bytes: &[u8]) -> String {
 
 /// Wall-clock time now, in ns since the Unix epoch (the unit of `Header::stamp_pub_ns`).
 pub fn wall_clock_ns() -> u64 {
-    std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.as_nanos() as u64)
-        .unwrap_or(0)
+    std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_nanos() as u64).unwrap_or(0)
 }
 
 /// One example value of every message, for docs/wire-format.md, the Python client's tests and

@@ -31,11 +31,22 @@ impl Message for SimClock {
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum SimEventKind {
-    ScenarioStart { name: String, seed: u64 },
-    ScenarioEnd { reason: String, success: bool },
-    Collision { other_id: u32, relative_speed_mps: f64 },
+    ScenarioStart {
+        name: String,
+        seed: u64,
+    },
+    ScenarioEnd {
+        reason: String,
+        success: bool,
+    },
+    Collision {
+        other_id: u32,
+        relative_speed_mps: f64,
+    },
     /// Lockstep waited longer than its timeout for these controllers.
-    ControlTimeout { late: Vec<String> },
+    ControlTimeout {
+        late: Vec<String>,
+    },
 }
 
 /// sim/events: things that happen once.

@@ -43,7 +43,7 @@ fn paint(px: &mut [u8], t_s: f64) {
     for (i, row) in px.chunks_exact_mut(WIDTH as usize * 3).enumerate() {
         let sky = i < HEIGHT as usize / 2;
         for (u, p) in row.chunks_exact_mut(3).enumerate() {
-            let in_box = i >= 260 && i < 300 && u >= box_u && u < box_u + 80;
+            let in_box = (260..300).contains(&i) && (box_u..box_u + 80).contains(&u);
             let c = if in_box {
                 [40, 40, 60]
             } else if sky {
@@ -86,7 +86,9 @@ pub async fn publish(bus: &Bus, duration: Duration) -> Result<()> {
         speed.put(t_ns, &Speed { speed_mps: 20.0 + 5.0 * (t_s * 0.5).sin() })?;
         clock.put(t_ns, &SimClock { step, real_time_factor: 1.0, mode: SimMode::Realtime, physics_hz: 100.0 })?;
         if step % 5 == 0 {
-            frames.put_with(t_ns, WIDTH, HEIGHT, ImageEncoding::Rgb8, (WIDTH * HEIGHT * 3) as usize, |px| paint(px, t_s))?;
+            frames.put_with(t_ns, WIDTH, HEIGHT, ImageEncoding::Rgb8, (WIDTH * HEIGHT * 3) as usize, |px| {
+                paint(px, t_s)
+            })?;
         }
         if step % 100 == 0 {
             info.put(t_ns, &cam_info)?;
@@ -142,7 +144,12 @@ pub async fn subscribe(bus: &Bus, duration: Duration) -> Result<DemoSummary> {
         }
     }
     Ok(DemoSummary {
-        topics: vec![speed.stats().snapshot(), clock.stats().snapshot(), frames.stats().snapshot(), info.stats().snapshot()],
+        topics: vec![
+            speed.stats().snapshot(),
+            clock.stats().snapshot(),
+            frames.stats().snapshot(),
+            info.stats().snapshot(),
+        ],
         shared_memory_frames: shm,
         nodes_seen,
     })
@@ -167,7 +174,11 @@ pub fn render(summary: &DemoSummary) -> String {
             t.decode_errors
         ));
     }
-    s.push_str(&format!("frames in shared memory: {}\nnodes seen: {}\n", summary.shared_memory_frames, summary.nodes_seen.join(", ")));
+    s.push_str(&format!(
+        "frames in shared memory: {}\nnodes seen: {}\n",
+        summary.shared_memory_frames,
+        summary.nodes_seen.join(", ")
+    ));
     s
 }
 

@@ -4,7 +4,7 @@
 use serde::Serialize;
 
 use crate::config::{ConfigError, ConnectArgs};
-use crate::qos::{Congestion, Delivery, Priority, Reliability};
+use crate::qos::{Delivery, TopicQos};
 use crate::topics::Topic;
 
 #[derive(Debug, Serialize)]
@@ -13,13 +13,8 @@ pub struct TopicInfo {
     pub key: String,
     pub message: &'static str,
     pub encoding: String,
-    pub priority: Priority,
-    pub express: bool,
-    pub congestion_control: Congestion,
-    pub reliability: Reliability,
-    pub max_rate_hz: Option<f64>,
-    pub delivery: Delivery,
-    pub latched: bool,
+    #[serde(flatten)]
+    pub qos: TopicQos,
 }
 
 #[derive(Debug, Serialize)]
@@ -38,24 +33,16 @@ pub struct Info {
 pub fn gather(args: &ConnectArgs) -> Result<Info, ConfigError> {
     let map = args.topic_map()?;
     let z = args.zenoh_config()?;
-    let get = |k: &str| z.get_json(k).ok().and_then(|s| serde_json::from_str(&s).ok()).unwrap_or(serde_json::Value::Null);
+    let get =
+        |k: &str| z.get_json(k).ok().and_then(|s| serde_json::from_str(&s).ok()).unwrap_or(serde_json::Value::Null);
     let topics = Topic::ALL
         .into_iter()
-        .map(|t| {
-            let q = map.qos(t);
-            TopicInfo {
-                topic: t.name(),
-                key: map.key(t).to_string(),
-                message: t.kind().name(),
-                encoding: format!("application/octet-stream;{}", t.kind().encoding_schema()),
-                priority: q.priority,
-                express: q.express,
-                congestion_control: q.congestion_control,
-                reliability: q.reliability,
-                max_rate_hz: q.max_rate_hz,
-                delivery: q.delivery,
-                latched: q.latched,
-            }
+        .map(|t| TopicInfo {
+            topic: t.name(),
+            key: map.key(t).to_string(),
+            message: t.kind().name(),
+            encoding: format!("application/octet-stream;{}", t.kind().encoding_schema()),
+            qos: map.qos(t),
         })
         .collect();
     Ok(Info {
@@ -82,14 +69,18 @@ pub fn render(info: &Info) -> String {
         info.multicast_scouting,
         info.shared_memory,
     );
-    s.push_str(&format!("{:<20} {:<28} {:<19} {:<17} {:<7} {:<6} {:<11} {}\n", "TOPIC", "KEY", "MESSAGE", "PRIORITY", "EXPRESS", "CC", "RELIABILITY", "DELIVERY"));
+    s.push_str(&format!(
+        "{:<20} {:<28} {:<19} {:<17} {:<7} {:<6} {:<11} {}\n",
+        "TOPIC", "KEY", "MESSAGE", "PRIORITY", "EXPRESS", "CC", "RELIABILITY", "DELIVERY"
+    ));
     for t in &info.topics {
-        let delivery = match t.delivery {
+        let q = &t.qos;
+        let delivery = match q.delivery {
             Delivery::Latest => "latest".to_string(),
             Delivery::Queue(n) => format!("queue {n}"),
         };
-        let mut rate = t.max_rate_hz.map(|r| format!(", max {r} Hz")).unwrap_or_default();
-        if t.latched {
+        let mut rate = q.max_rate_hz.map(|r| format!(", max {r} Hz")).unwrap_or_default();
+        if q.latched {
             rate.push_str(", latched");
         }
         s.push_str(&format!(
@@ -97,10 +88,10 @@ pub fn render(info: &Info) -> String {
             t.topic,
             t.key,
             t.message,
-            format!("{:?}", t.priority),
-            t.express,
-            format!("{:?}", t.congestion_control).to_lowercase(),
-            format!("{:?}", t.reliability).to_lowercase(),
+            format!("{:?}", q.priority),
+            q.express,
+            format!("{:?}", q.congestion_control).to_lowercase(),
+            format!("{:?}", q.reliability).to_lowercase(),
             delivery,
             rate
         ));

@@ -17,11 +17,7 @@ macro_rules! within {
 
 fn base_config() -> zenoh::Config {
     let mut c = zenoh::Config::default();
-    for (k, v) in [
-        ("mode", "\"peer\""),
-        ("scouting/multicast/enabled", "false"),
-        ("scouting/gossip/enabled", "true"),
-    ] {
+    for (k, v) in [("mode", "\"peer\""), ("scouting/multicast/enabled", "false"), ("scouting/gossip/enabled", "true")] {
         c.insert_json5(k, v).unwrap();
     }
     c
