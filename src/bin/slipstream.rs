@@ -25,6 +25,10 @@ enum Command {
     /// `slipstream up` exists, the quickest way to see the bus work)
     Demo(slipstream::tools::demo::DemoArgs),
     /// Measure the bus against raw Zenoh, UDP and TCP (two processes on loopback; use --release)
+    ///
+    /// Every case runs a sender and a receiver as child processes on loopback ports of their
+    /// own, with the built-in config/zenoh.json5: connection flags do not apply. About 14
+    /// minutes for all suites; --quick checks every path in about a minute.
     Bench(BenchArgs),
     /// Show the key of every topic after namespace and remapping, its QoS, and the Zenoh
     /// mode and endpoints in use
