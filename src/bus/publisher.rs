@@ -9,7 +9,7 @@ use zenoh::shm::{GarbageCollect, PosixShmProviderBackend, ShmProvider, ShmProvid
 use zenoh::Wait;
 
 use super::{zerr, BusError};
-use crate::config::TopicMap;
+use crate::config::{CameraEncoding, CameraSettings, TopicMap};
 use crate::msg::{self, encode_into, frame_prefix, CameraFrame, CameraFrameRef, Header, ImageEncoding, Message};
 use crate::topics::Topic;
 
@@ -184,6 +184,7 @@ pub struct FramePublisher {
     inner: Publisher<CameraFrame>,
     shm: Option<ShmProvider<PosixShmProviderBackend>>,
     heap_fallbacks: AtomicU64,
+    camera: CameraSettings,
 }
 
 impl FramePublisher {
@@ -200,7 +201,7 @@ impl FramePublisher {
         } else {
             None
         };
-        Ok(FramePublisher { inner, shm, heap_fallbacks: AtomicU64::new(0) })
+        Ok(FramePublisher { inner, shm, heap_fallbacks: AtomicU64::new(0), camera: topics.camera })
     }
 
     /// Publishes a frame whose `data_len` image bytes `fill` writes in place.
@@ -258,6 +259,42 @@ impl FramePublisher {
         self.put_with(stamp_sim_ns, frame.width, frame.height, frame.encoding, frame.data.len(), |dst| {
             dst.copy_from_slice(frame.data)
         })
+    }
+
+    /// Publishes RGB8 pixels in the encoding the config chose (`camera.encoding`): raw (one copy
+    /// into the payload; render with [`FramePublisher::put_with`] to avoid it) or JPEG at
+    /// `camera.jpeg_quality`.
+    pub fn put_rgb(
+        &self,
+        stamp_sim_ns: u64,
+        width: u32,
+        height: u32,
+        rgb: &[u8],
+    ) -> Result<Option<FrameSent>, BusError> {
+        let frame = |encoding, data| CameraFrameRef { width, height, encoding, data };
+        match self.camera.encoding {
+            CameraEncoding::Raw => self.put(stamp_sim_ns, &frame(ImageEncoding::Rgb8, rgb)),
+            CameraEncoding::Jpeg => {
+                if ImageEncoding::Rgb8.expected_len(width, height) != Some(rgb.len()) {
+                    return Err(BusError::InvalidFrame(format!(
+                        "{width}x{height} RGB8 needs {} bytes, got {}",
+                        width as usize * height as usize * 3,
+                        rgb.len()
+                    )));
+                }
+                let jpeg =
+                    msg::encode_jpeg(rgb, width, height, self.camera.jpeg_quality).map_err(BusError::InvalidFrame)?;
+                self.put(stamp_sim_ns, &frame(ImageEncoding::Jpeg, &jpeg))
+            }
+        }
+    }
+
+    /// The encoding `put_rgb` uses.
+    pub fn encoding(&self) -> ImageEncoding {
+        match self.camera.encoding {
+            CameraEncoding::Raw => ImageEncoding::Rgb8,
+            CameraEncoding::Jpeg => ImageEncoding::Jpeg,
+        }
     }
 
     /// Frames that had to go through the heap because the pool was full.

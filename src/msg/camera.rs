@@ -8,7 +8,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::codec::write_postcard;
-use super::{Header, Message, MessageKind, Vec3, PREAMBLE_LEN, WIRE_VERSION};
+use super::{DecodeError, Header, Message, MessageKind, Vec3, PREAMBLE_LEN, WIRE_VERSION};
 
 /// How a frame's bytes are encoded.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -77,11 +77,39 @@ impl Message for CameraFrameRef<'_> {
     }
 }
 
-impl CameraFrameRef<'_> {
+impl<'a> CameraFrameRef<'a> {
     /// Copies the pixels into an owned frame (the one copy a consumer may choose to make).
     pub fn to_owned_frame(&self) -> CameraFrame {
         CameraFrame { width: self.width, height: self.height, encoding: self.encoding, data: self.data.to_vec() }
     }
+
+    /// The image as RGB8 pixels, whatever its encoding: raw frames are borrowed as they are,
+    /// JPEG and PNG are decoded (and must have the size the frame states).
+    pub fn to_rgb8(&self) -> Result<std::borrow::Cow<'a, [u8]>, DecodeError> {
+        let invalid = |reason: String| DecodeError::Invalid { expected: "CameraFrame", reason };
+        let format = match self.encoding {
+            ImageEncoding::Rgb8 => return Ok(std::borrow::Cow::Borrowed(self.data)),
+            ImageEncoding::Jpeg => image::ImageFormat::Jpeg,
+            ImageEncoding::Png => image::ImageFormat::Png,
+        };
+        let img = image::load_from_memory_with_format(self.data, format)
+            .map_err(|e| invalid(format!("{:?} image does not decode: {e}", self.encoding)))?
+            .into_rgb8();
+        if img.dimensions() != (self.width, self.height) {
+            let (w, h) = img.dimensions();
+            return Err(invalid(format!("image is {w}x{h}, the frame says {}x{}", self.width, self.height)));
+        }
+        Ok(std::borrow::Cow::Owned(img.into_raw()))
+    }
+}
+
+/// Encodes RGB8 pixels as JPEG at `quality` (1..100).
+pub fn encode_jpeg(rgb: &[u8], width: u32, height: u32, quality: u8) -> Result<Vec<u8>, String> {
+    let mut out = Vec::with_capacity(rgb.len() / 8);
+    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, quality)
+        .encode(rgb, width, height, image::ExtendedColorType::Rgb8)
+        .map_err(|e| format!("JPEG encoding failed: {e}"))?;
+    Ok(out)
 }
 
 /// The bytes of a camera/front payload that precede `data_len` bytes of image data:

@@ -22,7 +22,7 @@ mod sim;
 mod vehicle;
 
 pub use acc::{AccCommand, AccMode, AccStatus, AccWarning, LeadInfo};
-pub use camera::{frame_prefix, CameraFrame, CameraFrameRef, CameraInfo, ImageEncoding};
+pub use camera::{encode_jpeg, frame_prefix, CameraFrame, CameraFrameRef, CameraInfo, ImageEncoding};
 pub use codec::{decode, decode_header, encode, encode_into, DecodeError, Stamped};
 pub use objects::{BoundingBox2d, Detection, Detections, GroundTruthObject, GroundTruthObjects, ObjectClass};
 pub use sim::{SimClock, SimEvent, SimEventKind, SimMode};
