@@ -246,9 +246,10 @@ impl FramePublisher {
                 }
             }
         }
-        let mut buf = Vec::with_capacity(total);
-        buf.extend_from_slice(&prefix);
-        buf.resize(total, 0);
+        // Zeroed allocation (calloc): a large buffer comes as fresh zero pages from the OS,
+        // so the renderer's writes are the only pass over it (no memset first).
+        let mut buf = vec![0u8; total];
+        buf[..prefix.len()].copy_from_slice(&prefix);
         fill(&mut buf[prefix.len()..]);
         self.inner.send(buf)?;
         Ok(Some(FrameSent { header, shared_memory: false }))
