@@ -272,19 +272,7 @@ async fn a_late_subscriber_gets_the_latched_camera_info() {
     let (a, b) = bus_pair(TopicMap::default(), TopicMap::default()).await;
     let publisher = a.publisher(CAMERA_FRONT_INFO).await.unwrap();
     assert!(publisher.is_latched());
-    let info = |w| CameraInfo {
-        width: w,
-        height: 480,
-        fx_px: 500.0,
-        fy_px: 500.0,
-        cx_px: 320.0,
-        cy_px: 240.0,
-        horizontal_fov_rad: 1.0,
-        mount_position_in_ego_m: [1.5, 0.0, 1.4],
-        mount_roll_pitch_yaw_rad: [0.0; 3],
-        rate_hz: 20.0,
-        encoding: ImageEncoding::Rgb8,
-    };
+    let info = |w| CameraInfo::pinhole(w, 480, 1.0, [1.5, 0.0, 1.4], [0.0; 3], 20.0, ImageEncoding::Rgb8);
     // Published before anyone subscribes: only the latest is kept.
     publisher.put(1, &info(320)).unwrap();
     publisher.put(2, &info(640)).unwrap();

@@ -102,8 +102,16 @@ fn bench_quick_every_path_delivers() {
         let (suite, path) = (r["suite"].as_str().unwrap(), r["path"].as_str().unwrap());
         let received = r["received"].as_f64().unwrap();
         assert!(received > 0.0, "{suite} / {path}: nothing received");
-        if suite.starts_with("a.") || suite.contains("latency") {
-            assert_eq!(received, r["sent"].as_f64().unwrap(), "{suite} / {path}: paced loopback traffic is not lost");
+        let sent = r["sent"].as_f64().unwrap();
+        if suite.starts_with("a.") {
+            // Callback subscribers and sockets: paced loopback traffic arrives whole.
+            assert_eq!(received, sent, "{suite} / {path}: paced loopback traffic is not lost");
+            assert!(r["p50_us"].as_f64().is_some(), "{suite} / {path}");
+        }
+        if suite.contains("latency") {
+            // The bus reader is latest-only by design: a reader starved of CPU for a frame
+            // period (other tests run alongside) skips to the newest frame.
+            assert!(received >= sent * 0.9, "{suite} / {path}: {received} of {sent} frames");
             assert!(r["p50_us"].as_f64().is_some(), "{suite} / {path}");
         }
         if suite.starts_with("b.") && path.starts_with("bus") {

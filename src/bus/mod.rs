@@ -13,7 +13,7 @@ use std::sync::Arc;
 
 pub use publisher::{FramePublisher, FrameSent, Publisher};
 pub use stats::{StatsSnapshot, TopicStats};
-pub use subscriber::{CallbackSubscriber, FrameSample, FrameSubscriber, Received, Subscriber};
+pub use subscriber::{CallbackSubscriber, FrameSample, FrameSubscriber, Received, Subscriber, Subscription};
 
 use crate::config::{ConfigError, TopicMap};
 use crate::msg::Message;

@@ -123,59 +123,6 @@ where
     .await
 }
 
-/// A subscription to one topic, delivering decoded messages.
-pub struct Subscriber<M> {
-    _inner: Declared,
-    inbox: Arc<Inbox<Received<M>>>,
-    stats: Arc<TopicStats>,
-    key: String,
-}
-
-impl<M: Message + DeserializeOwned + Send + 'static> Subscriber<M> {
-    pub(crate) async fn declare(
-        session: &zenoh::Session,
-        key: OwnedKeyExpr,
-        name: &str,
-        qos: TopicQos,
-    ) -> Result<Self, BusError> {
-        let stats = Arc::new(TopicStats::new(name));
-        let inbox = Arc::new(Inbox::new(qos.delivery));
-        let delivery = qos.delivery;
-        let inner = declare_inbox(session, &key, qos.latched, stats.clone(), inbox.clone(), |sample| {
-            let payload = sample.payload();
-            let bytes = payload.to_bytes();
-            let Stamped { header, msg } = msg::decode::<M>(&bytes)?;
-            Ok((header, bytes.len(), Received { header, msg }))
-        })
-        .await?;
-        tracing::debug!(topic = name, %key, ?delivery, "subscriber declared");
-        Ok(Subscriber { _inner: inner, inbox, stats, key: key.to_string() })
-    }
-
-    /// The next message; waits for one.
-    pub async fn recv(&self) -> Received<M> {
-        self.inbox.pop().await
-    }
-
-    /// The next message within `timeout`.
-    pub async fn recv_timeout(&self, timeout: Duration) -> Option<Received<M>> {
-        tokio::time::timeout(timeout, self.recv()).await.ok()
-    }
-
-    /// A message if one is waiting.
-    pub fn try_recv(&self) -> Option<Received<M>> {
-        self.inbox.try_pop()
-    }
-
-    pub fn stats(&self) -> &Arc<TopicStats> {
-        &self.stats
-    }
-
-    pub fn key(&self) -> &str {
-        &self.key
-    }
-}
-
 /// A received camera payload, validated; [`FrameSample::frame`] borrows the pixels from it.
 pub struct FrameSample {
     sample: Sample,
@@ -219,14 +166,6 @@ impl FrameSample {
     }
 }
 
-/// The camera subscription: zero-copy frames.
-pub struct FrameSubscriber {
-    _inner: Declared,
-    inbox: Arc<Inbox<FrameSample>>,
-    stats: Arc<TopicStats>,
-    key: String,
-}
-
 /// Validates a camera payload as a frame (joining fragments if Zenoh delivered it in pieces).
 fn accept_frame(sample: Sample) -> Result<(Header, usize, FrameSample), DecodeError> {
     let payload = sample.payload();
@@ -240,29 +179,50 @@ fn accept_frame(sample: Sample) -> Result<(Header, usize, FrameSample), DecodeEr
     Ok((header, len, FrameSample { sample, header, joined }))
 }
 
-impl FrameSubscriber {
-    pub(crate) async fn declare(
+/// A subscription to one topic whose messages wait in an inbox until the reader takes them.
+pub struct Subscription<T> {
+    _inner: Declared,
+    inbox: Arc<Inbox<T>>,
+    stats: Arc<TopicStats>,
+    key: String,
+}
+
+/// Decoded messages of one topic.
+pub type Subscriber<M> = Subscription<Received<M>>;
+
+/// Camera frames, validated on arrival and read in place (zero-copy).
+pub type FrameSubscriber = Subscription<FrameSample>;
+
+impl<T: Send + 'static> Subscription<T> {
+    async fn declare_with<F>(
         session: &zenoh::Session,
         key: OwnedKeyExpr,
         name: &str,
         qos: TopicQos,
-    ) -> Result<Self, BusError> {
+        accept: F,
+    ) -> Result<Self, BusError>
+    where
+        F: Fn(Sample) -> Result<(Header, usize, T), DecodeError> + Send + Sync + 'static,
+    {
         let stats = Arc::new(TopicStats::new(name));
         let inbox = Arc::new(Inbox::new(qos.delivery));
-        let inner = declare_inbox(session, &key, qos.latched, stats.clone(), inbox.clone(), accept_frame).await?;
-        Ok(FrameSubscriber { _inner: inner, inbox, stats, key: key.to_string() })
+        let inner = declare_inbox(session, &key, qos.latched, stats.clone(), inbox.clone(), accept).await?;
+        tracing::debug!(topic = name, %key, delivery = ?qos.delivery, "subscriber declared");
+        Ok(Subscription { _inner: inner, inbox, stats, key: key.to_string() })
     }
 
-    /// The next frame; waits for one.
-    pub async fn recv(&self) -> FrameSample {
+    /// The next message; waits for one.
+    pub async fn recv(&self) -> T {
         self.inbox.pop().await
     }
 
-    pub async fn recv_timeout(&self, timeout: Duration) -> Option<FrameSample> {
+    /// The next message within `timeout`.
+    pub async fn recv_timeout(&self, timeout: Duration) -> Option<T> {
         tokio::time::timeout(timeout, self.recv()).await.ok()
     }
 
-    pub fn try_recv(&self) -> Option<FrameSample> {
+    /// A message if one is waiting.
+    pub fn try_recv(&self) -> Option<T> {
         self.inbox.try_pop()
     }
 
@@ -272,6 +232,34 @@ impl FrameSubscriber {
 
     pub fn key(&self) -> &str {
         &self.key
+    }
+}
+
+impl<M: Message + DeserializeOwned + Send + 'static> Subscription<Received<M>> {
+    pub(crate) async fn declare(
+        session: &zenoh::Session,
+        key: OwnedKeyExpr,
+        name: &str,
+        qos: TopicQos,
+    ) -> Result<Self, BusError> {
+        Self::declare_with(session, key, name, qos, |sample| {
+            let payload = sample.payload();
+            let bytes = payload.to_bytes();
+            let Stamped { header, msg } = msg::decode::<M>(&bytes)?;
+            Ok((header, bytes.len(), Received { header, msg }))
+        })
+        .await
+    }
+}
+
+impl Subscription<FrameSample> {
+    pub(crate) async fn declare(
+        session: &zenoh::Session,
+        key: OwnedKeyExpr,
+        name: &str,
+        qos: TopicQos,
+    ) -> Result<Self, BusError> {
+        Self::declare_with(session, key, name, qos, accept_frame).await
     }
 }
 

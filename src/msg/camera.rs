@@ -151,6 +151,35 @@ pub struct CameraInfo {
     pub encoding: ImageEncoding,
 }
 
+impl CameraInfo {
+    /// A pinhole camera with square pixels and the principal point at the image centre, from
+    /// its horizontal field of view: fx = fy = (width / 2) / tan(fov / 2).
+    pub fn pinhole(
+        width: u32,
+        height: u32,
+        horizontal_fov_rad: f64,
+        mount_position_in_ego_m: Vec3,
+        mount_roll_pitch_yaw_rad: Vec3,
+        rate_hz: f64,
+        encoding: ImageEncoding,
+    ) -> CameraInfo {
+        let f = (width as f64 / 2.0) / (horizontal_fov_rad / 2.0).tan();
+        CameraInfo {
+            width,
+            height,
+            fx_px: f,
+            fy_px: f,
+            cx_px: width as f64 / 2.0,
+            cy_px: height as f64 / 2.0,
+            horizontal_fov_rad,
+            mount_position_in_ego_m,
+            mount_roll_pitch_yaw_rad,
+            rate_hz,
+            encoding,
+        }
+    }
+}
+
 impl Message for CameraInfo {
     const KIND: MessageKind = MessageKind::CameraInfo;
     fn check(&self) -> Result<(), String> {
@@ -165,17 +194,13 @@ impl Message for CameraInfo {
 }
 
 pub(super) fn example_info() -> CameraInfo {
-    CameraInfo {
-        width: 640,
-        height: 480,
-        fx_px: 554.256,
-        fy_px: 554.256,
-        cx_px: 320.0,
-        cy_px: 240.0,
-        horizontal_fov_rad: std::f64::consts::FRAC_PI_3,
-        mount_position_in_ego_m: [1.5, 0.0, 1.4],
-        mount_roll_pitch_yaw_rad: [0.0, 0.05, 0.0],
-        rate_hz: 20.0,
-        encoding: ImageEncoding::Rgb8,
-    }
+    CameraInfo::pinhole(
+        640,
+        480,
+        std::f64::consts::FRAC_PI_3,
+        [1.5, 0.0, 1.4],
+        [0.0, 0.05, 0.0],
+        20.0,
+        ImageEncoding::Rgb8,
+    )
 }

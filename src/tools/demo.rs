@@ -62,19 +62,15 @@ pub async fn publish(bus: &Bus, duration: Duration) -> Result<()> {
     let clock = bus.publisher(topics::SIM_CLOCK).await?;
     let info = bus.publisher(topics::CAMERA_FRONT_INFO).await?;
     let frames = bus.frame_publisher().await?;
-    let cam_info = CameraInfo {
-        width: WIDTH,
-        height: HEIGHT,
-        fx_px: 554.256,
-        fy_px: 554.256,
-        cx_px: 320.0,
-        cy_px: 240.0,
-        horizontal_fov_rad: std::f64::consts::FRAC_PI_3,
-        mount_position_in_ego_m: [1.5, 0.0, 1.4],
-        mount_roll_pitch_yaw_rad: [0.0, 0.0, 0.0],
-        rate_hz: 20.0,
-        encoding: ImageEncoding::Rgb8,
-    };
+    let cam_info = CameraInfo::pinhole(
+        WIDTH,
+        HEIGHT,
+        std::f64::consts::FRAC_PI_3,
+        [1.5, 0.0, 1.4],
+        [0.0, 0.0, 0.0],
+        20.0,
+        ImageEncoding::Rgb8,
+    );
     let start = Instant::now();
     let mut tick = tokio::time::interval(Duration::from_millis(10));
     tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Burst);
