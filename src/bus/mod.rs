@@ -107,7 +107,7 @@ impl Bus {
     /// (lowest latency; keep the handler short).
     pub async fn subscribe_with<M, F>(&self, def: TopicDef<M>, handler: F) -> Result<CallbackSubscriber, BusError>
     where
-        M: Message + serde::de::DeserializeOwned,
+        M: Message + serde::de::DeserializeOwned + 'static,
         F: Fn(Received<M>) + Send + Sync + 'static,
     {
         CallbackSubscriber::declare(

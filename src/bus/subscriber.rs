@@ -100,27 +100,36 @@ where
     Ok(declared)
 }
 
-/// Declares a subscriber whose callback validates with `accept` and fills `inbox`.
-async fn declare_inbox<T, F>(
+/// Declares a subscriber that validates every sample with `accept`, records the good ones in
+/// `stats` (and counts the bad ones there), and hands each accepted item to `deliver`.
+async fn declare_accepting<T, A, D>(
     session: &zenoh::Session,
     key: &OwnedKeyExpr,
     latched: bool,
     stats: Arc<TopicStats>,
-    inbox: Arc<Inbox<T>>,
-    accept: F,
+    accept: A,
+    deliver: D,
 ) -> Result<Declared, BusError>
 where
-    T: Send + 'static,
-    F: Fn(Sample) -> Result<(Header, usize, T), DecodeError> + Send + Sync + 'static,
+    A: Fn(Sample) -> Result<(Header, usize, T), DecodeError> + Send + Sync + 'static,
+    D: Fn(T) + Send + Sync + 'static,
 {
     declare_callback(session, key, latched, move |sample: Sample| match accept(sample) {
         Ok((header, len, item)) => {
             stats.on_message(&header, len, msg::wall_clock_ns());
-            inbox.push(item, &stats);
+            deliver(item);
         }
         Err(e) => stats.on_decode_error(&e),
     })
     .await
+}
+
+/// Decodes a payload into an owned message.
+fn accept_decoded<M: Message + DeserializeOwned>(sample: Sample) -> Result<(Header, usize, Received<M>), DecodeError> {
+    let payload = sample.payload();
+    let bytes = payload.to_bytes();
+    let Stamped { header, msg } = msg::decode::<M>(&bytes)?;
+    Ok((header, bytes.len(), Received { header, msg }))
 }
 
 /// A received camera payload, validated; [`FrameSample::frame`] borrows the pixels from it.
@@ -206,7 +215,9 @@ impl<T: Send + 'static> Subscription<T> {
     {
         let stats = Arc::new(TopicStats::new(name));
         let inbox = Arc::new(Inbox::new(qos.delivery));
-        let inner = declare_inbox(session, &key, qos.latched, stats.clone(), inbox.clone(), accept).await?;
+        let (into, counted) = (inbox.clone(), stats.clone());
+        let deliver = move |item| into.push(item, &counted);
+        let inner = declare_accepting(session, &key, qos.latched, stats.clone(), accept, deliver).await?;
         tracing::debug!(topic = name, %key, delivery = ?qos.delivery, "subscriber declared");
         Ok(Subscription { _inner: inner, inbox, stats, key: key.to_string() })
     }
@@ -242,13 +253,7 @@ impl<M: Message + DeserializeOwned + Send + 'static> Subscription<Received<M>> {
         name: &str,
         qos: TopicQos,
     ) -> Result<Self, BusError> {
-        Self::declare_with(session, key, name, qos, |sample| {
-            let payload = sample.payload();
-            let bytes = payload.to_bytes();
-            let Stamped { header, msg } = msg::decode::<M>(&bytes)?;
-            Ok((header, bytes.len(), Received { header, msg }))
-        })
-        .await
+        Self::declare_with(session, key, name, qos, accept_decoded::<M>).await
     }
 }
 
@@ -272,6 +277,23 @@ pub struct CallbackSubscriber {
 }
 
 impl CallbackSubscriber {
+    async fn declare_with<T, A, F>(
+        session: &zenoh::Session,
+        key: OwnedKeyExpr,
+        name: &str,
+        qos: TopicQos,
+        accept: A,
+        handler: F,
+    ) -> Result<Self, BusError>
+    where
+        A: Fn(Sample) -> Result<(Header, usize, T), DecodeError> + Send + Sync + 'static,
+        F: Fn(T) + Send + Sync + 'static,
+    {
+        let stats = Arc::new(TopicStats::new(name));
+        let inner = declare_accepting(session, &key, qos.latched, stats.clone(), accept, handler).await?;
+        Ok(CallbackSubscriber { _inner: inner, stats })
+    }
+
     pub(crate) async fn declare<M, F>(
         session: &zenoh::Session,
         key: OwnedKeyExpr,
@@ -280,28 +302,10 @@ impl CallbackSubscriber {
         handler: F,
     ) -> Result<Self, BusError>
     where
-        M: Message + DeserializeOwned,
+        M: Message + DeserializeOwned + 'static,
         F: Fn(Received<M>) + Send + Sync + 'static,
     {
-        let stats = Arc::new(TopicStats::new(name));
-        let st = stats.clone();
-        let inner = declare_callback(session, &key, qos.latched, move |sample: Sample| {
-            let payload = sample.payload();
-            let bytes = payload.to_bytes();
-            match msg::decode::<M>(&bytes) {
-                Ok(Stamped { header, msg }) => {
-                    st.on_message(&header, bytes.len(), msg::wall_clock_ns());
-                    handler(Received { header, msg });
-                }
-                Err(e) => st.on_decode_error(&e),
-            }
-        })
-        .await?;
-        Ok(CallbackSubscriber { _inner: inner, stats })
-    }
-
-    pub fn stats(&self) -> &Arc<TopicStats> {
-        &self.stats
+        Self::declare_with(session, key, name, qos, accept_decoded::<M>, handler).await
     }
 
     pub(crate) async fn declare_frames<F>(
@@ -314,16 +318,10 @@ impl CallbackSubscriber {
     where
         F: Fn(FrameSample) + Send + Sync + 'static,
     {
-        let stats = Arc::new(TopicStats::new(name));
-        let st = stats.clone();
-        let inner = declare_callback(session, &key, qos.latched, move |sample: Sample| match accept_frame(sample) {
-            Ok((header, len, frame)) => {
-                st.on_message(&header, len, msg::wall_clock_ns());
-                handler(frame);
-            }
-            Err(e) => st.on_decode_error(&e),
-        })
-        .await?;
-        Ok(CallbackSubscriber { _inner: inner, stats })
+        Self::declare_with(session, key, name, qos, accept_frame, handler).await
+    }
+
+    pub fn stats(&self) -> &Arc<TopicStats> {
+        &self.stats
     }
 }
