@@ -20,6 +20,7 @@ pub mod cli;
 pub mod config;
 pub mod msg;
 pub mod qos;
+pub mod sim;
 pub mod tools;
 pub mod topics;
 

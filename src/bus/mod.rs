@@ -79,12 +79,12 @@ impl Bus {
 
     /// A typed publisher on `def`'s key with its configured QoS.
     pub async fn publisher<M: Message>(&self, def: TopicDef<M>) -> Result<Publisher<M>, BusError> {
-        Publisher::declare(&self.session, &self.topics, def.topic).await
+        Publisher::declare(&self.session, &self.topics, def.topic, &self.node).await
     }
 
     /// The camera-frame publisher: renders straight into shared memory when it can.
     pub async fn frame_publisher(&self) -> Result<FramePublisher, BusError> {
-        FramePublisher::declare(&self.session, &self.topics).await
+        FramePublisher::declare(&self.session, &self.topics, &self.node).await
     }
 
     /// A typed subscriber with the topic's configured delivery (latest-only or a queue).

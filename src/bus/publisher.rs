@@ -30,11 +30,19 @@ pub struct Publisher<M> {
     last_sim_ns: Mutex<Option<u64>>,
     /// Size of the last encoded message, to allocate the next buffer once.
     size_hint: AtomicUsize,
+    /// The node's name, sent as every sample's attachment (lockstep tells controllers apart
+    /// by it).
+    source: ZBytes,
     _msg: PhantomData<fn(&M)>,
 }
 
 impl<M: Message> Publisher<M> {
-    pub(super) async fn declare(session: &zenoh::Session, topics: &TopicMap, topic: Topic) -> Result<Self, BusError> {
+    pub(super) async fn declare(
+        session: &zenoh::Session,
+        topics: &TopicMap,
+        topic: Topic,
+        node: &str,
+    ) -> Result<Self, BusError> {
         let key = topics.key(topic);
         let qos = topics.qos(topic);
         let builder = session
@@ -67,6 +75,7 @@ impl<M: Message> Publisher<M> {
             min_interval_ns: qos.max_rate_hz.map(|hz| (1e9 / hz) as u64),
             last_sim_ns: Mutex::new(None),
             size_hint: AtomicUsize::new(64),
+            source: ZBytes::from(node.to_string()),
             _msg: PhantomData,
         })
     }
@@ -102,8 +111,8 @@ impl<M: Message> Publisher<M> {
 
     fn send(&self, payload: impl Into<ZBytes>) -> Result<(), BusError> {
         let sent = match &self.inner {
-            Inner::Plain(p) => p.put(payload).wait(),
-            Inner::Latched(p) => p.put(payload).wait(),
+            Inner::Plain(p) => p.put(payload).attachment(self.source.clone()).wait(),
+            Inner::Latched(p) => p.put(payload).attachment(self.source.clone()).wait(),
         };
         sent.map_err(zerr(format!("put on {}", self.key())))
     }
@@ -188,8 +197,8 @@ pub struct FramePublisher {
 }
 
 impl FramePublisher {
-    pub(super) async fn declare(session: &zenoh::Session, topics: &TopicMap) -> Result<Self, BusError> {
-        let inner = Publisher::declare(session, topics, Topic::CameraFront).await?;
+    pub(super) async fn declare(session: &zenoh::Session, topics: &TopicMap, node: &str) -> Result<Self, BusError> {
+        let inner = Publisher::declare(session, topics, Topic::CameraFront, node).await?;
         let shm = if topics.camera.shared_memory {
             match ShmProviderBuilder::default_backend(topics.camera.shm_pool_mib << 20).wait() {
                 Ok(p) => Some(p),

@@ -30,6 +30,8 @@ use crate::qos::{Delivery, TopicQos};
 pub struct Received<M> {
     pub header: Header,
     pub msg: M,
+    /// The publishing node's name (the sample's attachment), when it sent one.
+    pub source: Option<String>,
 }
 
 /// Bounded hand-over from Zenoh's thread to a reader: drops (and counts) the oldest.
@@ -129,7 +131,8 @@ fn accept_decoded<M: Message + DeserializeOwned>(sample: Sample) -> Result<(Head
     let payload = sample.payload();
     let bytes = payload.to_bytes();
     let Stamped { header, msg } = msg::decode::<M>(&bytes)?;
-    Ok((header, bytes.len(), Received { header, msg }))
+    let source = sample.attachment().and_then(|a| a.try_to_string().ok()).map(|s| s.into_owned());
+    Ok((header, bytes.len(), Received { header, msg, source }))
 }
 
 /// A received camera payload, validated; [`FrameSample::frame`] borrows the pixels from it.

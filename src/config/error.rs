@@ -42,3 +42,40 @@ impl fmt::Display for ConfigError {
 }
 
 impl std::error::Error for ConfigError {}
+
+/// Parses JSON5 text into `T`, naming the file (`origin`), the dotted key and `fix` on error.
+pub fn parse_json5<T: serde::de::DeserializeOwned>(text: &str, origin: &str, fix: &str) -> Result<T, ConfigError> {
+    from_value(parse_json5_value(text, origin)?, origin, fix)
+}
+
+/// Parses JSON5 text into a JSON value (syntax errors only).
+pub fn parse_json5_value(text: &str, origin: &str) -> Result<serde_json::Value, ConfigError> {
+    json5::from_str(text)
+        .map_err(|e| ConfigError::new(origin, "", format!("not valid JSON5: {e}"), "fix the syntax at the position given"))
+}
+
+/// Deserializes a JSON value into `T`, naming the dotted key of the first problem.
+pub fn from_value<T: serde::de::DeserializeOwned>(value: serde_json::Value, origin: &str, fix: &str) -> Result<T, ConfigError> {
+    serde_path_to_error::deserialize(value).map_err(|e| {
+        let key = e.path().to_string();
+        let key = if key == "." { String::new() } else { key };
+        ConfigError::new(origin, key, e.inner().to_string(), fix)
+    })
+}
+
+/// Lays `over` onto `base`: objects merge key by key, anything else replaces.
+pub fn merge_json(base: &mut serde_json::Value, over: serde_json::Value) {
+    match (base, over) {
+        (serde_json::Value::Object(b), serde_json::Value::Object(o)) => {
+            for (k, v) in o {
+                match b.get_mut(&k) {
+                    Some(slot) => merge_json(slot, v),
+                    None => {
+                        b.insert(k, v);
+                    }
+                }
+            }
+        }
+        (slot, v) => *slot = v,
+    }
+}

@@ -6,7 +6,7 @@ use std::path::Path;
 use serde::Deserialize;
 use zenoh::key_expr::OwnedKeyExpr;
 
-use super::ConfigError;
+use super::{parse_json5, ConfigError};
 use crate::qos::{Congestion, Delivery, Priority, Reliability, TopicQos};
 use crate::topics::{Topic, NODES_PREFIX};
 
@@ -136,19 +136,8 @@ impl TopicMap {
 
     /// Parses config text; `origin` names it in errors.
     pub fn from_json5(text: &str, origin: &str) -> Result<TopicMap, ConfigError> {
-        let value: serde_json::Value = json5::from_str(text).map_err(|e| {
-            ConfigError::new(origin, "", format!("not valid JSON5: {e}"), "fix the syntax at the position given")
-        })?;
-        let raw: RawFile = serde_path_to_error::deserialize(value).map_err(|e| {
-            let key = e.path().to_string();
-            let key = if key == "." { String::new() } else { key };
-            ConfigError::new(
-                origin,
-                key,
-                e.inner().to_string(),
-                "see the comments in config/slipstream.json5 for every key and its allowed values",
-            )
-        })?;
+        let raw: RawFile =
+            parse_json5(text, origin, "see the comments in config/slipstream.json5 for every key and its allowed values")?;
         TopicMap::from_raw(raw, origin)
     }
 

@@ -1,0 +1,114 @@
+//! slipstream-sim's own command-line flags (the connection flags are shared: ConnectArgs).
+
+use std::path::PathBuf;
+
+use super::scenario::{Scenario, BUILT_IN};
+use super::settings::{Mode, SimSettings};
+use crate::config::ConfigError;
+
+#[derive(Debug, Clone, clap::Args)]
+pub struct SimArgs {
+    /// Scenario: a built-in name (see --list-scenarios) or a path to a .json5 file
+    #[arg(short = 's', long, default_value = "steady-follow")]
+    pub scenario: String,
+    /// List the built-in scenarios and exit
+    #[arg(long)]
+    pub list_scenarios: bool,
+    /// Seed for every random choice (default: the scenario's own)
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Settings file (rates, camera, clock mode, lockstep, control policy); only the keys it
+    /// changes are needed [default: config/sim.json5 when present, else built-in]
+    #[arg(long, value_name = "FILE", env = "SLIPSTREAM_SIM_CONFIG")]
+    pub settings: Option<PathBuf>,
+    /// Clock mode: realtime (paced to the wall clock), fast (as fast as it can), lockstep
+    /// (each step waits for the controllers' answers; deterministic)
+    #[arg(long, value_parser = ["realtime", "fast", "lockstep"])]
+    pub mode: Option<String>,
+    /// Nodes lockstep waits for (comma-separated), e.g. acc
+    #[arg(long, value_delimiter = ',')]
+    pub wait_for: Option<Vec<String>>,
+    /// Physics steps per simulated second
+    #[arg(long)]
+    pub physics_hz: Option<u32>,
+    /// Camera frames (and ground truth) per simulated second
+    #[arg(long)]
+    pub camera_hz: Option<f64>,
+    /// Camera resolution, WIDTHxHEIGHT
+    #[arg(long, value_name = "WxH")]
+    pub camera_size: Option<String>,
+    /// End the scenario after this many simulated seconds instead of its own duration
+    #[arg(long)]
+    pub duration: Option<f64>,
+    /// This node's name on the bus (liveliness token nodes/<name>)
+    #[arg(long, default_value = "sim")]
+    pub name: String,
+    /// Render the camera at --at seconds into this PNG (ground-truth boxes in yellow) and exit,
+    /// without joining the bus: to see what a scenario looks like
+    #[arg(long, value_name = "FILE.png")]
+    pub preview: Option<PathBuf>,
+    /// Simulated time of the --preview frame, seconds (the ego cruises until then)
+    #[arg(long, default_value_t = 0.0, requires = "preview")]
+    pub at: f64,
+    /// Print the run's report as JSON at the end
+    #[arg(long)]
+    pub json: bool,
+}
+
+impl SimArgs {
+    /// The settings file (or defaults) with the flags applied and checked.
+    pub fn settings(&self) -> Result<SimSettings, ConfigError> {
+        let default_file = PathBuf::from(super::settings::DEFAULT_SIM_CONFIG_PATH);
+        let path = self.settings.clone().or_else(|| default_file.exists().then_some(default_file));
+        let mut s = SimSettings::load_or_default(path.as_deref())?;
+        if let Some(mode) = &self.mode {
+            s.mode = match mode.as_str() {
+                "fast" => Mode::Fast,
+                "lockstep" => Mode::Lockstep,
+                _ => Mode::Realtime,
+            };
+        }
+        if let Some(w) = &self.wait_for {
+            s.lockstep.wait_for = w.clone();
+        }
+        if let Some(hz) = self.physics_hz {
+            s.physics_hz = hz;
+        }
+        if let Some(hz) = self.camera_hz {
+            s.rates_hz.camera = hz;
+        }
+        if let Some(size) = &self.camera_size {
+            let parsed = size.split_once(['x', 'X']).and_then(|(w, h)| Some((w.parse().ok()?, h.parse().ok()?)));
+            let Some((w, h)) = parsed else {
+                return Err(ConfigError::new("--camera-size", "", format!("`{size}` is not WIDTHxHEIGHT"), "write e.g. 640x480"));
+            };
+            s.camera.width = w;
+            s.camera.height = h;
+        }
+        s.check().map_err(|(key, problem, fix)| ConfigError::new("command line", key, problem, fix))?;
+        Ok(s)
+    }
+
+    /// The scenario, with --duration applied.
+    pub fn scenario(&self) -> Result<Scenario, ConfigError> {
+        let mut s = Scenario::find(&self.scenario)?;
+        if let Some(d) = self.duration {
+            if !(d > 0.0) {
+                return Err(ConfigError::new("--duration", "", format!("{d} s"), "give seconds > 0"));
+            }
+            s.duration_s = d;
+        }
+        Ok(s)
+    }
+
+    /// The built-in scenarios, one a line, with their descriptions.
+    pub fn scenario_list() -> String {
+        BUILT_IN
+            .iter()
+            .map(|(name, _)| {
+                let description = Scenario::find(name).map(|s| s.description).unwrap_or_default();
+                format!("{name:32} {description}\n")
+            })
+            .collect()
+    }
+}
