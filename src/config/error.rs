@@ -50,12 +50,17 @@ pub fn parse_json5<T: serde::de::DeserializeOwned>(text: &str, origin: &str, fix
 
 /// Parses JSON5 text into a JSON value (syntax errors only).
 pub fn parse_json5_value(text: &str, origin: &str) -> Result<serde_json::Value, ConfigError> {
-    json5::from_str(text)
-        .map_err(|e| ConfigError::new(origin, "", format!("not valid JSON5: {e}"), "fix the syntax at the position given"))
+    json5::from_str(text).map_err(|e| {
+        ConfigError::new(origin, "", format!("not valid JSON5: {e}"), "fix the syntax at the position given")
+    })
 }
 
 /// Deserializes a JSON value into `T`, naming the dotted key of the first problem.
-pub fn from_value<T: serde::de::DeserializeOwned>(value: serde_json::Value, origin: &str, fix: &str) -> Result<T, ConfigError> {
+pub fn from_value<T: serde::de::DeserializeOwned>(
+    value: serde_json::Value,
+    origin: &str,
+    fix: &str,
+) -> Result<T, ConfigError> {
     serde_path_to_error::deserialize(value).map_err(|e| {
         let key = e.path().to_string();
         let key = if key == "." { String::new() } else { key };

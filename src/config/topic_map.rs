@@ -136,8 +136,11 @@ impl TopicMap {
 
     /// Parses config text; `origin` names it in errors.
     pub fn from_json5(text: &str, origin: &str) -> Result<TopicMap, ConfigError> {
-        let raw: RawFile =
-            parse_json5(text, origin, "see the comments in config/slipstream.json5 for every key and its allowed values")?;
+        let raw: RawFile = parse_json5(
+            text,
+            origin,
+            "see the comments in config/slipstream.json5 for every key and its allowed values",
+        )?;
         TopicMap::from_raw(raw, origin)
     }
 

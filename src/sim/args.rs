@@ -80,7 +80,12 @@ impl SimArgs {
         if let Some(size) = &self.camera_size {
             let parsed = size.split_once(['x', 'X']).and_then(|(w, h)| Some((w.parse().ok()?, h.parse().ok()?)));
             let Some((w, h)) = parsed else {
-                return Err(ConfigError::new("--camera-size", "", format!("`{size}` is not WIDTHxHEIGHT"), "write e.g. 640x480"));
+                return Err(ConfigError::new(
+                    "--camera-size",
+                    "",
+                    format!("`{size}` is not WIDTHxHEIGHT"),
+                    "write e.g. 640x480",
+                ));
             };
             s.camera.width = w;
             s.camera.height = h;
@@ -93,7 +98,7 @@ impl SimArgs {
     pub fn scenario(&self) -> Result<Scenario, ConfigError> {
         let mut s = Scenario::find(&self.scenario)?;
         if let Some(d) = self.duration {
-            if !(d > 0.0) {
+            if d.is_nan() || d <= 0.0 {
                 return Err(ConfigError::new("--duration", "", format!("{d} s"), "give seconds > 0"));
             }
             s.duration_s = d;

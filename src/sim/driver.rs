@@ -75,7 +75,13 @@ impl Cruise {
     }
 
     /// Throttle and brake for this step.
-    pub fn longitudinal(&mut self, params: &VehicleParams, speed_mps: f64, lead: Option<Lead>, dt_s: f64) -> (f64, f64) {
+    pub fn longitudinal(
+        &mut self,
+        params: &VehicleParams,
+        speed_mps: f64,
+        lead: Option<Lead>,
+        dt_s: f64,
+    ) -> (f64, f64) {
         let step = self.ramp_mps2 * dt_s;
         let diff = self.target_mps - self.reference_mps;
         let ramp_accel = if diff.abs() <= step { 0.0 } else { self.ramp_mps2.copysign(diff) };

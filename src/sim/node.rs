@@ -177,7 +177,12 @@ pub async fn run(
     result
 }
 
-async fn run_loop(bus: &Bus, world: &mut World, settings: &SimSettings, stop: &AtomicBool) -> Result<SimReport, SimError> {
+async fn run_loop(
+    bus: &Bus,
+    world: &mut World,
+    settings: &SimSettings,
+    stop: &AtomicBool,
+) -> Result<SimReport, SimError> {
     let speed_pub = bus.publisher(topics::VEHICLE_SPEED).await?;
     let state_pub = bus.publisher(topics::VEHICLE_STATE).await?;
     let clock_pub = bus.publisher(topics::SIM_CLOCK).await?;
@@ -244,16 +249,19 @@ async fn run_loop(bus: &Bus, world: &mut World, settings: &SimSettings, stop: &A
             state_pub.put(t_ns, &world.ego_state())?;
         }
         if due(k, rates.clock, hz) {
-            clock_pub.put(t_ns, &SimClock { step: k, real_time_factor: rtf, mode: mode.into(), physics_hz: hz as f64 })?;
+            clock_pub
+                .put(t_ns, &SimClock { step: k, real_time_factor: rtf, mode: mode.into(), physics_hz: hz as f64 })?;
         }
         if due(k, rates.camera, hz) {
             let look = renderer.draw_look(noise.brightness, &mut look_rng);
             let mut visibility: Option<Vec<ObjectVisibility>> = None;
             let (w, h) = (info.width, info.height);
             let sent = match frames.encoding() {
-                ImageEncoding::Rgb8 => frames.put_with(t_ns, w, h, ImageEncoding::Rgb8, renderer.frame_len(), |buf| {
-                    visibility = Some(renderer.render(world.road(), world.ego(), world.vehicles(), look, buf));
-                })?,
+                ImageEncoding::Rgb8 => {
+                    frames.put_with(t_ns, w, h, ImageEncoding::Rgb8, renderer.frame_len(), |buf| {
+                        visibility = Some(renderer.render(world.road(), world.ego(), world.vehicles(), look, buf));
+                    })?
+                }
                 _ => {
                     visibility = Some(renderer.render(world.road(), world.ego(), world.vehicles(), look, &mut scratch));
                     frames.put_rgb(t_ns, w, h, &scratch)?
@@ -270,16 +278,26 @@ async fn run_loop(bus: &Bus, world: &mut World, settings: &SimSettings, stop: &A
 
         // The ego's input for the step from k to k + 1.
         if mode == Mode::Lockstep && (speed_due || state_due) {
-            let (answer, late) = await_answers(&inbox, &settings.lockstep.wait_for, k, settings.lockstep.step_timeout_ms, stop).await;
+            let (answer, late) =
+                await_answers(&inbox, &settings.lockstep.wait_for, k, settings.lockstep.step_timeout_ms, stop).await;
             if let Some(cmd) = answer {
                 policy.on_command(cmd, t_ns);
             }
             if !late.is_empty() && !stop.load(Ordering::SeqCst) {
                 lockstep_timeouts += 1;
-                tracing::warn!(step = k, ?late, timeout_ms = settings.lockstep.step_timeout_ms, "lockstep: no answer to this step from {}", late.join(", "));
+                tracing::warn!(
+                    step = k,
+                    ?late,
+                    timeout_ms = settings.lockstep.step_timeout_ms,
+                    "lockstep: no answer to this step from {}",
+                    late.join(", ")
+                );
                 events_pub.put(t_ns, &SimEvent { kind: SimEventKind::ControlTimeout { late: late.clone() } })?;
                 if settings.lockstep.on_timeout == OnTimeout::Stop {
-                    break Some(End { reason: format!("lockstep timeout at step {k} waiting for {}", late.join(", ")), success: false });
+                    break Some(End {
+                        reason: format!("lockstep timeout at step {k} waiting for {}", late.join(", ")),
+                        success: false,
+                    });
                 }
             }
         } else {
@@ -383,7 +401,9 @@ async fn await_answers(
                 (Some(name), Some(step)) if step == k => {
                     answers.insert(name.as_str(), r.msg);
                 }
-                (_, step) => tracing::debug!(source = ?r.source, ?step, waiting_for = k, "vehicle/control ignored in lockstep"),
+                (_, step) => {
+                    tracing::debug!(source = ?r.source, ?step, waiting_for = k, "vehicle/control ignored in lockstep")
+                }
             }
         }
         let now = tokio::time::Instant::now();

@@ -61,7 +61,9 @@ impl Physics {
             .translation(to_glam(rear_axle))
             .rotation(GVec3::new(0.0, 0.0, yaw_rad as f32))
             .linvel(to_glam(heading * speed_mps))
-            .locked_axes(LockedAxes::TRANSLATION_LOCKED_Z | LockedAxes::ROTATION_LOCKED_X | LockedAxes::ROTATION_LOCKED_Y)
+            .locked_axes(
+                LockedAxes::TRANSLATION_LOCKED_Z | LockedAxes::ROTATION_LOCKED_X | LockedAxes::ROTATION_LOCKED_Y,
+            )
             .linear_damping(0.0)
             .angular_damping(0.0)
             .can_sleep(false)

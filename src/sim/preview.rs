@@ -31,8 +31,10 @@ pub fn preview(
     if outline_boxes {
         for b in truth.objects.iter().filter_map(|o| o.bbox) {
             let (u0, v0) = (b.u_min_px as usize, b.v_min_px as usize);
-            let (u1, v1) = ((b.u_max_px as usize).min(w) .saturating_sub(1), (b.v_max_px as usize).min(h).saturating_sub(1));
-            let mut put = |u: usize, v: usize| rgb[(v * w + u) * 3..(v * w + u) * 3 + 3].copy_from_slice(&[255, 220, 0]);
+            let (u1, v1) =
+                ((b.u_max_px as usize).min(w).saturating_sub(1), (b.v_max_px as usize).min(h).saturating_sub(1));
+            let mut put =
+                |u: usize, v: usize| rgb[(v * w + u) * 3..(v * w + u) * 3 + 3].copy_from_slice(&[255, 220, 0]);
             for u in u0..=u1 {
                 put(u, v0);
                 put(u, v1);

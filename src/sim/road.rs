@@ -179,7 +179,8 @@ mod tests {
     fn a_quarter_circle_turns_ninety_degrees_and_projection_inverts_to_world() {
         let r = 200.0;
         let quarter = std::f64::consts::FRAC_PI_2 * r;
-        let spec = RoadSpec { curves: vec![Curve { start_m: 100.0, length_m: quarter, radius_m: r }], ..Default::default() };
+        let spec =
+            RoadSpec { curves: vec![Curve { start_m: 100.0, length_m: quarter, radius_m: r }], ..Default::default() };
         let road = Road::new(spec);
         let (end, heading) = road.center(100.0 + quarter);
         assert!((heading - std::f64::consts::FRAC_PI_2).abs() < 1e-3, "heading {heading}");

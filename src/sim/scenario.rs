@@ -250,9 +250,8 @@ impl Scenario {
 
     pub fn load(path: &Path) -> Result<Scenario, ConfigError> {
         let origin = ConfigError::file(path);
-        let text = std::fs::read_to_string(path).map_err(|e| {
-            ConfigError::new(&origin, "", format!("cannot read scenario: {e}"), "check the path")
-        })?;
+        let text = std::fs::read_to_string(path)
+            .map_err(|e| ConfigError::new(&origin, "", format!("cannot read scenario: {e}"), "check the path"))?;
         Scenario::parse(&text, &origin)
     }
 
@@ -335,25 +334,37 @@ impl Scenario {
         }
         if let Some(r) = &self.random_traffic {
             if let Some(l) = r.lanes.iter().find(|l| **l >= lanes) {
-                return err("random_traffic.lanes", format!("lane {l} does not exist on a {lanes}-lane road"), &lane_fix);
+                return err(
+                    "random_traffic.lanes",
+                    format!("lane {l} does not exist on a {lanes}-lane road"),
+                    &lane_fix,
+                );
             }
             if r.count > 500 {
                 return err("random_traffic.count", format!("{} vehicles", r.count), "use at most 500");
             }
             if !(speed_ok(r.speed_mps[0]) && speed_ok(r.speed_mps[1]) && r.speed_mps[0] <= r.speed_mps[1]) {
-                return err("random_traffic.speed_mps", format!("{:?}", r.speed_mps), "give [low, high] within 0..70 m/s");
+                return err(
+                    "random_traffic.speed_mps",
+                    format!("{:?}", r.speed_mps),
+                    "give [low, high] within 0..70 m/s",
+                );
             }
-            if !(r.range_m[0] < r.range_m[1]) {
-                return err("random_traffic.range_m", format!("{:?}", r.range_m), "give [behind, ahead] with behind < ahead");
+            if r.range_m[0].is_nan() || r.range_m[0] >= r.range_m[1] {
+                return err(
+                    "random_traffic.range_m",
+                    format!("{:?}", r.range_m),
+                    "give [behind, ahead] with behind < ahead",
+                );
             }
-            if !(r.min_spacing_m >= 8.0) {
+            if r.min_spacing_m.is_nan() || r.min_spacing_m < 8.0 {
                 return err("random_traffic.min_spacing_m", format!("{} m", r.min_spacing_m), "use at least 8 m");
             }
             if !(0.0..=1.0).contains(&(r.van_share + r.truck_share)) || r.van_share < 0.0 || r.truck_share < 0.0 {
                 return err("random_traffic.van_share", "shares must be >= 0 and add up to <= 1".into(), FIX);
             }
         }
-        if let Some(d) = self.end.ego_distance_m.filter(|d| !(*d > 0.0)) {
+        if let Some(d) = self.end.ego_distance_m.filter(|d| d.is_nan() || *d <= 0.0) {
             return err("end.ego_distance_m", format!("{d} m"), "give a distance > 0");
         }
         for (key, v) in [

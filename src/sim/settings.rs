@@ -144,7 +144,12 @@ impl SimSettings {
             return err("realtime_factor", format!("{}", self.realtime_factor), "use a factor in (0, 100]");
         }
         let r = &self.rates_hz;
-        for (key, v) in [("rates_hz.speed", r.speed), ("rates_hz.state", r.state), ("rates_hz.clock", r.clock), ("rates_hz.camera", r.camera)] {
+        for (key, v) in [
+            ("rates_hz.speed", r.speed),
+            ("rates_hz.state", r.state),
+            ("rates_hz.clock", r.clock),
+            ("rates_hz.camera", r.camera),
+        ] {
             if !(v > 0.0 && v <= self.physics_hz as f64) {
                 return err(key, format!("{v} Hz"), &format!("use a rate in (0, physics_hz = {}]", self.physics_hz));
             }
@@ -160,7 +165,11 @@ impl SimSettings {
             return err("camera.mount_position_m", format!("{:?}", c.mount_position_m), "mount the camera above 0.1 m");
         }
         if self.mode == Mode::Lockstep && self.lockstep.wait_for.is_empty() {
-            return err("lockstep.wait_for", "lockstep with no node to wait for".into(), "name the controller node(s), e.g. [\"acc\"]");
+            return err(
+                "lockstep.wait_for",
+                "lockstep with no node to wait for".into(),
+                "name the controller node(s), e.g. [\"acc\"]",
+            );
         }
         if self.lockstep.step_timeout_ms == 0 {
             return err("lockstep.step_timeout_ms", "0 ms".into(), "give a timeout > 0");

@@ -102,7 +102,8 @@ impl VehicleParams {
 
     /// Rolling and air resistance at a speed (brakes off).
     pub fn resistance_n(&self, speed_mps: f64) -> f64 {
-        self.rolling_coeff * self.mass_kg * GRAVITY_MPS2 + 0.5 * AIR_DENSITY_KGPM3 * self.drag_area_m2 * speed_mps * speed_mps
+        self.rolling_coeff * self.mass_kg * GRAVITY_MPS2
+            + 0.5 * AIR_DENSITY_KGPM3 * self.drag_area_m2 * speed_mps * speed_mps
     }
 }
 
@@ -191,7 +192,12 @@ mod tests {
     use super::*;
 
     fn moving(speed: f64) -> PlanarState {
-        PlanarState { center: Vector2::zeros(), yaw_rad: 0.0, velocity_mps: Vector2::new(speed, 0.0), yaw_rate_radps: 0.0 }
+        PlanarState {
+            center: Vector2::zeros(),
+            yaw_rad: 0.0,
+            velocity_mps: Vector2::new(speed, 0.0),
+            yaw_rate_radps: 0.0,
+        }
     }
 
     #[test]

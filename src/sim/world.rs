@@ -181,7 +181,8 @@ impl World {
             let mut vrng = rng.fork(id as u64);
             let params = VehicleParams::of_class(t.class.into());
             let gap = t.gap_m + vrng.range(-scenario.variation.gap_m, scenario.variation.gap_m);
-            let speed = (t.speed_mps + vrng.range(-scenario.variation.speed_mps, scenario.variation.speed_mps)).max(0.0);
+            let speed =
+                (t.speed_mps + vrng.range(-scenario.variation.speed_mps, scenario.variation.speed_mps)).max(0.0);
             let s = if t.gap_m >= 0.0 {
                 ego_front + gap.max(0.5) + params.rear_overhang_m
             } else {
@@ -359,7 +360,8 @@ impl World {
         let ego_act = match input {
             EgoInput::Cruise => {
                 let (throttle, brake) = self.ego_cruise.longitudinal(&ego_params, ego.forward_speed_mps(), None, dt);
-                self.ego_applied = ControlCommand { throttle: throttle as f32, brake: brake as f32, steer: 0.0, answers_step: None };
+                self.ego_applied =
+                    ControlCommand { throttle: throttle as f32, brake: brake as f32, steer: 0.0, answers_step: None };
                 Actuation { throttle, brake, steer: lane_keep(self) }
             }
             EgoInput::Command(cmd) => {
@@ -381,7 +383,16 @@ impl World {
                 actuations.push(Actuation::default());
                 continue;
             };
-            actuations.push(driver.drive(&params, &self.road, &view.observation(), lead, gap_to_ego, &neighbours, t_s, dt));
+            actuations.push(driver.drive(
+                &params,
+                &self.road,
+                &view.observation(),
+                lead,
+                gap_to_ego,
+                &neighbours,
+                t_s,
+                dt,
+            ));
         }
 
         for (b, act) in self.bodies.iter().zip(&actuations) {

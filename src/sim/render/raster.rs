@@ -100,7 +100,8 @@ pub fn fill_polygon(
         bounds = [bounds[0].min(s.u), bounds[1].min(s.v), bounds[2].max(s.u), bounds[3].max(s.v)];
         screen[i] = s;
     }
-    let off_image = bounds[2] < 0.0 || bounds[3] < 0.0 || bounds[0] > target.width as f32 || bounds[1] > target.height as f32;
+    let off_image =
+        bounds[2] < 0.0 || bounds[3] < 0.0 || bounds[0] > target.width as f32 || bounds[1] > target.height as f32;
     if !off_image {
         for i in 1..n - 1 {
             fill_triangle(target, [screen[0], screen[i], screen[i + 1]], color, layer);
@@ -189,7 +190,14 @@ mod tests {
             Buffers { rgb: vec![0; w * h * 3], depth: vec![0.0; w * h], owner: vec![0; w * h], stamps: vec![0; w * h] }
         }
         fn target(&mut self, w: usize, h: usize) -> Target<'_> {
-            Target { width: w, height: h, rgb: &mut self.rgb, depth: &mut self.depth, owner: &mut self.owner, stamps: &mut self.stamps }
+            Target {
+                width: w,
+                height: h,
+                rgb: &mut self.rgb,
+                depth: &mut self.depth,
+                owner: &mut self.owner,
+                stamps: &mut self.stamps,
+            }
         }
     }
 
@@ -215,7 +223,12 @@ mod tests {
         let (mut far_px, mut near_px) = (0, 0);
         let mut t = b.target(4, 4);
         let full = |w| [v(0.0, 0.0, w), v(8.0, 0.0, w), v(0.0, 8.0, w)];
-        fill_triangle(&mut t, full(0.5), [1, 1, 1], &mut Layer::Object { owner: 2, stamp: 2, covered_px: &mut near_px });
+        fill_triangle(
+            &mut t,
+            full(0.5),
+            [1, 1, 1],
+            &mut Layer::Object { owner: 2, stamp: 2, covered_px: &mut near_px },
+        );
         fill_triangle(&mut t, full(0.1), [2, 2, 2], &mut Layer::Object { owner: 1, stamp: 1, covered_px: &mut far_px });
         assert!(b.owner.iter().all(|o| *o == 2));
         assert_eq!((near_px, far_px), (16, 16));
@@ -223,7 +236,12 @@ mod tests {
 
     #[test]
     fn clipping_keeps_the_part_in_front() {
-        let quad = [Point3::new(-1.0, -1.0, 0.0), Point3::new(5.0, -1.0, 0.0), Point3::new(5.0, 1.0, 0.0), Point3::new(-1.0, 1.0, 0.0)];
+        let quad = [
+            Point3::new(-1.0, -1.0, 0.0),
+            Point3::new(5.0, -1.0, 0.0),
+            Point3::new(5.0, 1.0, 0.0),
+            Point3::new(-1.0, 1.0, 0.0),
+        ];
         let mut out = [Point3::origin(); 8];
         let n = clip_near(&quad, &mut out);
         assert_eq!(n, 4);

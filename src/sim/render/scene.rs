@@ -105,7 +105,11 @@ impl Face {
     pub fn shaded(&self, yaw_rad: f64) -> [u8; 3] {
         let sun = Vector3::new(-0.35, 0.45, 0.82).normalize();
         let (sin, cos) = yaw_rad.sin_cos();
-        let n = Vector3::new(self.normal.x * cos - self.normal.y * sin, self.normal.x * sin + self.normal.y * cos, self.normal.z);
+        let n = Vector3::new(
+            self.normal.x * cos - self.normal.y * sin,
+            self.normal.x * sin + self.normal.y * cos,
+            self.normal.z,
+        );
         let light = 0.55 + 0.45 * n.dot(&sun).max(0.0);
         self.color.map(|c| (c as f64 * light).round().min(255.0) as u8)
     }

@@ -45,11 +45,8 @@ fn a_vehicle_ahead_is_drawn_inside_its_box_and_differs_from_the_empty_road() {
     }
     assert!(differ * 10 > inside * 7, "{differ} of {inside} pixels in the box changed");
     // Every changed pixel is the car's or its shadow's (ground layer, not part of the car).
-    let changed_not_shadow = with_car
-        .chunks(3)
-        .zip(empty.chunks(3))
-        .filter(|(x, y)| x != y && *x != scene::SHADOW)
-        .count();
+    let changed_not_shadow =
+        with_car.chunks(3).zip(empty.chunks(3)).filter(|(x, y)| x != y && *x != scene::SHADOW).count();
     assert_eq!(v.visible_px as usize, changed_not_shadow);
 }
 

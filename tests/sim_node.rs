@@ -1,0 +1,376 @@
+//! The simulator on the bus: every topic at its rate to another process, lockstep
+//! determinism, lockstep timeouts, collisions on sim/events, and the binary's errors.
+
+mod common;
+
+use std::collections::BTreeMap;
+use std::process::{Child, Command, Stdio};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use parking_lot::Mutex;
+use slipstream::msg::{self, ControlCommand, MessageKind, SimClock, SimEvent, SimEventKind};
+use slipstream::sim::settings::{Mode, OnTimeout, SimSettings};
+use slipstream::sim::{Scenario, World};
+use slipstream::{topics, Bus, TopicMap};
+
+use common::{connected_session, listening_session};
+
+/// Every sim topic reliable and blocking, so a recorder sees every message.
+fn lossless_map() -> TopicMap {
+    let entry = |name: &str| format!("\"{name}\": {{ congestion_control: \"block\", delivery: {{ queue: 4096 }} }}");
+    let names =
+        ["vehicle/speed", "vehicle/state", "vehicle/control", "camera/front", "objects", "sim/clock", "sim/events"];
+    let body = names.iter().map(|n| entry(n)).collect::<Vec<_>>().join(", ");
+    TopicMap::from_json5(&format!("{{ topics: {{ {body} }} }}"), "test").unwrap()
+}
+
+fn settings(mode: Mode, wait_for: &[&str]) -> SimSettings {
+    let mut s = SimSettings { mode, ..SimSettings::default() };
+    s.camera.width = 160;
+    s.camera.height = 120;
+    s.lockstep.wait_for = wait_for.iter().map(|s| s.to_string()).collect();
+    s.lockstep.start_timeout_ms = 10_000;
+    s
+}
+
+fn scenario(name: &str, duration_s: f64) -> Scenario {
+    let mut s = Scenario::find(name).unwrap();
+    s.duration_s = duration_s;
+    s
+}
+
+/// Records every sample the simulator publishes, in arrival order per key.
+/// (key, payload) in arrival order.
+type Samples = Arc<Mutex<Vec<(String, Vec<u8>)>>>;
+
+struct Recorder {
+    samples: Samples,
+    _subs: Vec<zenoh::pubsub::Subscriber<()>>,
+}
+
+impl Recorder {
+    async fn new(session: &zenoh::Session, map: &TopicMap) -> Recorder {
+        let samples = Arc::new(Mutex::new(Vec::new()));
+        let mut subs = Vec::new();
+        for t in [
+            topics::VEHICLE_SPEED.topic,
+            topics::VEHICLE_STATE.topic,
+            topics::SIM_CLOCK.topic,
+            topics::SIM_EVENTS.topic,
+            topics::OBJECTS.topic,
+            topics::CAMERA_FRONT.topic,
+            topics::CAMERA_FRONT_INFO.topic,
+        ] {
+            let samples = samples.clone();
+            let sub = session
+                .declare_subscriber(map.key(t))
+                .callback(move |s: zenoh::sample::Sample| {
+                    samples.lock().push((s.key_expr().to_string(), s.payload().to_bytes().into_owned()));
+                })
+                .await
+                .unwrap();
+            subs.push(sub);
+        }
+        Recorder { samples, _subs: subs }
+    }
+
+    fn events(&self) -> Vec<SimEvent> {
+        self.samples
+            .lock()
+            .iter()
+            .filter(|(k, _)| k.ends_with("sim/events"))
+            .map(|(_, b)| msg::decode::<SimEvent>(b).unwrap().msg)
+            .collect()
+    }
+
+    async fn wait_for_end(&self) {
+        within!(async {
+            while !self.events().iter().any(|e| matches!(e.kind, SimEventKind::ScenarioEnd { .. })) {
+                tokio::time::sleep(Duration::from_millis(20)).await;
+            }
+        });
+    }
+
+    /// The stream with its two wall-clock fields taken out (each header's stamp_pub_ns and
+    /// the clock's measured real-time factor): what must be identical between runs.
+    fn deterministic_part(&self) -> BTreeMap<String, Vec<String>> {
+        let mut by_key: BTreeMap<String, Vec<String>> = BTreeMap::new();
+        for (key, bytes) in self.samples.lock().iter() {
+            let kind = MessageKind::from_u8(bytes[1]).unwrap();
+            let (header, body_start) = msg::decode_header(bytes, kind).unwrap();
+            let body = if kind == MessageKind::SimClock {
+                let clock = SimClock { real_time_factor: 0.0, ..msg::decode::<SimClock>(bytes).unwrap().msg };
+                format!("{clock:?}")
+            } else {
+                msg::hex_lines(&bytes[body_start..])
+            };
+            by_key.entry(key.clone()).or_default().push(format!("{} {} {}", header.seq, header.stamp_sim_ns, body));
+        }
+        by_key
+    }
+}
+
+/// A deterministic controller: answers every vehicle/state with a speed-holding command.
+async fn controller(bus: Bus, answer_until_step: u64) -> tokio::task::JoinHandle<()> {
+    let states = bus.subscriber(topics::VEHICLE_STATE).await.unwrap();
+    let control = bus.publisher(topics::VEHICLE_CONTROL).await.unwrap();
+    tokio::spawn(async move {
+        let _alive = bus;
+        loop {
+            let r = states.recv().await;
+            if r.msg.step >= answer_until_step {
+                continue;
+            }
+            let error = 22.0 - r.msg.speed_mps;
+            let cmd = ControlCommand {
+                throttle: (0.3 * error).clamp(0.0, 1.0) as f32,
+                brake: (-0.3 * error).clamp(0.0, 1.0) as f32,
+                steer: 0.0,
+                answers_step: Some(r.msg.step),
+            };
+            control.put(r.header.stamp_sim_ns, &cmd).unwrap();
+        }
+    })
+}
+
+/// One lockstep run of `scenario` with a controller; returns the recorded stream.
+async fn lockstep_run(scenario_name: &str, seed: u64) -> BTreeMap<String, Vec<String>> {
+    let map = lossless_map();
+    let (s_sim, ep) = listening_session().await;
+    let s_ctl = connected_session(&ep).await;
+    let s_rec = connected_session(&ep).await;
+    let recorder = Recorder::new(&s_rec, &map).await;
+    let ctl = controller(Bus::from_session(s_ctl, map.clone(), "ctl").await.unwrap(), u64::MAX).await;
+    let sim = Bus::from_session(s_sim, map, "sim").await.unwrap();
+    let world = World::new(scenario(scenario_name, 3.0), seed, 100);
+    let report =
+        within!(slipstream::sim::run(&sim, world, &settings(Mode::Lockstep, &["ctl"]), std::future::pending()))
+            .unwrap();
+    assert_eq!((report.steps, report.lockstep_timeouts), (300, 0), "{report:?}");
+    recorder.wait_for_end().await;
+    ctl.abort();
+    // The controller's answer to step k is what the ego applied in step k -> k + 1.
+    let states: Vec<msg::VehicleState> = recorder
+        .samples
+        .lock()
+        .iter()
+        .filter(|(k, _)| k == "vehicle/state")
+        .map(|(_, b)| msg::decode::<msg::VehicleState>(b).unwrap().msg)
+        .collect();
+    assert!(states.iter().skip(1).all(|s| s.applied.answers_step == Some(s.step - 1)), "{:?}", &states[..3]);
+    recorder.deterministic_part()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn lockstep_same_scenario_and_seed_give_identical_streams() {
+    let first = lockstep_run("cut-in", 5).await;
+    let second = lockstep_run("cut-in", 5).await;
+    for (key, n) in
+        [("vehicle/speed", 300), ("vehicle/state", 300), ("sim/clock", 300), ("camera/front", 60), ("objects", 60)]
+    {
+        assert_eq!(first.get(key).map(Vec::len), Some(n), "{key} in run 1");
+    }
+    assert_eq!(first.keys().collect::<Vec<_>>(), second.keys().collect::<Vec<_>>());
+    for (key, a) in &first {
+        let b = &second[key];
+        assert_eq!(a.len(), b.len(), "{key}: message counts differ");
+        if let Some(i) = (0..a.len()).find(|i| a[*i] != b[*i]) {
+            panic!("{key}: message {i} differs between two runs with the same seed:\n{}\n{}", a[i], b[i]);
+        }
+    }
+    let other_seed = lockstep_run("cut-in", 6).await;
+    assert_ne!(first["objects"], other_seed["objects"], "another seed, another run");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn lockstep_names_a_late_controller_and_stops_when_told() {
+    let map = lossless_map();
+    let (s_sim, ep) = listening_session().await;
+    let s_ctl = connected_session(&ep).await;
+    let s_rec = connected_session(&ep).await;
+    let recorder = Recorder::new(&s_rec, &map).await;
+    let ctl = controller(Bus::from_session(s_ctl, map.clone(), "ctl").await.unwrap(), 50).await;
+    let sim = Bus::from_session(s_sim, map.clone(), "sim").await.unwrap();
+    let mut s = settings(Mode::Lockstep, &["ctl"]);
+    s.lockstep.step_timeout_ms = 300;
+    s.lockstep.on_timeout = OnTimeout::Stop;
+    let world = World::new(scenario("steady-follow", 10.0), 1, 100);
+    let report = within!(slipstream::sim::run(&sim, world, &s, std::future::pending())).unwrap();
+    assert_eq!(report.steps, 50, "stops at the first unanswered step: {report:?}");
+    let end = report.end.expect("ended");
+    assert!(!end.success && end.reason.contains("lockstep timeout at step 50 waiting for ctl"), "{end:?}");
+    recorder.wait_for_end().await;
+    let late: Vec<_> = recorder
+        .events()
+        .into_iter()
+        .filter_map(|e| match e.kind {
+            SimEventKind::ControlTimeout { late } => Some(late),
+            _ => None,
+        })
+        .collect();
+    assert_eq!(late, vec![vec!["ctl".to_string()]]);
+    ctl.abort();
+
+    // A controller that never comes up: a clear error after the start timeout.
+    let mut s = settings(Mode::Lockstep, &["ghost"]);
+    s.lockstep.start_timeout_ms = 300;
+    let world = World::new(scenario("steady-follow", 1.0), 1, 100);
+    let err = within!(slipstream::sim::run(&sim, world, &s, std::future::pending())).unwrap_err();
+    assert!(err.to_string().contains("ghost not up after 300 ms"), "{err}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_collision_is_published_on_sim_events_and_ends_the_run() {
+    let map = lossless_map();
+    let (s_sim, ep) = listening_session().await;
+    let s_rec = connected_session(&ep).await;
+    let recorder = Recorder::new(&s_rec, &map).await;
+    let sim = Bus::from_session(s_sim, map, "sim").await.unwrap();
+    let crash = Scenario::parse(
+        "{ name: 'crash', duration_s: 30, ego: { lane: 1, speed_mps: 15 }, traffic: [ { lane: 1, gap_m: 30, speed_mps: 0 } ] }",
+        "test",
+    )
+    .unwrap();
+    let report = within!(slipstream::sim::run(
+        &sim,
+        World::new(crash, 1, 100),
+        &settings(Mode::Fast, &[]),
+        std::future::pending()
+    ))
+    .unwrap();
+    assert_eq!(report.ego_collisions, 1);
+    recorder.wait_for_end().await;
+    let events = recorder.events();
+    let collision = events.iter().find_map(|e| match &e.kind {
+        SimEventKind::Collision { other_id, relative_speed_mps } => Some((*other_id, *relative_speed_mps)),
+        _ => None,
+    });
+    let (other, speed) = collision.expect("a collision event");
+    assert!(other == 1 && speed > 10.0, "{events:?}");
+    assert!(matches!(&events.last().unwrap().kind, SimEventKind::ScenarioEnd { success: false, .. }), "{events:?}");
+}
+
+struct Killed(Child);
+
+impl Drop for Killed {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
+    }
+}
+
+fn sim_bin() -> Command {
+    let mut c = Command::new(env!("CARGO_BIN_EXE_slipstream-sim"));
+    c.env_remove("RUST_LOG")
+        .env_remove("SLIPSTREAM_CONFIG")
+        .env_remove("SLIPSTREAM_NAMESPACE")
+        .env_remove("SLIPSTREAM_SIM_CONFIG");
+    c
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn another_process_receives_every_topic_at_its_rate() {
+    let (session, ep) = listening_session().await;
+    let map = TopicMap::default();
+    let recorder = Recorder::new(&session, &map).await;
+    let bus = Bus::from_session(session, map, "watcher").await.unwrap();
+    let started = Instant::now();
+    let child = sim_bin()
+        .args(["--scenario", "cut-in", "--duration", "4", "-e", &ep, "-l", "tcp/127.0.0.1:0"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let _child = Killed(child);
+    // camera/front/info is latched: a subscriber that starts while the sim runs, long after
+    // the info was published, still gets it.
+    within!(async {
+        while !recorder.samples.lock().iter().any(|(k, _)| k == "sim/clock") {
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+    });
+    tokio::time::sleep(Duration::from_secs(1)).await;
+    let late = bus.subscriber(topics::CAMERA_FRONT_INFO).await.unwrap();
+    let info = within!(late.recv()).msg;
+    assert_eq!((info.width, info.height, info.rate_hz), (640, 480, 20.0));
+    recorder.wait_for_end().await;
+    let wall_s = started.elapsed().as_secs_f64();
+
+    let stamps = |key: &str| -> Vec<u64> {
+        recorder
+            .samples
+            .lock()
+            .iter()
+            .filter(|(k, _)| k == key)
+            .map(|(_, b)| msg::decode_header(b, MessageKind::from_u8(b[1]).unwrap()).unwrap().0.stamp_sim_ns)
+            .collect()
+    };
+    // Counted on simulation time, between 1 s and 3 s (clear of connection set-up and end).
+    let in_window = |key: &str| stamps(key).into_iter().filter(|t| (1_000_000_000..3_000_000_000).contains(t)).count();
+    for (key, n) in
+        [("vehicle/speed", 200), ("vehicle/state", 200), ("sim/clock", 200), ("camera/front", 40), ("objects", 40)]
+    {
+        assert_eq!(in_window(key), n, "{key}: messages per 2 s of simulated time");
+    }
+    // Ground truth carries exactly the stamps of the frames it belongs to.
+    let frames: Vec<u64> = stamps("camera/front");
+    let objects: Vec<u64> = stamps("objects");
+    assert!(frames.iter().filter(|t| **t >= 1_000_000_000).all(|t| objects.contains(t)));
+    // Real time: 4 simulated seconds took about 4 s of wall time.
+    assert!((3.5..12.0).contains(&wall_s), "realtime run took {wall_s:.1} s");
+
+    let frame = recorder.samples.lock().iter().find(|(k, _)| k == "camera/front").map(|(_, b)| b.clone()).unwrap();
+    let frame = msg::decode::<msg::CameraFrameRef>(&frame).unwrap().msg;
+    assert_eq!(
+        (frame.width, frame.height, frame.encoding, frame.data.len()),
+        (640, 480, msg::ImageEncoding::Rgb8, 640 * 480 * 3)
+    );
+    let events = recorder.events();
+    assert!(matches!(&events.last().unwrap().kind, SimEventKind::ScenarioEnd { success: true, .. }), "{events:?}");
+}
+
+#[test]
+fn bad_scenarios_and_settings_are_clear_errors() {
+    let dir = std::env::temp_dir().join(format!("slipstream-sim-test-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let bad = dir.join("bad.json5");
+    std::fs::write(&bad, "{ name: 'bad', duration_s: 10, ego: { lane: 3, speed_mps: 20 } }").unwrap();
+    let out = sim_bin().args(["--scenario", bad.to_str().unwrap()]).output().unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success());
+    assert!(
+        err.contains("bad.json5")
+            && err.contains("key `ego.lane`")
+            && err.contains("lanes are numbered 0 (rightmost) to 2"),
+        "{err}"
+    );
+
+    let out = sim_bin().args(["--scenario", "nope"]).output().unwrap();
+    assert!(!out.status.success() && String::from_utf8_lossy(&out.stderr).contains("cut-in"));
+
+    let out = sim_bin().args(["--camera-size", "640by480"]).output().unwrap();
+    assert!(String::from_utf8_lossy(&out.stderr).contains("write e.g. 640x480"));
+
+    let out = sim_bin().arg("--list-scenarios").output().unwrap();
+    let list = String::from_utf8_lossy(&out.stdout);
+    for name in [
+        "steady-follow",
+        "approach-slower-lead",
+        "lead-brakes-to-stop",
+        "stop-and-go",
+        "cut-in",
+        "cut-out-revealing-stopped-car",
+        "busy-traffic",
+    ] {
+        assert!(list.contains(name), "{list}");
+    }
+
+    let png = dir.join("frame.png");
+    let out =
+        sim_bin().args(["--scenario", "cut-in", "--preview", png.to_str().unwrap(), "--at", "2"]).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let img = image::load_from_memory(&std::fs::read(&png).unwrap()).unwrap();
+    assert_eq!((img.width(), img.height()), (640, 480));
+    let _ = std::fs::remove_dir_all(&dir);
+}

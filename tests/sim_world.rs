@@ -1,0 +1,152 @@
+//! The simulator's world without the bus: vehicle physics, collisions, traffic, determinism
+//! of the core. Bands are stated here and in docs/simulator.md.
+
+use slipstream::msg::ControlCommand;
+use slipstream::sim::world::{EgoInput, World, EGO_ID};
+use slipstream::sim::Scenario;
+
+const HZ: u32 = 100;
+
+fn world(text: &str) -> World {
+    let s = Scenario::parse(text, "test").unwrap_or_else(|e| panic!("{e}"));
+    let seed = s.seed;
+    World::new(s, seed, HZ)
+}
+
+fn empty_road(speed_mps: f64) -> World {
+    world(&format!(
+        "{{ name: 'empty', duration_s: 600, road: {{ length_m: 20000 }}, ego: {{ lane: 1, speed_mps: {speed_mps} }} }}"
+    ))
+}
+
+fn command(throttle: f32, brake: f32) -> EgoInput {
+    EgoInput::Command(ControlCommand { throttle, brake, steer: 0.0, answers_step: None })
+}
+
+#[test]
+fn full_throttle_reaches_100_kmh_in_a_plausible_time_and_tops_out_plausibly() {
+    let mut w = empty_road(0.0);
+    let mut t_100 = None;
+    for step in 0..(150 * HZ) {
+        w.step(command(1.0, 0.0));
+        if t_100.is_none() && w.ego().forward_speed_mps() >= 100.0 / 3.6 {
+            t_100 = Some(step as f64 / HZ as f64);
+        }
+    }
+    let t_100 = t_100.expect("reaches 100 km/h");
+    assert!((6.0..=12.0).contains(&t_100), "0-100 km/h in {t_100:.1} s (band 6-12 s)");
+    let top_kmh = w.ego().forward_speed_mps() * 3.6;
+    println!("0-100 km/h: {t_100:.2} s, speed after 150 s: {top_kmh:.1} km/h");
+    assert!((180.0..=250.0).contains(&top_kmh), "top speed {top_kmh:.0} km/h (band 180-250)");
+    assert!(w.ego().lane == 1, "lane keeping holds the lane at full speed");
+}
+
+#[test]
+fn full_brake_decelerates_at_8_to_10_mps2_and_stops_without_rolling_back() {
+    let mut w = empty_road(100.0 / 3.6);
+    w.step(command(0.0, 1.0));
+    let v0 = w.ego().forward_speed_mps();
+    for _ in 0..HZ {
+        w.step(command(0.0, 1.0));
+    }
+    let decel = v0 - w.ego().forward_speed_mps();
+    println!("full brake from 100 km/h: {decel:.2} m/s2 over the first second");
+    assert!((8.0..=10.0).contains(&decel), "full brake: {decel:.2} m/s2 (band 8-10)");
+    for _ in 0..(5 * HZ) {
+        w.step(command(0.0, 1.0));
+    }
+    let v = w.ego().forward_speed_mps();
+    assert!(v.abs() < 0.01, "stands still: {v}");
+    let state = w.ego_state();
+    assert_eq!(state.applied.brake, 1.0);
+}
+
+#[test]
+fn coasting_slows_down_gently() {
+    let mut w = empty_road(100.0 / 3.6);
+    let v0 = w.ego().forward_speed_mps();
+    for _ in 0..(10 * HZ) {
+        w.step(command(0.0, 0.0));
+    }
+    let decel = (v0 - w.ego().forward_speed_mps()) / 10.0;
+    println!("coasting from 100 km/h: {decel:.2} m/s2 over 10 s");
+    assert!((0.2..=1.0).contains(&decel), "coasting from 100 km/h: {decel:.2} m/s2 (band 0.2-1.0)");
+}
+
+#[test]
+fn driving_into_a_stopped_car_is_a_collision_that_ends_the_scenario() {
+    let mut w = world(
+        "{ name: 'crash', duration_s: 30, variation: { gap_m: 0, speed_mps: 0 }, ego: { lane: 1, speed_mps: 15 }, traffic: [ { lane: 1, gap_m: 30, speed_mps: 0 } ] }",
+    );
+    let mut collisions = Vec::new();
+    let mut ended = None;
+    for _ in 0..(10 * HZ) {
+        let events = w.step(EgoInput::Cruise);
+        collisions.extend(events.collisions);
+        if let Some(end) = events.ended {
+            ended = Some(end);
+            break;
+        }
+    }
+    let c = collisions.first().expect("a collision");
+    assert!(c.involves_ego() && (c.id_a == 1 || c.id_b == 1) && (c.id_a == EGO_ID || c.id_b == EGO_ID));
+    assert!((12.0..=16.0).contains(&c.relative_speed_mps), "impact at {:.1} m/s", c.relative_speed_mps);
+    let end = ended.expect("the collision ends the scenario");
+    assert!(!end.success && end.reason.contains("collided with vehicle 1"), "{end:?}");
+    assert_eq!(w.ego_collisions(), 1);
+}
+
+#[test]
+fn the_lead_brakes_at_the_scripted_rate() {
+    let mut w = world(
+        "{ name: 'l', duration_s: 40, variation: { gap_m: 0, speed_mps: 0 }, ego: { lane: 1, speed_mps: 0 }, traffic: [ { lane: 1, gap_m: 45, speed_mps: 25, actions: [ { at_s: 2, speed_mps: 0, accel_mps2: 6 } ] } ] }",
+    );
+    let lead_speed = |w: &World| w.vehicles()[1].forward_speed_mps();
+    for _ in 0..(3 * HZ) {
+        w.step(command(0.0, 1.0));
+    }
+    let v0 = lead_speed(&w);
+    for _ in 0..HZ {
+        w.step(command(0.0, 1.0));
+    }
+    let decel = v0 - lead_speed(&w);
+    assert!((5.5..=6.5).contains(&decel), "lead decelerates at {decel:.2} m/s2");
+    for _ in 0..(5 * HZ) {
+        w.step(command(0.0, 1.0));
+    }
+    assert!(lead_speed(&w).abs() < 0.05, "lead stopped");
+}
+
+#[test]
+fn the_ego_keeps_its_lane_through_curves_and_traffic_changes_lanes_when_told() {
+    let mut w = world(&std::fs::read_to_string("scenarios/curve-follow.json5").unwrap());
+    let mut worst = 0.0f64;
+    for _ in 0..(60 * HZ) {
+        w.step(EgoInput::Cruise);
+        worst = worst.max((w.ego().d_m - w.road().lane_center_d(1)).abs());
+    }
+    assert!(worst < 0.5, "ego strays {worst:.2} m from its lane centre");
+
+    let mut w = world(&std::fs::read_to_string("scenarios/cut-in.json5").unwrap());
+    assert_eq!(w.vehicles()[2].lane, 2);
+    for _ in 0..(12 * HZ) {
+        w.step(EgoInput::Cruise);
+    }
+    let cutter = w.vehicles()[2];
+    assert_eq!(cutter.lane, 1, "the cutter is in the ego's lane after its lane change");
+    assert!((cutter.d_m - w.road().lane_center_d(1)).abs() < 0.4);
+}
+
+#[test]
+fn same_seed_same_world_other_seed_other_start() {
+    let run = |seed: u64| {
+        let s = Scenario::find("busy-traffic").unwrap();
+        let mut w = World::new(s, seed, HZ);
+        for _ in 0..(5 * HZ) {
+            w.step(EgoInput::Cruise);
+        }
+        w.vehicles().iter().map(|v| (v.rear_axle.x.to_bits(), v.rear_axle.y.to_bits(), v.color)).collect::<Vec<_>>()
+    };
+    assert_eq!(run(7), run(7));
+    assert_ne!(run(7), run(8));
+}
