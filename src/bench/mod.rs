@@ -7,6 +7,7 @@
 //! message: one-way latency on one host's clock.
 
 mod peer;
+pub mod sim;
 mod spec;
 
 use std::io::{BufRead, BufReader, Write};
@@ -31,6 +32,8 @@ pub enum Suite {
     Frames,
     /// c. speed latency and losses while frames load the link
     Contention,
+    /// d. the simulator: physics steps/s, render time per frame, fast-mode real-time factor
+    Sim,
 }
 
 #[derive(Debug, Clone, clap::Args)]
@@ -82,6 +85,8 @@ pub struct BenchReport {
     pub command: String,
     pub rows: Vec<Row>,
     pub ratios: Vec<Ratio>,
+    /// The simulator suite's figures (d).
+    pub sim: Vec<sim::SimFigure>,
 }
 
 struct Case {
@@ -315,8 +320,11 @@ pub fn run(args: &BenchArgs) -> Result<BenchReport> {
     if cfg!(debug_assertions) {
         eprintln!("warning: this is a debug build; figures mean little. Use `cargo run --release -- bench`.");
     }
-    let suites =
-        if args.suites.is_empty() { vec![Suite::Speed, Suite::Frames, Suite::Contention] } else { args.suites.clone() };
+    let suites = if args.suites.is_empty() {
+        vec![Suite::Speed, Suite::Frames, Suite::Contention, Suite::Sim]
+    } else {
+        args.suites.clone()
+    };
     let repeat = if args.quick { 1 } else { args.repeat.max(1) };
     let all = cases(&suites, args.quick);
     let mut rows = Vec::new();
@@ -355,8 +363,9 @@ pub fn run(args: &BenchArgs) -> Result<BenchReport> {
         });
     }
     let ratios = ratios(&rows);
+    let sim = if suites.contains(&Suite::Sim) { sim::run(args.quick, repeat)? } else { Vec::new() };
     let command = std::env::args().collect::<Vec<_>>().join(" ");
-    Ok(BenchReport { command, rows, ratios })
+    Ok(BenchReport { command, rows, ratios, sim })
 }
 
 fn find<'a>(rows: &'a [Row], suite_prefix: &str, path: &str) -> Option<&'a Row> {
@@ -451,6 +460,12 @@ pub fn markdown(report: &BenchReport) -> String {
             r.shared_memory_frames,
             fmt_opt(r.background_frames_per_s, 1),
         ));
+    }
+    if !report.sim.is_empty() {
+        s.push_str("\n### d. simulator (in process)\n\n| what | value | unit | aim |\n|---|---|---|---|\n");
+        for f in &report.sim {
+            s.push_str(&format!("| {} | {:.2} | {} | {} |\n", f.what, f.value, f.unit, f.aim));
+        }
     }
     if !report.ratios.is_empty() {
         s.push_str("\n### Ratios (same run)\n\n| ratio | value | aim |\n|---|---|---|\n");

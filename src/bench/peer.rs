@@ -80,7 +80,9 @@ impl Collector {
 /// The Zenoh config of a bench peer: the shipped default (config/zenoh.json5, so the bench
 /// measures what users run) with loopback endpoints of its own, no scouting, and the case's
 /// shared memory, transport and socket-buffer choices.
-pub fn peer_config(spec: &CaseSpec, listen: Option<&str>, connect: Option<&str>) -> Result<zenoh::Config> {
+/// The default config on exactly these loopback endpoints: no rendezvous, no gossip, and the
+/// listener bound before the session opens returns.
+pub fn loopback_config(listen: Option<&str>, connect: Option<&str>) -> Result<zenoh::Config> {
     let mut c = zenoh::Config::from_json5(crate::config::DEFAULT_ZENOH_CONFIG)
         .map_err(|e| anyhow::anyhow!("default config: {e}"))?;
     let set = |c: &mut zenoh::Config, k: &str, v: &str| c.insert_json5(k, v).map_err(|e| anyhow::anyhow!("{k}: {e}"));
@@ -91,6 +93,12 @@ pub fn peer_config(spec: &CaseSpec, listen: Option<&str>, connect: Option<&str>)
     set(&mut c, "listen/exit_on_failure", "true")?;
     set(&mut c, "listen/endpoints", &serde_json::to_string(&listen.into_iter().collect::<Vec<_>>())?)?;
     set(&mut c, "connect/endpoints", &serde_json::to_string(&connect.into_iter().collect::<Vec<_>>())?)?;
+    Ok(c)
+}
+
+pub fn peer_config(spec: &CaseSpec, listen: Option<&str>, connect: Option<&str>) -> Result<zenoh::Config> {
+    let mut c = loopback_config(listen, connect)?;
+    let set = |c: &mut zenoh::Config, k: &str, v: &str| c.insert_json5(k, v).map_err(|e| anyhow::anyhow!("{k}: {e}"));
     set(&mut c, "transport/shared_memory/enabled", if spec.shm { "true" } else { "false" })?;
     match spec.tcp_buffer {
         TcpBuffer::Default => {}

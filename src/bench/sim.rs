@@ -1,0 +1,168 @@
+//! `slipstream bench sim`: the simulator's own speed, in process: physics steps/s with 1, 10
+//! and 50 vehicles, software render time per frame, and the real-time factor of a whole run in
+//! fast mode with the camera publishing on a loopback bus. A frame-sized memcpy runs in the
+//! same process as the machine's yardstick for the render figures.
+
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result};
+use serde::Serialize;
+
+use super::peer::loopback_config;
+use crate::msg::ImageEncoding;
+use crate::sim::render::{FrameLook, Renderer};
+use crate::sim::rng::SimRng;
+use crate::sim::settings::{Mode, SimSettings};
+use crate::sim::world::{EgoInput, World};
+use crate::sim::Scenario;
+
+/// One simulator figure, the median over runs.
+#[derive(Debug, Clone, Serialize)]
+pub struct SimFigure {
+    pub what: String,
+    pub value: f64,
+    pub unit: String,
+    pub aim: String,
+    pub runs: usize,
+}
+
+fn traffic_world(vehicles: u32) -> Result<World> {
+    let text = format!(
+        "{{ name: 'bench-{vehicles}', duration_s: 100000, road: {{ lanes: 3, length_m: 50000 }}, ego: {{ lane: 1, speed_mps: 25 }},
+           random_traffic: {{ count: {}, range_m: [-300, 3000], speed_mps: [20, 30], lane_change_every_s: 15 }} }}",
+        vehicles.saturating_sub(1)
+    );
+    let scenario = Scenario::parse(&text, "bench").map_err(anyhow::Error::msg)?;
+    let world = World::new(scenario, 1, 100);
+    anyhow::ensure!(
+        world.vehicles().len() == vehicles as usize,
+        "placed {} of {vehicles} vehicles",
+        world.vehicles().len()
+    );
+    Ok(world)
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// Physics steps per second of the whole world (drivers, forces, rapier, contacts).
+fn steps_per_s(vehicles: u32, steps: u64) -> Result<f64> {
+    let mut world = traffic_world(vehicles)?;
+    let t = Instant::now();
+    for _ in 0..steps {
+        world.step(EgoInput::Cruise);
+    }
+    Ok(steps as f64 / t.elapsed().as_secs_f64())
+}
+
+/// Median milliseconds to render one frame of the busy-traffic scenario, 5 s in.
+fn render_ms(width: u32, height: u32, frames: usize) -> Result<f64> {
+    let mut settings = SimSettings::default();
+    settings.camera.width = width;
+    settings.camera.height = height;
+    let mut world = World::new(Scenario::find("busy-traffic").map_err(anyhow::Error::msg)?, 7, settings.physics_hz);
+    for _ in 0..500 {
+        world.step(EgoInput::Cruise);
+    }
+    let info = settings.camera_info(ImageEncoding::Rgb8);
+    let mut renderer = Renderer::new(&info, 0.0, &mut SimRng::new(1));
+    let mut rgb = vec![0u8; renderer.frame_len()];
+    let mut times = Vec::with_capacity(frames);
+    for _ in 0..frames {
+        world.step(EgoInput::Cruise);
+        let t = Instant::now();
+        let vis = renderer.render(world.road(), world.ego(), world.vehicles(), FrameLook::PLAIN, &mut rgb);
+        times.push(t.elapsed().as_secs_f64() * 1e3);
+        std::hint::black_box(vis);
+    }
+    Ok(median(times))
+}
+
+/// Median milliseconds to copy a frame of this size (cold destination each time is not
+/// modelled: this is the hot-cache yardstick).
+fn memcpy_ms(width: u32, height: u32, copies: usize) -> f64 {
+    let src = vec![7u8; (width * height * 3) as usize];
+    let mut dst = vec![0u8; src.len()];
+    let mut times = Vec::with_capacity(copies);
+    for _ in 0..copies {
+        let t = Instant::now();
+        dst.copy_from_slice(std::hint::black_box(&src));
+        std::hint::black_box(&dst);
+        times.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    median(times)
+}
+
+/// Real-time factor of a fast-mode run of `scenario` with 640x480 frames at 20 Hz published
+/// through shared memory to a subscriber in another session on loopback.
+async fn fast_rtf(scenario: &str, sim_s: f64) -> Result<f64> {
+    let sim_session = zenoh::open(loopback_config(Some("tcp/127.0.0.1:0"), None)?).await.map_err(anyhow::Error::msg)?;
+    let ep = sim_session.info().locators().await.first().context("sim session has no locator")?.to_string();
+    let sub_session = zenoh::open(loopback_config(None, Some(&ep))?).await.map_err(anyhow::Error::msg)?;
+    let topics = crate::TopicMap::default();
+    let sim_bus = crate::Bus::from_session(sim_session, topics.clone(), "bench-sim").await?;
+    let sub_bus = crate::Bus::from_session(sub_session, topics, "bench-viewer").await?;
+    let frames = sub_bus.frame_subscriber().await?;
+    let mut scenario = Scenario::find(scenario).map_err(anyhow::Error::msg)?;
+    scenario.duration_s = sim_s;
+    let settings = SimSettings { mode: Mode::Fast, ..SimSettings::default() };
+    let world = World::new(scenario, 1, settings.physics_hz);
+    let report = crate::sim::run(&sim_bus, world, &settings, std::future::pending()).await?;
+    anyhow::ensure!(frames.stats().snapshot().received > 0, "the viewer received no frame");
+    sim_bus.close().await?;
+    sub_bus.close().await?;
+    Ok(report.real_time_factor)
+}
+
+/// Runs the simulator suite; progress on stderr.
+pub fn run(quick: bool, repeat: usize) -> Result<Vec<SimFigure>> {
+    let repeat = if quick { 1 } else { repeat.max(1) };
+    let (steps, frames, sim_s) = if quick { (300, 10, 3.0) } else { (5000, 200, 60.0) };
+    let mut out = Vec::new();
+    let mut figure = |what: &str, unit: &str, aim: &str, f: &mut dyn FnMut() -> Result<f64>| -> Result<f64> {
+        let mut values = Vec::with_capacity(repeat);
+        for i in 0..repeat {
+            eprint!("[sim {}/{repeat}] {what} ... ", i + 1);
+            let v = f()?;
+            eprintln!("{v:.2} {unit}");
+            values.push(v);
+        }
+        let value = median(values);
+        out.push(SimFigure { what: what.into(), value, unit: unit.into(), aim: aim.into(), runs: repeat });
+        Ok(value)
+    };
+    for n in [1, 10, 50] {
+        figure(
+            &format!("physics steps/s, {n} vehicles"),
+            "steps/s",
+            if n == 50 { ">= 2000 (20x at 100 Hz)" } else { "-" },
+            &mut || steps_per_s(n, steps),
+        )?;
+    }
+    let vga = figure("render 640x480, busy-traffic", "ms/frame", "<= 5", &mut || render_ms(640, 480, frames))?;
+    figure("render 1280x720, busy-traffic", "ms/frame", "-", &mut || render_ms(1280, 720, frames))?;
+    let copy = figure("memcpy of a 640x480 RGB frame (yardstick)", "ms", "-", &mut || {
+        Ok(memcpy_ms(640, 480, frames.max(50)))
+    })?;
+    let rt = tokio::runtime::Runtime::new()?;
+    for scenario in ["steady-follow", "busy-traffic"] {
+        figure(
+            &format!("fast mode real-time factor, {scenario}, camera 640x480 @ 20 Hz on the bus"),
+            "x",
+            if scenario == "steady-follow" { ">= 20" } else { "-" },
+            &mut || {
+                rt.block_on(async { tokio::time::timeout(Duration::from_secs(600), fast_rtf(scenario, sim_s)).await? })
+            },
+        )?;
+    }
+    out.push(SimFigure {
+        what: "render 640x480 / memcpy 640x480 (same run)".into(),
+        value: vga / copy.max(1e-9),
+        unit: "x".into(),
+        aim: "-".into(),
+        runs: repeat,
+    });
+    Ok(out)
+}
