@@ -21,10 +21,10 @@ pub struct SimArgs {
     /// changes are needed [default: config/sim.json5 when present, else built-in]
     #[arg(long, value_name = "FILE", env = "SLIPSTREAM_SIM_CONFIG")]
     pub settings: Option<PathBuf>,
-    /// Clock mode: realtime (paced to the wall clock), fast (as fast as it can), lockstep
-    /// (each step waits for the controllers' answers; deterministic)
+    /// Clock mode (settings key `mode`): realtime (paced to the wall clock), fast (as fast as
+    /// it can), lockstep (each step waits for the controllers' answers; deterministic)
     #[arg(long, value_parser = ["realtime", "fast", "lockstep"])]
-    pub mode: Option<String>,
+    pub clock: Option<String>,
     /// Nodes lockstep waits for (comma-separated), e.g. acc
     #[arg(long, value_delimiter = ',')]
     pub wait_for: Option<Vec<String>>,
@@ -61,7 +61,7 @@ impl SimArgs {
         let default_file = PathBuf::from(super::settings::DEFAULT_SIM_CONFIG_PATH);
         let path = self.settings.clone().or_else(|| default_file.exists().then_some(default_file));
         let mut s = SimSettings::load_or_default(path.as_deref())?;
-        if let Some(mode) = &self.mode {
+        if let Some(mode) = &self.clock {
             s.mode = match mode.as_str() {
                 "fast" => Mode::Fast,
                 "lockstep" => Mode::Lockstep,
@@ -115,5 +115,25 @@ impl SimArgs {
                 format!("{name:32} {description}\n")
             })
             .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::CommandFactory;
+
+    use super::*;
+
+    #[derive(clap::Parser)]
+    struct WithConnect {
+        #[command(flatten)]
+        connect: crate::config::ConnectArgs,
+        #[command(flatten)]
+        sim: SimArgs,
+    }
+
+    #[test]
+    fn flags_do_not_clash_with_the_shared_connection_flags() {
+        WithConnect::command().debug_assert();
     }
 }

@@ -24,3 +24,11 @@ def free_port():
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+@pytest.fixture(scope="session")
+def sim_bin(slipstream_bin):
+    path = pathlib.Path(slipstream_bin).parent / "slipstream-sim"
+    if not path.is_file():
+        pytest.fail(f"{path} is missing: build it with `cargo build --release` (scripts/test.sh does)")
+    return str(path)
