@@ -222,20 +222,26 @@ impl Renderer {
     }
 }
 
-/// Brightness (a lookup table) and noise (from the table at this frame's offset).
+/// Brightness (a lookup table, skipped at 1) and noise (the table read from this frame's
+/// offset in contiguous runs, so the add vectorizes).
 fn apply_look(noise: &[i8], look: FrameLook, rgb: &mut [u8]) {
-    if look.brightness == 1.0 && noise.is_empty() {
-        return;
-    }
-    let lut: [u8; 256] = std::array::from_fn(|i| (i as f32 * look.brightness).round().clamp(0.0, 255.0) as u8);
-    if noise.is_empty() {
+    if look.brightness != 1.0 {
+        let lut: [u8; 256] = std::array::from_fn(|i| (i as f32 * look.brightness).round().clamp(0.0, 255.0) as u8);
         rgb.iter_mut().for_each(|p| *p = lut[*p as usize]);
+    }
+    if noise.is_empty() {
         return;
     }
-    let mask = noise.len() - 1;
-    for (i, p) in rgb.iter_mut().enumerate() {
-        let n = noise[(i + look.noise_offset) & mask] as i16;
-        *p = (lut[*p as usize] as i16 + n).clamp(0, 255) as u8;
+    let mut at = look.noise_offset % noise.len();
+    let mut rest = rgb;
+    while !rest.is_empty() {
+        let run = (noise.len() - at).min(rest.len());
+        let (head, tail) = rest.split_at_mut(run);
+        for (p, n) in head.iter_mut().zip(&noise[at..at + run]) {
+            *p = p.saturating_add_signed(*n);
+        }
+        rest = tail;
+        at = 0;
     }
 }
 
