@@ -18,11 +18,15 @@ use common::{connected_session, listening_session};
 
 /// Every sim topic reliable and blocking, so a recorder sees every message.
 fn lossless_map() -> TopicMap {
+    lossless_map_with("")
+}
+
+fn lossless_map_with(extra: &str) -> TopicMap {
     let entry = |name: &str| format!("\"{name}\": {{ congestion_control: \"block\", delivery: {{ queue: 4096 }} }}");
     let names =
         ["vehicle/speed", "vehicle/state", "vehicle/control", "camera/front", "objects", "sim/clock", "sim/events"];
     let body = names.iter().map(|n| entry(n)).collect::<Vec<_>>().join(", ");
-    TopicMap::from_json5(&format!("{{ topics: {{ {body} }} }}"), "test").unwrap()
+    TopicMap::from_json5(&format!("{{ {extra} topics: {{ {body} }} }}"), "test").unwrap()
 }
 
 fn settings(mode: Mode, wait_for: &[&str]) -> SimSettings {
@@ -251,6 +255,43 @@ async fn a_collision_is_published_on_sim_events_and_ends_the_run() {
     assert!(matches!(&events.last().unwrap().kind, SimEventKind::ScenarioEnd { success: false, .. }), "{events:?}");
 }
 
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn jpeg_frames_when_configured_and_malformed_control_is_counted_not_applied() {
+    let map = lossless_map_with("camera: { encoding: \"jpeg\", jpeg_quality: 80 },");
+    let (s_sim, ep) = listening_session().await;
+    let s_rec = connected_session(&ep).await;
+    let recorder = Recorder::new(&s_rec, &map).await;
+    let control_key = map.key(topics::VEHICLE_CONTROL.topic);
+    let spam = tokio::spawn(async move {
+        for i in 0u32..400 {
+            let junk: Vec<u8> = if i % 2 == 0 { vec![1, 3, 0xff] } else { vec![9; 40] };
+            s_rec.put(&control_key, junk).await.unwrap();
+            tokio::time::sleep(Duration::from_millis(5)).await;
+        }
+        s_rec
+    });
+    let sim = Bus::from_session(s_sim, map, "sim").await.unwrap();
+    let world = World::new(scenario("steady-follow", 1.5), 1, 100);
+    let report =
+        within!(slipstream::sim::run(&sim, world, &settings(Mode::Realtime, &[]), std::future::pending())).unwrap();
+    let _session = within!(spam).unwrap();
+    assert!(report.control_rejected > 0, "{report:?}");
+    assert_eq!(report.control_timeouts, 0, "garbage is not a command: the ego cruised on");
+    assert!(report.end.as_ref().is_some_and(|e| e.success), "{report:?}");
+    recorder.wait_for_end().await;
+    let samples = recorder.samples.lock().clone();
+    let frame_bytes = samples.iter().find(|(k, _)| k == "camera/front").map(|(_, b)| b.clone()).expect("a frame");
+    let frame = msg::decode::<msg::CameraFrameRef>(&frame_bytes).unwrap().msg;
+    assert_eq!((frame.encoding, frame.width, frame.height), (msg::ImageEncoding::Jpeg, 160, 120));
+    assert!(frame.data.len() < 160 * 120 * 3 / 4, "compressed: {} bytes", frame.data.len());
+    assert_eq!(frame.to_rgb8().unwrap().len(), 160 * 120 * 3);
+    let info = samples
+        .iter()
+        .find(|(k, _)| k == "camera/front/info")
+        .map(|(_, b)| msg::decode::<msg::CameraInfo>(b).unwrap().msg);
+    assert_eq!(info.map(|i| i.encoding), Some(msg::ImageEncoding::Jpeg));
+}
+
 struct Killed(Child);
 
 impl Drop for Killed {
@@ -317,6 +358,16 @@ async fn another_process_receives_every_topic_at_its_rate() {
     let frames: Vec<u64> = stamps("camera/front");
     let objects: Vec<u64> = stamps("objects");
     assert!(frames.iter().filter(|t| **t >= 1_000_000_000).all(|t| objects.contains(t)));
+    // sim/clock reports the measured real-time factor: about 1 in realtime mode.
+    let last_clock = recorder
+        .samples
+        .lock()
+        .iter()
+        .filter(|(k, _)| k == "sim/clock")
+        .map(|(_, b)| msg::decode::<SimClock>(b).unwrap().msg)
+        .next_back()
+        .unwrap();
+    assert!((0.5..1.5).contains(&last_clock.real_time_factor), "{last_clock:?}");
     // Real time: 4 simulated seconds took about 4 s of wall time.
     assert!((3.5..12.0).contains(&wall_s), "realtime run took {wall_s:.1} s");
 

@@ -54,6 +54,8 @@ pub struct SimReport {
     pub lockstep_timeouts: u64,
     /// Times the control policy had to brake for lack of commands.
     pub control_timeouts: u64,
+    /// vehicle/control payloads that failed to decode (counted and logged, never applied).
+    pub control_rejected: u64,
     /// None when stopped before the scenario ended.
     pub end: Option<End>,
 }
@@ -66,7 +68,7 @@ impl SimReport {
             None => "stopped before the end".to_string(),
         };
         format!(
-            "{} (seed {}): {outcome}\n  {:.1} s simulated in {:.1} s (real-time factor {:.1}), {} steps, {} frames\n  collisions: {} ego, {} traffic; lockstep timeouts {}, control timeouts {}",
+            "{} (seed {}): {outcome}\n  {:.1} s simulated in {:.1} s (real-time factor {:.1}), {} steps, {} frames\n  collisions: {} ego, {} traffic; lockstep timeouts {}, control timeouts {}, bad control messages {}",
             self.scenario,
             self.seed,
             self.sim_time_s,
@@ -77,7 +79,8 @@ impl SimReport {
             self.ego_collisions,
             self.traffic_collisions,
             self.lockstep_timeouts,
-            self.control_timeouts
+            self.control_timeouts,
+            self.control_rejected
         )
     }
 }
@@ -191,7 +194,7 @@ async fn run_loop(
     let info_pub = bus.publisher(topics::CAMERA_FRONT_INFO).await?;
     let frames = bus.frame_publisher().await?;
     let inbox = Arc::new(ControlInbox::default());
-    let _control_sub = {
+    let control_sub = {
         let inbox = inbox.clone();
         bus.subscribe_with(topics::VEHICLE_CONTROL, move |r| inbox.push(r)).await?
     };
@@ -354,6 +357,7 @@ async fn run_loop(
         traffic_collisions: world.traffic_collisions(),
         lockstep_timeouts,
         control_timeouts: policy.timeouts,
+        control_rejected: control_sub.stats().snapshot().decode_errors,
         end,
     })
 }
@@ -421,6 +425,28 @@ async fn await_answers(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn policy(before_first: BeforeFirst) -> Policy {
+        let spec = ControlPolicy { hold_ms: 200, timeout_brake: 0.4, before_first };
+        Policy { spec, last: None, braking: false, timeouts: 0 }
+    }
+
+    #[test]
+    fn the_last_command_holds_then_the_ego_brakes_until_control_resumes() {
+        use crate::sim::world::EgoInput;
+        let mut p = policy(BeforeFirst::Cruise);
+        assert_eq!(p.input(0), EgoInput::Cruise);
+        let go = ControlCommand { throttle: 0.7, ..ControlCommand::NEUTRAL };
+        p.on_command(go, 1_000_000_000);
+        assert_eq!(p.input(1_200_000_000), EgoInput::Command(go), "held for 200 ms");
+        let brake = EgoInput::Command(ControlCommand { brake: 0.4, ..ControlCommand::NEUTRAL });
+        assert_eq!(p.input(1_210_000_000), brake);
+        assert_eq!(p.input(5_000_000_000), brake);
+        assert_eq!(p.timeouts, 1, "one timeout, however long it lasts");
+        p.on_command(go, 6_000_000_000);
+        assert_eq!(p.input(6_010_000_000), EgoInput::Command(go));
+        assert_eq!(policy(BeforeFirst::Brake).input(0), brake);
+    }
 
     #[test]
     fn rates_tick_on_the_right_steps() {
