@@ -32,3 +32,15 @@ def sim_bin(slipstream_bin):
     if not path.is_file():
         pytest.fail(f"{path} is missing: build it with `cargo build --release` (scripts/test.sh does)")
     return str(path)
+
+
+def peer_config(endpoint):
+    """A Python peer that connects to `endpoint` on loopback only: no scouting, no listener."""
+    import zenoh
+
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"peer"')
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("listen/endpoints", "[]")
+    conf.insert_json5("connect/endpoints", f'["{endpoint}"]')
+    return conf

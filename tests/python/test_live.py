@@ -5,6 +5,7 @@ import threading
 import time
 
 import zenoh
+from conftest import peer_config
 
 from slipstream_client import decode, encoding_schema
 
@@ -16,11 +17,7 @@ def test_python_subscriber_decodes_rust_publications(slipstream_bin, free_port):
         stdout=subprocess.DEVNULL,
     )
     try:
-        conf = zenoh.Config()
-        conf.insert_json5("mode", '"peer"')
-        conf.insert_json5("scouting/multicast/enabled", "false")
-        conf.insert_json5("listen/endpoints", "[]")
-        conf.insert_json5("connect/endpoints", f'["{endpoint}"]')
+        conf = peer_config(endpoint)
         got = {"Speed": [], "CameraFrame": [], "SimClock": []}
         encodings = set()
         lock = threading.Lock()

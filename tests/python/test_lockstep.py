@@ -8,6 +8,7 @@ import threading
 import time
 
 import zenoh
+from conftest import peer_config
 
 from slipstream_client import decode, encode
 
@@ -20,11 +21,7 @@ def test_a_python_controller_drives_the_simulator_in_lockstep(sim_bin, free_port
         stdout=subprocess.PIPE,
     )
     try:
-        conf = zenoh.Config()
-        conf.insert_json5("mode", '"peer"')
-        conf.insert_json5("scouting/multicast/enabled", "false")
-        conf.insert_json5("listen/endpoints", "[]")
-        conf.insert_json5("connect/endpoints", f'["{endpoint}"]')
+        conf = peer_config(endpoint)
         states = []
         lock = threading.Lock()
         with zenoh.open(conf) as session:
