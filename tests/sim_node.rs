@@ -425,3 +425,54 @@ fn bad_scenarios_and_settings_are_clear_errors() {
     assert_eq!((img.width(), img.height()), (640, 480));
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn lockstep_explains_answers_from_a_controller_that_does_not_name_itself() {
+    let (session, ep) = listening_session().await;
+    let map = TopicMap::default();
+    // Alive as "ctl", but its answers carry no attachment (a hand-written client's mistake).
+    let bus = Bus::from_session(session.clone(), map.clone(), "ctl").await.unwrap();
+    let states = bus.subscriber(topics::VEHICLE_STATE).await.unwrap();
+    let control_key = map.key(topics::VEHICLE_CONTROL.topic);
+    let answer = tokio::spawn(async move {
+        loop {
+            let r = states.recv().await;
+            let cmd = ControlCommand { answers_step: Some(r.msg.step), ..ControlCommand::NEUTRAL };
+            session.put(&control_key, msg::encode(&r.header, &cmd)).await.unwrap();
+        }
+    });
+    let dir = std::env::temp_dir().join(format!("slipstream-sim-unnamed-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let settings_file = dir.join("sim.json5");
+    std::fs::write(&settings_file, "{ lockstep: { step_timeout_ms: 300, on_timeout: 'stop' } }").unwrap();
+    let mut cmd = sim_bin();
+    cmd.args([
+        "--clock",
+        "lockstep",
+        "--wait-for",
+        "ctl",
+        "--camera-size",
+        "160x120",
+        "--json",
+        "-e",
+        &ep,
+        "-l",
+        "tcp/127.0.0.1:0",
+    ])
+    .arg("--settings")
+    .arg(&settings_file);
+    let out = within!(tokio::task::spawn_blocking(move || cmd.output())).unwrap().unwrap();
+    answer.abort();
+    let _ = std::fs::remove_dir_all(&dir);
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{stderr}");
+    assert!(
+        stderr.contains(
+            "answered by (unnamed), which lockstep.wait_for does not list (a controller must attach its node name)"
+        ),
+        "{stderr}"
+    );
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!((report["steps"].as_u64(), report["lockstep_timeouts"].as_u64()), (Some(0), Some(1)), "{report}");
+    drop(bus);
+}

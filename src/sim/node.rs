@@ -10,7 +10,7 @@
 //!   attachment), or the step timeout passes (then warn, publish ControlTimeout naming the late
 //!   nodes, and continue with the policy or stop).
 
-use std::collections::{BTreeMap, VecDeque};
+use std::collections::{BTreeMap, BTreeSet, VecDeque};
 use std::future::Future;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -281,18 +281,26 @@ async fn run_loop(
 
         // The ego's input for the step from k to k + 1.
         if mode == Mode::Lockstep && (speed_due || state_due) {
-            let (answer, late) =
+            let Answers { command, late, strangers } =
                 await_answers(&inbox, &settings.lockstep.wait_for, k, settings.lockstep.step_timeout_ms, stop).await;
-            if let Some(cmd) = answer {
+            if let Some(cmd) = command {
                 policy.on_command(cmd, t_ns);
             }
             if !late.is_empty() && !stop.load(Ordering::SeqCst) {
                 lockstep_timeouts += 1;
+                let hint = if strangers.is_empty() {
+                    String::new()
+                } else {
+                    format!(
+                        "; this step was answered by {}, which lockstep.wait_for does not list (a controller must attach its node name)",
+                        strangers.iter().cloned().collect::<Vec<_>>().join(", ")
+                    )
+                };
                 tracing::warn!(
                     step = k,
                     ?late,
                     timeout_ms = settings.lockstep.step_timeout_ms,
-                    "lockstep: no answer to this step from {}",
+                    "lockstep: no answer to this step from {}{hint}",
                     late.join(", ")
                 );
                 events_pub.put(t_ns, &SimEvent { kind: SimEventKind::ControlTimeout { late: late.clone() } })?;
@@ -387,23 +395,37 @@ async fn wait_for_nodes(bus: &Bus, names: &[String], timeout_ms: u64, stop: &Ato
     }
 }
 
-/// Collects the answers to step `k`; returns the command of the first awaited node that
-/// answered and the nodes that did not answer in time.
+/// The answers to one lockstep step.
+struct Answers {
+    /// The command of the first awaited node that answered.
+    command: Option<ControlCommand>,
+    /// Awaited nodes that did not answer in time.
+    late: Vec<String>,
+    /// Senders of answers to this step that lockstep does not wait for ("(unnamed)": no
+    /// attachment): usually a controller started under another name.
+    strangers: BTreeSet<String>,
+}
+
+/// Collects the answers to step `k` until every awaited node answered or the timeout passed.
 async fn await_answers(
     inbox: &ControlInbox,
     wait_for: &[String],
     k: u64,
     timeout_ms: u64,
     stop: &AtomicBool,
-) -> (Option<ControlCommand>, Vec<String>) {
+) -> Answers {
     let deadline = tokio::time::Instant::now() + Duration::from_millis(timeout_ms);
     let mut answers: BTreeMap<&str, ControlCommand> = BTreeMap::new();
+    let mut strangers = BTreeSet::new();
     loop {
         for r in inbox.drain() {
             let from = r.source.as_deref().and_then(|s| wait_for.iter().find(|n| n.as_str() == s));
             match (from, r.msg.answers_step) {
                 (Some(name), Some(step)) if step == k => {
                     answers.insert(name.as_str(), r.msg);
+                }
+                (None, Some(step)) if step == k => {
+                    strangers.insert(r.source.clone().unwrap_or_else(|| "(unnamed)".into()));
                 }
                 (_, step) => {
                     tracing::debug!(source = ?r.source, ?step, waiting_for = k, "vehicle/control ignored in lockstep")
@@ -417,9 +439,11 @@ async fn await_answers(
         // Wake at least every 100 ms to notice a stop request.
         let _ = tokio::time::timeout_at(deadline.min(now + Duration::from_millis(100)), inbox.notify.notified()).await;
     }
-    let first = wait_for.iter().find_map(|n| answers.get(n.as_str()).copied());
-    let late = wait_for.iter().filter(|n| !answers.contains_key(n.as_str())).cloned().collect();
-    (first, late)
+    Answers {
+        command: wait_for.iter().find_map(|n| answers.get(n.as_str()).copied()),
+        late: wait_for.iter().filter(|n| !answers.contains_key(n.as_str())).cloned().collect(),
+        strangers,
+    }
 }
 
 #[cfg(test)]
