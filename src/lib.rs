@@ -19,6 +19,7 @@ pub mod bus;
 pub mod cli;
 pub mod config;
 pub mod msg;
+pub mod perception;
 pub mod qos;
 pub mod sim;
 pub mod tools;

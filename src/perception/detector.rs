@@ -1,0 +1,370 @@
+//! Finds vehicles in one RGB frame with classical computer vision and the camera geometry.
+//!
+//! The method (docs/perception.md):
+//! 1. Luminance; the road's brightness is the mode of the lower image (the road fills it).
+//! 2. The dark band where a vehicle meets the road (its shadow, tyres and underbody) is much
+//!    darker than the road in any colour, brightness or noise: pixels below `dark_ratio` of
+//!    the road's brightness, below the horizon, grouped into connected components.
+//! 3. A component's lowest row is the contact line: its ground distance comes from the ray
+//!    through it (flat road), which gives the metres-per-pixel scale there.
+//! 4. Above the contact line, the rows whose pixels differ from the background on both sides
+//!    (road or sky, sampled just outside the component) give the vehicle's height; a band too
+//!    narrow or too low for a vehicle at that distance is rejected.
+//! 5. A candidate lying inside the box of a nearer one (a dark window, a black car's body) is
+//!    part of it and suppressed.
+//!
+//! It reads only pixels and the camera info: no ground truth, no palette.
+
+use super::geometry::CameraModel;
+use crate::msg::{BoundingBox2d, CameraInfo, ObjectClass};
+
+/// Tunable thresholds (the defaults are what docs/perception.md measures).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DetectorParams {
+    /// A pixel is "contact-dark" below this share of the road's luminance.
+    pub dark_ratio: f32,
+    /// Plausible widths of the dark contact band, metres (a partly hidden vehicle shows less).
+    pub min_width_m: f64,
+    pub max_width_m: f64,
+    /// Plausible heights, metres.
+    pub min_height_m: f64,
+    pub max_height_m: f64,
+    /// Colour difference (sum over RGB) that separates a vehicle from its background.
+    pub contrast: i32,
+    /// Farthest distance reported.
+    pub max_distance_m: f64,
+}
+
+impl Default for DetectorParams {
+    fn default() -> Self {
+        DetectorParams {
+            dark_ratio: 0.66,
+            min_width_m: 0.6,
+            max_width_m: 3.6,
+            min_height_m: 0.7,
+            max_height_m: 4.5,
+            contrast: 45,
+            max_distance_m: 120.0,
+        }
+    }
+}
+
+/// One vehicle found in one frame (before tracking).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FrameDetection {
+    pub bbox: BoundingBox2d,
+    pub class: ObjectClass,
+    /// Ego body x of the vehicle's rear (its contact line).
+    pub distance_m: f64,
+    /// Ego body y of its centre.
+    pub lateral_offset_m: f64,
+    pub height_m: f64,
+    pub width_m: f64,
+    pub confidence: f32,
+}
+
+/// A run of dark pixels on one row, and the component it belongs to.
+#[derive(Debug, Clone, Copy)]
+struct Run {
+    row: u32,
+    u0: u32,
+    u1: u32,
+}
+
+#[derive(Debug, Clone, Copy)]
+struct Component {
+    u0: u32,
+    u1: u32,
+    v0: u32,
+    v1: u32,
+    pixels: u32,
+}
+
+/// Reusable detector for one camera.
+pub struct Detector {
+    camera: CameraModel,
+    params: DetectorParams,
+    horizon_v: f64,
+    luma: Vec<u8>,
+    runs: Vec<Run>,
+    parent: Vec<u32>,
+}
+
+impl Detector {
+    pub fn new(info: &CameraInfo, params: DetectorParams) -> Detector {
+        let camera = CameraModel::new(info);
+        let horizon_v = camera.horizon_v();
+        Detector { camera, params, horizon_v, luma: Vec::new(), runs: Vec::new(), parent: Vec::new() }
+    }
+
+    pub fn camera(&self) -> &CameraModel {
+        &self.camera
+    }
+
+    /// Vehicles in an RGB8 frame of the camera's size.
+    pub fn detect(&mut self, rgb: &[u8]) -> Vec<FrameDetection> {
+        let (w, h) = (self.camera.info.width as usize, self.camera.info.height as usize);
+        if rgb.len() != w * h * 3 {
+            return Vec::new();
+        }
+        let first_ground_row = (self.horizon_v.ceil().max(0.0) as usize + 1).min(h);
+        if first_ground_row + 4 >= h {
+            return Vec::new();
+        }
+        self.luma.clear();
+        self.luma.extend(
+            rgb.chunks_exact(3).map(|p| ((77 * p[0] as u32 + 150 * p[1] as u32 + 29 * p[2] as u32) >> 8) as u8),
+        );
+        let road = road_luma(&self.luma, w, h, first_ground_row);
+        let dark = (road as f32 * self.params.dark_ratio) as u8;
+        let components = self.dark_components(w, h, first_ground_row, dark);
+
+        let mut candidates: Vec<FrameDetection> =
+            components.iter().filter_map(|c| self.candidate(rgb, w, h, c)).collect();
+        // Nearest first; a candidate inside a nearer one's box is part of it.
+        candidates.sort_by(|a, b| b.bbox.v_max_px.total_cmp(&a.bbox.v_max_px));
+        let mut kept: Vec<FrameDetection> = Vec::new();
+        for c in candidates {
+            let inside = kept.iter().any(|k| {
+                let overlap = c.bbox.u_max_px.min(k.bbox.u_max_px) - c.bbox.u_min_px.max(k.bbox.u_min_px);
+                let width = c.bbox.u_max_px - c.bbox.u_min_px;
+                overlap > 0.5 * width && c.bbox.v_max_px <= k.bbox.v_max_px && c.bbox.v_max_px >= k.bbox.v_min_px
+            });
+            if !inside {
+                kept.push(c);
+            }
+        }
+        kept
+    }
+
+    /// Connected components of the pixels darker than `dark`, below the horizon.
+    fn dark_components(&mut self, w: usize, h: usize, first_row: usize, dark: u8) -> Vec<Component> {
+        self.runs.clear();
+        let mut row_start = Vec::with_capacity(h - first_row + 1);
+        for v in first_row..h {
+            row_start.push(self.runs.len());
+            let row = &self.luma[v * w..(v + 1) * w];
+            let mut u = 0;
+            while u < w {
+                if row[u] < dark {
+                    let start = u;
+                    while u < w && row[u] < dark {
+                        u += 1;
+                    }
+                    self.runs.push(Run { row: v as u32, u0: start as u32, u1: u as u32 - 1 });
+                } else {
+                    u += 1;
+                }
+            }
+        }
+        row_start.push(self.runs.len());
+        self.parent.clear();
+        self.parent.extend(0..self.runs.len() as u32);
+        // Join runs that touch runs of the row above (4-connected).
+        for r in 1..row_start.len() - 1 {
+            let (above, here) = (row_start[r - 1]..row_start[r], row_start[r]..row_start[r + 1]);
+            let mut a = above.start;
+            for i in here {
+                let run = self.runs[i];
+                while a < above.end && self.runs[a].u1 < run.u0 {
+                    a += 1;
+                }
+                let mut b = a;
+                while b < above.end && self.runs[b].u0 <= run.u1 {
+                    union(&mut self.parent, i as u32, b as u32);
+                    b += 1;
+                }
+            }
+        }
+        let mut by_root: std::collections::BTreeMap<u32, Component> = std::collections::BTreeMap::new();
+        for i in 0..self.runs.len() {
+            let root = find(&mut self.parent, i as u32);
+            let r = self.runs[i];
+            let c = by_root.entry(root).or_insert(Component { u0: r.u0, u1: r.u1, v0: r.row, v1: r.row, pixels: 0 });
+            c.u0 = c.u0.min(r.u0);
+            c.u1 = c.u1.max(r.u1);
+            c.v0 = c.v0.min(r.row);
+            c.v1 = c.v1.max(r.row);
+            c.pixels += r.u1 - r.u0 + 1;
+        }
+        by_root.into_values().filter(|c| c.pixels >= 3).collect()
+    }
+
+    /// Checks a dark component as a vehicle's contact band and measures the vehicle above it.
+    fn candidate(&self, rgb: &[u8], w: usize, h: usize, c: &Component) -> Option<FrameDetection> {
+        let p = &self.params;
+        // The contact line is the lower edge of the component's lowest row; its horizontal
+        // extent is that of the component's bottom rows.
+        let contact_v = c.v1 as f64 + 1.0;
+        if c.v1 as usize >= h - 1 {
+            return None; // runs off the image bottom: the contact line is not seen
+        }
+        let (bu0, bu1) = self.bottom_extent(c);
+        let centre_u = (bu0 + bu1 + 1) as f64 / 2.0;
+        let contact = self.camera.ground_point(centre_u, contact_v)?;
+        if contact.x < 1.0 || contact.x > p.max_distance_m {
+            return None;
+        }
+        let origin = self.camera.origin_in_body();
+        let px_per_m = self.camera.info.fx_px / (contact.x - origin.x).max(0.5);
+        let width_m = (bu1 - bu0 + 1) as f64 / px_per_m;
+        if width_m < p.min_width_m || width_m > p.max_width_m {
+            return None;
+        }
+        let (u0, u1) = (c.u0.min(bu0) as usize, c.u1.max(bu1) as usize);
+        let top = self.top_row(rgb, w, u0, u1, c.v1 as usize, (p.max_height_m * px_per_m) as usize)?;
+        let height_m = (contact_v - top as f64) / px_per_m;
+        if height_m < p.min_height_m || height_m > p.max_height_m {
+            return None;
+        }
+        let class = if height_m > 2.9 {
+            ObjectClass::Truck
+        } else if height_m > 1.9 {
+            ObjectClass::Van
+        } else {
+            ObjectClass::Car
+        };
+        let plausible = |x: f64, lo: f64, hi: f64| {
+            if x < lo {
+                x / lo
+            } else if x > hi {
+                hi / x
+            } else {
+                1.0
+            }
+        };
+        let confidence = (plausible(width_m, 1.4, 2.8) * plausible(height_m, 1.1, 3.8)).clamp(0.05, 1.0) as f32;
+        Some(FrameDetection {
+            bbox: BoundingBox2d {
+                u_min_px: u0 as f32,
+                v_min_px: top as f32,
+                u_max_px: (u1 + 1) as f32,
+                v_max_px: contact_v as f32,
+            },
+            class,
+            distance_m: contact.x,
+            lateral_offset_m: contact.y,
+            height_m,
+            width_m,
+            confidence,
+        })
+    }
+
+    /// Column extent of a component's lowest three rows.
+    fn bottom_extent(&self, c: &Component) -> (u32, u32) {
+        let lowest = c.v1.saturating_sub(2);
+        let (mut u0, mut u1) = (u32::MAX, 0);
+        for r in self.runs.iter().filter(|r| r.row >= lowest && r.row <= c.v1 && r.u1 >= c.u0 && r.u0 <= c.u1) {
+            u0 = u0.min(r.u0);
+            u1 = u1.max(r.u1);
+        }
+        if u0 > u1 {
+            (c.u0, c.u1)
+        } else {
+            (u0, u1)
+        }
+    }
+
+    /// The highest row above `bottom` where the columns u0..=u1 still differ from the
+    /// background just left and right of them; None when nothing rises above the contact.
+    fn top_row(&self, rgb: &[u8], w: usize, u0: usize, u1: usize, bottom: usize, max_rows: usize) -> Option<usize> {
+        let px = |u: usize, v: usize| {
+            let i = (v * w + u) * 3;
+            [rgb[i] as i32, rgb[i + 1] as i32, rgb[i + 2] as i32]
+        };
+        let diff = |a: [i32; 3], b: [i32; 3]| (a[0] - b[0]).abs() + (a[1] - b[1]).abs() + (a[2] - b[2]).abs();
+        let flank = 3;
+        let (l, r) = (u0.checked_sub(flank), (u1 + flank < w).then_some(u1 + flank));
+        let mut top = None;
+        let mut misses = 0;
+        let lowest = bottom.saturating_sub(max_rows);
+        for v in (lowest..=bottom).rev() {
+            let backgrounds: Vec<[i32; 3]> = [l, r].into_iter().flatten().map(|u| px(u, v)).collect();
+            if backgrounds.is_empty() {
+                return None;
+            }
+            let step = ((u1 - u0) / 24).max(1);
+            let (mut differ, mut total) = (0, 0);
+            for u in (u0..=u1).step_by(step) {
+                let c = px(u, v);
+                total += 1;
+                if backgrounds.iter().all(|b| diff(c, *b) > self.params.contrast) {
+                    differ += 1;
+                }
+            }
+            if differ * 10 >= total * 3 {
+                top = Some(v);
+                misses = 0;
+            } else {
+                misses += 1;
+                if misses >= 3 && top.is_some() {
+                    break;
+                }
+            }
+        }
+        top
+    }
+}
+
+/// The road's luminance: the mode of the lower middle of the image.
+fn road_luma(luma: &[u8], w: usize, h: usize, first_row: usize) -> u8 {
+    let mut hist = [0u32; 64];
+    let start = (first_row + (h - first_row) / 3).min(h - 1);
+    for v in (start..h).step_by(2) {
+        for u in (w / 5..w * 4 / 5).step_by(2) {
+            hist[(luma[v * w + u] >> 2) as usize] += 1;
+        }
+    }
+    let mode = hist.iter().enumerate().max_by_key(|(_, n)| **n).map(|(i, _)| i).unwrap_or(32);
+    (mode * 4 + 2) as u8
+}
+
+fn find(parent: &mut [u32], mut i: u32) -> u32 {
+    while parent[i as usize] != i {
+        parent[i as usize] = parent[parent[i as usize] as usize];
+        i = parent[i as usize];
+    }
+    i
+}
+
+fn union(parent: &mut [u32], a: u32, b: u32) {
+    let (ra, rb) = (find(parent, a), find(parent, b));
+    if ra != rb {
+        parent[ra.max(rb) as usize] = ra.min(rb);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+
+    use crate::perception::eval::{evaluate_scenario, Tally, RANGES_M, STANDARD};
+    use crate::sim::settings::SimSettings;
+    use crate::sim::Scenario;
+
+    #[test]
+    #[ignore = "prints scores while tuning; `slipstream eval detect` is the real report"]
+    fn scores_on_the_standard_scenarios() {
+        let settings = SimSettings::default();
+        let mut all = Tally::default();
+        for name in STANDARD {
+            let s = Scenario::find(name).unwrap();
+            let seed = s.seed;
+            let mut t = Tally::default();
+            evaluate_scenario(s, seed, &settings, 30.0, &mut t);
+            println!(
+                "{name:32} P {:.3} R {:.3} ({} of {}), dets {}",
+                t.precision(),
+                t.recall(),
+                t.eligible_found,
+                t.eligible,
+                t.detections
+            );
+            evaluate_scenario(Scenario::find(name).unwrap(), seed, &settings, 30.0, &mut all);
+        }
+        println!("ALL P {:.3} R {:.3}", all.precision(), all.recall());
+        for (lo, hi) in RANGES_M {
+            println!("  {lo}-{hi} m: {:?}", all.distance_error(lo, hi));
+        }
+        println!("  lateral: {:?}", all.lateral_error());
+    }
+}

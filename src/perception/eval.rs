@@ -1,0 +1,179 @@
+//! `slipstream eval detect`: runs scenarios in process (the simulator's world and renderer,
+//! the ego cruising), runs the detector on every camera frame and scores it against the
+//! ground truth of the same frame (same simulation step, so matching by time is exact).
+//!
+//! A ground-truth vehicle counts for recall when it is within `max_range_m` ahead and at least
+//! `min_visible` visible; a detection is a true positive when it overlaps (IoU >= 0.3) any
+//! ground-truth vehicle in view, near or far.
+
+use serde::Serialize;
+
+use super::detector::{Detector, DetectorParams, FrameDetection};
+use crate::msg::{BoundingBox2d, GroundTruthObject, ImageEncoding};
+use crate::sim::ground_truth::ground_truth;
+use crate::sim::render::Renderer;
+use crate::sim::rng::SimRng;
+use crate::sim::settings::SimSettings;
+use crate::sim::world::{EgoInput, World};
+use crate::sim::Scenario;
+
+pub const IOU_MATCH: f32 = 0.3;
+
+/// Distance bands errors are reported in.
+pub const RANGES_M: [(f64, f64); 4] = [(0.0, 20.0), (20.0, 40.0), (40.0, 60.0), (60.0, f64::INFINITY)];
+
+pub fn iou(a: &BoundingBox2d, b: &BoundingBox2d) -> f32 {
+    let iw = (a.u_max_px.min(b.u_max_px) - a.u_min_px.max(b.u_min_px)).max(0.0);
+    let ih = (a.v_max_px.min(b.v_max_px) - a.v_min_px.max(b.v_min_px)).max(0.0);
+    let inter = iw * ih;
+    let area = |r: &BoundingBox2d| (r.u_max_px - r.u_min_px) * (r.v_max_px - r.v_min_px);
+    let union = area(a) + area(b) - inter;
+    if union <= 0.0 {
+        0.0
+    } else {
+        inter / union
+    }
+}
+
+/// One matched pair's errors.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct MatchError {
+    pub true_distance_m: f64,
+    /// |estimated - true| / true.
+    pub distance_rel: f64,
+    pub lateral_abs_m: f64,
+}
+
+/// Counts and errors accumulated over frames.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct Tally {
+    pub frames: u64,
+    pub detections: u64,
+    pub true_positives: u64,
+    pub eligible: u64,
+    pub eligible_found: u64,
+    pub errors: Vec<MatchError>,
+}
+
+impl Tally {
+    /// Scores one frame: greedy matching by IoU, best pairs first.
+    pub fn add_frame(
+        &mut self,
+        dets: &[FrameDetection],
+        truth: &[GroundTruthObject],
+        max_range_m: f64,
+        min_visible: f32,
+    ) {
+        self.frames += 1;
+        self.detections += dets.len() as u64;
+        let in_view: Vec<&GroundTruthObject> =
+            truth.iter().filter(|o| o.bbox.is_some() && o.visible_fraction > 0.0).collect();
+        let mut pairs: Vec<(f32, usize, usize)> = Vec::new();
+        for (i, d) in dets.iter().enumerate() {
+            for (j, o) in in_view.iter().enumerate() {
+                let score = iou(&d.bbox, o.bbox.as_ref().unwrap_or(&d.bbox));
+                if score >= IOU_MATCH {
+                    pairs.push((score, i, j));
+                }
+            }
+        }
+        pairs.sort_by(|a, b| b.0.total_cmp(&a.0));
+        let (mut det_used, mut gt_used) = (vec![false; dets.len()], vec![false; in_view.len()]);
+        for (_, i, j) in pairs {
+            if det_used[i] || gt_used[j] {
+                continue;
+            }
+            det_used[i] = true;
+            gt_used[j] = true;
+            self.true_positives += 1;
+            let o = in_view[j];
+            let truth_x = o.position_in_ego_m[0];
+            if truth_x > 0.0 {
+                self.errors.push(MatchError {
+                    true_distance_m: truth_x,
+                    distance_rel: (dets[i].distance_m - truth_x).abs() / truth_x,
+                    lateral_abs_m: (dets[i].lateral_offset_m - o.position_in_ego_m[1]).abs(),
+                });
+            }
+        }
+        for (j, o) in in_view.iter().enumerate() {
+            let x = o.position_in_ego_m[0];
+            if x > 0.0 && x <= max_range_m && o.visible_fraction >= min_visible {
+                self.eligible += 1;
+                self.eligible_found += gt_used[j] as u64;
+            }
+        }
+    }
+
+    pub fn precision(&self) -> f64 {
+        if self.detections == 0 {
+            1.0
+        } else {
+            self.true_positives as f64 / self.detections as f64
+        }
+    }
+
+    pub fn recall(&self) -> f64 {
+        if self.eligible == 0 {
+            1.0
+        } else {
+            self.eligible_found as f64 / self.eligible as f64
+        }
+    }
+
+    /// (median, p90) of relative distance error for true distances in [lo, hi).
+    pub fn distance_error(&self, lo: f64, hi: f64) -> Option<(f64, f64)> {
+        percentiles(
+            self.errors.iter().filter(|e| e.true_distance_m >= lo && e.true_distance_m < hi).map(|e| e.distance_rel),
+        )
+    }
+
+    pub fn lateral_error(&self) -> Option<(f64, f64)> {
+        percentiles(self.errors.iter().map(|e| e.lateral_abs_m))
+    }
+}
+
+fn percentiles(values: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
+    let mut v: Vec<f64> = values.collect();
+    if v.is_empty() {
+        return None;
+    }
+    v.sort_by(f64::total_cmp);
+    let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
+    Some((at(0.5), at(0.9)))
+}
+
+/// Runs one scenario (for at most `max_seconds` simulated) and scores every frame.
+pub fn evaluate_scenario(scenario: Scenario, seed: u64, settings: &SimSettings, max_seconds: f64, tally: &mut Tally) {
+    let info = settings.camera_info(ImageEncoding::Rgb8);
+    let noise = scenario.noise.clone();
+    let mut world = World::new(scenario, seed, settings.physics_hz);
+    let mut renderer = Renderer::new(&info, noise.camera_stddev, &mut SimRng::new(seed ^ 0xCA3E_2A00));
+    let mut look_rng = SimRng::new(seed ^ 0x1006_0000);
+    let mut detector = Detector::new(&info, DetectorParams::default());
+    let mut rgb = vec![0u8; renderer.frame_len()];
+    let every = (settings.physics_hz as f64 / settings.rates_hz.camera).round().max(1.0) as u64;
+    let last_step = (max_seconds * settings.physics_hz as f64) as u64;
+    while world.ended().is_none() && world.step_count() <= last_step {
+        if world.step_count() % every == 0 {
+            let look = renderer.draw_look(noise.brightness, &mut look_rng);
+            let vis = renderer.render(world.road(), world.ego(), world.vehicles(), look, &mut rgb);
+            let truth = ground_truth(&world, &vis);
+            let dets = detector.detect(&rgb);
+            tally.add_frame(&dets, &truth.objects, 60.0, 0.5);
+        }
+        world.step(EgoInput::Cruise);
+    }
+}
+
+/// The standard scenarios for detection scores.
+pub const STANDARD: [&str; 8] = [
+    "steady-follow",
+    "approach-slower-lead",
+    "lead-brakes-to-stop",
+    "stop-and-go",
+    "cut-in",
+    "cut-out-revealing-stopped-car",
+    "busy-traffic",
+    "curve-follow",
+];
