@@ -1,6 +1,7 @@
 //! `slipstream bench sim`: the simulator's own speed, in process: physics steps/s with 1, 10
-//! and 50 vehicles, software render time per frame, and the real-time factor of a whole run in
-//! fast mode with the camera publishing on a loopback bus. A frame-sized memcpy runs in the
+//! and 50 vehicles, software render time per frame, the vehicle detector's time per frame,
+//! and the real-time factor of a whole run in fast mode with the camera publishing on a
+//! loopback bus. A frame-sized memcpy runs in the
 //! same process as the machine's yardstick for the render figures.
 
 use std::time::{Duration, Instant};
@@ -80,6 +81,32 @@ fn render_ms(width: u32, height: u32, frames: usize) -> Result<f64> {
     Ok(median(times))
 }
 
+/// Median milliseconds for the vehicle detector on one 640x480 frame of busy-traffic (noisy
+/// camera), frames rendered beforehand.
+fn detect_ms(frames: usize) -> Result<f64> {
+    let settings = SimSettings::default();
+    let scenario = Scenario::find("busy-traffic").map_err(anyhow::Error::msg)?;
+    let noise = scenario.noise.clone();
+    let mut world = World::new(scenario, 7, settings.physics_hz);
+    let info = settings.camera_info(ImageEncoding::Rgb8);
+    let mut renderer = Renderer::new(&info, noise.camera_stddev, &mut SimRng::new(1));
+    let mut look_rng = SimRng::new(2);
+    let mut detector = crate::perception::Detector::new(&info, crate::perception::DetectorParams::default());
+    let mut rgb = vec![0u8; renderer.frame_len()];
+    let mut times = Vec::with_capacity(frames);
+    for _ in 0..frames {
+        for _ in 0..5 {
+            world.step(EgoInput::Cruise);
+        }
+        let look = renderer.draw_look(noise.brightness, &mut look_rng);
+        renderer.render(world.road(), world.ego(), world.vehicles(), look, &mut rgb);
+        let t = Instant::now();
+        std::hint::black_box(detector.detect(&rgb));
+        times.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    Ok(median(times))
+}
+
 /// Median milliseconds to copy a frame of this size (cold destination each time is not
 /// modelled: this is the hot-cache yardstick).
 fn memcpy_ms(width: u32, height: u32, copies: usize) -> f64 {
@@ -143,6 +170,7 @@ pub fn run(quick: bool, repeat: usize) -> Result<Vec<SimFigure>> {
     }
     let vga = figure("render 640x480, busy-traffic", "ms/frame", "<= 5", &mut || render_ms(640, 480, frames))?;
     figure("render 1280x720, busy-traffic", "ms/frame", "-", &mut || render_ms(1280, 720, frames))?;
+    figure("detect vehicles 640x480, busy-traffic (noisy)", "ms/frame", "<= 5", &mut || detect_ms(frames))?;
     let copy = figure("memcpy of a 640x480 RGB frame (yardstick)", "ms", "-", &mut || {
         Ok(memcpy_ms(640, 480, frames.max(50)))
     })?;

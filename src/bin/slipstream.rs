@@ -37,6 +37,9 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Score a node against the simulator's ground truth
+    #[command(subcommand)]
+    Eval(EvalCommand),
     /// Print the example payload of every message type (hex, as in docs/wire-format.md)
     #[command(hide = true)]
     WireExamples,
@@ -49,6 +52,24 @@ enum Command {
         spec: String,
         #[arg(long)]
         endpoint: Option<String>,
+    },
+}
+
+#[derive(Subcommand)]
+enum EvalCommand {
+    /// Vehicle detection: runs scenarios in process (world, camera, detector; the ego
+    /// cruising), matches detections to the ground truth of the same frame, and reports
+    /// precision, recall and distance/lateral errors by range
+    Detect {
+        /// Scenarios to run (names or files) [default: the standard set]
+        #[arg(long = "scenario", value_name = "NAME")]
+        scenarios: Vec<String>,
+        /// Simulated seconds per scenario at most
+        #[arg(long, default_value_t = 30.0)]
+        seconds: f64,
+        /// Print JSON instead of the table
+        #[arg(long)]
+        json: bool,
     },
 }
 
@@ -121,6 +142,19 @@ fn main() -> Result<()> {
                 println!("{}", serde_json::to_string_pretty(&info)?);
             } else {
                 print!("{}", slipstream::tools::info::render(&info));
+            }
+            Ok(())
+        }
+        Command::Eval(EvalCommand::Detect { scenarios, seconds, json }) => {
+            use slipstream::perception::eval;
+            let names: Vec<String> =
+                if scenarios.is_empty() { eval::STANDARD.iter().map(|s| s.to_string()).collect() } else { scenarios };
+            let settings = slipstream::sim::SimSettings::default();
+            let report = eval::evaluate(&names, seconds, &settings)?;
+            if json {
+                println!("{}", serde_json::to_string_pretty(&report)?);
+            } else {
+                println!("{}", eval::markdown(&report));
             }
             Ok(())
         }

@@ -177,3 +177,109 @@ pub const STANDARD: [&str; 8] = [
     "busy-traffic",
     "curve-follow",
 ];
+
+/// Scores per scenario and over all, as `slipstream eval detect` prints them.
+#[derive(Debug, Clone, Serialize)]
+pub struct DetectReport {
+    pub command: String,
+    pub scenarios: Vec<ScenarioScore>,
+    pub overall: ScenarioScore,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct ScenarioScore {
+    pub scenario: String,
+    pub frames: u64,
+    pub detections: u64,
+    pub precision: f64,
+    pub recall: f64,
+    /// Vehicles within 60 m and at least half visible: how many, how many found.
+    pub eligible: u64,
+    pub found: u64,
+    /// Per range band "lo-hi m": (median, p90) of |distance error| / true distance.
+    pub distance_error: Vec<(String, Option<(f64, f64)>)>,
+    /// (median, p90) of |lateral error|, metres.
+    pub lateral_error_m: Option<(f64, f64)>,
+}
+
+impl ScenarioScore {
+    pub fn from_tally(scenario: &str, t: &Tally) -> ScenarioScore {
+        ScenarioScore {
+            scenario: scenario.to_string(),
+            frames: t.frames,
+            detections: t.detections,
+            precision: t.precision(),
+            recall: t.recall(),
+            eligible: t.eligible,
+            found: t.eligible_found,
+            distance_error: RANGES_M
+                .iter()
+                .map(|&(lo, hi)| {
+                    let band = if hi.is_finite() { format!("{lo:.0}-{hi:.0} m") } else { format!("{lo:.0}+ m") };
+                    (band, t.distance_error(lo, hi))
+                })
+                .collect(),
+            lateral_error_m: t.lateral_error(),
+        }
+    }
+}
+
+/// Evaluates the named scenarios (each for at most `seconds` simulated); progress on stderr.
+pub fn evaluate(
+    names: &[String],
+    seconds: f64,
+    settings: &SimSettings,
+) -> Result<DetectReport, crate::config::ConfigError> {
+    let mut overall = Tally::default();
+    let mut scenarios = Vec::new();
+    for name in names {
+        let scenario = Scenario::find(name)?;
+        let seed = scenario.seed;
+        let mut t = Tally::default();
+        let started = std::time::Instant::now();
+        evaluate_scenario(scenario.clone(), seed, settings, seconds, &mut t);
+        eprintln!("{name}: {} frames in {:.1} s", t.frames, started.elapsed().as_secs_f64());
+        scenarios.push(ScenarioScore::from_tally(&scenario.name, &t));
+        overall.merge(t);
+    }
+    let command = std::env::args().collect::<Vec<_>>().join(" ");
+    Ok(DetectReport { command, scenarios, overall: ScenarioScore::from_tally("all", &overall) })
+}
+
+impl Tally {
+    pub fn merge(&mut self, other: Tally) {
+        self.frames += other.frames;
+        self.detections += other.detections;
+        self.true_positives += other.true_positives;
+        self.eligible += other.eligible;
+        self.eligible_found += other.eligible_found;
+        self.errors.extend(other.errors);
+    }
+}
+
+/// The report as markdown.
+pub fn markdown(report: &DetectReport) -> String {
+    let pct =
+        |e: Option<(f64, f64)>| e.map_or("-".to_string(), |(m, p)| format!("{:.1}% / {:.1}%", m * 100.0, p * 100.0));
+    let mut s = String::from(
+        "| scenario | frames | precision | recall (found/eligible) | dist. err. 0-20 m | 20-40 m | 40-60 m | 60+ m | lateral err. m |\n|---|---|---|---|---|---|---|---|---|\n",
+    );
+    for r in report.scenarios.iter().chain(std::iter::once(&report.overall)) {
+        s.push_str(&format!(
+            "| {} | {} | {:.3} | {:.3} ({}/{}) | {} | {} | {} | {} | {} |\n",
+            r.scenario,
+            r.frames,
+            r.precision,
+            r.recall,
+            r.found,
+            r.eligible,
+            pct(r.distance_error[0].1),
+            pct(r.distance_error[1].1),
+            pct(r.distance_error[2].1),
+            pct(r.distance_error[3].1),
+            r.lateral_error_m.map_or("-".into(), |(m, p)| format!("{m:.2} / {p:.2}")),
+        ));
+    }
+    s.push_str("\nDistance and lateral errors: median / p90 over matched detections.\n");
+    s
+}
