@@ -8,8 +8,9 @@
 
 use serde::Serialize;
 
-use super::detector::{Detector, DetectorParams, FrameDetection};
-use crate::msg::{BoundingBox2d, GroundTruthObject, ImageEncoding};
+use super::detector::{Detector, DetectorParams};
+use super::tracker::Tracker;
+use crate::msg::{BoundingBox2d, Detection, GroundTruthObject, ImageEncoding};
 use crate::sim::ground_truth::ground_truth;
 use crate::sim::render::Renderer;
 use crate::sim::rng::SimRng;
@@ -42,6 +43,8 @@ pub struct MatchError {
     /// |estimated - true| / true.
     pub distance_rel: f64,
     pub lateral_abs_m: f64,
+    /// |estimated - true| relative speed, m/s, for tracks seen at least 3 times.
+    pub relative_speed_abs_mps: Option<f64>,
 }
 
 /// Counts and errors accumulated over frames.
@@ -53,17 +56,15 @@ pub struct Tally {
     pub eligible: u64,
     pub eligible_found: u64,
     pub errors: Vec<MatchError>,
+    /// Times a ground-truth vehicle's matched track id changed.
+    pub id_switches: u64,
+    #[serde(skip)]
+    last_track_of: std::collections::BTreeMap<u32, u32>,
 }
 
 impl Tally {
     /// Scores one frame: greedy matching by IoU, best pairs first.
-    pub fn add_frame(
-        &mut self,
-        dets: &[FrameDetection],
-        truth: &[GroundTruthObject],
-        max_range_m: f64,
-        min_visible: f32,
-    ) {
+    pub fn add_frame(&mut self, dets: &[Detection], truth: &[GroundTruthObject], max_range_m: f64, min_visible: f32) {
         self.frames += 1;
         self.detections += dets.len() as u64;
         let in_view: Vec<&GroundTruthObject> =
@@ -87,12 +88,19 @@ impl Tally {
             gt_used[j] = true;
             self.true_positives += 1;
             let o = in_view[j];
+            let d = &dets[i];
+            let previous = self.last_track_of.insert(o.id, d.track_id);
+            self.id_switches += previous.is_some_and(|p| p != d.track_id) as u64;
+            // Relative speed is judged once the same track has held the vehicle for a frame.
+            let settled = previous == Some(d.track_id);
             let truth_x = o.position_in_ego_m[0];
             if truth_x > 0.0 {
                 self.errors.push(MatchError {
                     true_distance_m: truth_x,
-                    distance_rel: (dets[i].distance_m - truth_x).abs() / truth_x,
-                    lateral_abs_m: (dets[i].lateral_offset_m - o.position_in_ego_m[1]).abs(),
+                    distance_rel: (d.distance_m - truth_x).abs() / truth_x,
+                    lateral_abs_m: (d.lateral_offset_m - o.position_in_ego_m[1]).abs(),
+                    relative_speed_abs_mps: (settled && d.relative_speed_mps != 0.0)
+                        .then(|| (d.relative_speed_mps - o.velocity_in_ego_mps[0]).abs()),
                 });
             }
         }
@@ -128,6 +136,10 @@ impl Tally {
         )
     }
 
+    pub fn relative_speed_error(&self) -> Option<(f64, f64)> {
+        percentiles(self.errors.iter().filter_map(|e| e.relative_speed_abs_mps))
+    }
+
     pub fn lateral_error(&self) -> Option<(f64, f64)> {
         percentiles(self.errors.iter().map(|e| e.lateral_abs_m))
     }
@@ -151,6 +163,7 @@ pub fn evaluate_scenario(scenario: Scenario, seed: u64, settings: &SimSettings, 
     let mut renderer = Renderer::new(&info, noise.camera_stddev, &mut SimRng::new(seed ^ 0xCA3E_2A00));
     let mut look_rng = SimRng::new(seed ^ 0x1006_0000);
     let mut detector = Detector::new(&info, DetectorParams::default());
+    let mut tracker = Tracker::new();
     let mut rgb = vec![0u8; renderer.frame_len()];
     let every = (settings.physics_hz as f64 / settings.rates_hz.camera).round().max(1.0) as u64;
     let last_step = (max_seconds * settings.physics_hz as f64) as u64;
@@ -159,7 +172,7 @@ pub fn evaluate_scenario(scenario: Scenario, seed: u64, settings: &SimSettings, 
             let look = renderer.draw_look(noise.brightness, &mut look_rng);
             let vis = renderer.render(world.road(), world.ego(), world.vehicles(), look, &mut rgb);
             let truth = ground_truth(&world, &vis);
-            let dets = detector.detect(&rgb);
+            let dets = tracker.update(&detector.detect(&rgb), world.time_ns() as f64 / 1e9);
             tally.add_frame(&dets, &truth.objects, 60.0, 0.5);
         }
         world.step(EgoInput::Cruise);
@@ -200,6 +213,9 @@ pub struct ScenarioScore {
     pub distance_error: Vec<(String, Option<(f64, f64)>)>,
     /// (median, p90) of |lateral error|, metres.
     pub lateral_error_m: Option<(f64, f64)>,
+    /// (median, p90) of |relative speed error|, m/s.
+    pub relative_speed_error_mps: Option<(f64, f64)>,
+    pub id_switches: u64,
 }
 
 impl ScenarioScore {
@@ -220,6 +236,8 @@ impl ScenarioScore {
                 })
                 .collect(),
             lateral_error_m: t.lateral_error(),
+            relative_speed_error_mps: t.relative_speed_error(),
+            id_switches: t.id_switches,
         }
     }
 }
@@ -254,6 +272,7 @@ impl Tally {
         self.eligible += other.eligible;
         self.eligible_found += other.eligible_found;
         self.errors.extend(other.errors);
+        self.id_switches += other.id_switches;
     }
 }
 
@@ -262,11 +281,11 @@ pub fn markdown(report: &DetectReport) -> String {
     let pct =
         |e: Option<(f64, f64)>| e.map_or("-".to_string(), |(m, p)| format!("{:.1}% / {:.1}%", m * 100.0, p * 100.0));
     let mut s = String::from(
-        "| scenario | frames | precision | recall (found/eligible) | dist. err. 0-20 m | 20-40 m | 40-60 m | 60+ m | lateral err. m |\n|---|---|---|---|---|---|---|---|---|\n",
+        "| scenario | frames | precision | recall (found/eligible) | dist. err. 0-20 m | 20-40 m | 40-60 m | 60+ m | lateral err. m | rel. speed err. m/s | id switches |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in report.scenarios.iter().chain(std::iter::once(&report.overall)) {
         s.push_str(&format!(
-            "| {} | {} | {:.3} | {:.3} ({}/{}) | {} | {} | {} | {} | {} |\n",
+            "| {} | {} | {:.3} | {:.3} ({}/{}) | {} | {} | {} | {} | {} | {} | {} |\n",
             r.scenario,
             r.frames,
             r.precision,
@@ -278,8 +297,10 @@ pub fn markdown(report: &DetectReport) -> String {
             pct(r.distance_error[2].1),
             pct(r.distance_error[3].1),
             r.lateral_error_m.map_or("-".into(), |(m, p)| format!("{m:.2} / {p:.2}")),
+            r.relative_speed_error_mps.map_or("-".into(), |(m, p)| format!("{m:.2} / {p:.2}")),
+            r.id_switches,
         ));
     }
-    s.push_str("\nDistance and lateral errors: median / p90 over matched detections.\n");
+    s.push_str("\nErrors: median / p90 over matched detections (relative speed: tracks seen twice or more).\n");
     s
 }

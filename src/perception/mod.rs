@@ -3,13 +3,18 @@
 //! # Layout
 //! - [`geometry`]: the calibrated camera: rays, the ground plane, distances.
 //! - [`detector`]: one frame -> vehicles, classical computer vision (pixels + camera info only).
+//! - [`tracker`]: detections joined into tracks; distance and relative speed by a Kalman filter.
 //! - [`eval`]: scores detections against the simulator's ground truth.
+//! - [`node`]: slipstream-detect on the bus (camera/front -> perception/objects).
 //!
 //! docs/perception.md describes the method, its limits and its measured scores.
 
 pub mod detector;
 pub mod eval;
 pub mod geometry;
+pub mod node;
+pub mod tracker;
 
 pub use detector::{Detector, DetectorParams, FrameDetection};
 pub use geometry::CameraModel;
+pub use tracker::Tracker;
