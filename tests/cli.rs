@@ -129,3 +129,29 @@ fn bench_quick_every_path_delivers() {
     }
     assert!(!report["ratios"].as_array().unwrap().is_empty());
 }
+
+#[test]
+fn eval_detect_scores_a_scenario_as_json() {
+    let mut cmd = bin();
+    cmd.args(["eval", "detect", "--scenario", "cut-in", "--seconds", "6", "--json"]);
+    let out = run(cmd, Duration::from_secs(120));
+    assert!(out.status.success(), "stderr: {}", String::from_utf8_lossy(&out.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let cut_in = &report["scenarios"][0];
+    assert_eq!(cut_in["scenario"], "cut-in");
+    assert!(cut_in["frames"].as_u64().unwrap() >= 100, "{cut_in}");
+    assert!(cut_in["eligible"].as_u64().unwrap() > 100, "{cut_in}");
+    assert!(cut_in["recall"].as_f64().unwrap() > 0.9 && cut_in["precision"].as_f64().unwrap() > 0.9, "{cut_in}");
+    assert_eq!(report["overall"]["found"], cut_in["found"]);
+    let bad = run(
+        {
+            let mut c = bin();
+            c.args(["eval", "detect", "--scenario", "nope"]);
+            c
+        },
+        Duration::from_secs(30),
+    );
+    assert!(
+        !bad.status.success() && String::from_utf8_lossy(&bad.stderr).contains("no built-in scenario named `nope`")
+    );
+}

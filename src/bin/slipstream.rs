@@ -57,8 +57,8 @@ enum Command {
 
 #[derive(Subcommand)]
 enum EvalCommand {
-    /// Vehicle detection: runs scenarios in process (world, camera, detector; the ego
-    /// cruising), matches detections to the ground truth of the same frame, and reports
+    /// Vehicle detection: runs scenarios in process (world, camera, detector and tracker; the
+    /// ego keeps its start speed and slows for the vehicle ahead), matches detections to the ground truth of the same frame, and reports
     /// precision, recall and distance/lateral errors by range
     Detect {
         /// Scenarios to run (names or files) [default: the standard set]

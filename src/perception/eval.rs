@@ -1,5 +1,6 @@
 //! `slipstream eval detect`: runs scenarios in process (the simulator's world and renderer,
-//! the ego cruising), runs the detector on every camera frame and scores it against the
+//! the ego driven like traffic: its start speed, slowing for the vehicle ahead), runs the
+//! detector and tracker on every camera frame and scores it against the
 //! ground truth of the same frame (same simulation step, so matching by time is exact).
 //!
 //! A ground-truth vehicle counts for recall when it is within `max_range_m` ahead and at least
@@ -175,7 +176,7 @@ pub fn evaluate_scenario(scenario: Scenario, seed: u64, settings: &SimSettings, 
             let dets = tracker.update(&detector.detect(&rgb), world.time_ns() as f64 / 1e9);
             tally.add_frame(&dets, &truth.objects, 60.0, 0.5);
         }
-        world.step(EgoInput::Cruise);
+        world.step(EgoInput::Follow);
     }
 }
 

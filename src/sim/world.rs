@@ -85,6 +85,9 @@ pub fn bumper_gap_m(a: &VehicleView, b: &VehicleView) -> f64 {
 pub enum EgoInput {
     /// Hold the start speed in lane (before any controller has spoken).
     Cruise,
+    /// Hold the start speed in lane, slowing for the vehicle ahead as traffic does (a
+    /// stand-in driver for offline evaluation of perception).
+    Follow,
     /// A controller's command (or the timeout policy's brake).
     Command(ControlCommand),
 }
@@ -358,8 +361,9 @@ impl World {
             pursue(&ego_params, &world.road, &ego.observation(), world.road.lane_center_d(lane))
         };
         let ego_act = match input {
-            EgoInput::Cruise => {
-                let (throttle, brake) = self.ego_cruise.longitudinal(&ego_params, ego.forward_speed_mps(), None, dt);
+            EgoInput::Cruise | EgoInput::Follow => {
+                let lead = if input == EgoInput::Follow { self.lead_of(0) } else { None };
+                let (throttle, brake) = self.ego_cruise.longitudinal(&ego_params, ego.forward_speed_mps(), lead, dt);
                 self.ego_applied =
                     ControlCommand { throttle: throttle as f32, brake: brake as f32, steer: 0.0, answers_step: None };
                 Actuation { throttle, brake, steer: lane_keep(self) }
