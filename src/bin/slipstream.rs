@@ -147,8 +147,7 @@ fn main() -> Result<()> {
         }
         Command::Eval(EvalCommand::Detect { scenarios, seconds, json }) => {
             use slipstream::perception::eval;
-            let names: Vec<String> =
-                if scenarios.is_empty() { eval::STANDARD.iter().map(|s| s.to_string()).collect() } else { scenarios };
+            let names: Vec<String> = if scenarios.is_empty() { eval::standard() } else { scenarios };
             let settings = slipstream::sim::SimSettings::default();
             let report = eval::evaluate(&names, seconds, &settings)?;
             if json {

@@ -378,7 +378,7 @@ fn union(parent: &mut [u32], a: u32, b: u32) {
 
 #[cfg(test)]
 mod tests {
-    use crate::perception::eval::{evaluate_scenario, Tally, RANGES_M, STANDARD};
+    use crate::perception::eval::{evaluate_scenario, standard, Tally, RANGES_M};
     use crate::sim::settings::SimSettings;
     use crate::sim::Scenario;
 
@@ -460,8 +460,8 @@ mod tests {
     fn scores_on_the_standard_scenarios() {
         let settings = SimSettings::default();
         let mut all = Tally::default();
-        for name in STANDARD {
-            let s = Scenario::find(name).unwrap();
+        for name in standard() {
+            let s = Scenario::find(&name).unwrap();
             let seed = s.seed;
             let mut t = Tally::default();
             evaluate_scenario(s, seed, &settings, 30.0, &mut t);
@@ -473,7 +473,7 @@ mod tests {
                 t.eligible,
                 t.detections
             );
-            evaluate_scenario(Scenario::find(name).unwrap(), seed, &settings, 30.0, &mut all);
+            evaluate_scenario(Scenario::find(&name).unwrap(), seed, &settings, 30.0, &mut all);
         }
         println!("ALL P {:.3} R {:.3}", all.precision(), all.recall());
         for (lo, hi) in RANGES_M {

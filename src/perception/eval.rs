@@ -14,7 +14,6 @@ use super::tracker::Tracker;
 use crate::msg::{BoundingBox2d, Detection, GroundTruthObject, ImageEncoding};
 use crate::sim::ground_truth::ground_truth;
 use crate::sim::render::Renderer;
-use crate::sim::rng::SimRng;
 use crate::sim::settings::SimSettings;
 use crate::sim::world::{EgoInput, World};
 use crate::sim::Scenario;
@@ -161,8 +160,7 @@ pub fn evaluate_scenario(scenario: Scenario, seed: u64, settings: &SimSettings, 
     let info = settings.camera_info(ImageEncoding::Rgb8);
     let noise = scenario.noise.clone();
     let mut world = World::new(scenario, seed, settings.physics_hz);
-    let mut renderer = Renderer::new(&info, noise.camera_stddev, &mut SimRng::new(seed ^ 0xCA3E_2A00));
-    let mut look_rng = SimRng::new(seed ^ 0x1006_0000);
+    let (mut renderer, mut look_rng) = Renderer::seeded(&info, noise.camera_stddev, seed);
     let mut detector = Detector::new(&info, DetectorParams::default());
     let mut tracker = Tracker::new();
     let mut rgb = vec![0u8; renderer.frame_len()];
@@ -180,17 +178,10 @@ pub fn evaluate_scenario(scenario: Scenario, seed: u64, settings: &SimSettings, 
     }
 }
 
-/// The standard scenarios for detection scores.
-pub const STANDARD: [&str; 8] = [
-    "steady-follow",
-    "approach-slower-lead",
-    "lead-brakes-to-stop",
-    "stop-and-go",
-    "cut-in",
-    "cut-out-revealing-stopped-car",
-    "busy-traffic",
-    "curve-follow",
-];
+/// The standard scenarios for detection scores: every built-in one.
+pub fn standard() -> Vec<String> {
+    crate::sim::scenario::BUILT_IN.iter().map(|(name, _)| name.to_string()).collect()
+}
 
 /// Scores per scenario and over all, as `slipstream eval detect` prints them.
 #[derive(Debug, Clone, Serialize)]

@@ -20,7 +20,6 @@ use parking_lot::Mutex;
 
 use super::ground_truth::ground_truth;
 use super::render::{ObjectVisibility, Renderer};
-use super::rng::SimRng;
 use super::settings::{BeforeFirst, ControlPolicy, Mode, OnTimeout, SimSettings};
 use super::world::{End, World, EGO_ID};
 use crate::bus::{Bus, BusError, Received};
@@ -205,8 +204,7 @@ async fn run_loop(
     let info = settings.camera_info(frames.encoding());
     let seed = world.seed();
     let noise = world.scenario().noise.clone();
-    let mut renderer = Renderer::new(&info, noise.camera_stddev, &mut SimRng::new(seed ^ 0xCA3E_2A00));
-    let mut look_rng = SimRng::new(seed ^ 0x1006_0000);
+    let (mut renderer, mut look_rng) = Renderer::seeded(&info, noise.camera_stddev, seed);
     let mut scratch = vec![0u8; renderer.frame_len()];
     let mut policy = Policy { spec: settings.control.clone(), last: None, braking: false, timeouts: 0 };
 

@@ -3,7 +3,6 @@
 
 use super::ground_truth::ground_truth;
 use super::render::Renderer;
-use super::rng::SimRng;
 use super::settings::SimSettings;
 use super::world::{EgoInput, World};
 use crate::msg::{GroundTruthObjects, ImageEncoding};
@@ -22,8 +21,8 @@ pub fn preview(
     }
     let info = settings.camera_info(ImageEncoding::Rgb8);
     let noise = world.scenario().noise.clone();
-    let mut renderer = Renderer::new(&info, noise.camera_stddev, &mut SimRng::new(world.seed()));
-    let look = renderer.draw_look(noise.brightness, &mut SimRng::new(world.seed()));
+    let (mut renderer, mut look_rng) = Renderer::seeded(&info, noise.camera_stddev, world.seed());
+    let look = renderer.draw_look(noise.brightness, &mut look_rng);
     let mut rgb = vec![0u8; renderer.frame_len()];
     let visibility = renderer.render(world.road(), world.ego(), world.vehicles(), look, &mut rgb);
     let truth = ground_truth(&world, &visibility);

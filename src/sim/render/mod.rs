@@ -97,6 +97,13 @@ impl Renderer {
         }
     }
 
+    /// The camera of a run with `seed`: its pixel noise and the generator of each frame's
+    /// look both come from the seed, so every consumer (the node, `eval`, `--preview`) draws
+    /// the same frames for the same run.
+    pub fn seeded(info: &CameraInfo, noise_stddev: f64, seed: u64) -> (Renderer, SimRng) {
+        (Renderer::new(info, noise_stddev, &mut SimRng::new(seed ^ 0xCA3E_2A00)), SimRng::new(seed ^ 0x1006_0000))
+    }
+
     pub fn info(&self) -> &CameraInfo {
         &self.info
     }
