@@ -10,10 +10,12 @@
 //!   flags every binary shares.
 //! - [`bus`]: typed publishers and subscribers over a Zenoh session, latest-only delivery,
 //!   per-subscription statistics, liveliness.
+//! - [`acc`]: slipstream-acc, the adaptive cruise control, and its scenario suite.
 //! - [`bench`]: `slipstream bench`, the bus against raw Zenoh, UDP and TCP in one run.
 //! - [`tools`]: `slipstream info` (and later `top`, `echo`).
 //! - [`cli`]: tracing set-up shared by the binaries.
 
+pub mod acc;
 pub mod bench;
 pub mod bus;
 pub mod cli;

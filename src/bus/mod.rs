@@ -160,8 +160,40 @@ impl Bus {
         Ok(names)
     }
 
+    /// Follows one node's liveliness token: `is_alive()` turns true when the node is up and
+    /// false when it leaves or its session dies.
+    pub async fn watch_node(&self, name: &str) -> Result<NodeWatch, BusError> {
+        let key = self.topics.node_key(name)?;
+        let alive = Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let flag = alive.clone();
+        let subscriber = self
+            .session
+            .liveliness()
+            .declare_subscriber(key.clone())
+            .history(true)
+            .callback(move |sample| {
+                let up = sample.kind() == zenoh::sample::SampleKind::Put;
+                flag.store(up, std::sync::atomic::Ordering::SeqCst);
+            })
+            .await
+            .map_err(zerr(format!("liveliness subscriber {key}")))?;
+        Ok(NodeWatch { alive, _subscriber: subscriber })
+    }
+
     /// Leaves the bus: undeclares everything and closes the session.
     pub async fn close(self) -> Result<(), BusError> {
         self.session.close().await.map_err(zerr("close session"))
+    }
+}
+
+/// One node's liveliness, as `Bus::watch_node` follows it.
+pub struct NodeWatch {
+    alive: Arc<std::sync::atomic::AtomicBool>,
+    _subscriber: zenoh::pubsub::Subscriber<()>,
+}
+
+impl NodeWatch {
+    pub fn is_alive(&self) -> bool {
+        self.alive.load(std::sync::atomic::Ordering::SeqCst)
     }
 }

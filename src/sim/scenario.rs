@@ -20,6 +20,7 @@ pub const BUILT_IN: &[(&str, &str)] = &[
     ("cut-out-revealing-stopped-car", include_str!("../../scenarios/cut-out-revealing-stopped-car.json5")),
     ("busy-traffic", include_str!("../../scenarios/busy-traffic.json5")),
     ("curve-follow", include_str!("../../scenarios/curve-follow.json5")),
+    ("open-road", include_str!("../../scenarios/open-road.json5")),
 ];
 
 const FIX: &str = "see docs/simulator.md (scenario format) for every field and its allowed values";
@@ -83,6 +84,10 @@ pub struct EgoSpec {
     #[serde(default = "EgoSpec::default_s")]
     pub s_m: f64,
     pub speed_mps: f64,
+    /// The cruise speed a controller is set to (`slipstream eval acc` sets the ACC to it);
+    /// default: the start speed.
+    #[serde(default)]
+    pub set_speed_mps: Option<f64>,
     #[serde(default)]
     pub class: ClassSpec,
     /// The simulator steers the ego along its lane; vehicle/control's steer adds to it.

@@ -1,0 +1,430 @@
+//! The ACC's decisions, free of any I/O: lead selection, the spacing law, collision warning and
+//! emergency braking, the stale-data fallback and the low-level loop from target acceleration
+//! to throttle and brake. The node (`super::node`) feeds it; tests drive it directly.
+//!
+//! Units: seconds of simulated time, metres, m/s, m/s2. The ego's body frame: x forward from the
+//! rear axle, y left.
+
+use std::collections::HashMap;
+
+use super::settings::{AccSettings, TIME_GAP_RANGE_S};
+use crate::msg::{AccCommand, AccMode, AccStatus, AccWarning, Detections, GroundTruthObjects, LeadInfo};
+use crate::sim::driver::actuate_acceleration;
+use crate::sim::vehicle::VehicleParams;
+
+/// A vehicle ahead, as perception (or ground truth) reports it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Object {
+    pub id: u32,
+    /// From the ego's origin (rear axle) to the object's rear, along ego x.
+    pub distance_m: f64,
+    /// The object's centre, ego y (positive left).
+    pub lateral_m: f64,
+    /// Object speed minus ego speed along ego x (negative: closing in).
+    pub relative_speed_mps: f64,
+}
+
+/// The objects of one camera frame.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct PerceptionFrame {
+    /// Simulation time of the frame.
+    pub stamp_s: f64,
+    pub objects: Vec<Object>,
+}
+
+impl PerceptionFrame {
+    pub fn from_detections(stamp_s: f64, d: &Detections) -> Self {
+        let objects = d
+            .detections
+            .iter()
+            .map(|d| Object {
+                id: d.track_id,
+                distance_m: d.distance_m,
+                lateral_m: d.lateral_offset_m,
+                relative_speed_mps: d.relative_speed_mps,
+            })
+            .collect();
+        PerceptionFrame { stamp_s, objects }
+    }
+
+    /// Ground truth as perception: every vehicle ahead of the ego's origin.
+    pub fn from_ground_truth(stamp_s: f64, gt: &GroundTruthObjects) -> Self {
+        let objects = gt
+            .objects
+            .iter()
+            .filter(|o| o.position_in_ego_m[0] > 0.0)
+            .map(|o| Object {
+                id: o.id,
+                distance_m: o.position_in_ego_m[0],
+                lateral_m: o.position_in_ego_m[1],
+                relative_speed_mps: o.velocity_in_ego_mps[0],
+            })
+            .collect();
+        PerceptionFrame { stamp_s, objects }
+    }
+}
+
+/// The ego now: from vehicle/speed and vehicle/state.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct EgoNow {
+    pub t_s: f64,
+    pub speed_mps: f64,
+    /// Measured longitudinal acceleration.
+    pub accel_mps2: f64,
+    pub yaw_rate_radps: f64,
+}
+
+/// What one control step decided.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Output {
+    pub throttle: f32,
+    pub brake: f32,
+    pub status: AccStatus,
+}
+
+/// What the controller remembers of one track.
+#[derive(Debug, Clone, Copy)]
+struct Track {
+    stamp_s: f64,
+    lateral_m: f64,
+    lateral_rate_mps: f64,
+    lead_speed_mps: f64,
+    lead_accel_mps2: f64,
+    seen: u32,
+}
+
+/// The lead vehicle as of the last perception frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Lead {
+    id: u32,
+    stamp_s: f64,
+    /// Bumper to bumper, at `stamp_s`.
+    gap_m: f64,
+    relative_speed_mps: f64,
+    accel_mps2: f64,
+}
+
+/// Filter constant for the per-track derivative estimates (lateral speed, lead acceleration).
+const RATE_FILTER: f64 = 0.3;
+/// Margin kept when computing the deceleration that still avoids a collision.
+const THREAT_MARGIN_M: f64 = 1.0;
+/// Lead deceleration below which the threat assessment assumes it brakes to a stop.
+const LEAD_BRAKING_MPS2: f64 = -0.5;
+/// Below this speed the ego counts as standing.
+const STANDSTILL_MPS: f64 = 0.2;
+/// Brake held at standstill.
+const HOLD_BRAKE: f32 = 0.3;
+/// Integrator of the low-level loop: gain (1/s) and bound (m/s2).
+const LOW_LEVEL_KI: f64 = 0.5;
+const LOW_LEVEL_I_MAX: f64 = 0.7;
+
+pub struct Controller {
+    s: AccSettings,
+    params: VehicleParams,
+    enabled: bool,
+    set_speed_mps: f64,
+    time_gap_s: f64,
+    tracks: HashMap<u32, Track>,
+    lead: Option<Lead>,
+    last_t_s: Option<f64>,
+    /// The target acceleration of the last step (jerk-limited outside emergencies).
+    accel_cmd: f64,
+    integral: f64,
+    emergency: bool,
+}
+
+/// The threat a lead poses now.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Threat {
+    pub ttc_s: Option<f64>,
+    /// Deceleration (positive) that keeps THREAT_MARGIN_M to the lead.
+    pub needed_decel_mps2: f64,
+}
+
+/// Time to collision and the deceleration that still avoids one, from the gap, the speeds and
+/// the lead's acceleration (a braking lead is assumed to brake to a stop).
+pub fn threat(gap_m: f64, ego_speed_mps: f64, lead_speed_mps: f64, lead_accel_mps2: f64) -> Threat {
+    let closing = ego_speed_mps - lead_speed_mps;
+    let ttc_s = (closing > 0.1).then(|| gap_m.max(0.0) / closing);
+    let room = (gap_m - THREAT_MARGIN_M).max(0.1);
+    let lead_decel = (-lead_accel_mps2).max(0.0);
+    // Both keep braking until the speeds match: the relative motion decides.
+    let matching = if closing > 0.0 { lead_decel + closing * closing / (2.0 * room) } else { 0.0 };
+    if lead_accel_mps2 >= LEAD_BRAKING_MPS2 {
+        return Threat { ttc_s, needed_decel_mps2: matching };
+    }
+    // A braking lead: does it stop before the speeds would match?
+    let lead_stops_first = closing <= 0.0 || {
+        let t_match = closing / (matching - lead_decel).max(1e-6);
+        lead_speed_mps - lead_decel * t_match <= 0.0
+    };
+    let needed = if lead_stops_first {
+        // Then stop behind where it stops (v_L^2 / 2|a_L| on).
+        let lead_stop = lead_speed_mps.max(0.0).powi(2) / (2.0 * lead_decel);
+        ego_speed_mps.powi(2) / (2.0 * (room + lead_stop))
+    } else {
+        matching
+    };
+    Threat { ttc_s, needed_decel_mps2: needed }
+}
+
+impl Controller {
+    pub fn new(settings: AccSettings) -> Self {
+        Controller {
+            params: settings.vehicle.params(),
+            enabled: settings.enabled,
+            set_speed_mps: settings.set_speed_mps,
+            time_gap_s: settings.time_gap_s,
+            s: settings,
+            tracks: HashMap::new(),
+            lead: None,
+            last_t_s: None,
+            accel_cmd: 0.0,
+            integral: 0.0,
+            emergency: false,
+        }
+    }
+
+    pub fn settings(&self) -> &AccSettings {
+        &self.s
+    }
+
+    pub fn set_speed_mps(&self) -> f64 {
+        self.set_speed_mps
+    }
+
+    pub fn time_gap_s(&self) -> f64 {
+        self.time_gap_s
+    }
+
+    pub fn enabled(&self) -> bool {
+        self.enabled
+    }
+
+    /// Applies acc/command; returns what was refused (a time gap outside the allowed range is
+    /// clamped into it).
+    pub fn command(&mut self, cmd: &AccCommand) -> Option<String> {
+        let mut note = None;
+        if let Some(e) = cmd.enable {
+            if e != self.enabled {
+                tracing::info!(enabled = e, "acc/command: {}", if e { "engaged" } else { "disengaged" });
+            }
+            self.enabled = e;
+            if e {
+                self.emergency = false;
+            }
+        }
+        if let Some(v) = cmd.set_speed_mps {
+            self.set_speed_mps = v.clamp(0.0, 70.0);
+            tracing::info!(set_speed_mps = self.set_speed_mps, "acc/command: set speed");
+        }
+        if let Some(h) = cmd.time_gap_s {
+            let clamped = h.clamp(*TIME_GAP_RANGE_S.start(), *TIME_GAP_RANGE_S.end());
+            if clamped != h {
+                note = Some(format!("time gap {h} s is outside 0.8..3.0 s; using {clamped} s"));
+            }
+            self.time_gap_s = clamped;
+            tracing::info!(time_gap_s = self.time_gap_s, "acc/command: time gap");
+        }
+        note
+    }
+
+    /// The ego's path curvature, from its yaw rate.
+    fn curvature(ego: &EgoNow) -> f64 {
+        ego.yaw_rate_radps / ego.speed_mps.max(2.0)
+    }
+
+    /// Takes a perception frame: updates the tracks and picks the lead.
+    pub fn perceive(&mut self, frame: &PerceptionFrame, ego: &EgoNow) {
+        let front = self.s.vehicle.front_overhang_from_origin_m;
+        let kappa = Self::curvature(ego);
+        let lane = &self.s.lane;
+        let current = self.lead.map(|l| l.id);
+        let mut best: Option<Lead> = None;
+        for o in &frame.objects {
+            let lead_speed = ego.speed_mps + o.relative_speed_mps;
+            let track = match self.tracks.get(&o.id) {
+                Some(t) if frame.stamp_s > t.stamp_s => {
+                    let dt = frame.stamp_s - t.stamp_s;
+                    let lat_rate = (o.lateral_m - t.lateral_m) / dt;
+                    let accel = (lead_speed - t.lead_speed_mps) / dt;
+                    Track {
+                        stamp_s: frame.stamp_s,
+                        lateral_m: o.lateral_m,
+                        lateral_rate_mps: t.lateral_rate_mps + RATE_FILTER * (lat_rate - t.lateral_rate_mps),
+                        lead_speed_mps: lead_speed,
+                        lead_accel_mps2: t.lead_accel_mps2 + RATE_FILTER * (accel - t.lead_accel_mps2),
+                        seen: t.seen.saturating_add(1),
+                    }
+                }
+                Some(t) => *t,
+                None => Track {
+                    stamp_s: frame.stamp_s,
+                    lateral_m: o.lateral_m,
+                    lateral_rate_mps: 0.0,
+                    lead_speed_mps: lead_speed,
+                    lead_accel_mps2: 0.0,
+                    seen: 1,
+                },
+            };
+            self.tracks.insert(o.id, track);
+
+            let gap = o.distance_m - front;
+            if o.distance_m <= 0.0 || gap > lane.range_m {
+                continue;
+            }
+            let path_y = kappa * o.distance_m * o.distance_m / 2.0;
+            let off = o.lateral_m - path_y;
+            // Lateral speed counts once a track has a few frames behind it.
+            let predicted = if track.seen >= 4 { off + track.lateral_rate_mps * lane.lateral_lookahead_s } else { off };
+            let limit = if current == Some(o.id) { lane.stay_in_lane_m } else { lane.in_lane_m };
+            if off.abs().min(predicted.abs()) >= limit {
+                continue;
+            }
+            if best.is_none_or(|b| gap < b.gap_m) {
+                best = Some(Lead {
+                    id: o.id,
+                    stamp_s: frame.stamp_s,
+                    gap_m: gap,
+                    relative_speed_mps: o.relative_speed_mps,
+                    accel_mps2: if track.seen >= 3 { track.lead_accel_mps2 } else { 0.0 },
+                });
+            }
+        }
+        if best.map(|b| b.id) != current {
+            tracing::debug!(from = ?current, to = ?best.map(|b| b.id), "lead changed");
+        }
+        self.lead = best;
+        self.tracks.retain(|_, t| frame.stamp_s - t.stamp_s < 2.0);
+    }
+
+    /// One control step. `warnings` are the node's findings about its inputs (stale speed or
+    /// perception, perception lost); any of them puts the ACC in Stale mode.
+    pub fn step(&mut self, ego: &EgoNow, warnings: &[AccWarning]) -> Output {
+        let dt = self.last_t_s.map_or(0.0, |t| (ego.t_s - t).clamp(0.0, 0.2));
+        self.last_t_s = Some(ego.t_s);
+        let v = ego.speed_mps.max(0.0);
+        let lim = &self.s.limits;
+        let mut warnings: Vec<AccWarning> = warnings.to_vec();
+        let stale = !warnings.is_empty();
+
+        // The lead now: its gap moved on from the frame's time at the measured relative speed.
+        let lead = self.lead.filter(|_| !stale).map(|l| {
+            let ahead = (ego.t_s - l.stamp_s).clamp(0.0, 0.2);
+            let gap = l.gap_m + l.relative_speed_mps * ahead;
+            let lead_speed = (v + l.relative_speed_mps).max(0.0);
+            (l, gap, lead_speed)
+        });
+        let desired_gap = self.s.standstill_m + self.time_gap_s * v;
+        let threat = lead.map(|(l, gap, lead_speed)| threat(gap, v, lead_speed, l.accel_mps2));
+        if let Some(t) = threat {
+            if t.ttc_s.is_some_and(|x| x < self.s.emergency.warn_ttc_s) || t.needed_decel_mps2 > lim.decel_mps2 {
+                warnings.push(AccWarning::ForwardCollision);
+            }
+        }
+
+        let (mode, accel) = if !self.enabled {
+            self.emergency = false;
+            (AccMode::Off, 0.0)
+        } else if stale {
+            self.emergency = false;
+            // Throttle off at once, then down to the stale deceleration within the jerk limit.
+            let from = self.accel_cmd.min(0.0);
+            (AccMode::Stale, (-self.s.stale.decel_mps2).max(from - lim.jerk_mps3 * dt))
+        } else {
+            let e = &self.s.emergency;
+            if let Some(t) = threat {
+                let ttc = t.ttc_s.unwrap_or(f64::INFINITY);
+                if !self.emergency && (ttc < e.brake_ttc_s || t.needed_decel_mps2 > lim.decel_mps2) {
+                    tracing::warn!(ttc_s = ttc, needed_decel_mps2 = t.needed_decel_mps2, "emergency braking");
+                    self.emergency = true;
+                } else if self.emergency
+                    && (v < STANDSTILL_MPS || (ttc > e.release_ttc_s && t.needed_decel_mps2 < 0.8 * lim.decel_mps2))
+                {
+                    tracing::info!(ttc_s = ttc, "emergency over");
+                    self.emergency = false;
+                }
+            } else if self.emergency {
+                self.emergency = false;
+            }
+            if self.emergency {
+                let t = threat.expect("emergency only with a lead");
+                let vehicle_max = self.params.max_brake_decel_mps2;
+                let decel = if t.ttc_s.is_some_and(|x| x < e.full_brake_ttc_s) {
+                    vehicle_max
+                } else {
+                    (1.3 * t.needed_decel_mps2).clamp(lim.decel_mps2, vehicle_max)
+                };
+                (AccMode::Emergency, -decel)
+            } else {
+                let g = &self.s.gains;
+                let cruise = (g.cruise_per_s * (self.set_speed_mps - v)).clamp(-lim.decel_mps2, lim.accel_mps2);
+                let follow = lead.map(|(_, gap, lead_speed)| {
+                    let law = g.gap_per_s2 * (gap - desired_gap) + g.speed_per_s * (lead_speed - v);
+                    // Never less braking than avoiding a collision needs (once it matters).
+                    let needed = threat.map_or(0.0, |t| t.needed_decel_mps2);
+                    let mut a = if needed > 0.1 { law.min(-needed) } else { law };
+                    // At standstill: stay until the lead has moved off.
+                    if v < STANDSTILL_MPS && !(gap > self.s.standstill_m + 1.0 && lead_speed > 0.5) {
+                        a = a.min(-0.5);
+                    }
+                    a
+                });
+                let (mode, target) = match follow {
+                    Some(f) if f < cruise => (AccMode::Follow, f),
+                    _ => (AccMode::Speed, cruise),
+                };
+                let target = target.clamp(-lim.decel_mps2, lim.accel_mps2);
+                let step = lim.jerk_mps3 * dt;
+                (mode, target.clamp(self.accel_cmd - step, self.accel_cmd + step))
+            }
+        };
+        self.accel_cmd = accel;
+
+        let (throttle, brake) = self.actuate(mode, accel, v, ego.accel_mps2, dt);
+        let status = AccStatus {
+            mode,
+            set_speed_mps: self.set_speed_mps,
+            time_gap_s: self.time_gap_s,
+            target_accel_mps2: accel,
+            lead: lead.map(|(l, gap, _)| LeadInfo {
+                id: l.id,
+                gap_m: gap,
+                desired_gap_m: desired_gap,
+                relative_speed_mps: l.relative_speed_mps,
+                ttc_s: threat.and_then(|t| t.ttc_s),
+            }),
+            warnings,
+        };
+        Output { throttle, brake, status }
+    }
+
+    /// The low-level loop: the vehicle model's throttle/brake for the target, plus an
+    /// integrator on the acceleration error for what the model does not know.
+    fn actuate(&mut self, mode: AccMode, accel: f64, v: f64, measured: f64, dt: f64) -> (f32, f32) {
+        match mode {
+            AccMode::Off => {
+                self.integral = 0.0;
+                return (0.0, 0.0);
+            }
+            AccMode::Emergency => {
+                self.integral = 0.0;
+                if accel <= -self.params.max_brake_decel_mps2 {
+                    return (0.0, 1.0);
+                }
+            }
+            _ => {
+                if v > 1.0 && accel.abs() < self.s.limits.decel_mps2 {
+                    self.integral = (self.integral + LOW_LEVEL_KI * (accel - measured) * dt)
+                        .clamp(-LOW_LEVEL_I_MAX, LOW_LEVEL_I_MAX);
+                }
+            }
+        }
+        let (throttle, brake) = actuate_acceleration(&self.params, v, accel + self.integral);
+        if v < STANDSTILL_MPS && accel <= 0.0 {
+            return (0.0, (brake as f32).max(HOLD_BRAKE));
+        }
+        let throttle = if mode == AccMode::Stale { 0.0 } else { throttle };
+        (throttle as f32, brake as f32)
+    }
+}

@@ -1,0 +1,274 @@
+//! Controller and closed-loop tests (ground truth, in one process).
+
+use super::controller::*;
+use super::eval::{Metrics, Trace};
+use super::settings::AccSettings;
+use crate::msg::{AccCommand, AccMode, AccWarning};
+use crate::sim::scenario::{Scenario, BUILT_IN};
+
+fn closed_loop(name: &str) -> (Trace, Metrics) {
+    let scenario = Scenario::find(name).unwrap();
+    let mut s = AccSettings::default();
+    s.set_speed_mps = scenario.ego.set_speed_mps.unwrap_or(scenario.ego.speed_mps);
+    let trace = super::offline::run(scenario, s, 100, 20.0);
+    let m = Metrics::of(&trace);
+    (trace, m)
+}
+
+#[test]
+#[ignore]
+fn print_all() {
+    for (name, _) in BUILT_IN {
+        let (_, m) = closed_loop(name);
+        println!("{name}: pass {} coll {} gap {:?} ttc {:?} tg {:?} ({:.0}s) spd {:?} acc {:.2} dec {:.2} jerk {:.2} em {:.1}s emdec {:.1}",
+            m.pass, m.collisions, m.min_gap_m, m.min_ttc_s, m.time_gap_rms_error_s, m.steady_follow_s, m.speed_rmse_mps,
+            m.max_accel_mps2, m.max_decel_mps2, m.max_jerk_mps3, m.emergency_s, m.max_decel_in_emergency_mps2);
+        for c in m.checks.iter().filter(|c| !c.pass) {
+            println!("   FAIL {} {:?} {}", c.name, c.value, c.aim);
+        }
+    }
+}
+
+const DT: f64 = 0.01;
+
+fn ego(t_s: f64, speed_mps: f64) -> EgoNow {
+    EgoNow { t_s, speed_mps, accel_mps2: 0.0, yaw_rate_radps: 0.0 }
+}
+
+fn obj(id: u32, gap_m: f64, lateral_m: f64, relative_speed_mps: f64) -> Object {
+    // distance is from the rear axle: the default front overhang is 3.65 m.
+    Object { id, distance_m: gap_m + 3.65, lateral_m, relative_speed_mps }
+}
+
+fn frame(t_s: f64, objects: Vec<Object>) -> PerceptionFrame {
+    PerceptionFrame { stamp_s: t_s, objects }
+}
+
+/// Steps a point mass that follows the target acceleration exactly, for `seconds`.
+fn drive(
+    c: &mut Controller,
+    t0: f64,
+    v0: f64,
+    seconds: f64,
+    objects: impl Fn(f64) -> Vec<Object>,
+) -> Vec<(f64, f64, Output)> {
+    let (mut t, mut v) = (t0, v0);
+    let mut out = Vec::new();
+    while t < t0 + seconds - 1e-9 {
+        if ((t / DT).round() as i64) % 5 == 0 {
+            c.perceive(&frame(t, objects(t)), &ego(t, v));
+        }
+        let o = c.step(&ego(t, v), &[]);
+        v = (v + o.status.target_accel_mps2 * DT).max(0.0);
+        out.push((t, v, o));
+        t += DT;
+    }
+    out
+}
+
+#[test]
+fn every_built_in_scenario_passes_on_ground_truth_in_one_process() {
+    for (name, _) in BUILT_IN {
+        let (trace, m) = closed_loop(name);
+        let failed: Vec<_> = m.checks.iter().filter(|c| !c.pass).collect();
+        assert!(m.pass, "{name}: {failed:?}");
+        assert!(trace.samples.len() > 1000, "{name}: {} samples", trace.samples.len());
+    }
+}
+
+#[test]
+fn speed_mode_reaches_the_set_speed_within_the_comfort_limits() {
+    let mut c = Controller::new(AccSettings { set_speed_mps: 30.0, ..AccSettings::default() });
+    let run = drive(&mut c, 0.0, 20.0, 20.0, |_| vec![]);
+    let (_, v_end, last) = run.last().unwrap();
+    assert!((v_end - 30.0).abs() < 0.2, "speed {v_end}");
+    assert_eq!(last.status.mode, AccMode::Speed);
+    let mut prev = 0.0;
+    for (_, _, o) in &run {
+        let a = o.status.target_accel_mps2;
+        assert!(a <= 2.0 + 1e-9, "accel {a}");
+        assert!((a - prev).abs() <= 2.5 * DT + 1e-9, "jerk {} m/s3", (a - prev) / DT);
+        prev = a;
+    }
+    assert!(run.iter().any(|(_, _, o)| o.status.target_accel_mps2 > 1.99), "uses the full comfort acceleration");
+}
+
+#[test]
+fn follow_mode_settles_at_the_time_gap_behind_a_steady_lead() {
+    let mut c = Controller::new(AccSettings { set_speed_mps: 30.0, ..AccSettings::default() });
+    // Lead at 20 m/s, 80 m ahead; the ego at 25 m/s. Integrate the lead's position too.
+    let lead_x = std::cell::Cell::new(80.0);
+    let ego_x = std::cell::Cell::new(0.0);
+    let (mut t, mut v) = (0.0, 25.0);
+    while t < 60.0 {
+        if ((t / DT).round() as i64) % 5 == 0 {
+            c.perceive(&frame(t, vec![obj(7, lead_x.get() - ego_x.get(), 0.2, 20.0 - v)]), &ego(t, v));
+        }
+        let o = c.step(&ego(t, v), &[]);
+        assert!(o.status.target_accel_mps2 >= -3.5 - 1e-9);
+        v = (v + o.status.target_accel_mps2 * DT).max(0.0);
+        ego_x.set(ego_x.get() + v * DT);
+        lead_x.set(lead_x.get() + 20.0 * DT);
+        t += DT;
+    }
+    let gap = lead_x.get() - ego_x.get();
+    let time_gap = (gap - 5.0) / v;
+    assert!((time_gap - 1.8).abs() < 0.05, "time gap {time_gap} s (gap {gap} m at {v} m/s)");
+    let status = c.step(&ego(t, v), &[]).status;
+    assert_eq!(status.mode, AccMode::Follow);
+    assert_eq!(status.lead.unwrap().id, 7);
+}
+
+#[test]
+fn the_lead_is_the_nearest_vehicle_in_the_ego_path_also_on_a_curve() {
+    let mut c = Controller::new(AccSettings::default());
+    // Straight road: a nearer car in the next lane does not count.
+    c.perceive(
+        &frame(0.0, vec![obj(1, 20.0, 3.5, 0.0), obj(2, 40.0, 0.3, 0.0), obj(3, 60.0, -0.2, 0.0)]),
+        &ego(0.0, 25.0),
+    );
+    assert_eq!(c.step(&ego(0.0, 25.0), &[]).status.lead.map(|l| l.id), Some(2));
+    // Left curve of 600 m radius: the lane's centre 50 m ahead lies 2.08 m to the left; the
+    // car straight ahead of the bumper is in the right lane.
+    let mut c = Controller::new(AccSettings::default());
+    let curving = EgoNow { yaw_rate_radps: 25.0 / 600.0, ..ego(0.0, 25.0) };
+    let on_path = 50.0f64.powi(2) / (2.0 * 600.0);
+    c.perceive(
+        &frame(0.0, vec![obj(4, 50.0 - 3.65, on_path - 3.5, 0.0), obj(5, 60.0 - 3.65, on_path + 0.5, 0.0)]),
+        &curving,
+    );
+    assert_eq!(c.step(&curving, &[]).status.lead.map(|l| l.id), Some(5));
+}
+
+#[test]
+fn a_car_cutting_in_becomes_the_lead_before_its_centre_is_in_the_lane_and_one_cutting_out_stops_being_it() {
+    let mut c = Controller::new(AccSettings::default());
+    // Moving from the left lane (3.5 m) toward ours at 1.2 m/s, 25 m ahead.
+    let mut became_lead_at = None;
+    for i in 0..40 {
+        let t = i as f64 * 0.05;
+        let lateral = 3.5 - 1.2 * t;
+        c.perceive(&frame(t, vec![obj(9, 25.0, lateral, 0.0)]), &ego(t, 25.0));
+        if c.step(&ego(t, 25.0), &[]).status.lead.is_some() {
+            became_lead_at = Some(lateral);
+            break;
+        }
+    }
+    let lateral = became_lead_at.expect("the cut-in became the lead");
+    assert!(lateral > 1.6, "selected at lateral {lateral} m: the lateral speed should count");
+    // Cutting out: drifting away, it is dropped past stay_in_lane_m.
+    let mut dropped_at = None;
+    for i in 0..80 {
+        let t = 2.0 + i as f64 * 0.05;
+        let lateral = 0.0 + 1.2 * i as f64 * 0.05;
+        c.perceive(&frame(t, vec![obj(9, 25.0, lateral, 0.0)]), &ego(t, 25.0));
+        if c.step(&ego(t, 25.0), &[]).status.lead.is_none() {
+            dropped_at = Some(lateral);
+            break;
+        }
+    }
+    let lateral = dropped_at.expect("the cut-out stopped being the lead");
+    assert!((1.5..2.6).contains(&lateral), "dropped at lateral {lateral} m");
+}
+
+#[test]
+fn stop_and_go_holds_at_standstill_and_moves_off_after_the_lead() {
+    let mut c = Controller::new(AccSettings { set_speed_mps: 15.0, ..AccSettings::default() });
+    // Standing 5.5 m behind a stopped lead.
+    let run = drive(&mut c, 0.0, 0.0, 3.0, |_| vec![obj(1, 5.5, 0.0, 0.0)]);
+    for (_, v, o) in &run {
+        assert_eq!(*v, 0.0);
+        assert_eq!(o.throttle, 0.0);
+        assert!(o.brake >= 0.3, "holds the brake: {}", o.brake);
+    }
+    // The lead drives off at 1.5 m/s2: the ego follows, smoothly.
+    let run = drive(&mut c, 3.0, 0.0, 10.0, |t| {
+        let dt = t - 3.0;
+        vec![obj(1, 5.5 + 0.75 * dt * dt, 0.0, 1.5 * dt)]
+    });
+    let (_, v_end, _) = run.last().unwrap();
+    assert!(*v_end > 5.0, "moving again: {v_end} m/s");
+    let started = run.iter().find(|(_, v, _)| *v > 0.0).map(|(t, _, _)| *t).unwrap();
+    assert!(started > 3.0, "waits for the lead to move first");
+}
+
+#[test]
+fn closing_fast_warns_then_brakes_beyond_comfort_then_fully() {
+    let mut c = Controller::new(AccSettings::default());
+    // 40 m at 10 m/s closing: TTC 4 s > warn 3 s, but the needed deceleration is about 1.3 m/s2.
+    c.perceive(&frame(0.0, vec![obj(1, 40.0, 0.0, -10.0)]), &ego(0.0, 25.0));
+    let o = c.step(&ego(0.0, 25.0), &[]);
+    assert_eq!(o.status.mode, AccMode::Follow);
+    assert!(o.status.warnings.is_empty());
+    // 25 m at 10 m/s: TTC 2.5 s (warn), needed about 2.1 m/s2.
+    c.perceive(&frame(0.05, vec![obj(1, 25.0, 0.0, -10.0)]), &ego(0.05, 25.0));
+    let o = c.step(&ego(0.05, 25.0), &[]);
+    assert_eq!(o.status.warnings, vec![AccWarning::ForwardCollision]);
+    assert_ne!(o.status.mode, AccMode::Emergency);
+    // 15 m at 10 m/s: TTC 1.5 s < 1.8 s: emergency, harder than the comfort limit.
+    c.perceive(&frame(0.1, vec![obj(1, 15.0, 0.0, -10.0)]), &ego(0.1, 25.0));
+    let o = c.step(&ego(0.1, 25.0), &[]);
+    assert_eq!(o.status.mode, AccMode::Emergency);
+    assert!(o.status.target_accel_mps2 < -3.5, "{}", o.status.target_accel_mps2);
+    assert!((o.status.lead.unwrap().ttc_s.unwrap() - 1.5).abs() < 0.1);
+    // 8 m at 10 m/s: TTC 0.8 s: full brake.
+    c.perceive(&frame(0.15, vec![obj(1, 8.0, 0.0, -10.0)]), &ego(0.15, 25.0));
+    let o = c.step(&ego(0.15, 25.0), &[]);
+    assert_eq!((o.throttle, o.brake), (0.0, 1.0));
+    // Speeds matched and the gap opening: back to normal control.
+    c.perceive(&frame(0.2, vec![obj(1, 12.0, 0.0, 1.0)]), &ego(0.2, 15.0));
+    assert_ne!(c.step(&ego(0.2, 15.0), &[]).status.mode, AccMode::Emergency);
+}
+
+#[test]
+fn the_threat_of_a_lead_braking_to_a_stop_is_the_stop_behind_it() {
+    // 25 m/s both, 45 m apart, the lead brakes at 6 m/s2: it stops after 52.1 m.
+    let t = threat(45.0, 25.0, 25.0, -6.0);
+    let expected = 25.0f64.powi(2) / (2.0 * (44.0 + 25.0f64.powi(2) / 12.0));
+    assert!((t.needed_decel_mps2 - expected).abs() < 1e-9, "{t:?}");
+    assert_eq!(t.ttc_s, None);
+    // Closing at 5 m/s on a steady lead 26 m ahead: 25 / 50 = 0.5 m/s2 and TTC 5.2 s.
+    let t = threat(26.0, 25.0, 20.0, 0.0);
+    assert!((t.needed_decel_mps2 - 0.5).abs() < 1e-9);
+    assert!((t.ttc_s.unwrap() - 5.2).abs() < 1e-9);
+    // Opening: no threat.
+    assert_eq!(threat(10.0, 20.0, 22.0, 0.0).needed_decel_mps2, 0.0);
+}
+
+#[test]
+fn stale_inputs_release_the_throttle_at_once_brake_smoothly_and_recover() {
+    let mut c = Controller::new(AccSettings { set_speed_mps: 30.0, ..AccSettings::default() });
+    let run = drive(&mut c, 0.0, 20.0, 2.0, |_| vec![]);
+    assert!(run.last().unwrap().2.throttle > 0.0, "accelerating before");
+    let mut prev = run.last().unwrap().2.status.target_accel_mps2;
+    let mut t = 2.0;
+    for i in 0..300 {
+        let o = c.step(&ego(t, 25.0), &[AccWarning::StalePerception]);
+        assert_eq!(o.status.mode, AccMode::Stale);
+        assert_eq!(o.status.warnings, vec![AccWarning::StalePerception]);
+        assert_eq!(o.throttle, 0.0, "no throttle on stale data");
+        let a = o.status.target_accel_mps2;
+        assert!(a <= 0.0 && a >= -2.0 - 1e-9, "{a}");
+        if i > 0 {
+            assert!(prev - a <= 2.5 * DT + 1e-9, "smooth: jerk {}", (prev - a) / DT);
+        }
+        prev = a;
+        t += DT;
+    }
+    assert!((prev + 2.0).abs() < 1e-9, "reaches the stale deceleration: {prev}");
+    assert!(c.step(&ego(t, 25.0), &[]).status.mode != AccMode::Stale, "recovers with fresh data");
+}
+
+#[test]
+fn disengaged_it_passes_nothing_and_commands_change_settings() {
+    let mut c = Controller::new(AccSettings::default());
+    assert_eq!(
+        c.command(&AccCommand { enable: Some(false), set_speed_mps: Some(20.0), time_gap_s: Some(0.5) }),
+        Some("time gap 0.5 s is outside 0.8..3.0 s; using 0.8 s".into())
+    );
+    let o = c.step(&ego(0.0, 25.0), &[]);
+    assert_eq!((o.status.mode, o.throttle, o.brake), (AccMode::Off, 0.0, 0.0));
+    assert_eq!((o.status.set_speed_mps, o.status.time_gap_s), (20.0, 0.8));
+    c.command(&AccCommand { enable: Some(true), set_speed_mps: None, time_gap_s: None });
+    assert_eq!(c.step(&ego(0.01, 25.0), &[]).status.mode, AccMode::Speed);
+}
