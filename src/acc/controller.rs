@@ -7,7 +7,9 @@
 
 use std::collections::HashMap;
 
-use super::settings::{AccSettings, TIME_GAP_RANGE_S};
+use nalgebra::{Matrix3, Vector3};
+
+use super::settings::{AccSettings, PerceptionSource, TIME_GAP_RANGE_S};
 use crate::msg::{AccCommand, AccMode, AccStatus, AccWarning, Detections, GroundTruthObjects, LeadInfo};
 use crate::sim::driver::actuate_acceleration;
 use crate::sim::vehicle::VehicleParams;
@@ -82,32 +84,86 @@ pub struct Output {
     pub status: AccStatus,
 }
 
-/// What the controller remembers of one track.
+/// What the controller remembers of one track (for its lateral speed).
 #[derive(Debug, Clone, Copy)]
 struct Track {
     stamp_s: f64,
     lateral_m: f64,
     lateral_rate_mps: f64,
-    lead_speed_mps: f64,
-    lead_accel_mps2: f64,
     seen: u32,
 }
 
-/// The lead vehicle as of the last perception frame.
+/// The lead's gap, speed and acceleration, estimated by a Kalman filter on the relative
+/// motion: the gap shrinks by the ego's travel (its speed is known exactly) and grows by the
+/// lead's, whose acceleration is a random walk (white jerk). Perception measures the gap
+/// and the relative speed. This smooths a camera's coarse range (one image row is metres
+/// at 50 m) and gives the lead's acceleration for the threat assessment.
 #[derive(Debug, Clone, Copy, PartialEq)]
-struct Lead {
+struct LeadFilter {
     id: u32,
-    stamp_s: f64,
-    /// Bumper to bumper, at `stamp_s`.
-    gap_m: f64,
-    relative_speed_mps: f64,
-    accel_mps2: f64,
+    t_s: f64,
+    /// Gap (bumper to bumper), lead speed, lead acceleration.
+    x: Vector3<f64>,
+    p: Matrix3<f64>,
 }
 
-/// Filter constant for the per-track derivative estimates (lateral speed, lead acceleration).
+impl LeadFilter {
+    fn new(id: u32, t_s: f64, gap_m: f64, lead_speed_mps: f64, n: &Noise) -> Self {
+        let p = Matrix3::from_diagonal(&Vector3::new(n.gap_sigma(gap_m).powi(2), n.speed_sigma_mps.powi(2), 4.0));
+        LeadFilter { id, t_s, x: Vector3::new(gap_m, lead_speed_mps, 0.0), p }
+    }
+
+    /// Moves the estimate to `t_s` with the ego at `ego_speed_mps`.
+    fn predict(&mut self, t_s: f64, ego_speed_mps: f64, jerk_sigma: f64) {
+        let dt = t_s - self.t_s;
+        if dt <= 0.0 {
+            return;
+        }
+        self.t_s = t_s;
+        let f = Matrix3::new(1.0, dt, dt * dt / 2.0, 0.0, 1.0, dt, 0.0, 0.0, 1.0);
+        self.x = f * self.x;
+        self.x[0] -= ego_speed_mps * dt;
+        // A stopped lead does not roll backwards.
+        if self.x[1] < 0.0 {
+            self.x[1] = 0.0;
+            self.x[2] = self.x[2].max(0.0);
+        }
+        let (d2, d3, d4, d5) = (dt * dt, dt.powi(3), dt.powi(4), dt.powi(5));
+        let q = Matrix3::new(d5 / 20.0, d4 / 8.0, d3 / 6.0, d4 / 8.0, d3 / 3.0, d2 / 2.0, d3 / 6.0, d2 / 2.0, dt)
+            * (jerk_sigma * jerk_sigma);
+        self.p = f * self.p * f.transpose() + q;
+    }
+
+    /// A scalar measurement of state component `i`.
+    fn update(&mut self, i: usize, z: f64, sigma: f64) {
+        let s = self.p[(i, i)] + sigma * sigma;
+        let k: Vector3<f64> = self.p.column(i) / s;
+        self.x += k * (z - self.x[i]);
+        let mut kh = Matrix3::zeros();
+        kh.set_column(i, &k);
+        self.p = (Matrix3::identity() - kh) * self.p;
+    }
+}
+
+/// Measurement noise of the perception source.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Noise {
+    gap_base_m: f64,
+    gap_per_m2: f64,
+    speed_sigma_mps: f64,
+    jerk_sigma_mps3: f64,
+}
+
+impl Noise {
+    fn gap_sigma(&self, gap_m: f64) -> f64 {
+        self.gap_base_m + self.gap_per_m2 * gap_m.max(0.0).powi(2)
+    }
+}
+
+/// Filter constant for the per-track lateral speed, per perception frame.
 const RATE_FILTER: f64 = 0.3;
 /// Margin kept when computing the deceleration that still avoids a collision.
-const THREAT_MARGIN_M: f64 = 1.0;
+const THREAT_MARGIN_M: f64 = 2.0;
 /// Lead deceleration below which the threat assessment assumes it brakes to a stop.
 const LEAD_BRAKING_MPS2: f64 = -0.5;
 /// Below this speed the ego counts as standing.
@@ -125,7 +181,8 @@ pub struct Controller {
     set_speed_mps: f64,
     time_gap_s: f64,
     tracks: HashMap<u32, Track>,
-    lead: Option<Lead>,
+    lead: Option<LeadFilter>,
+    noise: Noise,
     last_t_s: Option<f64>,
     /// The target acceleration of the last step (jerk-limited outside emergencies).
     accel_cmd: f64,
@@ -170,6 +227,21 @@ pub fn threat(gap_m: f64, ego_speed_mps: f64, lead_speed_mps: f64, lead_accel_mp
 
 impl Controller {
     pub fn new(settings: AccSettings) -> Self {
+        let noise = match settings.perception {
+            PerceptionSource::Camera => Noise {
+                gap_base_m: settings.estimator.gap_sigma_m,
+                gap_per_m2: settings.estimator.gap_sigma_per_m2,
+                speed_sigma_mps: settings.estimator.speed_sigma_mps,
+                jerk_sigma_mps3: settings.estimator.lead_jerk_sigma_mps3,
+            },
+            // Exact measurements: the filter follows them.
+            PerceptionSource::GroundTruth => Noise {
+                gap_base_m: 0.05,
+                gap_per_m2: 0.0,
+                speed_sigma_mps: 0.05,
+                jerk_sigma_mps3: settings.estimator.lead_jerk_sigma_mps3,
+            },
+        };
         Controller {
             params: settings.vehicle.params(),
             enabled: settings.enabled,
@@ -178,6 +250,7 @@ impl Controller {
             s: settings,
             tracks: HashMap::new(),
             lead: None,
+            noise,
             last_t_s: None,
             accel_cmd: 0.0,
             integral: 0.0,
@@ -234,38 +307,26 @@ impl Controller {
         ego.yaw_rate_radps / ego.speed_mps.max(2.0)
     }
 
-    /// Takes a perception frame: updates the tracks and picks the lead.
+    /// Takes a perception frame: updates the tracks, picks the lead and updates its estimate.
     pub fn perceive(&mut self, frame: &PerceptionFrame, ego: &EgoNow) {
         let front = self.s.vehicle.front_overhang_from_origin_m;
         let kappa = Self::curvature(ego);
         let lane = &self.s.lane;
         let current = self.lead.map(|l| l.id);
-        let mut best: Option<Lead> = None;
+        let mut best: Option<(u32, f64, f64)> = None;
         for o in &frame.objects {
-            let lead_speed = ego.speed_mps + o.relative_speed_mps;
             let track = match self.tracks.get(&o.id) {
                 Some(t) if frame.stamp_s > t.stamp_s => {
-                    let dt = frame.stamp_s - t.stamp_s;
-                    let lat_rate = (o.lateral_m - t.lateral_m) / dt;
-                    let accel = (lead_speed - t.lead_speed_mps) / dt;
+                    let lat_rate = (o.lateral_m - t.lateral_m) / (frame.stamp_s - t.stamp_s);
                     Track {
                         stamp_s: frame.stamp_s,
                         lateral_m: o.lateral_m,
                         lateral_rate_mps: t.lateral_rate_mps + RATE_FILTER * (lat_rate - t.lateral_rate_mps),
-                        lead_speed_mps: lead_speed,
-                        lead_accel_mps2: t.lead_accel_mps2 + RATE_FILTER * (accel - t.lead_accel_mps2),
                         seen: t.seen.saturating_add(1),
                     }
                 }
                 Some(t) => *t,
-                None => Track {
-                    stamp_s: frame.stamp_s,
-                    lateral_m: o.lateral_m,
-                    lateral_rate_mps: 0.0,
-                    lead_speed_mps: lead_speed,
-                    lead_accel_mps2: 0.0,
-                    seen: 1,
-                },
+                None => Track { stamp_s: frame.stamp_s, lateral_m: o.lateral_m, lateral_rate_mps: 0.0, seen: 1 },
             };
             self.tracks.insert(o.id, track);
 
@@ -281,21 +342,31 @@ impl Controller {
             if off.abs().min(predicted.abs()) >= limit {
                 continue;
             }
-            if best.is_none_or(|b| gap < b.gap_m) {
-                best = Some(Lead {
-                    id: o.id,
-                    stamp_s: frame.stamp_s,
-                    gap_m: gap,
-                    relative_speed_mps: o.relative_speed_mps,
-                    accel_mps2: if track.seen >= 3 { track.lead_accel_mps2 } else { 0.0 },
-                });
+            if best.is_none_or(|b| gap < b.1) {
+                best = Some((o.id, gap, o.relative_speed_mps));
             }
         }
-        if best.map(|b| b.id) != current {
-            tracing::debug!(from = ?current, to = ?best.map(|b| b.id), "lead changed");
-        }
-        self.lead = best;
         self.tracks.retain(|_, t| frame.stamp_s - t.stamp_s < 2.0);
+        let Some((id, gap, rel)) = best else {
+            if current.is_some() {
+                tracing::debug!(from = ?current, "lead lost");
+            }
+            self.lead = None;
+            return;
+        };
+        let n = self.noise;
+        let t = ego.t_s.max(frame.stamp_s);
+        match &mut self.lead {
+            Some(f) if f.id == id => {
+                f.predict(t, ego.speed_mps, n.jerk_sigma_mps3);
+                f.update(0, gap, n.gap_sigma(gap));
+                f.update(1, ego.speed_mps + rel, n.speed_sigma_mps);
+            }
+            _ => {
+                tracing::debug!(from = ?current, to = id, "lead changed");
+                self.lead = Some(LeadFilter::new(id, t, gap, (ego.speed_mps + rel).max(0.0), &n));
+            }
+        }
     }
 
     /// One control step. `warnings` are the node's findings about its inputs (stale speed or
@@ -309,16 +380,16 @@ impl Controller {
         let stale = !warnings.is_empty();
 
         // The lead now: its gap moved on from the frame's time at the measured relative speed.
-        let lead = self.lead.filter(|_| !stale).map(|l| {
-            let ahead = (ego.t_s - l.stamp_s).clamp(0.0, 0.2);
-            let gap = l.gap_m + l.relative_speed_mps * ahead;
-            let lead_speed = (v + l.relative_speed_mps).max(0.0);
-            (l, gap, lead_speed)
-        });
+        if let Some(f) = &mut self.lead {
+            f.predict(ego.t_s, v, self.noise.jerk_sigma_mps3);
+        }
+        let lead = self.lead.filter(|_| !stale).map(|f| (f, f.x[0], f.x[1].max(0.0)));
         let desired_gap = self.s.standstill_m + self.time_gap_s * v;
-        let threat = lead.map(|(l, gap, lead_speed)| threat(gap, v, lead_speed, l.accel_mps2));
+        let threat = lead.map(|(f, gap, lead_speed)| threat(gap, v, lead_speed, f.x[2]));
         if let Some(t) = threat {
-            if t.ttc_s.is_some_and(|x| x < self.s.emergency.warn_ttc_s) || t.needed_decel_mps2 > lim.decel_mps2 {
+            let ttc = t.ttc_s.unwrap_or(f64::INFINITY);
+            let e = &self.s.emergency;
+            if ttc < e.warn_ttc_s || (t.needed_decel_mps2 > lim.decel_mps2 && ttc < e.release_ttc_s) {
                 warnings.push(AccWarning::ForwardCollision);
             }
         }
@@ -335,7 +406,10 @@ impl Controller {
             let e = &self.s.emergency;
             if let Some(t) = threat {
                 let ttc = t.ttc_s.unwrap_or(f64::INFINITY);
-                if !self.emergency && (ttc < e.brake_ttc_s || t.needed_decel_mps2 > lim.decel_mps2) {
+                // Imminent: TTC below the threshold, or closing in within release_ttc_s with more
+                // braking needed than comfort allows.
+                let beyond_comfort = t.needed_decel_mps2 > lim.decel_mps2 && ttc < e.release_ttc_s;
+                if !self.emergency && (ttc < e.brake_ttc_s || beyond_comfort) {
                     tracing::warn!(ttc_s = ttc, needed_decel_mps2 = t.needed_decel_mps2, "emergency braking");
                     self.emergency = true;
                 } else if self.emergency
@@ -353,7 +427,7 @@ impl Controller {
                 let decel = if t.ttc_s.is_some_and(|x| x < e.full_brake_ttc_s) {
                     vehicle_max
                 } else {
-                    (1.3 * t.needed_decel_mps2).clamp(lim.decel_mps2, vehicle_max)
+                    (1.5 * t.needed_decel_mps2).clamp(lim.decel_mps2, vehicle_max)
                 };
                 (AccMode::Emergency, -decel)
             } else {
@@ -387,11 +461,11 @@ impl Controller {
             set_speed_mps: self.set_speed_mps,
             time_gap_s: self.time_gap_s,
             target_accel_mps2: accel,
-            lead: lead.map(|(l, gap, _)| LeadInfo {
-                id: l.id,
+            lead: lead.map(|(f, gap, lead_speed)| LeadInfo {
+                id: f.id,
                 gap_m: gap,
                 desired_gap_m: desired_gap,
-                relative_speed_mps: l.relative_speed_mps,
+                relative_speed_mps: lead_speed - v,
                 ttc_s: threat.and_then(|t| t.ttc_s),
             }),
             warnings,

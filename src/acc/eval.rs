@@ -159,8 +159,8 @@ impl Metrics {
             }
             if let Some((_, from)) = lead_since {
                 let window = &s[from..=i];
-                // Steady: the same lead for 2 x STEADY_S (time to settle), and neither its
-                // speed nor the ego's moved by more than 1 m/s in the last STEADY_S.
+                // Steady following: the same lead for 2 x STEADY_S (time to settle), its speed
+                // within 1 m/s over the last STEADY_S. What the ego does meanwhile is judged.
                 let steady_lead = x.t_s - s[from].t_s >= 2.0 * STEADY_S && {
                     let range = |f: &dyn Fn(&Sample) -> f64| {
                         let (lo, hi) = window
@@ -171,7 +171,7 @@ impl Metrics {
                         hi - lo
                     };
                     let lead_speed = |w: &Sample| w.speed_mps + w.truth.map_or(0.0, |t| t.relative_speed_mps);
-                    range(&lead_speed) < 1.0 && range(&|w: &Sample| w.speed_mps) < 1.0
+                    range(&lead_speed) < 1.0
                 };
                 if steady_lead && x.mode == AccMode::Follow && x.speed_mps > 3.0 {
                     let tl = x.truth.expect("lead stretch");
@@ -334,7 +334,7 @@ pub fn plot(trace: &Trace, title: &str, path: &Path) -> anyhow::Result<()> {
             let pad = ((hi - lo) * 0.08).max(0.5);
             let mut chart = ChartBuilder::on(area)
                 .margin(8)
-                .x_label_area_size(30)
+                .x_label_area_size(40)
                 .y_label_area_size(60)
                 .build_cartesian_2d(0.0..t_end, (lo - pad)..(hi + pad))?;
             chart

@@ -12,11 +12,13 @@
 //!
 //! The control law and its numbers: docs/control.md.
 
+pub mod args;
 pub mod controller;
 pub mod eval;
 pub mod node;
 pub mod offline;
 pub mod settings;
+pub mod suite;
 
 pub use controller::{Controller, EgoNow, Object, PerceptionFrame};
 pub use settings::{AccSettings, PerceptionSource};

@@ -207,14 +207,15 @@ pub async fn run(bus: &Bus, settings: AccSettings, shutdown: impl Future<Output 
         while let Some(frame) = perception.frame(None).await {
             take_perception(&mut st, &frame);
         }
-        if settings.lockstep && st.frame_expected_at(t_s) {
+        let have = |st: &State| st.perception_stamp_s.is_some_and(|p| p >= t_s - 1e-9);
+        if settings.lockstep && st.frame_expected_at(t_s) && !have(&st) {
             let deadline = Instant::now() + Duration::from_millis(settings.lockstep_wait_ms);
             let mut arrived = false;
             while Instant::now() < deadline {
                 let left = deadline.saturating_duration_since(Instant::now());
                 if let Some(frame) = perception.frame(Some(left)).await {
                     take_perception(&mut st, &frame);
-                    arrived = st.perception_stamp_s.is_some_and(|p| p >= t_s - 1e-9);
+                    arrived = have(&st);
                     if arrived {
                         break;
                     }
@@ -246,6 +247,8 @@ pub async fn run(bus: &Bus, settings: AccSettings, shutdown: impl Future<Output 
         let cmd = ControlCommand { throttle: out.throttle, brake: out.brake, steer: 0.0, answers_step };
         control_pub.put(t_ns, &cmd)?;
         st.stats.commands += 1;
+        // Up to date from here: time spent waiting above (lockstep) does not age the speed.
+        st.last_speed_at = Some(Instant::now());
         let tick = (t_s * settings.status_hz + 1e-9).floor() as i64;
         if st.status_tick != Some(tick) {
             st.status_tick = Some(tick);
@@ -262,14 +265,17 @@ impl State {
     }
 
     /// Whether a camera frame (and so a perception message) is due at simulated time `t_s`:
-    /// frame n is taken at the first step at or after n / rate.
+    /// the simulator's own rule (`sim::node::due`) with the camera rate from camera/front/info
+    /// and the physics rate learned from vehicle/state.
     fn frame_expected_at(&self, t_s: f64) -> bool {
-        let (Some(rate), Some(last)) = (self.camera_rate_hz, self.perception_stamp_s) else {
-            // Nothing yet: the first frame comes with the first step.
-            return self.perception_stamp_s.is_none();
-        };
-        let next_n = (last * rate + 1e-6).floor() + 1.0;
-        t_s >= next_n / rate - 1e-9
+        match (self.camera_rate_hz, self.physics_hz) {
+            (Some(rate), Some(hz)) => {
+                let hz = hz.round().max(1.0);
+                crate::sim::node::due((t_s * hz).round() as u64, rate, hz as u32)
+            }
+            // Before the rates are known (the first step): a frame comes with step 0.
+            _ => self.perception_stamp_s.is_none_or(|p| p < t_s),
+        }
     }
 }
 

@@ -39,6 +39,7 @@ pub struct AccSettings {
     pub emergency: Emergency,
     pub stale: Stale,
     pub lane: Lane,
+    pub estimator: Estimator,
     pub vehicle: Vehicle,
     pub status_hz: f64,
 }
@@ -83,6 +84,15 @@ pub struct Lane {
     pub stay_in_lane_m: f64,
     pub lateral_lookahead_s: f64,
     pub range_m: f64,
+}
+
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Estimator {
+    pub gap_sigma_m: f64,
+    pub gap_sigma_per_m2: f64,
+    pub speed_sigma_mps: f64,
+    pub lead_jerk_sigma_mps3: f64,
 }
 
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -216,6 +226,19 @@ impl AccSettings {
                 format!("{n:?}"),
                 "in_lane_m > 0, stay_in_lane_m >= in_lane_m, range_m > 0, lookahead >= 0",
             );
+        }
+        let e = &self.estimator;
+        for (key, x) in [
+            ("estimator.gap_sigma_m", e.gap_sigma_m),
+            ("estimator.speed_sigma_mps", e.speed_sigma_mps),
+            ("estimator.lead_jerk_sigma_mps3", e.lead_jerk_sigma_mps3),
+        ] {
+            if !positive(x) {
+                return err(key, format!("{x}"), "give a value > 0");
+            }
+        }
+        if !(e.gap_sigma_per_m2.is_finite() && e.gap_sigma_per_m2 >= 0.0) {
+            return err("estimator.gap_sigma_per_m2", format!("{}", e.gap_sigma_per_m2), "give a value >= 0");
         }
         let v = &self.vehicle;
         for (key, x) in [

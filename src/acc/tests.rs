@@ -31,6 +31,11 @@ fn print_all() {
 
 const DT: f64 = 0.01;
 
+/// Settings for exact measurements (the decisions, not the estimator, are under test).
+fn truth() -> AccSettings {
+    AccSettings { perception: super::settings::PerceptionSource::GroundTruth, ..AccSettings::default() }
+}
+
 fn ego(t_s: f64, speed_mps: f64) -> EgoNow {
     EgoNow { t_s, speed_mps, accel_mps2: 0.0, yaw_rate_radps: 0.0 }
 }
@@ -78,7 +83,7 @@ fn every_built_in_scenario_passes_on_ground_truth_in_one_process() {
 
 #[test]
 fn speed_mode_reaches_the_set_speed_within_the_comfort_limits() {
-    let mut c = Controller::new(AccSettings { set_speed_mps: 30.0, ..AccSettings::default() });
+    let mut c = Controller::new(AccSettings { set_speed_mps: 30.0, ..truth() });
     let run = drive(&mut c, 0.0, 20.0, 20.0, |_| vec![]);
     let (_, v_end, last) = run.last().unwrap();
     assert!((v_end - 30.0).abs() < 0.2, "speed {v_end}");
@@ -95,7 +100,7 @@ fn speed_mode_reaches_the_set_speed_within_the_comfort_limits() {
 
 #[test]
 fn follow_mode_settles_at_the_time_gap_behind_a_steady_lead() {
-    let mut c = Controller::new(AccSettings { set_speed_mps: 30.0, ..AccSettings::default() });
+    let mut c = Controller::new(AccSettings { set_speed_mps: 30.0, ..truth() });
     // Lead at 20 m/s, 80 m ahead; the ego at 25 m/s. Integrate the lead's position too.
     let lead_x = std::cell::Cell::new(80.0);
     let ego_x = std::cell::Cell::new(0.0);
@@ -121,7 +126,7 @@ fn follow_mode_settles_at_the_time_gap_behind_a_steady_lead() {
 
 #[test]
 fn the_lead_is_the_nearest_vehicle_in_the_ego_path_also_on_a_curve() {
-    let mut c = Controller::new(AccSettings::default());
+    let mut c = Controller::new(truth());
     // Straight road: a nearer car in the next lane does not count.
     c.perceive(
         &frame(0.0, vec![obj(1, 20.0, 3.5, 0.0), obj(2, 40.0, 0.3, 0.0), obj(3, 60.0, -0.2, 0.0)]),
@@ -130,7 +135,7 @@ fn the_lead_is_the_nearest_vehicle_in_the_ego_path_also_on_a_curve() {
     assert_eq!(c.step(&ego(0.0, 25.0), &[]).status.lead.map(|l| l.id), Some(2));
     // Left curve of 600 m radius: the lane's centre 50 m ahead lies 2.08 m to the left; the
     // car straight ahead of the bumper is in the right lane.
-    let mut c = Controller::new(AccSettings::default());
+    let mut c = Controller::new(truth());
     let curving = EgoNow { yaw_rate_radps: 25.0 / 600.0, ..ego(0.0, 25.0) };
     let on_path = 50.0f64.powi(2) / (2.0 * 600.0);
     c.perceive(
@@ -142,7 +147,7 @@ fn the_lead_is_the_nearest_vehicle_in_the_ego_path_also_on_a_curve() {
 
 #[test]
 fn a_car_cutting_in_becomes_the_lead_before_its_centre_is_in_the_lane_and_one_cutting_out_stops_being_it() {
-    let mut c = Controller::new(AccSettings::default());
+    let mut c = Controller::new(truth());
     // Moving from the left lane (3.5 m) toward ours at 1.2 m/s, 25 m ahead.
     let mut became_lead_at = None;
     for i in 0..40 {
@@ -173,7 +178,7 @@ fn a_car_cutting_in_becomes_the_lead_before_its_centre_is_in_the_lane_and_one_cu
 
 #[test]
 fn stop_and_go_holds_at_standstill_and_moves_off_after_the_lead() {
-    let mut c = Controller::new(AccSettings { set_speed_mps: 15.0, ..AccSettings::default() });
+    let mut c = Controller::new(AccSettings { set_speed_mps: 15.0, ..truth() });
     // Standing 5.5 m behind a stopped lead.
     let run = drive(&mut c, 0.0, 0.0, 3.0, |_| vec![obj(1, 5.5, 0.0, 0.0)]);
     for (_, v, o) in &run {
@@ -194,50 +199,67 @@ fn stop_and_go_holds_at_standstill_and_moves_off_after_the_lead() {
 
 #[test]
 fn closing_fast_warns_then_brakes_beyond_comfort_then_fully() {
-    let mut c = Controller::new(AccSettings::default());
-    // 40 m at 10 m/s closing: TTC 4 s > warn 3 s, but the needed deceleration is about 1.3 m/s2.
-    c.perceive(&frame(0.0, vec![obj(1, 40.0, 0.0, -10.0)]), &ego(0.0, 25.0));
-    let o = c.step(&ego(0.0, 25.0), &[]);
+    // One look at a lead closing at 10 m/s, from a fresh controller.
+    let at = |gap: f64| {
+        let mut c = Controller::new(truth());
+        c.perceive(&frame(0.0, vec![obj(1, gap, 0.0, -10.0)]), &ego(0.0, 25.0));
+        let o = c.step(&ego(0.0, 25.0), &[]);
+        (c, o)
+    };
+    // 40 m: TTC 4 s > warn 3 s, needed deceleration about 1.3 m/s2: normal following.
+    let (_, o) = at(40.0);
     assert_eq!(o.status.mode, AccMode::Follow);
     assert!(o.status.warnings.is_empty());
-    // 25 m at 10 m/s: TTC 2.5 s (warn), needed about 2.1 m/s2.
-    c.perceive(&frame(0.05, vec![obj(1, 25.0, 0.0, -10.0)]), &ego(0.05, 25.0));
-    let o = c.step(&ego(0.05, 25.0), &[]);
+    // 25 m: TTC 2.5 s (warn), needed about 2.1 m/s2.
+    let (_, o) = at(25.0);
     assert_eq!(o.status.warnings, vec![AccWarning::ForwardCollision]);
     assert_ne!(o.status.mode, AccMode::Emergency);
-    // 15 m at 10 m/s: TTC 1.5 s < 1.8 s: emergency, harder than the comfort limit.
-    c.perceive(&frame(0.1, vec![obj(1, 15.0, 0.0, -10.0)]), &ego(0.1, 25.0));
-    let o = c.step(&ego(0.1, 25.0), &[]);
+    // 15 m: TTC 1.5 s < 1.8 s: emergency, harder than the comfort limit.
+    let (mut c, o) = at(15.0);
     assert_eq!(o.status.mode, AccMode::Emergency);
     assert!(o.status.target_accel_mps2 < -3.5, "{}", o.status.target_accel_mps2);
     assert!((o.status.lead.unwrap().ttc_s.unwrap() - 1.5).abs() < 0.1);
-    // 8 m at 10 m/s: TTC 0.8 s: full brake.
-    c.perceive(&frame(0.15, vec![obj(1, 8.0, 0.0, -10.0)]), &ego(0.15, 25.0));
-    let o = c.step(&ego(0.15, 25.0), &[]);
+    // 8 m: TTC 0.8 s: full brake.
+    let (_, o) = at(8.0);
     assert_eq!((o.throttle, o.brake), (0.0, 1.0));
-    // Speeds matched and the gap opening: back to normal control.
-    c.perceive(&frame(0.2, vec![obj(1, 12.0, 0.0, 1.0)]), &ego(0.2, 15.0));
-    assert_ne!(c.step(&ego(0.2, 15.0), &[]).status.mode, AccMode::Emergency);
+    // Braking hard until the speeds match and the gap opens: back to normal control.
+    let (mut t, mut v, mut gap) = (0.0, 25.0, 15.0);
+    let mut released = None;
+    while t < 5.0 {
+        t += DT;
+        let a = c.step(&ego(t, v), &[]).status.target_accel_mps2;
+        v = (v + a * DT).max(0.0);
+        gap += (15.0 - v) * DT;
+        if ((t / DT).round() as i64) % 5 == 0 {
+            c.perceive(&frame(t, vec![obj(1, gap, 0.0, 15.0 - v)]), &ego(t, v));
+        }
+        if c.step(&ego(t, v), &[]).status.mode != AccMode::Emergency {
+            released = Some((t, gap, v));
+            break;
+        }
+    }
+    let (t, gap, v) = released.expect("the emergency ends");
+    assert!(gap > 2.0 && v < 16.0, "released at {t:.2} s, gap {gap:.1} m, {v:.1} m/s");
 }
 
 #[test]
 fn the_threat_of_a_lead_braking_to_a_stop_is_the_stop_behind_it() {
     // 25 m/s both, 45 m apart, the lead brakes at 6 m/s2: it stops after 52.1 m.
     let t = threat(45.0, 25.0, 25.0, -6.0);
-    let expected = 25.0f64.powi(2) / (2.0 * (44.0 + 25.0f64.powi(2) / 12.0));
+    let expected = 25.0f64.powi(2) / (2.0 * (43.0 + 25.0f64.powi(2) / 12.0));
     assert!((t.needed_decel_mps2 - expected).abs() < 1e-9, "{t:?}");
     assert_eq!(t.ttc_s, None);
-    // Closing at 5 m/s on a steady lead 26 m ahead: 25 / 50 = 0.5 m/s2 and TTC 5.2 s.
-    let t = threat(26.0, 25.0, 20.0, 0.0);
+    // Closing at 5 m/s on a steady lead 27 m ahead (2 m kept): 25 / 50 = 0.5 m/s2, TTC 5.4 s.
+    let t = threat(27.0, 25.0, 20.0, 0.0);
     assert!((t.needed_decel_mps2 - 0.5).abs() < 1e-9);
-    assert!((t.ttc_s.unwrap() - 5.2).abs() < 1e-9);
+    assert!((t.ttc_s.unwrap() - 5.4).abs() < 1e-9);
     // Opening: no threat.
     assert_eq!(threat(10.0, 20.0, 22.0, 0.0).needed_decel_mps2, 0.0);
 }
 
 #[test]
 fn stale_inputs_release_the_throttle_at_once_brake_smoothly_and_recover() {
-    let mut c = Controller::new(AccSettings { set_speed_mps: 30.0, ..AccSettings::default() });
+    let mut c = Controller::new(AccSettings { set_speed_mps: 30.0, ..truth() });
     let run = drive(&mut c, 0.0, 20.0, 2.0, |_| vec![]);
     assert!(run.last().unwrap().2.throttle > 0.0, "accelerating before");
     let mut prev = run.last().unwrap().2.status.target_accel_mps2;
@@ -261,7 +283,7 @@ fn stale_inputs_release_the_throttle_at_once_brake_smoothly_and_recover() {
 
 #[test]
 fn disengaged_it_passes_nothing_and_commands_change_settings() {
-    let mut c = Controller::new(AccSettings::default());
+    let mut c = Controller::new(truth());
     assert_eq!(
         c.command(&AccCommand { enable: Some(false), set_speed_mps: Some(20.0), time_gap_s: Some(0.5) }),
         Some("time gap 0.5 s is outside 0.8..3.0 s; using 0.8 s".into())
@@ -271,4 +293,27 @@ fn disengaged_it_passes_nothing_and_commands_change_settings() {
     assert_eq!((o.status.set_speed_mps, o.status.time_gap_s), (20.0, 0.8));
     c.command(&AccCommand { enable: Some(true), set_speed_mps: None, time_gap_s: None });
     assert_eq!(c.step(&ego(0.01, 25.0), &[]).status.mode, AccMode::Speed);
+}
+
+#[test]
+fn the_lead_estimate_smooths_a_camera_range_quantised_to_image_rows() {
+    // The lead at 22 m/s, 55 m ahead, the ego at 25 m/s: closing at 3 m/s. The camera's range
+    // comes in whole image rows (here 3 m steps) and its relative speed is noisy.
+    let mut c = Controller::new(AccSettings { set_speed_mps: 25.0, ..AccSettings::default() });
+    let mut rng = crate::sim::rng::SimRng::new(11);
+    let mut worst = (0.0f64, 0.0f64);
+    for i in 0..60 {
+        let t = i as f64 * 0.05;
+        let true_gap = 55.0 - 3.0 * t;
+        let measured = (true_gap / 3.0).round() * 3.0;
+        let noisy_rel = -3.0 + rng.range(-1.0, 1.0);
+        c.perceive(&frame(t, vec![obj(1, measured, 0.0, noisy_rel)]), &ego(t, 25.0));
+        let lead = c.step(&ego(t, 25.0), &[]).status.lead.unwrap();
+        if t >= 1.5 {
+            worst.0 = worst.0.max((lead.gap_m - true_gap).abs());
+            worst.1 = worst.1.max((lead.relative_speed_mps + 3.0).abs());
+        }
+    }
+    assert!(worst.0 < 1.2, "gap error up to {:.2} m with 3 m steps", worst.0);
+    assert!(worst.1 < 0.8, "relative speed error up to {:.2} m/s", worst.1);
 }

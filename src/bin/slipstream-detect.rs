@@ -37,9 +37,12 @@ fn main() -> Result<()> {
         let stats = slipstream::perception::node::run(&bus, DetectorParams::default(), shutdown)
             .await
             .context("detect: run")?;
-        eprintln!(
-            "detect: {} frames, {} skipped, {} unusable, {} detections",
-            stats.frames, stats.skipped, stats.unusable, stats.detections
+        tracing::info!(
+            "{} frames, {} skipped, {} unusable, {} detections",
+            stats.frames,
+            stats.skipped,
+            stats.unusable,
+            stats.detections
         );
         bus.close().await.context("detect: leave the bus")?;
         anyhow::Ok(())

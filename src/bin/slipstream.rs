@@ -71,6 +71,15 @@ enum EvalCommand {
         #[arg(long)]
         json: bool,
     },
+    /// Adaptive cruise control: runs slipstream-sim (lockstep, fast), slipstream-detect and
+    /// slipstream-acc as separate processes over Zenoh through each scenario and reports
+    /// collisions, minimum gap and TTC, time-gap and speed errors, and comfort (accel, decel,
+    /// jerk outside emergencies) against the aims; exits with 1 when a scenario misses one.
+    /// The nodes use loopback ports and a namespace of their own. Example:
+    ///
+    ///   slipstream eval acc --perception ground-truth --plots plots/
+    #[command(verbatim_doc_comment)]
+    Acc(slipstream::acc::suite::EvalAccArgs),
 }
 
 fn demo(connect: &ConnectArgs, args: &slipstream::tools::demo::DemoArgs) -> Result<()> {
@@ -154,6 +163,20 @@ fn main() -> Result<()> {
                 println!("{}", serde_json::to_string_pretty(&report)?);
             } else {
                 println!("{}", eval::markdown(&report));
+            }
+            Ok(())
+        }
+        Command::Eval(EvalCommand::Acc(args)) => {
+            use slipstream::acc::suite;
+            let report = suite::run(&args)?;
+            if args.json {
+                println!("{}", serde_json::to_string_pretty(&report)?);
+            } else {
+                println!("{}", suite::markdown(&report));
+            }
+            let failed = report.results.iter().filter(|r| !r.metrics.pass || r.lockstep_timeouts > 0).count();
+            if failed > 0 {
+                anyhow::bail!("{failed} of {} scenarios missed an aim", report.results.len());
             }
             Ok(())
         }

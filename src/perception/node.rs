@@ -50,17 +50,19 @@ pub async fn run(
                 tracker = Tracker::new();
             }
         }
-        let Some((info, detector)) = camera.as_mut() else {
+        if camera.is_none() {
             if !waiting_logged {
                 tracing::info!("waiting for camera/front/info before using frames");
                 waiting_logged = true;
             }
-            // The info is latched: it comes soon after start.
-            if let Some(info) = infos.recv_timeout(Duration::from_millis(500)).await {
-                camera = Some((info.msg.clone(), Detector::new(&info.msg, params)));
+            // The info is latched: it comes soon after start. The frame in hand is used then
+            // (a lockstep controller waits for its detections).
+            match infos.recv_timeout(Duration::from_millis(500)).await {
+                Some(info) => camera = Some((info.msg.clone(), Detector::new(&info.msg, params))),
+                None => continue,
             }
-            continue;
-        };
+        }
+        let (info, detector) = camera.as_mut().expect("camera info is known here");
         let frame = sample.frame();
         let header = frame.header;
         if (frame.msg.width, frame.msg.height) != (info.width, info.height) {

@@ -1,0 +1,58 @@
+//! slipstream-acc's own command-line flags (the connection flags are shared: ConnectArgs).
+
+use std::path::PathBuf;
+
+use super::settings::{AccSettings, PerceptionSource, DEFAULT_ACC_CONFIG_PATH};
+use crate::config::ConfigError;
+
+#[derive(Debug, Clone, clap::Args)]
+pub struct AccArgs {
+    /// Settings file (control law, limits, stale ages, vehicle model); only the keys it
+    /// changes are needed [default: config/acc.json5 when present, else built-in]
+    #[arg(long, value_name = "FILE", env = "SLIPSTREAM_ACC_CONFIG")]
+    pub settings: Option<PathBuf>,
+    /// Cruise speed with no vehicle ahead, m/s (settings key set_speed_mps)
+    #[arg(long, value_name = "M/S")]
+    pub set_speed: Option<f64>,
+    /// Time gap to the lead, seconds, 0.8 to 3.0 (settings key time_gap_s)
+    #[arg(long, value_name = "S")]
+    pub time_gap: Option<f64>,
+    /// Where the vehicles ahead come from: camera (perception/objects from slipstream-detect)
+    /// or ground-truth (the simulator's objects, to judge control apart from perception)
+    #[arg(long, value_enum)]
+    pub perception: Option<PerceptionSource>,
+    /// Answer each step only once the perception of that step's camera frame is in: a
+    /// deterministic loop with `slipstream-sim --clock lockstep`
+    #[arg(long)]
+    pub lockstep: bool,
+    /// Start disengaged (acc/command { enable: true } engages)
+    #[arg(long)]
+    pub disengaged: bool,
+    /// This node's name on the bus; the simulator's lockstep.wait_for names it
+    #[arg(long, default_value = "acc")]
+    pub name: String,
+}
+
+impl AccArgs {
+    /// The settings file (or defaults) with the flags applied and checked.
+    pub fn settings(&self) -> Result<AccSettings, ConfigError> {
+        let default_file = PathBuf::from(DEFAULT_ACC_CONFIG_PATH);
+        let path = self.settings.clone().or_else(|| default_file.exists().then_some(default_file));
+        let mut s = AccSettings::load_or_default(path.as_deref())?;
+        if let Some(v) = self.set_speed {
+            s.set_speed_mps = v;
+        }
+        if let Some(h) = self.time_gap {
+            s.time_gap_s = h;
+        }
+        if let Some(p) = self.perception {
+            s.perception = p;
+        }
+        s.lockstep |= self.lockstep;
+        if self.disengaged {
+            s.enabled = false;
+        }
+        s.check().map_err(|(key, problem, fix)| ConfigError::new("command line", key, problem, fix))?;
+        Ok(s)
+    }
+}

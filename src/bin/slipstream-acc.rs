@@ -1,0 +1,59 @@
+//! `slipstream-acc`: adaptive cruise control on the bus. Parses the command line and calls
+//! `slipstream::acc::node::run`.
+
+use anyhow::{Context, Result};
+use clap::Parser;
+use slipstream::acc::args::AccArgs;
+use slipstream::config::ConnectArgs;
+
+/// slipstream-acc: adaptive cruise control, closing the loop through the simulator.
+///
+/// Reads vehicle/speed, vehicle/state, the vehicles ahead (perception/objects, or the
+/// simulator's ground truth with --perception ground-truth) and acc/command; publishes
+/// vehicle/control for every speed message (naming the step it answers, for lockstep) and
+/// acc/status (mode, set speed, target acceleration, lead, gap, desired gap, TTC, warnings).
+/// Keeps a time gap to the lead in its lane, holds the set speed with nobody ahead, stops and
+/// goes, warns and brakes hard when a collision threatens, and brakes smoothly when its inputs
+/// go stale. Control law and results: docs/control.md. Examples:
+///
+///   slipstream-acc                                  (camera perception, config/acc.json5)
+///
+///   slipstream-acc --perception ground-truth --set-speed 30 --time-gap 2.0
+///
+///   slipstream-acc --lockstep     (with slipstream-sim --clock lockstep --wait-for acc)
+#[derive(Parser)]
+#[command(version, verbatim_doc_comment)]
+struct Cli {
+    #[command(flatten)]
+    connect: ConnectArgs,
+    #[command(flatten)]
+    acc: AccArgs,
+}
+
+fn main() -> Result<()> {
+    slipstream::cli::apply_zenoh_runtime_default();
+    let cli = Cli::parse();
+    slipstream::cli::init_tracing();
+    let settings = cli.acc.settings()?;
+    let rt = tokio::runtime::Runtime::new()?;
+    rt.block_on(async {
+        let bus = slipstream::Bus::open(cli.connect.zenoh_config()?, cli.connect.topic_map()?, &cli.acc.name)
+            .await
+            .context("acc: join the bus")?;
+        let shutdown = async {
+            let _ = tokio::signal::ctrl_c().await;
+        };
+        let stats = slipstream::acc::node::run(&bus, settings, shutdown).await.context("acc: run")?;
+        tracing::info!(
+            "{} commands ({} from the watchdog), {} perception frames, {} stale episodes, {} emergencies, {} lockstep waits timed out",
+            stats.commands,
+            stats.watchdog_commands,
+            stats.perception_frames,
+            stats.stale_episodes,
+            stats.emergencies,
+            stats.lockstep_waits_timed_out
+        );
+        bus.close().await.context("acc: leave the bus")?;
+        anyhow::Ok(())
+    })
+}
