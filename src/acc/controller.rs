@@ -410,12 +410,17 @@ impl Controller {
                 // braking needed than comfort allows.
                 let beyond_comfort = t.needed_decel_mps2 > lim.decel_mps2 && ttc < e.release_ttc_s;
                 if !self.emergency && (ttc < e.brake_ttc_s || beyond_comfort) {
-                    tracing::warn!(ttc_s = ttc, needed_decel_mps2 = t.needed_decel_mps2, "emergency braking");
+                    tracing::warn!(
+                        t_s = ego.t_s,
+                        ttc_s = ttc,
+                        needed_decel_mps2 = t.needed_decel_mps2,
+                        "emergency braking"
+                    );
                     self.emergency = true;
                 } else if self.emergency
                     && (v < STANDSTILL_MPS || (ttc > e.release_ttc_s && t.needed_decel_mps2 < 0.8 * lim.decel_mps2))
                 {
-                    tracing::info!(ttc_s = ttc, "emergency over");
+                    tracing::info!(t_s = ego.t_s, ttc_s = ttc, "emergency over");
                     self.emergency = false;
                 }
             } else if self.emergency {

@@ -273,8 +273,8 @@ impl State {
                 let hz = hz.round().max(1.0);
                 crate::sim::node::due((t_s * hz).round() as u64, rate, hz as u32)
             }
-            // Before the rates are known (the first step): a frame comes with step 0.
-            _ => self.perception_stamp_s.is_none_or(|p| p < t_s),
+            // Before the rates are known: the first frame comes with step 0.
+            _ => self.perception_stamp_s.is_none(),
         }
     }
 }

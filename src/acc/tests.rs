@@ -317,3 +317,26 @@ fn the_lead_estimate_smooths_a_camera_range_quantised_to_image_rows() {
     assert!(worst.0 < 1.2, "gap error up to {:.2} m with 3 m steps", worst.0);
     assert!(worst.1 < 0.8, "relative speed error up to {:.2} m/s", worst.1);
 }
+
+#[test]
+#[ignore]
+fn print_one() {
+    let name = std::env::var("SCN").unwrap_or_else(|_| "lead-brakes-to-stop".into());
+    let (trace, _) = closed_loop(&name);
+    let mut mode = None;
+    for x in &trace.samples {
+        if Some(x.mode) != mode {
+            println!("{:6.2} {:?} v {:.3} gap {:?}", x.t_s, x.mode, x.speed_mps, x.truth.map(|t| t.gap_m));
+            mode = Some(x.mode);
+        }
+    }
+    let m = trace
+        .samples
+        .iter()
+        .filter(|x| x.truth.is_some())
+        .min_by(|a, b| a.truth.unwrap().gap_m.total_cmp(&b.truth.unwrap().gap_m))
+        .unwrap();
+    println!("min gap at {:.2}: {:?} v {}", m.t_s, m.truth, m.speed_mps);
+    let last = trace.samples.last().unwrap();
+    println!("end {:.2}: {:?} v {}", last.t_s, last.truth, last.speed_mps);
+}
