@@ -105,7 +105,10 @@ impl Topic {
             Topic::SimEvents | Topic::AccCommand => {
                 TopicQos { congestion_control: crate::qos::Congestion::Block, delivery: Delivery::Queue(64), ..base }
             }
-            Topic::Objects | Topic::AccStatus => base,
+            // Ground truth is what a ground-truth controller waits for in lockstep: sent at
+            // once, not batched.
+            Topic::Objects => TopicQos { express: true, ..base },
+            Topic::AccStatus => base,
         }
     }
 }

@@ -266,20 +266,8 @@ fn acc_bin() -> Command {
     c
 }
 
-fn run(mut cmd: Command, limit: Duration) -> Output {
-    let child = cmd.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
-    let id = child.id();
-    let (tx, rx) = std::sync::mpsc::channel();
-    std::thread::spawn(move || {
-        let _ = tx.send(child.wait_with_output());
-    });
-    match rx.recv_timeout(limit) {
-        Ok(out) => out.unwrap(),
-        Err(_) => {
-            let _ = Command::new("kill").arg("-9").arg(id.to_string()).status();
-            panic!("{cmd:?} ran longer than {limit:?}");
-        }
-    }
+fn run(cmd: Command, limit: Duration) -> Output {
+    common::run_with_limit(cmd, limit)
 }
 
 #[test]

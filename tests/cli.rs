@@ -1,6 +1,8 @@
 //! The `slipstream` binary as a user runs it: demo across two processes, info, config errors,
 //! and the bench harness (quick mode: every path delivers; figures are not judged here).
 
+mod common;
+
 use std::path::PathBuf;
 use std::process::{Command, Output};
 use std::time::Duration;
@@ -11,21 +13,8 @@ fn bin() -> Command {
     c
 }
 
-/// Runs a command with a deadline; kills it and fails the test if it overruns.
-fn run(mut cmd: Command, limit: Duration) -> Output {
-    let child = cmd.stdout(std::process::Stdio::piped()).stderr(std::process::Stdio::piped()).spawn().unwrap();
-    let id = child.id();
-    let (tx, rx) = std::sync::mpsc::channel();
-    std::thread::spawn(move || {
-        let _ = tx.send(child.wait_with_output());
-    });
-    match rx.recv_timeout(limit) {
-        Ok(out) => out.unwrap(),
-        Err(_) => {
-            let _ = Command::new("kill").arg("-9").arg(id.to_string()).status();
-            panic!("{cmd:?} ran longer than {limit:?}");
-        }
-    }
+fn run(cmd: Command, limit: Duration) -> Output {
+    common::run_with_limit(cmd, limit)
 }
 
 fn free_endpoint() -> String {

@@ -5,7 +5,7 @@ use std::path::Path;
 
 use serde::Deserialize;
 
-use crate::config::{from_value, merge_json, parse_json5_value, ConfigError};
+use crate::config::{parse_layered, read_config, ConfigError};
 use crate::sim::vehicle::VehicleParams;
 
 pub const DEFAULT_ACC_CONFIG: &str = include_str!("../../config/acc.json5");
@@ -135,17 +135,13 @@ impl AccSettings {
     /// Settings from a file, or the built-in defaults.
     pub fn load_or_default(path: Option<&Path>) -> Result<AccSettings, ConfigError> {
         let Some(path) = path else { return Ok(AccSettings::default()) };
-        let origin = ConfigError::file(path);
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| ConfigError::new(&origin, "", format!("cannot read: {e}"), "check the path"))?;
+        let (text, origin) = read_config(path)?;
         AccSettings::parse(&text, &origin)
     }
 
     /// Parses settings text laid over the defaults.
     pub fn parse(text: &str, origin: &str) -> Result<AccSettings, ConfigError> {
-        let mut value = parse_json5_value(DEFAULT_ACC_CONFIG, DEFAULT_ACC_CONFIG_PATH)?;
-        merge_json(&mut value, parse_json5_value(text, origin)?);
-        let s: AccSettings = from_value(value, origin, FIX)?;
+        let s: AccSettings = parse_layered(DEFAULT_ACC_CONFIG, DEFAULT_ACC_CONFIG_PATH, text, origin, FIX)?;
         s.check().map_err(|(key, problem, fix)| ConfigError::new(origin, key, problem, fix))?;
         Ok(s)
     }

@@ -129,8 +129,11 @@ struct Recorded {
     collisions: u64,
 }
 
-/// Runs the suite; progress goes to stderr.
-pub fn run(args: &EvalAccArgs) -> Result<AccReport> {
+/// Runs the suite; progress goes to stderr. The nodes and the recorder use the topic config
+/// of `connect` (-t, SLIPSTREAM_CONFIG or ./config/slipstream.json5) under a namespace of the
+/// run's own; the connection flags do not apply (each run has its own loopback ports).
+pub fn run(args: &EvalAccArgs, connect: &crate::config::ConnectArgs) -> Result<AccReport> {
+    let topic_map = connect.topic_map()?;
     let names: Vec<String> = if args.scenarios.is_empty() {
         crate::sim::scenario::BUILT_IN.iter().map(|(n, _)| n.to_string()).collect()
     } else {
@@ -146,7 +149,9 @@ pub fn run(args: &EvalAccArgs) -> Result<AccReport> {
         let name = scenario.name.clone();
         eprint!("[{}/{}] {name} ({:?} perception) ... ", i + 1, names.len(), args.perception);
         let started = Instant::now();
-        let result = rt.block_on(run_one(arg, scenario, args)).with_context(|| format!("scenario {name}"))?;
+        let result = rt
+            .block_on(run_one(arg, scenario, args, &topic_map, connect.topics.as_deref()))
+            .with_context(|| format!("scenario {name}"))?;
         eprintln!(
             "{} in {:.1} s{}",
             if result.metrics.pass { "pass" } else { "FAIL" },
@@ -159,7 +164,13 @@ pub fn run(args: &EvalAccArgs) -> Result<AccReport> {
     Ok(AccReport { command: std::env::args().collect::<Vec<_>>().join(" "), results, pass })
 }
 
-async fn run_one(scenario_arg: &str, mut scenario: Scenario, args: &EvalAccArgs) -> Result<ScenarioResult> {
+async fn run_one(
+    scenario_arg: &str,
+    mut scenario: Scenario,
+    args: &EvalAccArgs,
+    topic_map: &crate::TopicMap,
+    topics_file: Option<&std::path::Path>,
+) -> Result<ScenarioResult> {
     if let Some(d) = args.duration {
         anyhow::ensure!(d > 0.0, "--duration must be > 0");
         scenario.duration_s = d;
@@ -178,7 +189,7 @@ async fn run_one(scenario_arg: &str, mut scenario: Scenario, args: &EvalAccArgs)
     let mut cfg = zenoh::Config::from_json5(crate::config::DEFAULT_ZENOH_CONFIG).map_err(anyhow::Error::msg)?;
     cfg.insert_json5("listen/endpoints", &format!("[\"{}\"]", ep(p_rec))).map_err(anyhow::Error::msg)?;
     cfg.insert_json5("connect/endpoints", "[]").map_err(anyhow::Error::msg)?;
-    let topics = crate::TopicMap::default().with_namespace(&namespace)?;
+    let topics = topic_map.clone().with_namespace(&namespace)?;
     let bus = crate::Bus::open(cfg, topics, "eval-acc").await?;
     let rec = Arc::new(Mutex::new(Recorded::default()));
     let r = rec.clone();
@@ -198,6 +209,9 @@ async fn run_one(scenario_arg: &str, mut scenario: Scenario, args: &EvalAccArgs)
 
     let common = |cmd: &mut Command, listen: u16, connect: &[u16]| {
         cmd.args(["-n", &namespace, "-l", &ep(listen)]);
+        if let Some(file) = topics_file {
+            cmd.arg("-t").arg(file);
+        }
         for p in connect {
             cmd.args(["-e", &ep(*p)]);
         }
@@ -336,7 +350,7 @@ fn build_trace(rec: &Recorded, ego_front: f64, standstill_m: f64) -> Trace {
 
 /// The report as a markdown table.
 pub fn markdown(report: &AccReport) -> String {
-    let f = |v: Option<f64>, p: usize| v.map_or("-".to_string(), |x| format!("{x:.p$}"));
+    let f = crate::bench::fmt_opt;
     let mut out = String::new();
     out.push_str("| scenario | perception | collisions | min gap m | min TTC s | time-gap RMS s | speed RMSE m/s | max accel | max decel | max jerk | emergency s | result |\n");
     out.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|\n");

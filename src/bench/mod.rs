@@ -433,7 +433,8 @@ fn ratios(rows: &[Row]) -> Vec<Ratio> {
     out
 }
 
-fn fmt_opt(v: Option<f64>, digits: usize) -> String {
+/// A number with `digits` decimals, or "-" when there is none (tables).
+pub fn fmt_opt(v: Option<f64>, digits: usize) -> String {
     v.map(|x| format!("{x:.digits$}")).unwrap_or_else(|| "-".into())
 }
 

@@ -75,7 +75,8 @@ enum EvalCommand {
     /// slipstream-acc as separate processes over Zenoh through each scenario and reports
     /// collisions, minimum gap and TTC, time-gap and speed errors, and comfort (accel, decel,
     /// jerk outside emergencies) against the aims; exits with 1 when a scenario misses one.
-    /// The nodes use loopback ports and a namespace of their own. Example:
+    /// The nodes use loopback ports and a namespace of their own (the topic config, -t, is
+    /// passed on; connection flags are not). Example:
     ///
     ///   slipstream eval acc --perception ground-truth --plots plots/
     #[command(verbatim_doc_comment)]
@@ -168,7 +169,7 @@ fn main() -> Result<()> {
         }
         Command::Eval(EvalCommand::Acc(args)) => {
             use slipstream::acc::suite;
-            let report = suite::run(&args)?;
+            let report = suite::run(&args, &cli.connect)?;
             if args.json {
                 println!("{}", serde_json::to_string_pretty(&report)?);
             } else {

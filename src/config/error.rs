@@ -84,3 +84,25 @@ pub fn merge_json(base: &mut serde_json::Value, over: serde_json::Value) {
         (slot, v) => *slot = v,
     }
 }
+
+/// Settings text laid over built-in defaults (also JSON5): a file needs only the keys it
+/// changes. Errors name `origin` (or the defaults' origin for a broken built-in file).
+pub fn parse_layered<T: serde::de::DeserializeOwned>(
+    defaults: &str,
+    defaults_origin: &str,
+    text: &str,
+    origin: &str,
+    fix: &str,
+) -> Result<T, ConfigError> {
+    let mut value = parse_json5_value(defaults, defaults_origin)?;
+    merge_json(&mut value, parse_json5_value(text, origin)?);
+    from_value(value, origin, fix)
+}
+
+/// A config file's text and its name for error messages.
+pub fn read_config(path: &std::path::Path) -> Result<(String, String), ConfigError> {
+    let origin = ConfigError::file(path);
+    let text = std::fs::read_to_string(path)
+        .map_err(|e| ConfigError::new(&origin, "", format!("cannot read: {e}"), "check the path"))?;
+    Ok((text, origin))
+}

@@ -6,5 +6,5 @@ mod error;
 mod topic_map;
 
 pub use connect::{ConnectArgs, ModeArg, DEFAULT_ZENOH_CONFIG, DEFAULT_ZENOH_CONFIG_PATH};
-pub use error::{from_value, merge_json, parse_json5, parse_json5_value, ConfigError};
+pub use error::{from_value, merge_json, parse_json5, parse_json5_value, parse_layered, read_config, ConfigError};
 pub use topic_map::{CameraEncoding, CameraSettings, ResolvedTopic, TopicMap, DEFAULT_SLIPSTREAM_CONFIG_PATH};

@@ -7,7 +7,7 @@ use std::path::Path;
 
 use serde::Deserialize;
 
-use crate::config::{from_value, merge_json, parse_json5_value, ConfigError};
+use crate::config::{parse_layered, read_config, ConfigError};
 use crate::msg::{CameraInfo, ImageEncoding, SimMode};
 
 /// The settings file shipped with the project; its values are the built-in defaults.
@@ -119,17 +119,13 @@ impl SimSettings {
     /// Settings from a file, or the built-in defaults.
     pub fn load_or_default(path: Option<&Path>) -> Result<SimSettings, ConfigError> {
         let Some(path) = path else { return Ok(SimSettings::default()) };
-        let origin = ConfigError::file(path);
-        let text = std::fs::read_to_string(path)
-            .map_err(|e| ConfigError::new(&origin, "", format!("cannot read: {e}"), "check the path"))?;
+        let (text, origin) = read_config(path)?;
         SimSettings::parse(&text, &origin)
     }
 
     /// Parses settings text laid over the defaults: a file needs only the keys it changes.
     pub fn parse(text: &str, origin: &str) -> Result<SimSettings, ConfigError> {
-        let mut value = parse_json5_value(DEFAULT_SIM_CONFIG, DEFAULT_SIM_CONFIG_PATH)?;
-        merge_json(&mut value, parse_json5_value(text, origin)?);
-        let s: SimSettings = from_value(value, origin, FIX)?;
+        let s: SimSettings = parse_layered(DEFAULT_SIM_CONFIG, DEFAULT_SIM_CONFIG_PATH, text, origin, FIX)?;
         s.check().map_err(|(key, problem, fix)| ConfigError::new(origin, key, problem, fix))?;
         Ok(s)
     }

@@ -50,3 +50,20 @@ pub async fn bus_pair(a: TopicMap, b: TopicMap) -> (Bus, Bus) {
 pub fn map(json5: &str) -> TopicMap {
     TopicMap::from_json5(json5, "test config").unwrap()
 }
+
+/// Runs a command with a deadline; kills it and fails the test if it overruns.
+pub fn run_with_limit(mut cmd: std::process::Command, limit: Duration) -> std::process::Output {
+    let child = cmd.stdout(std::process::Stdio::piped()).stderr(std::process::Stdio::piped()).spawn().unwrap();
+    let id = child.id();
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let _ = tx.send(child.wait_with_output());
+    });
+    match rx.recv_timeout(limit) {
+        Ok(out) => out.unwrap(),
+        Err(_) => {
+            let _ = std::process::Command::new("kill").arg("-9").arg(id.to_string()).status();
+            panic!("{cmd:?} ran longer than {limit:?}");
+        }
+    }
+}
