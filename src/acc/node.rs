@@ -95,6 +95,7 @@ struct State {
     physics_hz: Option<f64>,
     perception_stamp_s: Option<f64>,
     camera_rate_hz: Option<f64>,
+    info_waited: bool,
     last_speed_at: Option<Instant>,
     mode: Option<AccMode>,
     status_tick: Option<i64>,
@@ -134,6 +135,7 @@ pub async fn run(bus: &Bus, settings: AccSettings, shutdown: impl Future<Output 
         physics_hz: None,
         perception_stamp_s: None,
         camera_rate_hz: None,
+        info_waited: false,
         last_speed_at: None,
         mode: None,
         status_tick: None,
@@ -203,6 +205,18 @@ pub async fn run(bus: &Bus, settings: AccSettings, shutdown: impl Future<Output 
         }
         while let Some(info) = info_sub.try_recv() {
             st.camera_rate_hz = Some(info.msg.rate_hz);
+        }
+        if settings.lockstep && st.camera_rate_hz.is_none() && !st.info_waited {
+            // Which steps bring a frame follows from the camera rate: wait for the (latched)
+            // camera info once, or a frame answered a step late makes the run differ.
+            st.info_waited = true;
+            match info_sub.recv_timeout(Duration::from_millis(settings.lockstep_wait_ms)).await {
+                Some(info) => st.camera_rate_hz = Some(info.msg.rate_hz),
+                None => tracing::warn!(
+                    waited_ms = settings.lockstep_wait_ms,
+                    "lockstep: no camera/front/info; perception is awaited only for the first frame"
+                ),
+            }
         }
         while let Some(frame) = perception.frame(None).await {
             take_perception(&mut st, &frame);

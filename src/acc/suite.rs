@@ -79,9 +79,15 @@ pub fn sibling_binary(name: &str) -> Result<PathBuf> {
     bail!("{name} not found next to {} (build every binary: cargo build --release)", exe.display())
 }
 
-/// A free loopback TCP port (bound and released; taken again by the child right after).
-fn free_port() -> Result<u16> {
-    Ok(TcpListener::bind("127.0.0.1:0")?.local_addr()?.port())
+/// `N` distinct free loopback TCP ports (bound together, released together; the children take
+/// them right after). Released one at a time, the OS could hand out the same port twice.
+fn free_ports<const N: usize>() -> Result<[u16; N]> {
+    let listeners: Vec<TcpListener> = (0..N).map(|_| TcpListener::bind("127.0.0.1:0")).collect::<Result<_, _>>()?;
+    let mut ports = [0u16; N];
+    for (p, l) in ports.iter_mut().zip(&listeners) {
+        *p = l.local_addr()?.port();
+    }
+    Ok(ports)
 }
 
 /// A child process that is stopped (SIGINT, then killed) when dropped.
@@ -182,7 +188,7 @@ async fn run_one(
     // A namespace and ports of this run's own: nothing else on the machine is disturbed.
     let namespace =
         format!("eval-acc-{}-{}", std::process::id(), name.replace(|c: char| !c.is_ascii_alphanumeric(), "-"));
-    let (p_rec, p_sim, p_det, p_acc) = (free_port()?, free_port()?, free_port()?, free_port()?);
+    let [p_rec, p_sim, p_det, p_acc] = free_ports::<4>()?;
     let ep = |p: u16| format!("tcp/127.0.0.1:{p}");
 
     // The recorder: its own session, listening for the nodes.

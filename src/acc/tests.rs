@@ -8,7 +8,7 @@ use crate::sim::scenario::{Scenario, BUILT_IN};
 
 fn closed_loop(name: &str) -> (Trace, Metrics) {
     let scenario = Scenario::find(name).unwrap();
-    let mut s = AccSettings::default();
+    let mut s = truth();
     s.set_speed_mps = scenario.ego.set_speed_mps.unwrap_or(scenario.ego.speed_mps);
     let trace = super::offline::run(scenario, s, 100, 20.0);
     let m = Metrics::of(&trace);
