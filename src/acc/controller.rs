@@ -380,7 +380,9 @@ impl Controller {
         let stale = !warnings.is_empty();
 
         // The lead now: its gap moved on from the frame's time at the measured relative speed.
-        if let Some(f) = &mut self.lead {
+        // Not while stale: the watchdog's clock is a guess, and the estimate is not used then
+        // (it catches up when fresh data return).
+        if let Some(f) = self.lead.as_mut().filter(|_| !stale) {
             f.predict(ego.t_s, v, self.noise.jerk_sigma_mps3);
         }
         let lead = self.lead.filter(|_| !stale).map(|f| (f, f.x[0], f.x[1].max(0.0)));
