@@ -130,8 +130,8 @@ async fn controller(bus: Bus, answer_until_step: u64) -> tokio::task::JoinHandle
             let cmd = ControlCommand {
                 throttle: (0.3 * error).clamp(0.0, 1.0) as f32,
                 brake: (-0.3 * error).clamp(0.0, 1.0) as f32,
-                steer: 0.0,
                 answers_step: Some(r.msg.step),
+                ..ControlCommand::NEUTRAL
             };
             control.put(r.header.stamp_sim_ns, &cmd).unwrap();
         }

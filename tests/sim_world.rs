@@ -20,7 +20,7 @@ fn empty_road(speed_mps: f64) -> World {
 }
 
 fn command(throttle: f32, brake: f32) -> EgoInput {
-    EgoInput::Command(ControlCommand { throttle, brake, steer: 0.0, answers_step: None })
+    EgoInput::Command(ControlCommand { throttle, brake, ..ControlCommand::NEUTRAL })
 }
 
 #[test]

@@ -28,12 +28,16 @@ fn bbox() -> impl Strategy<Value = BoundingBox2d> {
     })
 }
 fn control() -> impl Strategy<Value = ControlCommand> {
-    (unit(), unit(), -1.0f32..=1.0, proptest::option::of(any::<u64>()))
-        .prop_map(|(throttle, brake, steer, answers_step)| ControlCommand { throttle, brake, steer, answers_step })
+    let opt = || proptest::option::of(any::<u64>());
+    (unit(), unit(), -1.0f32..=1.0, opt(), opt()).prop_map(|(throttle, brake, steer, answers_step, perception)| {
+        ControlCommand { throttle, brake, steer, answers_step, perception_stamp_pub_ns: perception }
+    })
 }
 fn state() -> impl Strategy<Value = VehicleState> {
-    (any::<u64>(), v3(), -4f64..4., v3(), v3(), -2f64..2., 0f64..80., -1i32..8, control()).prop_map(
-        |(step, p, yaw, v, a, yr, speed, lane, applied)| VehicleState {
+    let timing = proptest::option::of((any::<u64>(), any::<u64>()))
+        .prop_map(|t| t.map(|(c, a)| ControlTiming { command_stamp_pub_ns: c, applied_ns: a }));
+    (any::<u64>(), v3(), -4f64..4., v3(), v3(), -2f64..2., 0f64..80., -1i32..8, control(), timing).prop_map(
+        |(step, p, yaw, v, a, yr, speed, lane, applied, control_timing)| VehicleState {
             step,
             position_in_world_m: p,
             yaw_in_world_rad: yaw,
@@ -45,6 +49,7 @@ fn state() -> impl Strategy<Value = VehicleState> {
             speed_mps: speed,
             lane,
             applied,
+            control_timing,
         },
     )
 }
@@ -244,11 +249,17 @@ fn errors_say_what_was_wrong() {
 
     assert_eq!(decode::<Speed>(&[]), Err(DecodeError::Empty { expected: "Speed" }));
 
-    let mut v2 = good.clone();
-    v2[0] = 2;
-    let e = decode::<Speed>(&v2).unwrap_err();
-    assert_eq!(e, DecodeError::UnknownVersion { expected: "Speed", found: 2 });
-    assert!(e.to_string().contains("unknown wire version 2"), "{e}");
+    let mut other = good.clone();
+    other[0] = WIRE_VERSION + 1;
+    let e = decode::<Speed>(&other).unwrap_err();
+    assert_eq!(e, DecodeError::UnknownVersion { expected: "Speed", found: WIRE_VERSION + 1 });
+    assert!(e.to_string().contains(&format!("unknown wire version {}", WIRE_VERSION + 1)), "{e}");
+    other[0] = 1;
+    assert_eq!(
+        decode::<Speed>(&other),
+        Err(DecodeError::UnknownVersion { expected: "Speed", found: 1 }),
+        "version 1 (before the loop trace) is refused"
+    );
 
     let e = decode::<ControlCommand>(&good).unwrap_err();
     assert_eq!(e, DecodeError::WrongKind { expected: "ControlCommand", found: "Speed" });
@@ -271,7 +282,7 @@ fn errors_say_what_was_wrong() {
     // Content checks: a frame whose pixel count does not match its size, a throttle above 1.
     let frame = encode(&h, &CameraFrame { width: 2, height: 2, encoding: ImageEncoding::Rgb8, data: vec![0; 11] });
     assert!(matches!(decode::<CameraFrameRef>(&frame), Err(DecodeError::Invalid { .. })));
-    let over = encode(&h, &ControlCommand { throttle: 1.5, brake: 0.0, steer: 0.0, answers_step: None });
+    let over = encode(&h, &ControlCommand { throttle: 1.5, ..ControlCommand::NEUTRAL });
     let e = decode::<ControlCommand>(&over).unwrap_err();
     assert!(e.to_string().contains("throttle 1.5"), "{e}");
 }

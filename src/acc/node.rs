@@ -45,12 +45,14 @@ enum PerceptionSub {
 }
 
 impl PerceptionSub {
-    fn frame(&self, timeout: Option<Duration>) -> impl Future<Output = Option<PerceptionFrame>> + '_ {
+    /// The next perception message, converted, with its header.stamp_pub_ns.
+    fn frame(&self, timeout: Option<Duration>) -> impl Future<Output = Option<(PerceptionFrame, u64)>> + '_ {
         async move {
-            let convert_d =
-                |r: Received<Detections>| PerceptionFrame::from_detections(r.header.stamp_sim_ns as f64 / 1e9, &r.msg);
+            let convert_d = |r: Received<Detections>| {
+                (PerceptionFrame::from_detections(r.header.stamp_sim_ns as f64 / 1e9, &r.msg), r.header.stamp_pub_ns)
+            };
             let convert_g = |r: Received<GroundTruthObjects>| {
-                PerceptionFrame::from_ground_truth(r.header.stamp_sim_ns as f64 / 1e9, &r.msg)
+                (PerceptionFrame::from_ground_truth(r.header.stamp_sim_ns as f64 / 1e9, &r.msg), r.header.stamp_pub_ns)
             };
             match (self, timeout) {
                 (PerceptionSub::Camera(s), None) => s.try_recv().map(convert_d),
@@ -94,6 +96,8 @@ struct State {
     /// Physics rate learned from vehicle/state (steps per simulated second).
     physics_hz: Option<f64>,
     perception_stamp_s: Option<f64>,
+    /// header.stamp_pub_ns of the newest perception message taken (traced in vehicle/control).
+    perception_pub_ns: Option<u64>,
     camera_rate_hz: Option<f64>,
     info_waited: bool,
     last_speed_at: Option<Instant>,
@@ -134,6 +138,7 @@ pub async fn run(bus: &Bus, settings: AccSettings, shutdown: impl Future<Output 
         state: None,
         physics_hz: None,
         perception_stamp_s: None,
+        perception_pub_ns: None,
         camera_rate_hz: None,
         info_waited: false,
         last_speed_at: None,
@@ -162,7 +167,13 @@ pub async fn run(bus: &Bus, settings: AccSettings, shutdown: impl Future<Output 
                     }
                     let out = st.ctl.step(&ego, &warnings);
                     note_mode(&mut st, out.status.mode, &out.status.warnings);
-                    let cmd = ControlCommand { throttle: out.throttle, brake: out.brake, steer: 0.0, answers_step: None };
+                    let cmd = ControlCommand {
+                        throttle: out.throttle,
+                        brake: out.brake,
+                        steer: 0.0,
+                        answers_step: None,
+                        perception_stamp_pub_ns: st.perception_pub_ns,
+                    };
                     control_pub.put(st.ego_stamp_ns(), &cmd)?;
                     status_pub.put(st.ego_stamp_ns(), &out.status)?;
                     st.stats.watchdog_commands += 1;
@@ -218,8 +229,8 @@ pub async fn run(bus: &Bus, settings: AccSettings, shutdown: impl Future<Output 
                 ),
             }
         }
-        while let Some(frame) = perception.frame(None).await {
-            take_perception(&mut st, &frame);
+        while let Some((frame, pub_ns)) = perception.frame(None).await {
+            take_perception(&mut st, &frame, pub_ns);
         }
         let have = |st: &State| st.perception_stamp_s.is_some_and(|p| p >= t_s - 1e-9);
         if settings.lockstep && st.frame_expected_at(t_s) && !have(&st) {
@@ -227,8 +238,8 @@ pub async fn run(bus: &Bus, settings: AccSettings, shutdown: impl Future<Output 
             let mut arrived = false;
             while Instant::now() < deadline {
                 let left = deadline.saturating_duration_since(Instant::now());
-                if let Some(frame) = perception.frame(Some(left)).await {
-                    take_perception(&mut st, &frame);
+                if let Some((frame, pub_ns)) = perception.frame(Some(left)).await {
+                    take_perception(&mut st, &frame, pub_ns);
                     arrived = have(&st);
                     if arrived {
                         break;
@@ -258,7 +269,13 @@ pub async fn run(bus: &Bus, settings: AccSettings, shutdown: impl Future<Output 
         }
         let out = st.ctl.step(&st.ego, &warnings);
         note_mode(&mut st, out.status.mode, &out.status.warnings);
-        let cmd = ControlCommand { throttle: out.throttle, brake: out.brake, steer: 0.0, answers_step };
+        let cmd = ControlCommand {
+            throttle: out.throttle,
+            brake: out.brake,
+            steer: 0.0,
+            answers_step,
+            perception_stamp_pub_ns: st.perception_pub_ns,
+        };
         control_pub.put(t_ns, &cmd)?;
         st.stats.commands += 1;
         // Up to date from here: time spent waiting above (lockstep) does not age the speed.
@@ -321,13 +338,14 @@ fn answers_step(st: &State, t_ns: u64) -> Option<u64> {
     (step as f64 + ahead >= 0.0).then(|| (step as f64 + ahead) as u64)
 }
 
-fn take_perception(st: &mut State, frame: &PerceptionFrame) {
+fn take_perception(st: &mut State, frame: &PerceptionFrame, pub_ns: u64) {
     if st.perception_stamp_s.is_some_and(|p| frame.stamp_s < p) {
         tracing::debug!(stamp_s = frame.stamp_s, "perception older than the last one: ignored");
         return;
     }
     st.stats.perception_frames += 1;
     st.perception_stamp_s = Some(frame.stamp_s);
+    st.perception_pub_ns = Some(pub_ns);
     st.ctl.perceive(frame, &st.ego);
 }
 

@@ -37,7 +37,13 @@ pub fn run(scenario: Scenario, settings: AccSettings, physics_hz: u32, camera_hz
         }
         let out = ctl.step(&ego, &[]);
         trace.samples.push(Sample::new(t_s, &state, &out.status, truth));
-        let cmd = ControlCommand { throttle: out.throttle, brake: out.brake, steer: 0.0, answers_step: Some(k) };
+        let cmd = ControlCommand {
+            throttle: out.throttle,
+            brake: out.brake,
+            steer: 0.0,
+            answers_step: Some(k),
+            perception_stamp_pub_ns: None,
+        };
         let events = world.step(EgoInput::Command(cmd));
         trace.collisions += events.collisions.iter().filter(|c| c.involves_ego()).count() as u64;
         if let Some(end) = events.ended {

@@ -26,12 +26,12 @@ pub use camera::{encode_jpeg, frame_prefix, CameraFrame, CameraFrameRef, CameraI
 pub use codec::{decode, decode_header, encode, encode_into, DecodeError, Stamped};
 pub use objects::{BoundingBox2d, Detection, Detections, GroundTruthObject, GroundTruthObjects, ObjectClass};
 pub use sim::{SimClock, SimEvent, SimEventKind, SimMode};
-pub use vehicle::{ControlCommand, Speed, VehicleState};
+pub use vehicle::{ControlCommand, ControlTiming, Speed, VehicleState};
 
 use serde::{Deserialize, Serialize};
 
 /// Version of the envelope and of every message layout. A decoder refuses any other value.
-pub const WIRE_VERSION: u8 = 1;
+pub const WIRE_VERSION: u8 = 2;
 
 /// Bytes before the header: version and kind.
 pub const PREAMBLE_LEN: usize = 2;
@@ -146,7 +146,16 @@ pub fn examples() -> Vec<(MessageKind, Vec<u8>)> {
         e(MessageKind::VehicleState, encode(&h, &vehicle::example_state())),
         e(
             MessageKind::ControlCommand,
-            encode(&h, &ControlCommand { throttle: 0.25, brake: 0.0, steer: -0.5, answers_step: Some(125) }),
+            encode(
+                &h,
+                &ControlCommand {
+                    throttle: 0.25,
+                    brake: 0.0,
+                    steer: -0.5,
+                    answers_step: Some(125),
+                    perception_stamp_pub_ns: Some(1_700_000_000_100_000_000),
+                },
+            ),
         ),
         e(
             MessageKind::CameraFrame,

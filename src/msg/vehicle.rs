@@ -36,6 +36,19 @@ pub struct VehicleState {
     pub lane: i32,
     /// The control command in effect during this step.
     pub applied: ControlCommand,
+    /// When that command was published and when the simulator first applied it; None while
+    /// no command is in effect (before the first, or braking after commands stopped).
+    pub control_timing: Option<ControlTiming>,
+}
+
+/// The last hop of the loop: a command's publish time and the time the simulator first
+/// applied it, both wall clock (ns since the Unix epoch).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+pub struct ControlTiming {
+    /// The command's header.stamp_pub_ns.
+    pub command_stamp_pub_ns: u64,
+    /// When the simulator first stepped the physics with it.
+    pub applied_ns: u64,
 }
 
 impl Message for VehicleState {
@@ -53,10 +66,15 @@ pub struct ControlCommand {
     pub steer: f32,
     /// The simulation step this command answers (lockstep waits for it); None when not stepped.
     pub answers_step: Option<u64>,
+    /// header.stamp_pub_ns of the newest perception message (perception/objects, or objects)
+    /// this command was computed from; None when it used none. With Detections'
+    /// frame_stamp_pub_ns and VehicleState's control_timing it traces the loop hop by hop.
+    pub perception_stamp_pub_ns: Option<u64>,
 }
 
 impl ControlCommand {
-    pub const NEUTRAL: ControlCommand = ControlCommand { throttle: 0.0, brake: 0.0, steer: 0.0, answers_step: None };
+    pub const NEUTRAL: ControlCommand =
+        ControlCommand { throttle: 0.0, brake: 0.0, steer: 0.0, answers_step: None, perception_stamp_pub_ns: None };
 }
 
 impl Message for ControlCommand {
@@ -89,6 +107,16 @@ pub(super) fn example_state() -> VehicleState {
         yaw_rate_radps: 0.0,
         speed_mps: 27.5,
         lane: 1,
-        applied: ControlCommand { throttle: 0.25, brake: 0.0, steer: 0.0, answers_step: Some(124) },
+        applied: ControlCommand {
+            throttle: 0.25,
+            brake: 0.0,
+            steer: 0.0,
+            answers_step: Some(124),
+            perception_stamp_pub_ns: Some(1_700_000_000_100_000_000),
+        },
+        control_timing: Some(ControlTiming {
+            command_stamp_pub_ns: 1_700_000_000_110_000_000,
+            applied_ns: 1_700_000_000_120_000_000,
+        }),
     }
 }

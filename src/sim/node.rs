@@ -23,7 +23,7 @@ use super::render::{ObjectVisibility, Renderer};
 use super::settings::{BeforeFirst, ControlPolicy, Mode, OnTimeout, SimSettings};
 use super::world::{End, World, EGO_ID};
 use crate::bus::{Bus, BusError, Received};
-use crate::msg::{ControlCommand, ImageEncoding, SimClock, SimEvent, SimEventKind, Speed};
+use crate::msg::{ControlCommand, ControlTiming, ImageEncoding, SimClock, SimEvent, SimEventKind, Speed, VehicleState};
 use crate::topics;
 
 #[derive(Debug, thiserror::Error)]
@@ -119,18 +119,29 @@ impl ControlInbox {
 /// What the ego does when commands stop.
 struct Policy {
     spec: ControlPolicy,
-    last: Option<(ControlCommand, u64)>,
+    /// The newest command, the simulated time it came at, and its timing (applied_ns 0 until
+    /// first applied).
+    last: Option<(ControlCommand, u64, ControlTiming)>,
     braking: bool,
     timeouts: u64,
 }
 
 impl Policy {
-    fn on_command(&mut self, cmd: ControlCommand, now_ns: u64) {
+    fn on_command(&mut self, cmd: &Received<ControlCommand>, now_ns: u64) {
         if self.braking {
             tracing::info!("vehicle/control resumed");
             self.braking = false;
         }
-        self.last = Some((cmd, now_ns));
+        let timing = ControlTiming { command_stamp_pub_ns: cmd.header.stamp_pub_ns, applied_ns: 0 };
+        self.last = Some((cmd.msg, now_ns, timing));
+    }
+
+    /// The timing of the command in effect, for vehicle/state; None when none is.
+    fn timing(&self) -> Option<ControlTiming> {
+        match self.last {
+            Some((_, _, t)) if !self.braking && t.applied_ns != 0 => Some(t),
+            _ => None,
+        }
     }
 
     fn input(&mut self, now_ns: u64) -> super::world::EgoInput {
@@ -141,7 +152,12 @@ impl Policy {
                 BeforeFirst::Cruise => EgoInput::Cruise,
                 BeforeFirst::Brake => EgoInput::Command(brake),
             },
-            Some((cmd, at)) if now_ns.saturating_sub(at) <= self.spec.hold_ms * 1_000_000 => EgoInput::Command(cmd),
+            Some((cmd, at, ref mut timing)) if now_ns.saturating_sub(at) <= self.spec.hold_ms * 1_000_000 => {
+                if timing.applied_ns == 0 {
+                    timing.applied_ns = crate::msg::wall_clock_ns();
+                }
+                EgoInput::Command(cmd)
+            }
             Some(_) => {
                 if !self.braking {
                     tracing::warn!(
@@ -247,7 +263,8 @@ async fn run_loop(
             speed_pub.put(t_ns, &Speed { speed_mps: world.measured_speed_mps() })?;
         }
         if state_due {
-            state_pub.put(t_ns, &world.ego_state())?;
+            let state = VehicleState { control_timing: policy.timing(), ..world.ego_state() };
+            state_pub.put(t_ns, &state)?;
         }
         if due(k, rates.clock, hz) {
             clock_pub
@@ -281,7 +298,7 @@ async fn run_loop(
         if mode == Mode::Lockstep && (speed_due || state_due) {
             let Answers { command, late, strangers } =
                 await_answers(&inbox, &settings.lockstep.wait_for, k, settings.lockstep.step_timeout_ms, stop).await;
-            if let Some(cmd) = command {
+            if let Some(cmd) = &command {
                 policy.on_command(cmd, t_ns);
             }
             if !late.is_empty() && !stop.load(Ordering::SeqCst) {
@@ -311,7 +328,7 @@ async fn run_loop(
             }
         } else {
             for r in inbox.drain() {
-                policy.on_command(r.msg, t_ns);
+                policy.on_command(&r, t_ns);
             }
         }
         if stop.load(Ordering::SeqCst) {
@@ -396,7 +413,7 @@ async fn wait_for_nodes(bus: &Bus, names: &[String], timeout_ms: u64, stop: &Ato
 /// The answers to one lockstep step.
 struct Answers {
     /// The command of the first awaited node that answered.
-    command: Option<ControlCommand>,
+    command: Option<Received<ControlCommand>>,
     /// Awaited nodes that did not answer in time.
     late: Vec<String>,
     /// Senders of answers to this step that lockstep does not wait for ("(unnamed)": no
@@ -413,14 +430,14 @@ async fn await_answers(
     stop: &AtomicBool,
 ) -> Answers {
     let deadline = tokio::time::Instant::now() + Duration::from_millis(timeout_ms);
-    let mut answers: BTreeMap<&str, ControlCommand> = BTreeMap::new();
+    let mut answers: BTreeMap<&str, Received<ControlCommand>> = BTreeMap::new();
     let mut strangers = BTreeSet::new();
     loop {
         for r in inbox.drain() {
             let from = r.source.as_deref().and_then(|s| wait_for.iter().find(|n| n.as_str() == s));
             match (from, r.msg.answers_step) {
                 (Some(name), Some(step)) if step == k => {
-                    answers.insert(name.as_str(), r.msg);
+                    answers.insert(name.as_str(), r);
                 }
                 (None, Some(step)) if step == k => {
                     strangers.insert(r.source.clone().unwrap_or_else(|| "(unnamed)".into()));
@@ -437,11 +454,8 @@ async fn await_answers(
         // Wake at least every 100 ms to notice a stop request.
         let _ = tokio::time::timeout_at(deadline.min(now + Duration::from_millis(100)), inbox.notify.notified()).await;
     }
-    Answers {
-        command: wait_for.iter().find_map(|n| answers.get(n.as_str()).copied()),
-        late: wait_for.iter().filter(|n| !answers.contains_key(n.as_str())).cloned().collect(),
-        strangers,
-    }
+    let late = wait_for.iter().filter(|n| !answers.contains_key(n.as_str())).cloned().collect();
+    Answers { command: wait_for.iter().find_map(|n| answers.remove(n.as_str())), late, strangers }
 }
 
 #[cfg(test)]
@@ -459,13 +473,25 @@ mod tests {
         let mut p = policy(BeforeFirst::Cruise);
         assert_eq!(p.input(0), EgoInput::Cruise);
         let go = ControlCommand { throttle: 0.7, ..ControlCommand::NEUTRAL };
-        p.on_command(go, 1_000_000_000);
+        let sent = |stamp_pub_ns| Received {
+            header: crate::msg::Header { seq: 0, stamp_sim_ns: 0, stamp_pub_ns },
+            msg: go,
+            source: None,
+        };
+        p.on_command(&sent(42), 1_000_000_000);
+        assert_eq!(p.timing(), None, "not applied yet");
+        assert_eq!(p.input(1_000_000_000), EgoInput::Command(go));
+        let timing = p.timing().expect("applied");
+        assert_eq!(timing.command_stamp_pub_ns, 42);
+        assert!(timing.applied_ns > 0);
         assert_eq!(p.input(1_200_000_000), EgoInput::Command(go), "held for 200 ms");
+        assert_eq!(p.timing(), Some(timing), "the first application is kept");
         let brake = EgoInput::Command(ControlCommand { brake: 0.4, ..ControlCommand::NEUTRAL });
         assert_eq!(p.input(1_210_000_000), brake);
         assert_eq!(p.input(5_000_000_000), brake);
         assert_eq!(p.timeouts, 1, "one timeout, however long it lasts");
-        p.on_command(go, 6_000_000_000);
+        assert_eq!(p.timing(), None, "no command in effect while braking");
+        p.on_command(&sent(43), 6_000_000_000);
         assert_eq!(p.input(6_010_000_000), EgoInput::Command(go));
         assert_eq!(policy(BeforeFirst::Brake).input(0), brake);
     }

@@ -365,7 +365,7 @@ impl World {
                 let lead = if input == EgoInput::Follow { self.lead_of(0) } else { None };
                 let (throttle, brake) = self.ego_cruise.longitudinal(&ego_params, ego.forward_speed_mps(), lead, dt);
                 self.ego_applied =
-                    ControlCommand { throttle: throttle as f32, brake: brake as f32, steer: 0.0, answers_step: None };
+                    ControlCommand { throttle: throttle as f32, brake: brake as f32, ..ControlCommand::NEUTRAL };
                 Actuation { throttle, brake, steer: lane_keep(self) }
             }
             EgoInput::Command(cmd) => {
@@ -478,6 +478,8 @@ impl World {
             speed_mps: e.forward_speed_mps(),
             lane: e.lane,
             applied: self.ego_applied,
+            // Wall-clock timing is the node's business (sim::node fills it in).
+            control_timing: None,
         }
     }
 }

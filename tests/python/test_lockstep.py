@@ -32,7 +32,8 @@ def test_a_python_controller_drives_the_simulator_in_lockstep(sim_bin, free_port
                 with lock:
                     seq = len(states)
                     states.append(state)
-                command = {"throttle": 0.5, "brake": 0.0, "steer": 0.0, "answers_step": state["step"]}
+                command = {"throttle": 0.5, "brake": 0.0, "steer": 0.0, "answers_step": state["step"],
+                           "perception_stamp_pub_ns": None}
                 stamp = {"seq": seq, "stamp_sim_ns": header["stamp_sim_ns"], "stamp_pub_ns": time.time_ns()}
                 control.put(encode("ControlCommand", stamp, command), attachment=b"pyctl")
 

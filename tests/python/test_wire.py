@@ -26,7 +26,8 @@ def test_every_rust_example_decodes_and_reencodes_byte_for_byte(examples):
 def test_decoded_values_are_the_documented_ones(examples):
     assert decode(examples["Speed"])[2] == {"speed_mps": 27.5}
     control = decode(examples["ControlCommand"])[2]
-    assert control == {"throttle": 0.25, "brake": 0.0, "steer": -0.5, "answers_step": 125}
+    assert control == {"throttle": 0.25, "brake": 0.0, "steer": -0.5, "answers_step": 125,
+                       "perception_stamp_pub_ns": 1_700_000_000_100_000_000}
     frame = decode(examples["CameraFrame"])[2]
     assert (frame["width"], frame["height"], frame["encoding"]) == (2, 1, "Rgb8")
     assert frame["data"] == bytes([255, 0, 0, 0, 128, 255])
@@ -52,7 +53,7 @@ def test_strict_decoding(examples):
             decode(payload + b"\x00")
     speed = examples["Speed"]
     with pytest.raises(WireError, match="version"):
-        decode(b"\x02" + speed[1:])
+        decode(b"\x01" + speed[1:])
     with pytest.raises(WireError, match="expected ControlCommand"):
         decode(speed, expected="ControlCommand")
 
@@ -61,7 +62,7 @@ def test_python_encodes_what_rust_documents():
     header = {"seq": 1, "stamp_sim_ns": 0, "stamp_pub_ns": 5}
     # -1 as i32 is zigzag 1; 300 as varint is ac 02.
     state_lane = encode("Speed", header, {"speed_mps": 1.0})
-    assert state_lane[:5] == bytes([1, 1, 1, 0, 5])
+    assert state_lane[:5] == bytes([2, 1, 1, 0, 5])
     event = encode("SimEvent", header, {"kind": {"variant": "ControlTimeout", "late": ["acc"]}})
     assert event[5:] == bytes([3, 1, 3]) + b"acc"
     assert decode(event)[2]["kind"]["late"] == ["acc"]

@@ -1,4 +1,4 @@
-"""slipstream wire format v1 in pure Python, written from docs/wire-format.md alone.
+"""slipstream wire format (version 2) in pure Python, written from docs/wire-format.md alone.
 
 decode(payload) -> (kind_name, header, body) and encode(kind_name, header, body) -> bytes.
 Bodies are dicts keyed by the field names of the doc; enums are their variant names
@@ -8,11 +8,11 @@ Decoding is strict, like the Rust side: any malformed payload raises WireError.
 
 import struct
 
-WIRE_VERSION = 1
+WIRE_VERSION = 2
 
 
 class WireError(ValueError):
-    """A payload that is not a valid slipstream v1 message."""
+    """A payload that is not a valid slipstream message of this wire version."""
 
 
 # Type language: "u8" "u32" "u64" "i32" "f32" "f64" "bool" "str" "bytes",
@@ -24,11 +24,16 @@ OBJECT_CLASS = ("enum", ["Unknown", "Car", "Van", "Truck"])
 STRUCTS = {
     "Header": [("seq", "u64"), ("stamp_sim_ns", "u64"), ("stamp_pub_ns", "u64")],
     "Speed": [("speed_mps", "f64")],
-    "ControlCommand": [("throttle", "f32"), ("brake", "f32"), ("steer", "f32"), ("answers_step", ("opt", "u64"))],
+    "ControlCommand": [
+        ("throttle", "f32"), ("brake", "f32"), ("steer", "f32"), ("answers_step", ("opt", "u64")),
+        ("perception_stamp_pub_ns", ("opt", "u64")),
+    ],
+    "ControlTiming": [("command_stamp_pub_ns", "u64"), ("applied_ns", "u64")],
     "VehicleState": [
         ("step", "u64"), ("position_in_world_m", VEC3), ("yaw_in_world_rad", "f64"), ("pitch_rad", "f64"),
         ("roll_rad", "f64"), ("velocity_in_world_mps", VEC3), ("acceleration_in_body_mps2", VEC3),
         ("yaw_rate_radps", "f64"), ("speed_mps", "f64"), ("lane", "i32"), ("applied", ("struct", "ControlCommand")),
+        ("control_timing", ("opt", ("struct", "ControlTiming"))),
     ],
     "CameraFrame": [("width", "u32"), ("height", "u32"), ("encoding", IMAGE_ENCODING), ("data", "bytes")],
     "CameraInfo": [
