@@ -28,8 +28,12 @@ pub fn apply_zenoh_runtime_default() {
 /// (see config/zenoh.json5).
 pub fn init_tracing() {
     let env = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info,zenoh=warn,zenoh_ext=warn"));
-    let layer =
-        tracing_subscriber::fmt::layer().with_writer(std::io::stderr).with_filter(RendezvousNoise).with_filter(env);
+    let layer = tracing_subscriber::fmt::layer()
+        .with_writer(std::io::stderr)
+        // Colours on a terminal only: `slipstream up` writes the nodes' logs to files.
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .with_filter(RendezvousNoise)
+        .with_filter(env);
     let _ = tracing_subscriber::registry().with(layer).try_init();
 }
 

@@ -276,7 +276,7 @@ const FONT_PATHS: &[&str] = &[
     "/Library/Fonts/Arial.ttf",
 ];
 
-fn register_font() -> anyhow::Result<()> {
+pub(crate) fn register_font() -> anyhow::Result<()> {
     static DONE: std::sync::OnceLock<Result<(), String>> = std::sync::OnceLock::new();
     DONE.get_or_init(|| {
         let from_env = std::env::var("SLIPSTREAM_PLOT_FONT").ok();

@@ -4,9 +4,8 @@
 //! acc/status, objects and sim/events from a session of its own, and judges the run against the
 //! ground truth ([`super::eval::Metrics`]).
 
-use std::net::TcpListener;
 use std::path::PathBuf;
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -20,6 +19,7 @@ use crate::bus::Received;
 use crate::msg::{AccStatus, GroundTruthObjects, SimEvent, SimEventKind, VehicleState};
 use crate::sim::vehicle::VehicleParams;
 use crate::sim::Scenario;
+use crate::tools::children::{free_ports, sibling_binary, Child};
 use crate::topics;
 
 #[derive(Debug, Clone, clap::Args)]
@@ -65,74 +65,46 @@ pub struct AccReport {
     pub pass: bool,
 }
 
-/// The binary `name` next to the running one (cargo puts them side by side).
-pub fn sibling_binary(name: &str) -> Result<PathBuf> {
-    let exe = std::env::current_exe().context("where is this binary")?;
-    let dir = exe.parent().context("binary without a directory")?;
-    // Test binaries live one level further down (target/<profile>/deps).
-    for d in [dir, dir.parent().unwrap_or(dir)] {
-        let p = d.join(format!("{name}{}", std::env::consts::EXE_SUFFIX));
-        if p.is_file() {
-            return Ok(p);
-        }
-    }
-    bail!("{name} not found next to {} (build every binary: cargo build --release)", exe.display())
-}
-
-/// `N` distinct free loopback TCP ports (bound together, released together; the children take
-/// them right after). Released one at a time, the OS could hand out the same port twice.
-fn free_ports<const N: usize>() -> Result<[u16; N]> {
-    let listeners: Vec<TcpListener> = (0..N).map(|_| TcpListener::bind("127.0.0.1:0")).collect::<Result<_, _>>()?;
-    let mut ports = [0u16; N];
-    for (p, l) in ports.iter_mut().zip(&listeners) {
-        *p = l.local_addr()?.port();
-    }
-    Ok(ports)
-}
-
-/// A child process that is stopped (SIGINT, then killed) when dropped.
-struct Node {
-    name: &'static str,
-    child: Child,
-}
-
-impl Node {
-    fn spawn(name: &'static str, cmd: &mut Command) -> Result<Node> {
-        let child = cmd.spawn().with_context(|| format!("start {name}"))?;
-        Ok(Node { name, child })
-    }
-
-    fn stop(&mut self) {
-        if let Ok(Some(_)) = self.child.try_wait() {
-            return;
-        }
-        let _ = Command::new("kill").args(["-INT", &self.child.id().to_string()]).status();
-        let deadline = Instant::now() + Duration::from_secs(5);
-        while Instant::now() < deadline {
-            if let Ok(Some(_)) = self.child.try_wait() {
-                return;
-            }
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        tracing::warn!(node = self.name, "did not stop on SIGINT: killed");
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
-impl Drop for Node {
-    fn drop(&mut self) {
-        self.stop();
-    }
-}
-
 /// What the recorder keeps, in arrival order.
 #[derive(Default)]
-struct Recorded {
-    states: Vec<Received<VehicleState>>,
-    statuses: Vec<Received<AccStatus>>,
-    objects: Vec<Received<GroundTruthObjects>>,
-    collisions: u64,
+pub(crate) struct Recorded {
+    pub states: Vec<Received<VehicleState>>,
+    pub statuses: Vec<Received<AccStatus>>,
+    pub objects: Vec<Received<GroundTruthObjects>>,
+    pub collisions: u64,
+}
+
+/// Records vehicle/state, acc/status, objects and the collisions on sim/events: what a run is
+/// judged by.
+pub(crate) struct Recorder {
+    pub rec: Arc<Mutex<Recorded>>,
+    _subs: [crate::bus::CallbackSubscriber; 4],
+}
+
+impl Recorder {
+    pub(crate) async fn start(bus: &crate::Bus) -> Result<Recorder> {
+        let rec = Arc::new(Mutex::new(Recorded::default()));
+        let r = rec.clone();
+        let s1 = bus.subscribe_with(topics::VEHICLE_STATE, move |m| r.lock().states.push(m)).await?;
+        let r = rec.clone();
+        let s2 = bus.subscribe_with(topics::ACC_STATUS, move |m| r.lock().statuses.push(m)).await?;
+        let r = rec.clone();
+        let s3 = bus.subscribe_with(topics::OBJECTS, move |m| r.lock().objects.push(m)).await?;
+        let r = rec.clone();
+        let s4 = bus
+            .subscribe_with(topics::SIM_EVENTS, move |m: Received<SimEvent>| {
+                if matches!(m.msg.kind, SimEventKind::Collision { .. }) {
+                    r.lock().collisions += 1;
+                }
+            })
+            .await?;
+        Ok(Recorder { rec, _subs: [s1, s2, s3, s4] })
+    }
+
+    /// Everything recorded so far, leaving the recorder empty.
+    pub(crate) fn take(&self) -> Recorded {
+        std::mem::take(&mut *self.rec.lock())
+    }
 }
 
 /// Runs the suite; progress goes to stderr. The nodes and the recorder use the topic config
@@ -197,21 +169,7 @@ async fn run_one(
     cfg.insert_json5("connect/endpoints", "[]").map_err(anyhow::Error::msg)?;
     let topics = topic_map.clone().with_namespace(&namespace)?;
     let bus = crate::Bus::open(cfg, topics, "eval-acc").await?;
-    let rec = Arc::new(Mutex::new(Recorded::default()));
-    let r = rec.clone();
-    let _s1 = bus.subscribe_with(topics::VEHICLE_STATE, move |m| r.lock().states.push(m)).await?;
-    let r = rec.clone();
-    let _s2 = bus.subscribe_with(topics::ACC_STATUS, move |m| r.lock().statuses.push(m)).await?;
-    let r = rec.clone();
-    let _s3 = bus.subscribe_with(topics::OBJECTS, move |m| r.lock().objects.push(m)).await?;
-    let r = rec.clone();
-    let _s4 = bus
-        .subscribe_with(topics::SIM_EVENTS, move |m: Received<SimEvent>| {
-            if matches!(m.msg.kind, SimEventKind::Collision { .. }) {
-                r.lock().collisions += 1;
-            }
-        })
-        .await?;
+    let recorder = Recorder::start(&bus).await?;
 
     let common = |cmd: &mut Command, listen: u16, connect: &[u16]| {
         cmd.args(["-n", &namespace, "-l", &ep(listen)]);
@@ -234,12 +192,12 @@ async fn run_one(
     acc_cmd.args(["--perception", if camera { "camera" } else { "ground-truth" }]);
     common(&mut acc_cmd, p_acc, &[p_rec]);
     acc_cmd.stdout(Stdio::null());
-    nodes.push(Node::spawn("slipstream-acc", &mut acc_cmd)?);
+    nodes.push(Child::spawn("slipstream-acc", &mut acc_cmd)?);
     if camera {
         let mut det = Command::new(sibling_binary("slipstream-detect")?);
         common(&mut det, p_det, &[p_rec, p_acc]);
         det.stdout(Stdio::null());
-        nodes.push(Node::spawn("slipstream-detect", &mut det)?);
+        nodes.push(Child::spawn("slipstream-detect", &mut det)?);
     }
     // The simulator's first frame must find the detector (and the ACC) listening.
     let wanted: Vec<&str> = if camera { vec!["acc", "detect"] } else { vec!["acc"] };
@@ -250,7 +208,7 @@ async fn run_one(
             break;
         }
         for n in &mut nodes {
-            if let Ok(Some(status)) = n.child.try_wait() {
+            if let Some(status) = n.exited() {
                 bail!("{} exited at start ({status}); run it alone to see why", n.name);
             }
         }
@@ -285,17 +243,17 @@ async fn run_one(
     // Let the last messages land, then stop the nodes.
     tokio::time::sleep(Duration::from_millis(200)).await;
     for n in &mut nodes {
-        n.stop();
+        n.stop(Duration::from_secs(5));
     }
     anyhow::ensure!(output.status.success(), "slipstream-sim failed ({}); run it alone to see why", output.status);
     let report: serde_json::Value = serde_json::from_slice(&output.stdout).context("slipstream-sim --json report")?;
     let lockstep_timeouts = report["lockstep_timeouts"].as_u64().unwrap_or(0);
     let ego_collisions = report["ego_collisions"].as_u64().unwrap_or(0);
     let end = report["end"]["reason"].as_str().unwrap_or("stopped").to_string();
-    drop((_s1, _s2, _s3, _s4));
+    let rec = recorder.take();
+    drop(recorder);
     bus.close().await?;
 
-    let rec = std::mem::take(&mut *rec.lock());
     let mut trace = build_trace(&rec, ego_front, crate::acc::AccSettings::default().standstill_m);
     trace.collisions = ego_collisions.max(rec.collisions);
     trace.end = end.clone();
@@ -324,7 +282,7 @@ async fn run_one(
 }
 
 /// One sample per recorded state, with the newest status and ground truth at its time.
-fn build_trace(rec: &Recorded, ego_front: f64, standstill_m: f64) -> Trace {
+pub(crate) fn build_trace(rec: &Recorded, ego_front: f64, standstill_m: f64) -> Trace {
     let mut states: Vec<&Received<VehicleState>> = rec.states.iter().collect();
     states.sort_by_key(|r| r.header.stamp_sim_ns);
     states.dedup_by_key(|r| r.header.stamp_sim_ns);

@@ -21,6 +21,26 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Run the whole loop on this machine: slipstream-sim, slipstream-detect and slipstream-acc
+    /// as separate processes, with a live view (scenario time, ego speed, gap, ACC mode,
+    /// real-time factor, loop latency per hop), then a summary, report.json and plots.
+    ///
+    /// Exits with 1 on a collision or when a node dies. Ctrl-C stops every node and still
+    /// writes the report. The nodes' logs go to the report directory. Examples:
+    ///
+    ///   slipstream up
+    ///   slipstream up --scenario cut-in --mode lockstep --report reports/cut-in
+    ///   slipstream up --perception ground-truth --duration 20
+    #[command(verbatim_doc_comment)]
+    Up(slipstream::tools::up::UpArgs),
+    /// Live view of every key: rate, bandwidth, latency p50/p99, losses, malformed payloads,
+    /// age of the last message; the nodes alive and the simulator's real-time factor
+    ///
+    /// A table on a terminal; one JSON object per refresh with --json or when stdout is not a
+    /// terminal. Like `ros2 topic hz/bw/delay` and `dora top` on one screen.
+    Top(slipstream::tools::top::TopArgs),
+    /// Print the messages of a topic as JSON lines (decoded by their type)
+    Echo(slipstream::tools::echo::EchoArgs),
     /// Run a publisher and a subscriber as two processes and show what flows (until
     /// `slipstream up` exists, the quickest way to see the bus work)
     Demo(slipstream::tools::demo::DemoArgs),
@@ -126,6 +146,21 @@ fn demo(connect: &ConnectArgs, args: &slipstream::tools::demo::DemoArgs) -> Resu
     })
 }
 
+/// Opens a bus as `node`, runs `f` with it, closes it.
+fn on_bus<F, Fut>(connect: &ConnectArgs, node: &str, f: F) -> Result<()>
+where
+    F: FnOnce(slipstream::Bus) -> Fut,
+    Fut: std::future::Future<Output = Result<slipstream::Bus>>,
+{
+    let rt = tokio::runtime::Runtime::new()?;
+    rt.block_on(async {
+        let bus = slipstream::Bus::open(connect.zenoh_config()?, connect.topic_map()?, node).await?;
+        let bus = f(bus).await?;
+        bus.close().await?;
+        Ok(())
+    })
+}
+
 fn main() -> Result<()> {
     slipstream::cli::apply_zenoh_runtime_default();
     let cli = Cli::parse();
@@ -146,6 +181,21 @@ fn main() -> Result<()> {
             Ok(())
         }
         Command::Demo(args) => demo(&cli.connect, &args),
+        Command::Up(args) => {
+            let outcome = slipstream::tools::up::run(&args, &cli.connect)?;
+            std::process::exit(outcome.exit_code());
+        }
+        Command::Top(args) => on_bus(&cli.connect, &format!("top-{}", std::process::id()), |bus| async move {
+            slipstream::tools::top::run(&bus, &args).await?;
+            Ok(bus)
+        }),
+        Command::Echo(args) => on_bus(&cli.connect, &format!("echo-{}", std::process::id()), |bus| async move {
+            let printed = slipstream::tools::echo::run(&bus, &args).await?;
+            if args.count.is_some_and(|n| printed < n) {
+                anyhow::bail!("{printed} of {} messages seen on {}", args.count.unwrap_or(0), args.topic);
+            }
+            Ok(bus)
+        }),
         Command::Info { json } => {
             let info = slipstream::tools::info::gather(&cli.connect)?;
             if json {

@@ -13,7 +13,7 @@ use std::sync::Arc;
 
 pub use publisher::{FramePublisher, FrameSent, Publisher};
 pub use stats::{StatsSnapshot, TopicStats};
-pub use subscriber::{CallbackSubscriber, FrameSample, FrameSubscriber, Received, Subscriber, Subscription};
+pub use subscriber::{CallbackSubscriber, Declared, FrameSample, FrameSubscriber, Received, Subscriber, Subscription};
 
 use crate::config::{ConfigError, TopicMap};
 use crate::msg::Message;
@@ -160,6 +160,46 @@ impl Bus {
         Ok(names)
     }
 
+    /// Calls `handler` with every raw sample on `key` (any key expression), undecoded: for
+    /// tools that look at keys whatever their type (`slipstream top`, `echo`). `latched` also
+    /// fetches the last sample of latched publishers. Dropping the result undeclares.
+    pub async fn subscribe_samples<F>(
+        &self,
+        key: zenoh::key_expr::OwnedKeyExpr,
+        latched: bool,
+        handler: F,
+    ) -> Result<Declared, BusError>
+    where
+        F: Fn(zenoh::sample::Sample) + Send + Sync + 'static,
+    {
+        subscriber::declare_callback(&self.session, &key, latched, handler).await
+    }
+
+    /// Follows the liveliness tokens of every node in this namespace.
+    pub async fn watch_nodes(&self) -> Result<NodesWatch, BusError> {
+        let selector = self.topics.nodes_selector();
+        let prefix = selector.as_str().trim_end_matches("**").to_string();
+        let names = Arc::new(parking_lot::Mutex::new(std::collections::BTreeSet::new()));
+        let set = names.clone();
+        let subscriber = self
+            .session
+            .liveliness()
+            .declare_subscriber(selector.clone())
+            .history(true)
+            .callback(move |sample| {
+                let key = sample.key_expr().as_str();
+                let name = key.strip_prefix(&prefix).unwrap_or(key).to_string();
+                if sample.kind() == zenoh::sample::SampleKind::Put {
+                    set.lock().insert(name);
+                } else {
+                    set.lock().remove(&name);
+                }
+            })
+            .await
+            .map_err(zerr(format!("liveliness subscriber {selector}")))?;
+        Ok(NodesWatch { names, _subscriber: subscriber })
+    }
+
     /// Follows one node's liveliness token: `is_alive()` turns true when the node is up and
     /// false when it leaves or its session dies.
     pub async fn watch_node(&self, name: &str) -> Result<NodeWatch, BusError> {
@@ -195,5 +235,18 @@ pub struct NodeWatch {
 impl NodeWatch {
     pub fn is_alive(&self) -> bool {
         self.alive.load(std::sync::atomic::Ordering::SeqCst)
+    }
+}
+
+/// The nodes alive in a namespace, as `Bus::watch_nodes` follows them.
+pub struct NodesWatch {
+    names: Arc<parking_lot::Mutex<std::collections::BTreeSet<String>>>,
+    _subscriber: zenoh::pubsub::Subscriber<()>,
+}
+
+impl NodesWatch {
+    /// The names alive now, sorted.
+    pub fn names(&self) -> Vec<String> {
+        self.names.lock().iter().cloned().collect()
     }
 }

@@ -76,11 +76,11 @@ impl<T> Inbox<T> {
 }
 
 /// Keeps a declared Zenoh subscriber (plain or advanced) alive; dropping it undeclares.
-type Declared = Box<dyn std::any::Any + Send + Sync>;
+pub type Declared = Box<dyn std::any::Any + Send + Sync>;
 
 /// Declares a Zenoh subscriber calling `callback`; for a latched topic an advanced subscriber
 /// that first fetches the last message of every publisher, including ones that start later.
-async fn declare_callback<F>(
+pub(crate) async fn declare_callback<F>(
     session: &zenoh::Session,
     key: &OwnedKeyExpr,
     latched: bool,

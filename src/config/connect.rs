@@ -26,7 +26,7 @@ pub struct ConnectArgs {
     pub zenoh_config: Option<PathBuf>,
 
     /// Zenoh mode, overriding the config file
-    #[arg(short = 'm', long, value_enum, global = true)]
+    #[arg(id = "zenoh_mode", short = 'm', long = "zenoh-mode", value_name = "MODE", value_enum, global = true)]
     pub mode: Option<ModeArg>,
 
     /// Endpoint to connect to, e.g. tcp/192.168.1.10:7447 (repeatable; replaces the config's list)
@@ -87,7 +87,7 @@ impl ConnectArgs {
                 ModeArg::Client => "client",
                 ModeArg::Router => "router",
             };
-            set(&mut config, "mode", format!("\"{m}\""), "--mode")?;
+            set(&mut config, "mode", format!("\"{m}\""), "-m/--zenoh-mode")?;
         }
         if !self.connect.is_empty() {
             set(&mut config, "connect/endpoints", json_list(&self.connect), "--connect")?;

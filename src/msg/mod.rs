@@ -15,6 +15,7 @@
 //! input. docs/wire-format.md documents the bytes for other languages.
 
 mod acc;
+mod any;
 mod camera;
 mod codec;
 mod objects;
@@ -22,6 +23,7 @@ mod sim;
 mod vehicle;
 
 pub use acc::{AccCommand, AccMode, AccStatus, AccWarning, LeadInfo};
+pub use any::{decode_json, peek_kind};
 pub use camera::{encode_jpeg, frame_prefix, CameraFrame, CameraFrameRef, CameraInfo, ImageEncoding};
 pub use codec::{decode, decode_header, encode, encode_into, DecodeError, Stamped};
 pub use objects::{BoundingBox2d, Detection, Detections, GroundTruthObject, GroundTruthObjects, ObjectClass};

@@ -54,6 +54,12 @@ pub fn map(json5: &str) -> TopicMap {
 /// Runs a command with a deadline; kills it and fails the test if it overruns.
 pub fn run_with_limit(mut cmd: std::process::Command, limit: Duration) -> std::process::Output {
     let child = cmd.stdout(std::process::Stdio::piped()).stderr(std::process::Stdio::piped()).spawn().unwrap();
+    wait_with_limit(child, limit, &format!("{cmd:?}"))
+}
+
+/// Waits for a started child's output with a deadline; kills it and fails the test if it
+/// overruns.
+pub fn wait_with_limit(child: std::process::Child, limit: Duration, what: &str) -> std::process::Output {
     let id = child.id();
     let (tx, rx) = std::sync::mpsc::channel();
     std::thread::spawn(move || {
@@ -63,7 +69,7 @@ pub fn run_with_limit(mut cmd: std::process::Command, limit: Duration) -> std::p
         Ok(out) => out.unwrap(),
         Err(_) => {
             let _ = std::process::Command::new("kill").arg("-9").arg(id.to_string()).status();
-            panic!("{cmd:?} ran longer than {limit:?}");
+            panic!("{what} ran longer than {limit:?}");
         }
     }
 }

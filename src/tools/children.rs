@@ -1,0 +1,106 @@
+//! Child processes of the tools that start nodes (`slipstream up`, `slipstream eval acc`):
+//! finding the node binaries, loopback ports for them, and stopping them the way Ctrl-C does.
+
+use std::net::TcpListener;
+use std::path::PathBuf;
+use std::process::{Command, ExitStatus};
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+
+/// The binary `name` next to the running one (cargo puts them side by side).
+pub fn sibling_binary(name: &str) -> Result<PathBuf> {
+    let exe = std::env::current_exe().context("where is this binary")?;
+    let dir = exe.parent().context("binary without a directory")?;
+    // Test binaries live one level further down (target/<profile>/deps).
+    for d in [dir, dir.parent().unwrap_or(dir)] {
+        let p = d.join(format!("{name}{}", std::env::consts::EXE_SUFFIX));
+        if p.is_file() {
+            return Ok(p);
+        }
+    }
+    bail!("{name} not found next to {} (build every binary: cargo build --release)", exe.display())
+}
+
+/// `N` distinct free loopback TCP ports (bound together, released together; the children take
+/// them right after). Released one at a time, the OS could hand out the same port twice.
+pub fn free_ports<const N: usize>() -> Result<[u16; N]> {
+    let listeners: Vec<TcpListener> = (0..N).map(|_| TcpListener::bind("127.0.0.1:0")).collect::<Result<_, _>>()?;
+    let mut ports = [0u16; N];
+    for (p, l) in ports.iter_mut().zip(&listeners) {
+        *p = l.local_addr()?.port();
+    }
+    Ok(ports)
+}
+
+/// Sends SIGINT (what Ctrl-C sends) to a process.
+pub fn interrupt(pid: u32) {
+    // SAFETY: kill(2) with a pid we started and a valid signal number has no memory effects.
+    unsafe {
+        libc::kill(pid as libc::pid_t, libc::SIGINT);
+    }
+}
+
+/// A node started as a child process; stopped (SIGINT, then killed) when dropped.
+pub struct Child {
+    pub name: String,
+    child: std::process::Child,
+    status: Option<ExitStatus>,
+}
+
+impl Child {
+    pub fn spawn(name: &str, cmd: &mut Command) -> Result<Child> {
+        let child = cmd.spawn().with_context(|| format!("start {name} ({:?})", cmd.get_program()))?;
+        Ok(Child { name: name.to_string(), child, status: None })
+    }
+
+    pub fn pid(&self) -> u32 {
+        self.child.id()
+    }
+
+    /// The exit status once the process has ended (reaped), else None.
+    pub fn exited(&mut self) -> Option<ExitStatus> {
+        if self.status.is_none() {
+            self.status = self.child.try_wait().ok().flatten();
+        }
+        self.status
+    }
+
+    /// Asks the process to stop (SIGINT) unless it has ended.
+    pub fn interrupt(&mut self) {
+        if self.exited().is_none() {
+            interrupt(self.pid());
+        }
+    }
+
+    /// SIGINT, then up to `grace` for it to end, then SIGKILL. Returns the exit status.
+    pub fn stop(&mut self, grace: Duration) -> Option<ExitStatus> {
+        self.interrupt();
+        if self.wait_for(grace).is_none() {
+            tracing::warn!(node = %self.name, "did not stop on SIGINT within {grace:?}: killed");
+            let _ = self.child.kill();
+            self.status = self.child.wait().ok();
+        }
+        self.status
+    }
+
+    /// Waits up to `timeout` for the process to end.
+    pub fn wait_for(&mut self, timeout: Duration) -> Option<ExitStatus> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            if let Some(s) = self.exited() {
+                return Some(s);
+            }
+            if Instant::now() >= deadline {
+                return None;
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+    }
+}
+
+impl Drop for Child {
+    fn drop(&mut self) {
+        self.stop(Duration::from_secs(5));
+    }
+}

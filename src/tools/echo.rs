@@ -1,0 +1,146 @@
+//! `slipstream echo TOPIC`: the messages on one topic (or any key expression), decoded by their
+//! kind byte and printed as JSON lines; camera frames summarized, and written as PNG files
+//! with `--save DIR`.
+
+use std::io::Write;
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, Result};
+use serde_json::json;
+
+use crate::bus::{Bus, TopicStats};
+use crate::msg::{self, CameraFrameRef, MessageKind};
+use crate::topics::Topic;
+
+#[derive(Debug, Clone, clap::Args)]
+#[command(after_help = "Examples:\n  slipstream echo vehicle/speed --count 5\n  \
+    slipstream echo camera/front --count 3 --save frames/\n  slipstream echo 'vehicle/**'")]
+pub struct EchoArgs {
+    /// A topic (vehicle/speed, camera/front, perception/objects, ...: `slipstream info` lists
+    /// them with their keys after namespace and remapping) or any Zenoh key expression
+    pub topic: String,
+    /// Stop after this many messages
+    #[arg(long)]
+    pub count: Option<u64>,
+    /// Print the payload as hex instead of decoding it (for payloads that do not decode)
+    #[arg(long)]
+    pub raw: bool,
+    /// Write camera frames into this directory as PNG files (<key>-<seq>.png)
+    #[arg(long, value_name = "DIR")]
+    pub save: Option<PathBuf>,
+    /// Stop after this many seconds [default: until Ctrl-C or --count]
+    #[arg(long, value_parser = super::top::positive)]
+    pub duration: Option<f64>,
+}
+
+/// Runs until --count, --duration or Ctrl-C. Returns how many messages it printed.
+pub async fn run(bus: &Bus, args: &EchoArgs) -> Result<u64> {
+    let topics = bus.topics();
+    let (key, latched) = match Topic::from_name(&args.topic) {
+        Some(t) => (topics.key(t), topics.qos(t).latched),
+        None => {
+            let k = zenoh::key_expr::OwnedKeyExpr::autocanonize(args.topic.clone()).map_err(|e| {
+                anyhow::anyhow!(
+                    "`{}` is neither a topic nor a key expression ({e}); topics: {}",
+                    args.topic,
+                    Topic::ALL.map(|t| t.name()).join(", ")
+                )
+            })?;
+            (k, false)
+        }
+    };
+    if let Some(dir) = &args.save {
+        std::fs::create_dir_all(dir).with_context(|| format!("create {}", dir.display()))?;
+    }
+    // Samples (not copies: a sample holds its payload) go from Zenoh's thread to this loop.
+    let (tx, mut rx) = tokio::sync::mpsc::channel::<zenoh::sample::Sample>(256);
+    let dropped = std::sync::Arc::new(std::sync::atomic::AtomicU64::new(0));
+    let d = dropped.clone();
+    let _sub = bus
+        .subscribe_samples(key.clone(), latched, move |s| {
+            if tx.try_send(s).is_err() {
+                d.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            }
+        })
+        .await?;
+    tracing::info!(%key, "echo: waiting for messages");
+    let bad = TopicStats::new(key.to_string());
+    let deadline = args.duration.map(|d| Instant::now() + Duration::from_secs_f64(d));
+    let mut printed = 0u64;
+    let mut out = std::io::stdout().lock();
+    let ctrl_c = tokio::signal::ctrl_c();
+    tokio::pin!(ctrl_c);
+    while args.count.is_none_or(|n| printed < n) {
+        let left = deadline.map_or(Duration::from_secs(3600), |d| d.saturating_duration_since(Instant::now()));
+        if left.is_zero() {
+            break;
+        }
+        let sample = tokio::select! {
+            _ = &mut ctrl_c => break,
+            s = tokio::time::timeout(left, rx.recv()) => match s {
+                Ok(Some(s)) => s,
+                Ok(None) => break,
+                Err(_) => continue,
+            },
+        };
+        let line = match line(&sample, args, &bad)? {
+            Some(l) => l,
+            None => continue,
+        };
+        writeln!(out, "{line}")?;
+        out.flush()?;
+        printed += 1;
+    }
+    let missed = dropped.load(std::sync::atomic::Ordering::Relaxed);
+    if missed > 0 {
+        tracing::warn!(missed, "messages arrived faster than they could be printed and were skipped");
+    }
+    Ok(printed)
+}
+
+/// The JSON line for one sample; None (counted and logged) when it does not decode.
+fn line(sample: &zenoh::sample::Sample, args: &EchoArgs, bad: &TopicStats) -> Result<Option<String>> {
+    let key = sample.key_expr().as_str();
+    let from = sample.attachment().and_then(|a| a.try_to_string().ok()).map(|s| s.into_owned());
+    let payload = sample.payload().to_bytes();
+    let received_ns = msg::wall_clock_ns();
+    if args.raw {
+        let v = json!({ "key": key, "from": from, "bytes": payload.len(), "hex": msg::hex_lines(&payload).replace('\n', " ") });
+        return Ok(Some(v.to_string()));
+    }
+    let (kind, header, body) = match msg::decode_json(&payload) {
+        Ok(d) => d,
+        Err(e) => {
+            bad.on_decode_error(&format_args!("{key}: {e} (--raw prints the bytes)"));
+            return Ok(None);
+        }
+    };
+    let mut v = json!({
+        "key": key,
+        "from": from,
+        "kind": kind.name(),
+        "header": header,
+        "latency_us": (received_ns as i64 - header.stamp_pub_ns as i64) as f64 / 1e3,
+        "msg": body,
+    });
+    if kind == MessageKind::CameraFrame {
+        if let Some(dir) = &args.save {
+            let frame = msg::decode::<CameraFrameRef>(&payload)?.msg;
+            // Raw frames are encoded from the payload in place; JPEG is decoded once.
+            let rgb = frame.to_rgb8()?;
+            let path = dir.join(format!("{}-{:06}.png", key.replace('/', "_"), header.seq));
+            image::save_buffer_with_format(
+                &path,
+                &rgb,
+                frame.width,
+                frame.height,
+                image::ExtendedColorType::Rgb8,
+                image::ImageFormat::Png,
+            )
+            .with_context(|| format!("write {}", path.display()))?;
+            v["saved"] = json!(path);
+        }
+    }
+    Ok(Some(v.to_string()))
+}

@@ -1,0 +1,144 @@
+//! The loop's latency, hop by hop, from the stamps the messages carry (wire format v2):
+//!
+//! ```text
+//! camera frame published        Detections.frame_stamp_pub_ns
+//!   -> detections published     Detections header.stamp_pub_ns   = Control.perception_stamp_pub_ns
+//!   -> control published        Control header.stamp_pub_ns      = State.control_timing.command_stamp_pub_ns
+//!   -> control applied          State.control_timing.applied_ns
+//! ```
+//!
+//! Each hop counts once per message that moved the loop on: the first command computed from a
+//! perception message (later ones reuse it), the first application of a command. All stamps
+//! are publishers' wall clocks, so the figures hold on one host or hosts with synchronised
+//! clocks.
+
+use std::collections::{HashMap, HashSet};
+
+use serde::Serialize;
+
+/// The hops, in loop order.
+pub const HOPS: [&str; 4] = ["frame -> detections", "detections -> control", "control -> applied", "frame -> applied"];
+
+/// Samples kept per hop for the live view's percentiles.
+const LIVE_WINDOW: usize = 200;
+
+#[derive(Debug, Default)]
+pub struct LoopLatency {
+    /// Perception message publish stamp -> the stamp of the data it came from (the camera
+    /// frame for detections; itself for ground truth, which the simulator publishes with the
+    /// frame).
+    origin: HashMap<u64, u64>,
+    /// Command publish stamp -> the perception stamp it was computed from.
+    basis: HashMap<u64, u64>,
+    reacted: HashSet<u64>,
+    applied: HashSet<u64>,
+    /// Per hop: (publish time of the later message, ns since the epoch; latency, ns).
+    samples: [Vec<(u64, i64)>; 4],
+}
+
+/// Percentiles of one hop.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct HopStats {
+    pub hop: &'static str,
+    pub count: usize,
+    pub p50_ms: Option<f64>,
+    pub p99_ms: Option<f64>,
+    pub max_ms: Option<f64>,
+}
+
+impl LoopLatency {
+    /// A detections message: published at `pub_ns`, from the frame published at `frame_pub_ns`.
+    pub fn on_detections(&mut self, pub_ns: u64, frame_pub_ns: u64) {
+        self.origin.insert(pub_ns, frame_pub_ns);
+        self.samples[0].push((pub_ns, pub_ns as i64 - frame_pub_ns as i64));
+    }
+
+    /// A ground-truth message (the perception of `--perception ground-truth`).
+    pub fn on_ground_truth(&mut self, pub_ns: u64) {
+        self.origin.insert(pub_ns, pub_ns);
+    }
+
+    /// A command published at `pub_ns`, computed from the perception published at `basis`.
+    pub fn on_command(&mut self, pub_ns: u64, basis: Option<u64>) {
+        let Some(basis) = basis else { return };
+        self.basis.insert(pub_ns, basis);
+        if self.reacted.insert(basis) {
+            self.samples[1].push((pub_ns, pub_ns as i64 - basis as i64));
+        }
+    }
+
+    /// A state saying the command published at `command_pub_ns` was first applied at
+    /// `applied_ns`.
+    pub fn on_applied(&mut self, command_pub_ns: u64, applied_ns: u64) {
+        if !self.applied.insert(command_pub_ns) {
+            return;
+        }
+        self.samples[2].push((applied_ns, applied_ns as i64 - command_pub_ns as i64));
+        // The whole loop, once per perception message: its first command to be applied.
+        let Some(&basis) = self.basis.get(&command_pub_ns) else { return };
+        let Some(&origin) = self.origin.get(&basis) else { return };
+        if self.origin.remove(&basis).is_some() {
+            self.samples[3].push((applied_ns, applied_ns as i64 - origin as i64));
+        }
+    }
+
+    /// Percentiles over every sample, or over the newest `LIVE_WINDOW` of each hop.
+    pub fn stats(&self, live: bool) -> Vec<HopStats> {
+        HOPS.iter()
+            .zip(&self.samples)
+            .map(|(hop, s)| {
+                let from = if live { s.len().saturating_sub(LIVE_WINDOW) } else { 0 };
+                let mut v: Vec<i64> = s[from..].iter().map(|x| x.1).collect();
+                v.sort_unstable();
+                let pct = |p: f64| -> Option<f64> {
+                    (!v.is_empty()).then(|| v[((v.len() - 1) as f64 * p).round() as usize] as f64 / 1e6)
+                };
+                HopStats {
+                    hop,
+                    count: v.len(),
+                    p50_ms: pct(0.5),
+                    p99_ms: pct(0.99),
+                    max_ms: v.last().map(|x| *x as f64 / 1e6),
+                }
+            })
+            .collect()
+    }
+
+    /// Every sample of a hop, as (seconds since `t0_ns`, milliseconds).
+    pub fn series(&self, hop: usize, t0_ns: u64) -> Vec<(f64, f64)> {
+        self.samples[hop].iter().map(|(t, v)| ((*t as f64 - t0_ns as f64) / 1e9, *v as f64 / 1e6)).collect()
+    }
+}
+
+/// The smallest constant time gap a string of vehicles with this loop delay stays stable at:
+/// h > 2 (delay + actuator lag), the classic bound for a constant-time-gap policy with a
+/// delayed first-order actuator.
+pub fn min_stable_time_gap_s(delay_s: f64, actuator_lag_s: f64) -> f64 {
+    2.0 * (delay_s + actuator_lag_s)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn each_hop_counts_the_message_that_moved_the_loop_on() {
+        let ms = 1_000_000u64;
+        let mut l = LoopLatency::default();
+        // Frame at 100 ms, detections at 103, commands at 105 and 115 from them, the first
+        // applied at 110 (and reported again at 120), the second at 120.
+        l.on_detections(103 * ms, 100 * ms);
+        l.on_command(105 * ms, Some(103 * ms));
+        l.on_command(115 * ms, Some(103 * ms));
+        l.on_command(116 * ms, None);
+        l.on_applied(105 * ms, 110 * ms);
+        l.on_applied(105 * ms, 110 * ms);
+        l.on_applied(115 * ms, 120 * ms);
+        let s = l.stats(false);
+        let p50: Vec<Option<f64>> = s.iter().map(|h| h.p50_ms).collect();
+        assert_eq!(p50, vec![Some(3.0), Some(2.0), Some(5.0), Some(10.0)]);
+        let counts: Vec<usize> = s.iter().map(|h| h.count).collect();
+        assert_eq!(counts, vec![1, 1, 2, 1], "one reaction per perception, one total per perception");
+        assert!((min_stable_time_gap_s(0.01, 0.0) - 0.02).abs() < 1e-12);
+    }
+}

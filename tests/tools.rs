@@ -1,0 +1,317 @@
+//! `slipstream up`, `top` and `echo` as a user runs them, on loopback ports of their own.
+
+mod common;
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+use slipstream::msg::{self, MessageKind};
+use slipstream::topics::Topic;
+
+fn bin(name: &str) -> Command {
+    let path = match name {
+        "slipstream" => env!("CARGO_BIN_EXE_slipstream"),
+        "slipstream-sim" => env!("CARGO_BIN_EXE_slipstream-sim"),
+        other => panic!("no binary {other}"),
+    };
+    let mut c = Command::new(path);
+    c.env_remove("RUST_LOG").env_remove("SLIPSTREAM_CONFIG").env_remove("SLIPSTREAM_NAMESPACE");
+    c.env_remove("SLIPSTREAM_ZENOH_CONFIG");
+    c
+}
+
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+}
+
+fn ep(port: u16) -> String {
+    format!("tcp/127.0.0.1:{port}")
+}
+
+fn temp_dir(name: &str) -> PathBuf {
+    let dir = std::env::temp_dir().join(format!("slipstream-tools-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+fn report(dir: &Path) -> serde_json::Value {
+    let text = std::fs::read_to_string(dir.join("report.json")).expect("report.json written");
+    serde_json::from_str(&text).unwrap()
+}
+
+fn is_png(path: &Path) -> bool {
+    std::fs::read(path).is_ok_and(|b| b.starts_with(b"\x89PNG\r\n\x1a\n") && b.len() > 1000)
+}
+
+#[test]
+fn up_runs_the_loop_as_three_processes_and_writes_its_report() {
+    let dir = temp_dir("up-lockstep");
+    let p = free_port();
+    let mut cmd = bin("slipstream");
+    cmd.args(["-l", &ep(p), "up", "--mode", "lockstep", "--duration", "8", "--plain", "--report"]).arg(&dir);
+    let out = common::run_with_limit(cmd, Duration::from_secs(120));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "exit {:?}\nstderr: {stderr}", out.status);
+    let r = report(&dir);
+    assert_eq!(r["collisions"], 0);
+    assert_eq!(r["interrupted"], false);
+    assert!((r["sim_time_s"].as_f64().unwrap() - 8.0).abs() < 0.05, "{}", r["sim_time_s"]);
+    let nodes = r["nodes"].as_array().unwrap();
+    let names: Vec<&str> = nodes.iter().map(|n| n["node"].as_str().unwrap()).collect();
+    assert_eq!(names, ["slipstream-acc", "slipstream-detect", "slipstream-sim"]);
+    assert!(nodes.iter().all(|n| n["exit_code"] == 0 && n["died"] == false), "{nodes:?}");
+    // Every hop of the loop was traced, and the whole loop is the longest of them.
+    let hops = r["latency"]["hops"].as_array().unwrap();
+    assert_eq!(hops.len(), 4);
+    for h in hops {
+        assert!(h["count"].as_u64().unwrap() >= 100, "{h}");
+    }
+    let p50 = |i: usize| hops[i]["p50_ms"].as_f64().unwrap();
+    assert!(p50(3) >= p50(0) && p50(3) >= p50(1), "{hops:?}");
+    assert!(r["latency"]["min_stable_time_gap_s"].as_f64().unwrap() > 0.0);
+    assert_eq!(r["metrics"]["collisions"], 0);
+    // The keys seen include the loop's traffic at its rates' worth of messages.
+    let topics = r["topics"].as_array().unwrap();
+    let received =
+        |key: &str| topics.iter().filter(|t| t["key"] == key).map(|t| t["received"].as_u64().unwrap()).sum::<u64>();
+    assert!(received("vehicle/speed") >= 790, "{}", received("vehicle/speed"));
+    assert!(received("perception/objects") >= 150);
+    assert!(received("vehicle/control") >= 790);
+    for plot in r["plots"].as_array().unwrap() {
+        assert!(is_png(Path::new(plot.as_str().unwrap())), "{plot}");
+    }
+    assert_eq!(r["plots"].as_array().unwrap().len(), 2);
+    assert!(dir.join("logs/slipstream-sim.log").is_file());
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("frame -> applied") && stdout.contains("string stability"), "{stdout}");
+    // Plain progress lines on a non-terminal.
+    assert!(stderr.contains("[lockstep]") && stderr.contains("loop latency"), "{stderr}");
+}
+
+#[test]
+fn up_in_realtime_with_ground_truth_paces_the_wall_clock() {
+    let dir = temp_dir("up-realtime");
+    let p = free_port();
+    let mut cmd = bin("slipstream");
+    cmd.args(["-l", &ep(p), "up", "--scenario", "steady-follow", "--perception", "ground-truth"]);
+    cmd.args(["--duration", "4", "--report"]).arg(&dir);
+    let started = Instant::now();
+    let out = common::run_with_limit(cmd, Duration::from_secs(90));
+    assert!(out.status.success(), "stderr: {}", String::from_utf8_lossy(&out.stderr));
+    assert!(started.elapsed() >= Duration::from_secs(4), "4 simulated seconds take 4 s in realtime");
+    let r = report(&dir);
+    let names: Vec<&str> = r["nodes"].as_array().unwrap().iter().map(|n| n["node"].as_str().unwrap()).collect();
+    assert_eq!(names, ["slipstream-acc", "slipstream-sim"], "no detector with ground truth");
+    let hops = r["latency"]["hops"].as_array().unwrap();
+    assert_eq!(hops[0]["count"], 0, "no detector hop");
+    assert!(hops[2]["count"].as_u64().unwrap() >= 300, "{hops:?}");
+    assert!(hops[3]["count"].as_u64().unwrap() >= 60, "{hops:?}");
+}
+
+/// The pids of `parent`'s children, from /proc.
+fn children_of(parent: u32) -> Vec<u32> {
+    let mut kids = Vec::new();
+    for entry in std::fs::read_dir("/proc").unwrap().flatten() {
+        let Ok(pid) = entry.file_name().to_string_lossy().parse::<u32>() else { continue };
+        let Ok(stat) = std::fs::read_to_string(format!("/proc/{pid}/stat")) else { continue };
+        // pid (comm) state ppid ...: comm may hold spaces, so split after the last ')'.
+        let after = &stat[stat.rfind(')').unwrap_or(0) + 1..];
+        let ppid = after.split_whitespace().nth(1).and_then(|s| s.parse::<u32>().ok());
+        if ppid == Some(parent) {
+            kids.push(pid);
+        }
+    }
+    kids
+}
+
+#[test]
+fn ctrl_c_stops_every_node_and_still_writes_the_report() {
+    let dir = temp_dir("up-sigint");
+    let p = free_port();
+    let mut cmd = bin("slipstream");
+    cmd.args(["-l", &ep(p), "up", "--duration", "60", "--plain", "--report"]).arg(&dir);
+    let mut up = cmd.stdout(Stdio::null()).stderr(Stdio::null()).spawn().unwrap();
+    let deadline = Instant::now() + Duration::from_secs(60);
+    let kids = loop {
+        let kids = children_of(up.id());
+        if kids.len() == 3 {
+            break kids;
+        }
+        if Instant::now() > deadline || up.try_wait().unwrap().is_some() {
+            let _ = up.kill();
+            panic!("up did not start its three nodes: {kids:?}");
+        }
+        std::thread::sleep(Duration::from_millis(100));
+    };
+    std::thread::sleep(Duration::from_secs(2));
+    slipstream::tools::children::interrupt(up.id());
+    let deadline = Instant::now() + Duration::from_secs(30);
+    let status = loop {
+        if let Some(s) = up.try_wait().unwrap() {
+            break s;
+        }
+        if Instant::now() > deadline {
+            let _ = up.kill();
+            panic!("up did not stop within 30 s of SIGINT");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    assert_eq!(status.code(), Some(130), "stopped by Ctrl-C");
+    for k in &kids {
+        assert!(!Path::new(&format!("/proc/{k}")).exists(), "node {k} outlived up");
+    }
+    let r = report(&dir);
+    assert_eq!(r["interrupted"], true);
+    assert!(r["nodes"].as_array().unwrap().iter().all(|n| n["died"] == false && n["exit_code"] == 0), "{r}");
+}
+
+/// A simulator on its own, realtime, listening on `port`.
+fn sim(port: u16, scenario: &str) -> slipstream::tools::children::Child {
+    let mut cmd = bin("slipstream-sim");
+    cmd.args(["--scenario", scenario, "--duration", "60", "-l", &ep(port)]);
+    cmd.stdout(Stdio::null()).stderr(Stdio::null());
+    slipstream::tools::children::Child::spawn("slipstream-sim", &mut cmd).unwrap()
+}
+
+#[test]
+fn top_json_reports_the_configured_rates_and_counts_bad_payloads() {
+    let (p_sim, p_top) = (free_port(), free_port());
+    let _sim = sim(p_sim, "open-road");
+    let mut cmd = bin("slipstream");
+    cmd.args(["top", "--json", "--duration", "5", "-l", &ep(p_top), "-e", &ep(p_sim)]);
+    let top = cmd.stdout(Stdio::piped()).stderr(Stdio::null()).spawn().unwrap();
+    // A malformed payload on vehicle/speed from a session of the test's own.
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    rt.block_on(async {
+        let s = common::connected_session(&ep(p_top)).await;
+        for _ in 0..30 {
+            s.put("vehicle/speed", vec![9u8, 9, 9]).attachment("garbage").await.unwrap();
+            tokio::time::sleep(Duration::from_millis(100)).await;
+        }
+        s.close().await.unwrap();
+    });
+    let out = common::wait_with_limit(top, Duration::from_secs(60), "slipstream top");
+    let out = String::from_utf8_lossy(&out.stdout).to_string();
+    let last: serde_json::Value = serde_json::from_str(out.lines().last().expect("a line per second")).unwrap();
+    let keys = last["keys"].as_array().unwrap();
+    let row = |key: &str, from: &str| {
+        keys.iter()
+            .find(|k| k["key"] == key && k["from"] == from)
+            .unwrap_or_else(|| panic!("no {key} from {from}: {keys:?}"))
+    };
+    let rate = |key: &str| row(key, "sim")["rate_hz"].as_f64().unwrap();
+    // Configured: speed, state and clock 100 Hz, camera and ground truth 20 Hz (config/sim.json5).
+    for (key, hz) in [
+        ("vehicle/speed", 100.0),
+        ("vehicle/state", 100.0),
+        ("sim/clock", 100.0),
+        ("camera/front", 20.0),
+        ("objects", 20.0),
+    ] {
+        let got = rate(key);
+        assert!((got - hz).abs() <= hz * 0.2, "{key}: {got} Hz, configured {hz}");
+    }
+    let speed = row("vehicle/speed", "sim");
+    assert_eq!(speed["lost"], 0);
+    assert_eq!(speed["kind"], "Speed");
+    assert!(speed["latency_p50_us"].as_f64().is_some());
+    assert!(row("camera/front", "sim")["bandwidth_bps"].as_f64().unwrap() > 1e6, "frames are big");
+    assert!(row("vehicle/speed", "garbage")["decode_errors"].as_u64().unwrap() >= 1);
+    assert!(last["nodes"].as_array().unwrap().iter().any(|n| n == "sim"), "{}", last["nodes"]);
+    let rtf = last["sim"]["real_time_factor"].as_f64().unwrap();
+    assert!((rtf - 1.0).abs() < 0.2, "realtime: {rtf}");
+}
+
+#[test]
+fn echo_decodes_every_topic() {
+    let p = free_port();
+    let dir = temp_dir("echo");
+    let rt = tokio::runtime::Runtime::new().unwrap();
+    // A session that publishes every message kind's example on its topic until told to stop.
+    let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let publisher = {
+        let stop = stop.clone();
+        rt.spawn(async move {
+            let mut c = zenoh::Config::default();
+            c.insert_json5("listen/endpoints", &format!(r#"["{}"]"#, ep(p))).unwrap();
+            c.insert_json5("scouting/multicast/enabled", "false").unwrap();
+            let s = zenoh::open(c).await.unwrap();
+            let examples = msg::examples();
+            let deadline = Instant::now() + Duration::from_secs(60);
+            while !stop.load(std::sync::atomic::Ordering::SeqCst) && Instant::now() < deadline {
+                for t in Topic::ALL {
+                    let (_, bytes) = examples.iter().find(|(k, _)| *k == t.kind()).unwrap();
+                    s.put(t.name(), bytes.clone()).await.unwrap();
+                }
+                tokio::time::sleep(Duration::from_millis(50)).await;
+            }
+            s.close().await.unwrap();
+        })
+    };
+    let echoes: Vec<(Topic, std::process::Child)> = Topic::ALL
+        .into_iter()
+        .map(|t| {
+            let mut cmd = bin("slipstream");
+            cmd.args(["echo", t.name(), "--count", "2", "--duration", "30", "-e", &ep(p), "-l", "tcp/127.0.0.1:0"]);
+            if t == Topic::CameraFront {
+                cmd.arg("--save").arg(&dir);
+            }
+            (t, cmd.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap())
+        })
+        .collect();
+    for (t, child) in echoes {
+        let out = child.wait_with_output().unwrap();
+        assert!(out.status.success(), "{t}: {}", String::from_utf8_lossy(&out.stderr));
+        let lines: Vec<serde_json::Value> =
+            String::from_utf8_lossy(&out.stdout).lines().map(|l| serde_json::from_str(l).unwrap()).collect();
+        assert_eq!(lines.len(), 2, "{t}");
+        let l = &lines[0];
+        assert_eq!(l["kind"], t.kind().name(), "{t}");
+        assert_eq!(l["key"], t.name());
+        assert_eq!(l["header"]["seq"], 7);
+        match t.kind() {
+            MessageKind::Speed => assert_eq!(l["msg"]["speed_mps"], 27.5),
+            MessageKind::CameraFrame => {
+                assert_eq!(l["msg"]["data_bytes"], 6, "frames are summarized");
+                assert!(l["msg"].get("data").is_none());
+                let saved = l["saved"].as_str().expect("--save names the file");
+                assert!(std::fs::read(saved).unwrap().starts_with(b"\x89PNG"));
+            }
+            MessageKind::ControlCommand => assert_eq!(l["msg"]["answers_step"], 125),
+            MessageKind::VehicleState => assert_eq!(l["msg"]["step"], 125),
+            _ => assert!(l["msg"].is_object(), "{t}: {l}"),
+        }
+    }
+    // --raw shows the bytes, undecoded.
+    let mut cmd = bin("slipstream");
+    cmd.args([
+        "echo",
+        "vehicle/speed",
+        "--raw",
+        "--count",
+        "1",
+        "--duration",
+        "30",
+        "-e",
+        &ep(p),
+        "-l",
+        "tcp/127.0.0.1:0",
+    ]);
+    let out = common::run_with_limit(cmd, Duration::from_secs(40));
+    let l: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(l["hex"].as_str().unwrap().starts_with(&format!("{:02x} 01 07", msg::WIRE_VERSION)), "{l}");
+    stop.store(true, std::sync::atomic::Ordering::SeqCst);
+    rt.block_on(publisher).unwrap();
+}
+
+#[test]
+fn echo_of_an_unknown_name_says_what_topics_exist() {
+    let mut cmd = bin("slipstream");
+    cmd.args(["echo", "no such/topic**x", "--duration", "1", "-l", "tcp/127.0.0.1:0", "-e", "tcp/127.0.0.1:1"]);
+    let out = common::run_with_limit(cmd, Duration::from_secs(30));
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("neither a topic nor a key expression") && err.contains("vehicle/speed"), "{err}");
+}
