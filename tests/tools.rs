@@ -87,7 +87,7 @@ fn up_runs_the_loop_as_three_processes_and_writes_its_report() {
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(stdout.contains("frame -> applied") && stdout.contains("string stability"), "{stdout}");
     // Plain progress lines on a non-terminal.
-    assert!(stderr.contains("[lockstep]") && stderr.contains("loop latency"), "{stderr}");
+    assert!(stderr.contains("[lockstep]") && stderr.contains("latency p50/p99 ms: frame>det"), "{stderr}");
 }
 
 #[test]

@@ -41,8 +41,8 @@ enum Command {
     Top(slipstream::tools::top::TopArgs),
     /// Print the messages of a topic as JSON lines (decoded by their type)
     Echo(slipstream::tools::echo::EchoArgs),
-    /// Run a publisher and a subscriber as two processes and show what flows (until
-    /// `slipstream up` exists, the quickest way to see the bus work)
+    /// Run a publisher and a subscriber as two processes and show what flows (the bus alone,
+    /// without the simulator)
     Demo(slipstream::tools::demo::DemoArgs),
     /// Measure the bus against raw Zenoh, UDP and TCP (two processes on loopback; use --release)
     ///

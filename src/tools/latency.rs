@@ -18,6 +18,8 @@ use serde::Serialize;
 
 /// The hops, in loop order.
 pub const HOPS: [&str; 4] = ["frame -> detections", "detections -> control", "control -> applied", "frame -> applied"];
+/// The same, short (the live view).
+pub const HOPS_SHORT: [&str; 4] = ["frame>det", "det>ctl", "ctl>applied", "loop"];
 
 /// Samples kept per hop for the live view's percentiles.
 const LIVE_WINDOW: usize = 200;

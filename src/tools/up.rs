@@ -536,7 +536,7 @@ fn live_lines(
     };
     let rtf = live.clock.map(|c| c.real_time_factor as f64);
     let hops = lat.stats(true);
-    let hop = |h: &HopStats| format!("{} {}/{}", h.hop, f(h.p50_ms, 1), f(h.p99_ms, 1));
+    let hop = |(h, short): (&HopStats, &&str)| format!("{short} {}/{}", f(h.p50_ms, 1), f(h.p99_ms, 1));
     vec![
         format!(
             "{name} [{}] {:6.1}/{:.0} s [{bar}] {:3.0}%  RTF {}",
@@ -547,7 +547,7 @@ fn live_lines(
             f(rtf, 2)
         ),
         format!("ego {} m/s  {acc}  collisions {collisions}", f(speed, 1)),
-        format!("loop latency p50/p99 ms: {}", hops.iter().map(hop).collect::<Vec<_>>().join(", ")),
+        format!("latency p50/p99 ms: {}", hops.iter().zip(&latency::HOPS_SHORT).map(hop).collect::<Vec<_>>().join("  ")),
         format!("nodes alive: {}", if alive.is_empty() { "(none yet)".to_string() } else { alive.join(", ") }),
     ]
 }
