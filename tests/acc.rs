@@ -4,7 +4,7 @@
 mod common;
 
 use std::path::PathBuf;
-use std::process::{Command, Output, Stdio};
+use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
 use slipstream::acc::{AccSettings, PerceptionSource};
@@ -46,6 +46,7 @@ fn state(step: u64, speed: f64) -> VehicleState {
         speed_mps: speed,
         lane: 1,
         applied: ControlCommand::NEUTRAL,
+        control_timing: None,
     }
 }
 

@@ -103,9 +103,16 @@ impl Recorder {
         for (key, bytes) in self.samples.lock().iter() {
             let kind = MessageKind::from_u8(bytes[1]).unwrap();
             let (header, body_start) = msg::decode_header(bytes, kind).unwrap();
+            // Wall-clock fields (the real-time factor, the control's timing) differ run to run.
             let body = if kind == MessageKind::SimClock {
                 let clock = SimClock { real_time_factor: 0.0, ..msg::decode::<SimClock>(bytes).unwrap().msg };
                 format!("{clock:?}")
+            } else if kind == MessageKind::VehicleState {
+                let state = msg::decode::<msg::VehicleState>(bytes).unwrap().msg;
+                assert!(state.step == 0 || state.control_timing.is_some(), "a command is in effect");
+                let mut applied = state.applied;
+                applied.perception_stamp_pub_ns = None;
+                format!("{:?}", msg::VehicleState { control_timing: None, applied, ..state })
             } else {
                 msg::hex_lines(&bytes[body_start..])
             };

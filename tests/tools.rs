@@ -84,6 +84,9 @@ fn up_runs_the_loop_as_three_processes_and_writes_its_report() {
     }
     assert_eq!(r["plots"].as_array().unwrap().len(), 2);
     assert!(dir.join("logs/slipstream-sim.log").is_file());
+    let csv = std::fs::read_to_string(dir.join("trace.csv")).unwrap();
+    assert!(csv.starts_with("t_s,speed_mps,"));
+    assert!(csv.lines().count() > 790, "a row per state: {}", csv.lines().count());
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(stdout.contains("frame -> applied") && stdout.contains("string stability"), "{stdout}");
     // Plain progress lines on a non-terminal.

@@ -92,6 +92,10 @@ const JERK_WINDOW_S: f64 = 0.1;
 /// Below this speed comfort is not judged: a car stopping on its brakes has a jerk spike at the
 /// instant it stops, and ISO 15622 puts its jerk limit on driving at speed.
 const COMFORT_MIN_SPEED_MPS: f64 = 2.0;
+/// The first moments of a run belong to the simulator: until the controller's first command
+/// arrives the ego cruises (realtime runs), so the step to the controller's acceleration is
+/// the handover, not the controller's comfort. Jerk is judged from here on.
+const HANDOVER_S: f64 = 0.2;
 
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct Check {
@@ -196,7 +200,10 @@ impl Metrics {
             if !near_emergency(x.t_s) && x.speed_mps >= COMFORT_MIN_SPEED_MPS {
                 max_accel = max_accel.max(x.accel_mps2);
                 max_decel = max_decel.max(-x.accel_mps2);
-                if i >= jerk_lag && s[i - jerk_lag].speed_mps >= COMFORT_MIN_SPEED_MPS {
+                if i >= jerk_lag
+                    && s[i - jerk_lag].speed_mps >= COMFORT_MIN_SPEED_MPS
+                    && s[i - jerk_lag].t_s - s[0].t_s >= HANDOVER_S
+                {
                     let p = &s[i - jerk_lag];
                     let j = (x.accel_mps2 - p.accel_mps2) / (x.t_s - p.t_s).max(1e-6);
                     max_jerk = max_jerk.max(j.abs());

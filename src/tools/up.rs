@@ -461,6 +461,7 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
     let sim_time_s = trace.samples.last().map_or(0.0, |s| s.t_s);
     let metrics = (trace.samples.len() > 10).then(|| Metrics::of(&trace));
 
+    write_trace_csv(&trace, &dir.join("trace.csv"))?;
     let mut plots = Vec::new();
     if trace.samples.len() > 1 {
         let path = dir.join(format!("{name}.png"));
@@ -547,7 +548,10 @@ fn live_lines(
             f(rtf, 2)
         ),
         format!("ego {} m/s  {acc}  collisions {collisions}", f(speed, 1)),
-        format!("latency p50/p99 ms: {}", hops.iter().zip(&latency::HOPS_SHORT).map(hop).collect::<Vec<_>>().join("  ")),
+        format!(
+            "latency p50/p99 ms: {}",
+            hops.iter().zip(&latency::HOPS_SHORT).map(hop).collect::<Vec<_>>().join("  ")
+        ),
         format!("nodes alive: {}", if alive.is_empty() { "(none yet)".to_string() } else { alive.join(", ") }),
     ]
 }
@@ -611,6 +615,30 @@ pub fn summary(r: &UpReport) -> String {
         s.push_str(&format!(", {}", p.display()));
     }
     s
+}
+
+/// One row per vehicle/state: what the plot shows, for a spreadsheet or pandas.
+fn write_trace_csv(trace: &crate::acc::eval::Trace, path: &Path) -> Result<()> {
+    let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.4}"));
+    let mut out = String::from(
+        "t_s,speed_mps,accel_mps2,acc_mode,target_accel_mps2,set_speed_mps,time_gap_s,acc_gap_m,truth_gap_m,truth_lead_speed_mps\n",
+    );
+    for x in &trace.samples {
+        out.push_str(&format!(
+            "{:.3},{:.4},{:.4},{:?},{:.4},{:.3},{:.3},{},{},{}\n",
+            x.t_s,
+            x.speed_mps,
+            x.accel_mps2,
+            x.mode,
+            x.target_accel_mps2,
+            x.set_speed_mps,
+            x.time_gap_s,
+            opt(x.acc_gap_m),
+            opt(x.truth.map(|t| t.gap_m)),
+            opt(x.truth.map(|t| x.speed_mps + t.relative_speed_mps)),
+        ));
+    }
+    std::fs::write(path, out).with_context(|| format!("write {}", path.display()))
 }
 
 /// Loop latency per hop over the run.
