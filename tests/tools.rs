@@ -9,6 +9,14 @@ use std::time::{Duration, Instant};
 use slipstream::msg::{self, MessageKind};
 use slipstream::topics::Topic;
 
+/// These tests run whole loops and realtime simulators: one at a time, or on two cores they
+/// starve each other and the rates and the realtime pacing they check.
+static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+fn serial() -> std::sync::MutexGuard<'static, ()> {
+    ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner())
+}
+
 fn bin(name: &str) -> Command {
     let path = match name {
         "slipstream" => env!("CARGO_BIN_EXE_slipstream"),
@@ -47,6 +55,7 @@ fn is_png(path: &Path) -> bool {
 
 #[test]
 fn up_runs_the_loop_as_three_processes_and_writes_its_report() {
+    let _serial = serial();
     let dir = temp_dir("up-lockstep");
     let p = free_port();
     let mut cmd = bin("slipstream");
@@ -95,6 +104,7 @@ fn up_runs_the_loop_as_three_processes_and_writes_its_report() {
 
 #[test]
 fn up_in_realtime_with_ground_truth_paces_the_wall_clock() {
+    let _serial = serial();
     let dir = temp_dir("up-realtime");
     let p = free_port();
     let mut cmd = bin("slipstream");
@@ -131,6 +141,7 @@ fn children_of(parent: u32) -> Vec<u32> {
 
 #[test]
 fn ctrl_c_stops_every_node_and_still_writes_the_report() {
+    let _serial = serial();
     let dir = temp_dir("up-sigint");
     let p = free_port();
     let mut cmd = bin("slipstream");
@@ -180,6 +191,7 @@ fn sim(port: u16, scenario: &str) -> slipstream::tools::children::Child {
 
 #[test]
 fn top_json_reports_the_configured_rates_and_counts_bad_payloads() {
+    let _serial = serial();
     let (p_sim, p_top) = (free_port(), free_port());
     let _sim = sim(p_sim, "open-road");
     let mut cmd = bin("slipstream");
@@ -229,6 +241,7 @@ fn top_json_reports_the_configured_rates_and_counts_bad_payloads() {
 
 #[test]
 fn echo_decodes_every_topic() {
+    let _serial = serial();
     let p = free_port();
     let dir = temp_dir("echo");
     let rt = tokio::runtime::Runtime::new().unwrap();
@@ -311,6 +324,7 @@ fn echo_decodes_every_topic() {
 
 #[test]
 fn echo_of_an_unknown_name_says_what_topics_exist() {
+    let _serial = serial();
     let mut cmd = bin("slipstream");
     cmd.args(["echo", "no such/topic**x", "--duration", "1", "-l", "tcp/127.0.0.1:0", "-e", "tcp/127.0.0.1:1"]);
     let out = common::run_with_limit(cmd, Duration::from_secs(30));
