@@ -12,7 +12,7 @@
 //! are publishers' wall clocks, so the figures hold on one host or hosts with synchronised
 //! clocks.
 
-use std::collections::{HashMap, HashSet};
+use std::collections::HashMap;
 
 use serde::Serialize;
 
@@ -28,15 +28,21 @@ const LIVE_WINDOW: usize = 200;
 pub struct LoopLatency {
     /// Perception message publish stamp -> the stamp of the data it came from (the camera
     /// frame for detections; itself for ground truth, which the simulator publishes with the
-    /// frame).
+    /// frame). Removed when used; entries never used are dropped after `KEEP_NS`.
     origin: HashMap<u64, u64>,
-    /// Command publish stamp -> the perception stamp it was computed from.
+    /// Reacting command's publish stamp -> the perception stamp it reacted to.
     basis: HashMap<u64, u64>,
-    reacted: HashSet<u64>,
-    applied: HashSet<u64>,
+    /// The newest perception a command reacted to, and the newest command applied: each
+    /// stream is in publish order, so a stamp not newer than these was counted already.
+    last_basis: u64,
+    last_applied: u64,
     /// Per hop: (publish time of the later message, ns since the epoch; latency, ns).
     samples: [Vec<(u64, i64)>; 4],
 }
+
+/// How long an unused trace entry is kept (a perception no command used, a command never
+/// applied): bounded memory however long the run.
+const KEEP_NS: u64 = 10_000_000_000;
 
 /// Percentiles of one hop.
 #[derive(Debug, Clone, Serialize, PartialEq)]
@@ -51,35 +57,38 @@ pub struct HopStats {
 impl LoopLatency {
     /// A detections message: published at `pub_ns`, from the frame published at `frame_pub_ns`.
     pub fn on_detections(&mut self, pub_ns: u64, frame_pub_ns: u64) {
-        self.origin.insert(pub_ns, frame_pub_ns);
+        insert_bounded(&mut self.origin, pub_ns, frame_pub_ns);
         self.samples[0].push((pub_ns, pub_ns as i64 - frame_pub_ns as i64));
     }
 
     /// A ground-truth message (the perception of `--perception ground-truth`).
     pub fn on_ground_truth(&mut self, pub_ns: u64) {
-        self.origin.insert(pub_ns, pub_ns);
+        insert_bounded(&mut self.origin, pub_ns, pub_ns);
     }
 
-    /// A command published at `pub_ns`, computed from the perception published at `basis`.
+    /// A command published at `pub_ns`, computed from the perception published at `basis`;
+    /// the first command from a perception is the loop's reaction to it.
     pub fn on_command(&mut self, pub_ns: u64, basis: Option<u64>) {
         let Some(basis) = basis else { return };
-        self.basis.insert(pub_ns, basis);
-        if self.reacted.insert(basis) {
-            self.samples[1].push((pub_ns, pub_ns as i64 - basis as i64));
+        if basis <= self.last_basis {
+            return;
         }
+        self.last_basis = basis;
+        insert_bounded(&mut self.basis, pub_ns, basis);
+        self.samples[1].push((pub_ns, pub_ns as i64 - basis as i64));
     }
 
     /// A state saying the command published at `command_pub_ns` was first applied at
-    /// `applied_ns`.
+    /// `applied_ns` (every state while the command holds says so: counted once).
     pub fn on_applied(&mut self, command_pub_ns: u64, applied_ns: u64) {
-        if !self.applied.insert(command_pub_ns) {
+        if command_pub_ns <= self.last_applied {
             return;
         }
+        self.last_applied = command_pub_ns;
         self.samples[2].push((applied_ns, applied_ns as i64 - command_pub_ns as i64));
-        // The whole loop, once per perception message: its first command to be applied.
-        let Some(&basis) = self.basis.get(&command_pub_ns) else { return };
-        let Some(&origin) = self.origin.get(&basis) else { return };
-        if self.origin.remove(&basis).is_some() {
+        // The whole loop, once per perception message: its reacting command applied.
+        let Some(basis) = self.basis.remove(&command_pub_ns) else { return };
+        if let Some(origin) = self.origin.remove(&basis) {
             self.samples[3].push((applied_ns, applied_ns as i64 - origin as i64));
         }
     }
@@ -109,6 +118,14 @@ impl LoopLatency {
     /// Every sample of a hop, as (seconds since `t0_ns`, milliseconds).
     pub fn series(&self, hop: usize, t0_ns: u64) -> Vec<(f64, f64)> {
         self.samples[hop].iter().map(|(t, v)| ((*t as f64 - t0_ns as f64) / 1e9, *v as f64 / 1e6)).collect()
+    }
+}
+
+/// Inserts, and now and then drops the entries older than `KEEP_NS` (keys are wall-clock ns).
+fn insert_bounded(map: &mut HashMap<u64, u64>, key: u64, value: u64) {
+    map.insert(key, value);
+    if map.len() % 1024 == 0 {
+        map.retain(|k, _| k + KEEP_NS >= key);
     }
 }
 
@@ -142,5 +159,16 @@ mod tests {
         let counts: Vec<usize> = s.iter().map(|h| h.count).collect();
         assert_eq!(counts, vec![1, 1, 2, 1], "one reaction per perception, one total per perception");
         assert!((min_stable_time_gap_s(0.01, 0.0) - 0.02).abs() < 1e-12);
+    }
+
+    #[test]
+    fn unused_entries_do_not_pile_up() {
+        let mut l = LoopLatency::default();
+        // An hour of 20 Hz frames that no command ever used.
+        for i in 0..72_000u64 {
+            l.on_detections(i * 50_000_000 + 3_000_000, i * 50_000_000);
+        }
+        assert!(l.origin.len() <= 1024 + 200, "{}", l.origin.len());
+        assert_eq!(l.stats(false)[0].count, 72_000);
     }
 }

@@ -237,8 +237,15 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
                 }
             })
             .await?;
+        // Ground truth is the perception only without the camera.
         let l = lat.clone();
-        let s4 = bus.subscribe_with(topics::OBJECTS, move |o| l.lock().on_ground_truth(o.header.stamp_pub_ns)).await?;
+        let s4 = bus
+            .subscribe_with(topics::OBJECTS, move |o| {
+                if !camera {
+                    l.lock().on_ground_truth(o.header.stamp_pub_ns)
+                }
+            })
+            .await?;
         let c = clock.clone();
         let s5 = bus.subscribe_with(topics::SIM_CLOCK, move |m| *c.lock() = Some(m.msg)).await?;
         let e = end_event.clone();
