@@ -306,6 +306,29 @@ pub(crate) fn register_font() -> anyhow::Result<()> {
 }
 
 /// Draws speeds, gaps and accelerations over time into a PNG.
+/// A time-series chart of the plots here.
+pub(crate) type Chart<'a, 'b> = plotters::chart::ChartContext<
+    'a,
+    plotters::backend::BitMapBackend<'b>,
+    plotters::coord::cartesian::Cartesian2d<
+        plotters::coord::types::RangedCoordf64,
+        plotters::coord::types::RangedCoordf64,
+    >,
+>;
+
+/// The legend, the same on every plot: upper right, on a light box.
+pub(crate) fn draw_legend<'a, 'b: 'a>(chart: &mut Chart<'a, 'b>) -> anyhow::Result<()> {
+    use plotters::prelude::*;
+    chart
+        .configure_series_labels()
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .label_font(("sans-serif", 14))
+        .position(SeriesLabelPosition::UpperRight)
+        .draw()?;
+    Ok(())
+}
+
 pub fn plot(trace: &Trace, title: &str, path: &Path) -> anyhow::Result<()> {
     use plotters::prelude::*;
     register_font()?;
@@ -362,13 +385,7 @@ pub fn plot(trace: &Trace, title: &str, path: &Path) -> anyhow::Result<()> {
                     }
                 }
             }
-            chart
-                .configure_series_labels()
-                .background_style(WHITE.mix(0.85))
-                .border_style(BLACK)
-                .label_font(("sans-serif", 14))
-                .position(SeriesLabelPosition::UpperRight)
-                .draw()?;
+            draw_legend(&mut chart)?;
             Ok(())
         };
         let blue = RGBColor(31, 119, 180);

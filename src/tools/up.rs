@@ -674,13 +674,7 @@ fn plot_latency(lat: &LoopLatency, t0_ns: u64, title: &str, path: &Path) -> Resu
                 .label(*name)
                 .legend(move |(x, y)| Circle::new((x + 9, y), 4, color.filled()));
         }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 14))
-            .position(SeriesLabelPosition::UpperRight)
-            .draw()?;
+        crate::acc::eval::draw_legend(&mut chart)?;
         root.present()?;
     }
     let img = image::RgbImage::from_raw(w, h, buf).context("plot buffer size")?;
