@@ -332,3 +332,34 @@ fn echo_of_an_unknown_name_says_what_topics_exist() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("neither a topic nor a key expression") && err.contains("vehicle/speed"), "{err}");
 }
+
+#[test]
+fn nodes_in_client_mode_meet_through_slipstream_router() {
+    let _serial = serial();
+    let p = free_port();
+    let router_ep = ep(p);
+    let mut router = bin("slipstream");
+    router.args(["router", "-l", &router_ep]).stdout(Stdio::piped()).stderr(Stdio::null());
+    let _router = slipstream::tools::children::Child::spawn("slipstream router", &mut router).unwrap();
+    // Clients: no listener, the router's address only.
+    let client = ["-m", "client", "-e", router_ep.as_str(), "--cfg", "listen/endpoints:[]"];
+    let mut sim = bin("slipstream-sim");
+    sim.args(["--scenario", "open-road", "--duration", "60"]).args(client);
+    sim.stdout(Stdio::null()).stderr(Stdio::null());
+    let _sim = slipstream::tools::children::Child::spawn("slipstream-sim", &mut sim).unwrap();
+    let mut top = bin("slipstream");
+    top.args(["top", "--json", "--duration", "5"]).args(client);
+    let out = common::run_with_limit(top, Duration::from_secs(60));
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let text = String::from_utf8_lossy(&out.stdout);
+    let last: serde_json::Value = serde_json::from_str(text.lines().last().expect("a line per second")).unwrap();
+    let speed = last["keys"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|k| k["key"] == "vehicle/speed" && k["from"] == "sim")
+        .unwrap_or_else(|| panic!("no vehicle/speed through the router: {last}"));
+    let hz = speed["rate_hz"].as_f64().unwrap();
+    assert!((hz - 100.0).abs() <= 20.0, "{hz} Hz through the router");
+    assert!(last["nodes"].as_array().unwrap().iter().any(|n| n == "sim"), "{}", last["nodes"]);
+}

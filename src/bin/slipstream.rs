@@ -41,6 +41,13 @@ enum Command {
     Top(slipstream::tools::top::TopArgs),
     /// Print the messages of a topic as JSON lines (decoded by their type)
     Echo(slipstream::tools::echo::EchoArgs),
+    /// Run a Zenoh router (for nodes on several PCs, in client mode) with config/router.json5
+    /// (or -c FILE): for users who have no zenohd. Runs until Ctrl-C.
+    ///
+    ///   slipstream router                                  (listens on tcp/0.0.0.0:7447)
+    ///   slipstream-sim -m client -e tcp/ROUTER-PC:7447     (on another PC)
+    #[command(verbatim_doc_comment)]
+    Router,
     /// Run a publisher and a subscriber as two processes and show what flows (the bus alone,
     /// without the simulator)
     Demo(slipstream::tools::demo::DemoArgs),
@@ -189,6 +196,20 @@ fn main() -> Result<()> {
             slipstream::tools::top::run(&bus, &args).await?;
             Ok(bus)
         }),
+        Command::Router => {
+            let rt = tokio::runtime::Runtime::new()?;
+            rt.block_on(async {
+                let mut config = cli.connect.router_config()?;
+                config.insert_json5("mode", "\"router\"").map_err(|e| anyhow::anyhow!("router mode: {e}"))?;
+                let session = zenoh::open(config).await.map_err(|e| anyhow::anyhow!("start the router: {e}"))?;
+                let locators: Vec<String> = session.info().locators().await.iter().map(|l| l.to_string()).collect();
+                tracing::info!(zid = %session.zid(), ?locators, "router up (Ctrl-C to stop)");
+                println!("router {} listening on {}", session.zid(), locators.join(", "));
+                tokio::signal::ctrl_c().await?;
+                session.close().await.map_err(|e| anyhow::anyhow!("close the router: {e}"))?;
+                anyhow::Ok(())
+            })
+        }
         Command::Echo(args) => on_bus(&cli.connect, &format!("echo-{}", std::process::id()), |bus| async move {
             let printed = slipstream::tools::echo::run(&bus, &args).await?;
             if args.count.is_some_and(|n| printed < n) {

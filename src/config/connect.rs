@@ -10,6 +10,9 @@ pub const DEFAULT_ZENOH_CONFIG_PATH: &str = "config/zenoh.json5";
 /// config/zenoh.json5 as shipped, built in so a binary run from any directory behaves the same.
 pub const DEFAULT_ZENOH_CONFIG: &str = include_str!("../../config/zenoh.json5");
 
+/// config/router.json5 as shipped: what `slipstream router` runs without -c.
+pub const DEFAULT_ROUTER_CONFIG: &str = include_str!("../../config/router.json5");
+
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum ModeArg {
     Peer,
@@ -58,18 +61,28 @@ pub struct ConnectArgs {
 impl ConnectArgs {
     /// The Zenoh config: file (or built-in default), then mode, endpoints, scouting and --cfg.
     pub fn zenoh_config(&self) -> Result<zenoh::Config, ConfigError> {
+        self.config_over(DEFAULT_ZENOH_CONFIG_PATH, DEFAULT_ZENOH_CONFIG)
+    }
+
+    /// The router's config (`slipstream router`): -c FILE, else ./config/router.json5, else
+    /// the same built in; then the flags, as for a node.
+    pub fn router_config(&self) -> Result<zenoh::Config, ConfigError> {
+        self.config_over("config/router.json5", DEFAULT_ROUTER_CONFIG)
+    }
+
+    fn config_over(&self, default_path: &str, built_in: &str) -> Result<zenoh::Config, ConfigError> {
         let (mut config, origin) = match &self.zenoh_config {
             Some(path) => (load_zenoh_file(path)?, ConfigError::file(path)),
-            None if Path::new(DEFAULT_ZENOH_CONFIG_PATH).is_file() => {
-                let path = Path::new(DEFAULT_ZENOH_CONFIG_PATH);
+            None if Path::new(default_path).is_file() => {
+                let path = Path::new(default_path);
                 (load_zenoh_file(path)?, ConfigError::file(path))
             }
-            None => (
-                zenoh::Config::from_json5(DEFAULT_ZENOH_CONFIG).map_err(|e| {
-                    ConfigError::new("built-in config/zenoh.json5", "", e.to_string(), "report this as a bug")
-                })?,
-                "built-in config/zenoh.json5".to_string(),
-            ),
+            None => {
+                let origin = format!("built-in {default_path}");
+                let config = zenoh::Config::from_json5(built_in)
+                    .map_err(|e| ConfigError::new(&origin, "", e.to_string(), "report this as a bug"))?;
+                (config, origin)
+            }
         };
         let set = |config: &mut zenoh::Config, key: &str, value: String, flag: &str| {
             config.insert_json5(key, &value).map_err(|e| {

@@ -100,7 +100,8 @@ impl Watcher {
         let mut subs = Vec::new();
         for sel in selectors {
             let seen = seen.clone();
-            subs.push(bus.subscribe_samples(sel, false, move |sample| record(&seen, &sample)).await?);
+            let map = topics.clone();
+            subs.push(bus.subscribe_samples(sel, false, move |sample| record(&seen, &map, &sample)).await?);
         }
         Ok(Watcher { seen, _subs: subs, nodes: bus.watch_nodes().await?, started: Instant::now() })
     }
@@ -132,11 +133,16 @@ impl Watcher {
     }
 }
 
-fn record(seen: &Mutex<Seen>, sample: &zenoh::sample::Sample) {
+fn record(seen: &Mutex<Seen>, topics: &crate::TopicMap, sample: &zenoh::sample::Sample) {
     let key = sample.key_expr().as_str().to_string();
     let from = sample.attachment().and_then(|a| a.try_to_string().ok()).map(|s| s.into_owned());
     let payload = sample.payload().to_bytes();
-    let decoded = msg::decode_json(&payload);
+    // On a topic's key, a message of another type is as wrong as bytes that do not decode.
+    let expected = topics.topic_of(sample.key_expr()).map(|t| t.kind());
+    let decoded = msg::decode_json(&payload).and_then(|d| match expected {
+        Some(kind) if kind != d.0 => Err(msg::DecodeError::WrongKind { expected: kind.name(), found: d.0.name() }),
+        _ => Ok(d),
+    });
     let mut seen = seen.lock();
     let entry = seen.keys.entry((key.clone(), from)).or_insert_with(|| (Arc::new(TopicStats::new(key.clone())), None));
     match decoded {
