@@ -356,10 +356,15 @@ async fn another_process_receives_every_topic_at_its_rate() {
     };
     // Counted on simulation time, between 1 s and 3 s (clear of connection set-up and end).
     let in_window = |key: &str| stamps(key).into_iter().filter(|t| (1_000_000_000..3_000_000_000).contains(t)).count();
+    // These topics are published with congestion control "drop" (fresh or nothing), so a
+    // loaded machine may lose one where the sender's queue stayed full for a millisecond: allow
+    // 1% (at least one), and require that nothing arrives twice or out of order.
     for (key, n) in
         [("vehicle/speed", 200), ("vehicle/state", 200), ("sim/clock", 200), ("camera/front", 40), ("objects", 40)]
     {
-        assert_eq!(in_window(key), n, "{key}: messages per 2 s of simulated time");
+        let got = in_window(key);
+        assert!(got <= n && got + (n / 100).max(1) >= n, "{key}: {got} messages per 2 s of simulated time, want {n}");
+        assert!(stamps(key).windows(2).all(|w| w[0] < w[1]), "{key}: stamps repeat or go back");
     }
     // Ground truth carries exactly the stamps of the frames it belongs to.
     let frames: Vec<u64> = stamps("camera/front");

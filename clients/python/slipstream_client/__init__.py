@@ -1,5 +1,10 @@
-"""Pure-Python client of slipstream's wire format (docs/wire-format.md)."""
+"""Pure-Python client of slipstream's wire format (docs/wire-format.md) on eclipse-zenoh 1.10.
 
+wire: decode/encode every message; keys: the keys in force after namespace and remapping;
+connect: a Zenoh session with the nodes' flags; image: camera frames as numpy arrays.
+"""
+
+from .keys import ConfigError, Topics
 from .wire import DEFAULT_KEYS, KINDS, WireError, decode, encode, encoding_schema
 
-__all__ = ["DEFAULT_KEYS", "KINDS", "WireError", "decode", "encode", "encoding_schema"]
+__all__ = ["DEFAULT_KEYS", "KINDS", "ConfigError", "Topics", "WireError", "decode", "encode", "encoding_schema"]

@@ -93,9 +93,10 @@ _BITS = {"u32": 32, "u64": 64}
 
 
 class _Reader:
-    def __init__(self, data):
+    def __init__(self, data, copy=True):
         self.data = memoryview(data)
         self.at = 0
+        self.copy = copy
 
     def take(self, n):
         if self.at + n > len(self.data):
@@ -134,7 +135,8 @@ class _Reader:
                 raise WireError(f"bool byte {b} is neither 0 nor 1")
             return b == 1
         if ty == "bytes":
-            return bytes(self.take(self.varint("u64")))
+            chunk = self.take(self.varint("u64"))
+            return bytes(chunk) if self.copy else chunk
         if ty == "str":
             raw = bytes(self.take(self.varint("u64")))
             try:
@@ -243,8 +245,11 @@ def _check(kind, body):
                 raise WireError(f"{f} {body[f]} is outside {lo}..{hi}")
 
 
-def decode(payload, expected=None):
-    """Decodes one payload strictly. Returns (kind, header, body)."""
+def decode(payload, expected=None, copy=True):
+    """Decodes one payload strictly. Returns (kind, header, body).
+
+    copy=False leaves bytes fields (camera pixels) as memoryviews into `payload` instead of
+    copying them: numpy.frombuffer then reads the pixels where they are."""
     if len(payload) == 0:
         raise WireError("empty payload")
     if payload[0] != WIRE_VERSION:
@@ -256,7 +261,7 @@ def decode(payload, expected=None):
         raise WireError(f"unknown message kind {payload[1]}")
     if expected is not None and kind != expected:
         raise WireError(f"payload holds a {kind} message, expected {expected}")
-    r = _Reader(payload)
+    r = _Reader(payload, copy)
     r.at = 2
     header = r.read(("struct", "Header"))
     body = r.read(("struct", kind))

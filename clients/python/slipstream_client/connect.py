@@ -1,0 +1,82 @@
+"""Opening a Zenoh session the way the slipstream nodes do, with the same flags.
+
+Defaults match `slipstream up` on one machine: peer mode, connect to tcp/127.0.0.1:7447,
+multicast scouting off (nothing leaves loopback). On a LAN pass `-e tcp/ROUTER:7447 -m client`,
+or `-c config/lan-peer.json5` for multicast discovery, or any Zenoh config file with -c.
+
+    parser = argparse.ArgumentParser()
+    connect.add_args(parser)
+    args = parser.parse_args()
+    session, topics = connect.open_from_args(args)
+"""
+
+import json
+import signal
+
+import zenoh
+
+from .keys import Topics
+
+DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
+
+
+def add_args(parser):
+    g = parser.add_argument_group("connection (same flags as the Rust nodes)")
+    g.add_argument("-c", "--zenoh-config", metavar="FILE",
+                   help="Zenoh config file (JSON5); without it: peer mode on loopback, scouting off")
+    g.add_argument("-m", "--zenoh-mode", choices=["peer", "client"], help="Zenoh mode [default: peer]")
+    g.add_argument("-e", "--connect", action="append", metavar="ENDPOINT", default=[],
+                   help=f"endpoint to connect to, repeatable [default without -c: {DEFAULT_ENDPOINT}]")
+    g.add_argument("-l", "--listen", action="append", metavar="ENDPOINT", default=[],
+                   help="endpoint to listen on, repeatable [default: none]")
+    g.add_argument("--cfg", action="append", metavar="KEY:VALUE", default=[],
+                   help="any Zenoh config key, value in JSON5, e.g. --cfg 'transport/auth/usrpwd/user:\"acc\"'")
+    g.add_argument("-t", "--topics", metavar="FILE",
+                   help="topic config (namespace, key remapping) [default: $SLIPSTREAM_CONFIG, else "
+                        "./config/slipstream.json5 if present]")
+    g.add_argument("-n", "--namespace", help="put every key under this namespace [env: SLIPSTREAM_NAMESPACE]")
+
+
+def zenoh_config(config_file=None, mode=None, connect=(), listen=(), cfg=()):
+    """A zenoh.Config: the file, else loopback peer defaults; then mode, endpoints and --cfg pairs."""
+    if config_file:
+        conf = zenoh.Config.from_file(config_file)
+    else:
+        conf = zenoh.Config()
+        conf.insert_json5("mode", '"peer"')
+        conf.insert_json5("scouting/multicast/enabled", "false")
+        conf.insert_json5("listen/endpoints", "[]")
+        conf.insert_json5("connect/endpoints", json.dumps(list(connect) or [DEFAULT_ENDPOINT]))
+    if mode:
+        conf.insert_json5("mode", json.dumps(mode))
+    if connect:
+        conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
+    if listen:
+        conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
+    for kv in cfg:
+        key, sep, value = kv.partition(":")
+        if not sep:
+            raise SystemExit(f"--cfg {kv!r}: missing `:` between key and value; write --cfg 'KEY:VALUE'")
+        try:
+            conf.insert_json5(key, value)
+        except Exception as e:  # zenoh raises its own error type
+            raise SystemExit(f"--cfg {kv!r}: rejected: {e}") from None
+    return conf
+
+
+def _interrupt(signum, frame):
+    raise KeyboardInterrupt
+
+
+def open_from_args(args):
+    """Opens the session and loads the topic keys from parsed `add_args` flags."""
+    # SIGTERM (a process manager, `kill`) stops as cleanly as Ctrl-C.
+    signal.signal(signal.SIGTERM, _interrupt)
+    topics = Topics.load(args.topics, args.namespace)
+    conf = zenoh_config(args.zenoh_config, args.zenoh_mode, args.connect, args.listen, args.cfg)
+    try:
+        session = zenoh.open(conf)
+    except Exception as e:
+        where = ", ".join(args.connect) or args.zenoh_config or DEFAULT_ENDPOINT
+        raise SystemExit(f"cannot open a Zenoh session ({where}): {e}") from None
+    return session, topics
