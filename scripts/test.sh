@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # Runs every slipstream test, installing what the tests need first:
-#   - system packages: iproute2 (network-namespace tests), python3 venv support;
-#   - a Python venv in .venv with eclipse-zenoh 1.10 and pytest (the wire format is proved
-#     from Python);
+#   - system packages: iproute2 (network-namespace tests), openssl (the security tests make
+#     their certificates), python3 venv support;
+#   - a Python venv in .venv with eclipse-zenoh 1.10, numpy and pytest (the Python client and
+#     its examples run against the Rust nodes);
 #   - the Rust tests in the release profile (the one profile we build: benches use it too,
 #     so zenoh is compiled once);
 #   - the Python tests against the release binaries.
@@ -15,6 +16,7 @@ step() { printf '\n== %s\n' "$*"; }
 step "system packages"
 missing=()
 command -v ip >/dev/null 2>&1 || missing+=(iproute2)
+command -v openssl >/dev/null 2>&1 || missing+=(openssl)
 python3 -c 'import venv, ensurepip' >/dev/null 2>&1 || missing+=(python3-venv)
 if ((${#missing[@]})); then
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
@@ -27,9 +29,9 @@ fi
 echo "ok"
 
 step "python venv (.venv) with eclipse-zenoh 1.10"
-if ! .venv/bin/python -c 'import zenoh, pytest' >/dev/null 2>&1; then
+if ! .venv/bin/python -c 'import zenoh, numpy, pytest' >/dev/null 2>&1; then
   python3 -m venv .venv
-  .venv/bin/pip install --quiet --disable-pip-version-check 'eclipse-zenoh==1.10.*' pytest
+  .venv/bin/pip install --quiet --disable-pip-version-check 'eclipse-zenoh==1.10.*' numpy pytest
 fi
 .venv/bin/python -c 'import zenoh; print("eclipse-zenoh", zenoh.__version__ if hasattr(zenoh, "__version__") else "installed")'
 
