@@ -14,7 +14,7 @@ pub const ZENOH_RUNTIME_DEFAULT: &str =
     "(rx: (handover: tx), acc: (handover: tx), app: (handover: tx), net: (handover: tx))";
 
 /// Sets ZENOH_RUNTIME to [`ZENOH_RUNTIME_DEFAULT`] unless the user set it (`ZENOH_RUNTIME='()'`
-/// restores Zenoh's own layout). Call first in `main`, before any thread or Zenoh starts:
+/// restores Zenoh's own layout). Call early in `main`, before any thread or Zenoh starts:
 /// Zenoh reads the variable once, when its first runtime starts.
 pub fn apply_zenoh_runtime_default() {
     if std::env::var_os("ZENOH_RUNTIME").is_none() {

@@ -169,8 +169,13 @@ where
 }
 
 fn main() -> Result<()> {
-    slipstream::cli::apply_zenoh_runtime_default();
     let cli = Cli::parse();
+    // A router forwards what it receives: its receive path must not share the tx pool, or a
+    // message of several batches (a raw camera frame) waits for the threads busy receiving it
+    // and is never forwarded. Zenoh's own thread layout there; the handover layout elsewhere.
+    if !matches!(cli.command, Command::Router) {
+        slipstream::cli::apply_zenoh_runtime_default();
+    }
     slipstream::cli::init_tracing();
     match cli.command {
         Command::Bench(args) => {

@@ -1,0 +1,88 @@
+"""Watches the loop from a host of the namespace test and prints JSON lines (run by
+test_netns.py through `ip netns exec`):
+
+  {"ev": "ctl", "pub": ns, "perc": ns|null}      a vehicle/control and its perception stamp
+  {"ev": "applied", "cmd": ns, "at": ns}         the simulator applied a new command (vehicle/state)
+  {"ev": "tick", "t": ns, "state": n, "det": n, "frame": n}   counts over the last 250 ms
+
+All stamps are wall-clock nanoseconds of one machine (namespaces share the clock)."""
+
+import json
+import pathlib
+import sys
+import threading
+import time
+
+sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[2] / "clients" / "python"))
+
+from slipstream_client import WireError, connect, decode  # noqa: E402
+
+
+def main():
+    import argparse
+
+    parser = argparse.ArgumentParser()
+    connect.add_args(parser)
+    parser.add_argument("--seconds", type=float, default=300)
+    args = parser.parse_args()
+    session, topics = connect.open_from_args(args)
+    lock = threading.Lock()
+    counts = {"state": 0, "det": 0, "frame": 0}
+    last = {"cmd": None}
+
+    def out(obj):
+        with lock:
+            print(json.dumps(obj), flush=True)
+
+    def on_control(sample):
+        try:
+            _, h, c = decode(sample.payload.to_bytes(), expected="ControlCommand")
+        except WireError:
+            return
+        out({"ev": "ctl", "pub": h["stamp_pub_ns"], "perc": c["perception_stamp_pub_ns"]})
+
+    def on_state(sample):
+        try:
+            _, _, s = decode(sample.payload.to_bytes(), expected="VehicleState")
+        except WireError:
+            return
+        timing = s["control_timing"]
+        with lock:
+            counts["state"] += 1
+            new = timing is not None and timing["command_stamp_pub_ns"] != last["cmd"]
+            if new:
+                last["cmd"] = timing["command_stamp_pub_ns"]
+        if new:
+            out({"ev": "applied", "cmd": timing["command_stamp_pub_ns"], "at": timing["applied_ns"]})
+
+    def count(name):
+        def on_sample(_sample):
+            with lock:
+                counts[name] += 1
+        return on_sample
+
+    subs = [
+        session.declare_subscriber(topics.key("vehicle/control"), on_control),
+        session.declare_subscriber(topics.key("vehicle/state"), on_state),
+        session.declare_subscriber(topics.key("perception/objects"), count("det")),
+        session.declare_subscriber(topics.key("camera/front"), count("frame")),
+    ]
+    end = time.monotonic() + args.seconds
+    try:
+        while time.monotonic() < end:
+            time.sleep(0.25)
+            with lock:
+                snapshot = dict(counts)
+                for k in counts:
+                    counts[k] = 0
+            out({"ev": "tick", "t": time.time_ns(), **snapshot})
+    except KeyboardInterrupt:
+        pass
+    finally:
+        for s in subs:
+            s.undeclare()
+        session.close()
+
+
+if __name__ == "__main__":
+    main()
