@@ -42,4 +42,10 @@ step "python tests (against target/release/slipstream)"
 # `cargo test` built the binary for the process tests; building it again with `cargo build`
 # would recompile Zenoh under the feature set without dev-dependencies (~5 minutes).
 test -x target/release/slipstream || { echo "target/release/slipstream is missing after cargo test" >&2; exit 1; }
-SLIPSTREAM_BIN="$PWD/target/release/slipstream" .venv/bin/python -m pytest -q tests/python
+rm -f target/test-reports/netns.json
+SLIPSTREAM_BIN="$PWD/target/release/slipstream" .venv/bin/python -m pytest -q -rs tests/python
+
+if [ -f target/test-reports/netns.json ]; then
+  step "namespace test: recovery times (docs/deployment.md)"
+  cat target/test-reports/netns.json
+fi

@@ -55,6 +55,8 @@ pub struct SimReport {
     pub control_timeouts: u64,
     /// vehicle/control payloads that failed to decode (counted and logged, never applied).
     pub control_rejected: u64,
+    /// Commands older than control.max_age_ms of simulated time when they came (not applied).
+    pub control_stale: u64,
     /// None when stopped before the scenario ended.
     pub end: Option<End>,
 }
@@ -67,7 +69,7 @@ impl SimReport {
             None => "stopped before the end".to_string(),
         };
         format!(
-            "{} (seed {}): {outcome}\n  {:.1} s simulated in {:.1} s (real-time factor {:.1}), {} steps, {} frames\n  collisions: {} ego, {} traffic; lockstep timeouts {}, control timeouts {}, bad control messages {}",
+            "{} (seed {}): {outcome}\n  {:.1} s simulated in {:.1} s (real-time factor {:.1}), {} steps, {} frames\n  collisions: {} ego, {} traffic; lockstep timeouts {}, control timeouts {}, bad control messages {}, stale commands {}",
             self.scenario,
             self.seed,
             self.sim_time_s,
@@ -79,7 +81,8 @@ impl SimReport {
             self.traffic_collisions,
             self.lockstep_timeouts,
             self.control_timeouts,
-            self.control_rejected
+            self.control_rejected,
+            self.control_stale
         )
     }
 }
@@ -124,10 +127,31 @@ struct Policy {
     last: Option<(ControlCommand, u64, ControlTiming)>,
     braking: bool,
     timeouts: u64,
+    stale: u64,
 }
 
 impl Policy {
+    fn new(spec: ControlPolicy) -> Policy {
+        Policy { spec, last: None, braking: false, timeouts: 0, stale: 0 }
+    }
+
     fn on_command(&mut self, cmd: &Received<ControlCommand>, now_ns: u64) {
+        let stamp = cmd.header.stamp_sim_ns;
+        let age_ns = now_ns.saturating_sub(stamp);
+        if self.spec.max_age_ms > 0 && stamp != 0 && age_ns > self.spec.max_age_ms * 1_000_000 {
+            self.stale += 1;
+            if self.stale.is_power_of_two() {
+                tracing::warn!(
+                    age_ms = age_ns / 1_000_000,
+                    max_age_ms = self.spec.max_age_ms,
+                    stale = self.stale,
+                    from = cmd.source.as_deref().unwrap_or("?"),
+                    "vehicle/control answers a state {} ms old: not applied",
+                    age_ns / 1_000_000
+                );
+            }
+            return;
+        }
         if self.braking {
             tracing::info!("vehicle/control resumed");
             self.braking = false;
@@ -222,7 +246,7 @@ async fn run_loop(
     let noise = world.scenario().noise.clone();
     let (mut renderer, mut look_rng) = Renderer::seeded(&info, noise.camera_stddev, seed);
     let mut scratch = vec![0u8; renderer.frame_len()];
-    let mut policy = Policy { spec: settings.control.clone(), last: None, braking: false, timeouts: 0 };
+    let mut policy = Policy::new(settings.control.clone());
 
     info_pub.put(0, &info)?;
     if mode == Mode::Lockstep {
@@ -380,6 +404,7 @@ async fn run_loop(
         traffic_collisions: world.traffic_collisions(),
         lockstep_timeouts,
         control_timeouts: policy.timeouts,
+        control_stale: policy.stale,
         control_rejected: control_sub.stats().snapshot().decode_errors,
         end,
     })
@@ -463,8 +488,7 @@ mod tests {
     use super::*;
 
     fn policy(before_first: BeforeFirst) -> Policy {
-        let spec = ControlPolicy { hold_ms: 200, timeout_brake: 0.4, before_first };
-        Policy { spec, last: None, braking: false, timeouts: 0 }
+        Policy::new(ControlPolicy { hold_ms: 200, timeout_brake: 0.4, max_age_ms: 1000, before_first })
     }
 
     #[test]
@@ -494,6 +518,27 @@ mod tests {
         p.on_command(&sent(43), 6_000_000_000);
         assert_eq!(p.input(6_010_000_000), EgoInput::Command(go));
         assert_eq!(policy(BeforeFirst::Brake).input(0), brake);
+    }
+
+    #[test]
+    fn a_command_answering_an_old_state_is_counted_not_applied() {
+        use crate::sim::world::EgoInput;
+        let mut p = policy(BeforeFirst::Cruise);
+        let cmd = |throttle, stamp_sim_ns| Received {
+            header: crate::msg::Header { seq: 0, stamp_sim_ns, stamp_pub_ns: 1 },
+            msg: ControlCommand { throttle, ..ControlCommand::NEUTRAL },
+            source: Some("acc".into()),
+        };
+        p.on_command(&cmd(0.5, 9_000_000_000), 10_000_000_000);
+        assert_eq!(p.input(10_000_000_000), EgoInput::Command(cmd(0.5, 0).msg), "1 s old: still applied");
+        // Queued while a link was down, delivered 4 s late: the ego keeps its newer command.
+        p.on_command(&cmd(0.9, 6_000_000_000), 10_010_000_000);
+        assert_eq!(p.input(10_010_000_000), EgoInput::Command(cmd(0.5, 0).msg));
+        assert_eq!(p.stale, 1);
+        // Unstamped commands (stamp 0, e.g. a joystick) are taken as fresh.
+        p.on_command(&cmd(0.2, 0), 10_020_000_000);
+        assert_eq!(p.input(10_020_000_000), EgoInput::Command(cmd(0.2, 0).msg));
+        assert_eq!(p.stale, 1);
     }
 
     #[test]

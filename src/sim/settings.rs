@@ -105,6 +105,10 @@ pub struct ControlPolicy {
     pub hold_ms: u64,
     /// ...then brake this hard (0..1) until a command arrives.
     pub timeout_brake: f32,
+    /// A command whose header stamp_sim_ns is further behind the simulation than this (ms of
+    /// simulated time) answered a state long gone (e.g. it waited in a queue while a link was
+    /// down): counted, logged, not applied. 0: no limit. Stamp 0 means unstamped: applied.
+    pub max_age_ms: u64,
     pub before_first: BeforeFirst,
 }
 

@@ -35,7 +35,9 @@ def secure_router(slipstream_bin, free_port, tmp_path):
          "--cfg", f"transport/link/tls/listen_certificate:{json.dumps(str(cert))}",
          "--cfg", f"transport/link/tls/listen_private_key:{json.dumps(str(key))}",
          "--cfg", f"transport/link/tls/root_ca_certificate:{json.dumps(str(tmp_path / 'ca.pem'))}",
-         "--cfg", f"transport/auth/usrpwd/dictionary_file:{json.dumps(str(creds))}"],
+         "--cfg", f"transport/auth/usrpwd/dictionary_file:{json.dumps(str(creds))}",
+         # No shared memory at the router: frames pass it as bytes, as between PCs.
+         "--cfg", "transport/shared_memory/enabled:false"],
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )
     try:
