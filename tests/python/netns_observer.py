@@ -3,7 +3,9 @@ test_netns.py through `ip netns exec`):
 
   {"ev": "ctl", "pub": ns, "perc": ns|null}      a vehicle/control and its perception stamp
   {"ev": "applied", "cmd": ns, "at": ns}         the simulator applied a new command (vehicle/state)
-  {"ev": "tick", "t": ns, "state": n, "det": n, "frame": n}   counts over the last 250 ms
+  {"ev": "tick", "t": ns, "state": n, "det": n, "frame": n,   counts over the last 250 ms,
+   "speed_ms": [..], "frame_ms": [..]}                        and the one-way latencies (publish
+                                                              to this callback) of speed and frames
 
 All stamps are wall-clock nanoseconds of one machine (namespaces share the clock)."""
 
@@ -28,6 +30,7 @@ def main():
     session, topics = connect.open_from_args(args)
     lock = threading.Lock()
     counts = {"state": 0, "det": 0, "frame": 0}
+    latencies = {"speed_ms": [], "frame_ms": []}
     last = {"cmd": None}
 
     def out(obj):
@@ -61,20 +64,37 @@ def main():
                 counts[name] += 1
         return on_sample
 
+    def latency(name, kind):
+        # Stamped on arrival, before the payload is copied and decoded.
+        def on_sample(sample):
+            now = time.time_ns()
+            payload = sample.payload.to_bytes()
+            try:
+                _, h, _ = decode(payload, expected=kind, copy=False)
+            except WireError:
+                return
+            with lock:
+                latencies[name].append(round((now - h["stamp_pub_ns"]) / 1e6, 3))
+                if kind == "CameraFrame":
+                    counts["frame"] += 1
+        return on_sample
+
     subs = [
         session.declare_subscriber(topics.key("vehicle/control"), on_control),
         session.declare_subscriber(topics.key("vehicle/state"), on_state),
         session.declare_subscriber(topics.key("perception/objects"), count("det")),
-        session.declare_subscriber(topics.key("camera/front"), count("frame")),
+        session.declare_subscriber(topics.key("camera/front"), latency("frame_ms", "CameraFrame")),
+        session.declare_subscriber(topics.key("vehicle/speed"), latency("speed_ms", "Speed")),
     ]
     end = time.monotonic() + args.seconds
     try:
         while time.monotonic() < end:
             time.sleep(0.25)
             with lock:
-                snapshot = dict(counts)
+                snapshot = {**counts, **latencies}
                 for k in counts:
                     counts[k] = 0
+                latencies = {k: [] for k in latencies}
             out({"ev": "tick", "t": time.time_ns(), **snapshot})
     except KeyboardInterrupt:
         pass
