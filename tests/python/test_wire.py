@@ -66,3 +66,14 @@ def test_python_encodes_what_rust_documents():
     event = encode("SimEvent", header, {"kind": {"variant": "ControlTimeout", "late": ["acc"]}})
     assert event[5:] == bytes([3, 1, 3]) + b"acc"
     assert decode(event)[2]["kind"]["late"] == ["acc"]
+
+
+def test_bad_payloads_are_all_counted_and_printed_rate_limited(capsys):
+    from slipstream_client import BadPayloads
+
+    bad = BadPayloads()
+    for i in range(150):
+        bad("vehicle/speed", WireError(f"bad {i}"))
+    lines = capsys.readouterr().out.splitlines()
+    assert bad.count == 150
+    assert lines == [f"# vehicle/speed: undecodable payload #{n}: bad {n - 1}" for n in (1, 10, 100)]

@@ -18,7 +18,7 @@ import _path  # noqa: F401  (source checkout)
 
 import zenoh.ext
 
-from slipstream_client import WireError, connect, decode
+from slipstream_client import BadPayloads, WireError, connect, decode
 from slipstream_client.image import frame_array
 
 
@@ -39,14 +39,14 @@ def main():
     session, topics = connect.open_from_args(args)
     latest = {"frame": None}
     cond = threading.Condition()
-    stats = {"n": 0, "bad": 0}
+    stats = {"n": 0}
+    bad = BadPayloads()
 
     def on_info(sample):
         try:
             _, _, info = decode(sample.payload.to_bytes(), expected="CameraInfo")
         except WireError as e:
-            print(f"# camera info undecodable: {e}", flush=True)
-            return
+            return bad(topics.key("camera/front/info"), e)
         print(f"# camera {info['width']}x{info['height']} at {info['rate_hz']:g} Hz, fx {info['fx_px']:.1f} px, "
               f"{info['encoding']}", flush=True)
 
@@ -72,9 +72,7 @@ def main():
             try:
                 header, frame, pixels = frame_array(payload)
             except WireError as e:
-                stats["bad"] += 1
-                if stats["bad"] in (1, 10, 100):
-                    print(f"# undecodable frame #{stats['bad']}: {e}", flush=True)
+                bad(topics.key("camera/front"), e)
                 continue
             stats["n"] += 1
             age_ms = (time.time_ns() - header["stamp_pub_ns"]) / 1e6

@@ -18,7 +18,7 @@ import time
 
 import _path  # noqa: F401  (source checkout)
 
-from slipstream_client import WireError, connect, decode, encode
+from slipstream_client import BadPayloads, WireError, connect, decode, encode
 
 # The simulator's default car (config/acc.json5 "vehicle"): feed-forward from acceleration to pedals.
 MASS_KG, MAX_FORCE_N, MAX_POWER_W, MAX_BRAKE_MPS2 = 1500.0, 6500.0, 110000.0, 9.0
@@ -68,15 +68,11 @@ def main():
         raise SystemExit("--set-speed must be in 0..70 m/s and --time-gap in 0.5..5 s")
     session, topics = connect.open_from_args(args)
     lock = threading.Lock()
-    state = {"lead": None, "objects_at": 0.0, "seq": 0, "bad": 0, "sent": 0}
+    state = {"lead": None, "objects_at": 0.0, "seq": 0, "sent": 0}
+    bad = BadPayloads()
     control = session.declare_publisher(topics.key("vehicle/control"))
     token = session.liveliness().declare_token(topics.node_key(args.name))
     attachment = args.name.encode()
-
-    def bad(key, e):
-        state["bad"] += 1
-        if state["bad"] in (1, 10, 100, 1000):
-            print(f"# {key}: undecodable payload #{state['bad']}: {e}", flush=True)
 
     def on_objects(sample):
         try:
@@ -129,7 +125,7 @@ def main():
         token.undeclare()
         control.undeclare()
         session.close()
-        print(f"# sent {state['sent']} commands, {state['bad']} undecodable payloads", flush=True)
+        print(f"# sent {state['sent']} commands, {bad.count} undecodable payloads", flush=True)
 
 
 if __name__ == "__main__":

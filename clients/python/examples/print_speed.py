@@ -13,7 +13,7 @@ import time
 
 import _path  # noqa: F401  (source checkout)
 
-from slipstream_client import WireError, connect, decode
+from slipstream_client import BadPayloads, WireError, connect, decode
 
 
 def main():
@@ -25,16 +25,14 @@ def main():
     session, topics = connect.open_from_args(args)
     key = topics.key("vehicle/speed")
     done = threading.Event()
-    seen = {"n": 0, "bad": 0}
+    seen = {"n": 0}
+    bad = BadPayloads()
 
     def on_sample(sample):
         try:
             _, header, speed = decode(sample.payload.to_bytes(), expected="Speed")
         except WireError as e:
-            seen["bad"] += 1
-            if seen["bad"] in (1, 10, 100, 1000):  # rate-limited
-                print(f"# {key}: undecodable payload #{seen['bad']}: {e}", flush=True)
-            return
+            return bad(key, e)
         if done.is_set():
             return
         seen["n"] += 1

@@ -5,6 +5,8 @@ connect: a Zenoh session with the nodes' flags; image: camera frames as numpy ar
 """
 
 from .keys import ConfigError, Topics
-from .wire import DEFAULT_KEYS, KINDS, WireError, decode, encode, encoding_schema
+from .wire import DEFAULT_KEYS, KINDS, BadPayloads, WireError, decode, encode, encoding_schema
 
-__all__ = ["DEFAULT_KEYS", "KINDS", "ConfigError", "Topics", "WireError", "decode", "encode", "encoding_schema"]
+__all__ = [
+    "DEFAULT_KEYS", "KINDS", "BadPayloads", "ConfigError", "Topics", "WireError", "decode", "encode", "encoding_schema",
+]

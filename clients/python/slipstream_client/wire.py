@@ -7,12 +7,30 @@ Decoding is strict, like the Rust side: any malformed payload raises WireError.
 """
 
 import struct
+import threading
 
 WIRE_VERSION = 2
 
 
 class WireError(ValueError):
     """A payload that is not a valid slipstream message of this wire version."""
+
+
+class BadPayloads:
+    """Counts undecodable payloads and prints the 1st, 10th, 100th, ... of them: a client
+    keeps running on bad input and says so without flooding its output, as the nodes do.
+    Callable from any Zenoh callback thread: bad(key, error)."""
+
+    def __init__(self):
+        self.count = 0
+        self._lock = threading.Lock()
+
+    def __call__(self, key, error):
+        with self._lock:
+            self.count += 1
+            n = self.count
+        if str(n).rstrip("0") == "1":  # 1, 10, 100, ...
+            print(f"# {key}: undecodable payload #{n}: {error}", flush=True)
 
 
 # Type language: "u8" "u32" "u64" "i32" "f32" "f64" "bool" "str" "bytes",
