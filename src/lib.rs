@@ -2,30 +2,53 @@
 //! glued by Eclipse Zenoh with typed, timestamped, remappable topics.
 //!
 //! # Layout
+//! Four layers; a module imports only from its own layer or the ones above it in this list
+//! (tests/it/layering.rs reads the sources and fails on any other import).
+//!
+//! **Contract**: what every process agrees on.
 //! - [`msg`]: one type per topic and its one wire encoding (postcard behind a version/kind
-//!   preamble and a header with seq, simulation time and publish time).
+//!   preamble and a header with seq, simulation time and publish time); the clock rule
+//!   [`msg::due`].
 //! - [`topics`]: logical topics, their default keys, message types and QoS.
 //! - [`qos`]: the QoS vocabulary of the config and its mapping onto Zenoh.
 //! - [`config`]: config/slipstream.json5 (namespace, remapping, QoS) and the Zenoh connection
 //!   flags every binary shares.
 //! - [`bus`]: typed publishers and subscribers over a Zenoh session, latest-only delivery,
 //!   per-subscription statistics, liveliness.
-//! - [`acc`]: slipstream-acc, the adaptive cruise control, and its scenario suite.
+//!
+//! **Domain**: the loop's parts; each stands alone on the contract.
+//! - [`vehicle`]: the vehicle model shared by the simulator and the controllers.
+//! - [`sim`]: slipstream-sim, the deterministic driving simulator.
+//! - [`perception`]: slipstream-detect, vehicles from camera frames (never the simulator).
+//! - [`acc`]: slipstream-acc, the adaptive cruise control (never the simulator).
+//!
+//! **Orchestration**: running and judging the loop.
+//! - [`launch`]: the nodes as child processes: start, await on the bus, stop, logs.
+//! - [`eval`]: recording a run, metrics, plots, latency per hop; the detect and ACC suites.
+//!
+//! **Tools**: what the `slipstream` command offers.
+//! - [`tools`]: `up`, `top`, `echo`, `info`, `demo`.
 //! - [`bench`]: `slipstream bench`, the bus against raw Zenoh, UDP and TCP in one run.
-//! - [`tools`]: `slipstream info` (and later `top`, `echo`).
-//! - [`cli`]: tracing set-up shared by the binaries.
+//! - [`cli`]: what every binary does first (Zenoh's runtime layout, logging).
+
+pub mod msg;
+pub mod qos;
+pub mod topics;
+
+pub mod bus;
+pub mod config;
 
 pub mod acc;
-pub mod bench;
-pub mod bus;
-pub mod cli;
-pub mod config;
-pub mod msg;
 pub mod perception;
-pub mod qos;
 pub mod sim;
+pub mod vehicle;
+
+pub mod eval;
+pub mod launch;
+
+pub mod bench;
+pub mod cli;
 pub mod tools;
-pub mod topics;
 
 pub use bus::{Bus, BusError};
 pub use config::{ConnectArgs, TopicMap};

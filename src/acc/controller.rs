@@ -11,8 +11,7 @@ use nalgebra::{Matrix3, Vector3};
 
 use super::settings::{AccSettings, PerceptionSource, TIME_GAP_RANGE_S};
 use crate::msg::{AccCommand, AccMode, AccStatus, AccWarning, Detections, GroundTruthObjects, LeadInfo};
-use crate::sim::driver::actuate_acceleration;
-use crate::sim::vehicle::VehicleParams;
+use crate::vehicle::{actuate_acceleration, VehicleParams};
 
 /// A vehicle ahead, as perception (or ground truth) reports it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -173,6 +172,15 @@ const HOLD_BRAKE: f32 = 0.3;
 /// Integrator of the low-level loop: gain (1/s) and bound (m/s2).
 const LOW_LEVEL_KI: f64 = 0.5;
 const LOW_LEVEL_I_MAX: f64 = 0.7;
+
+/// The lead as estimated now.
+#[derive(Debug, Clone, Copy)]
+struct LeadNow {
+    id: u32,
+    gap_m: f64,
+    speed_mps: f64,
+    accel_mps2: f64,
+}
 
 pub struct Controller {
     s: AccSettings,
@@ -375,7 +383,6 @@ impl Controller {
         let dt = self.last_t_s.map_or(0.0, |t| (ego.t_s - t).clamp(0.0, 0.2));
         self.last_t_s = Some(ego.t_s);
         let v = ego.speed_mps.max(0.0);
-        let lim = &self.s.limits;
         let mut warnings: Vec<AccWarning> = warnings.to_vec();
         let stale = !warnings.is_empty();
 
@@ -385,15 +392,16 @@ impl Controller {
         if let Some(f) = self.lead.as_mut().filter(|_| !stale) {
             f.predict(ego.t_s, v, self.noise.jerk_sigma_mps3);
         }
-        let lead = self.lead.filter(|_| !stale).map(|f| (f, f.x[0], f.x[1].max(0.0)));
+        let lead = self.lead.filter(|_| !stale).map(|f| LeadNow {
+            id: f.id,
+            gap_m: f.x[0],
+            speed_mps: f.x[1].max(0.0),
+            accel_mps2: f.x[2],
+        });
         let desired_gap = self.s.standstill_m + self.time_gap_s * v;
-        let threat = lead.map(|(f, gap, lead_speed)| threat(gap, v, lead_speed, f.x[2]));
-        if let Some(t) = threat {
-            let ttc = t.ttc_s.unwrap_or(f64::INFINITY);
-            let e = &self.s.emergency;
-            if ttc < e.warn_ttc_s || (t.needed_decel_mps2 > lim.decel_mps2 && ttc < e.release_ttc_s) {
-                warnings.push(AccWarning::ForwardCollision);
-            }
+        let threat = lead.map(|l| threat(l.gap_m, v, l.speed_mps, l.accel_mps2));
+        if threat.is_some_and(|t| self.warns(&t)) {
+            warnings.push(AccWarning::ForwardCollision);
         }
 
         let (mode, accel) = if !self.enabled {
@@ -403,61 +411,12 @@ impl Controller {
             self.emergency = false;
             // Throttle off at once, then down to the stale deceleration within the jerk limit.
             let from = self.accel_cmd.min(0.0);
-            (AccMode::Stale, (-self.s.stale.decel_mps2).max(from - lim.jerk_mps3 * dt))
+            (AccMode::Stale, (-self.s.stale.decel_mps2).max(from - self.s.limits.jerk_mps3 * dt))
         } else {
-            let e = &self.s.emergency;
-            if let Some(t) = threat {
-                let ttc = t.ttc_s.unwrap_or(f64::INFINITY);
-                // Imminent: TTC below the threshold, or closing in within release_ttc_s with more
-                // braking needed than comfort allows.
-                let beyond_comfort = t.needed_decel_mps2 > lim.decel_mps2 && ttc < e.release_ttc_s;
-                if !self.emergency && (ttc < e.brake_ttc_s || beyond_comfort) {
-                    tracing::warn!(
-                        t_s = ego.t_s,
-                        ttc_s = ttc,
-                        needed_decel_mps2 = t.needed_decel_mps2,
-                        "emergency braking"
-                    );
-                    self.emergency = true;
-                } else if self.emergency
-                    && (v < STANDSTILL_MPS || (ttc > e.release_ttc_s && t.needed_decel_mps2 < 0.8 * lim.decel_mps2))
-                {
-                    tracing::info!(t_s = ego.t_s, ttc_s = ttc, "emergency over");
-                    self.emergency = false;
-                }
-            } else if self.emergency {
-                self.emergency = false;
-            }
-            if self.emergency {
-                let t = threat.expect("emergency only with a lead");
-                let vehicle_max = self.params.max_brake_decel_mps2;
-                let decel = if t.ttc_s.is_some_and(|x| x < e.full_brake_ttc_s) {
-                    vehicle_max
-                } else {
-                    (1.5 * t.needed_decel_mps2).clamp(lim.decel_mps2, vehicle_max)
-                };
-                (AccMode::Emergency, -decel)
-            } else {
-                let g = &self.s.gains;
-                let cruise = (g.cruise_per_s * (self.set_speed_mps - v)).clamp(-lim.decel_mps2, lim.accel_mps2);
-                let follow = lead.map(|(_, gap, lead_speed)| {
-                    let law = g.gap_per_s2 * (gap - desired_gap) + g.speed_per_s * (lead_speed - v);
-                    // Never less braking than avoiding a collision needs (once it matters).
-                    let needed = threat.map_or(0.0, |t| t.needed_decel_mps2);
-                    let mut a = if needed > 0.1 { law.min(-needed) } else { law };
-                    // At standstill: stay until the lead has moved off.
-                    if v < STANDSTILL_MPS && !(gap > self.s.standstill_m + 1.0 && lead_speed > 0.5) {
-                        a = a.min(-0.5);
-                    }
-                    a
-                });
-                let (mode, target) = match follow {
-                    Some(f) if f < cruise => (AccMode::Follow, f),
-                    _ => (AccMode::Speed, cruise),
-                };
-                let target = target.clamp(-lim.decel_mps2, lim.accel_mps2);
-                let step = lim.jerk_mps3 * dt;
-                (mode, target.clamp(self.accel_cmd - step, self.accel_cmd + step))
+            self.update_emergency(threat.as_ref(), v, ego.t_s);
+            match threat.filter(|_| self.emergency) {
+                Some(t) => (AccMode::Emergency, -self.emergency_decel(&t)),
+                None => self.comfort_target(v, lead, threat.as_ref(), desired_gap, dt),
             }
         };
         self.accel_cmd = accel;
@@ -468,16 +427,89 @@ impl Controller {
             set_speed_mps: self.set_speed_mps,
             time_gap_s: self.time_gap_s,
             target_accel_mps2: accel,
-            lead: lead.map(|(f, gap, lead_speed)| LeadInfo {
-                id: f.id,
-                gap_m: gap,
+            lead: lead.map(|l| LeadInfo {
+                id: l.id,
+                gap_m: l.gap_m,
                 desired_gap_m: desired_gap,
-                relative_speed_mps: lead_speed - v,
+                relative_speed_mps: l.speed_mps - v,
                 ttc_s: threat.and_then(|t| t.ttc_s),
             }),
             warnings,
         };
         Output { throttle, brake, status }
+    }
+
+    /// The forward-collision warning: TTC below its threshold, or closing within
+    /// release_ttc_s with more braking needed than comfort allows.
+    fn warns(&self, t: &Threat) -> bool {
+        let ttc = t.ttc_s.unwrap_or(f64::INFINITY);
+        let e = &self.s.emergency;
+        ttc < e.warn_ttc_s || (t.needed_decel_mps2 > self.s.limits.decel_mps2 && ttc < e.release_ttc_s)
+    }
+
+    /// Enters emergency braking when a collision is imminent (TTC below the threshold, or
+    /// closing within release_ttc_s with more braking needed than comfort allows); leaves it
+    /// at standstill or once the threat is comfortably over.
+    fn update_emergency(&mut self, threat: Option<&Threat>, v: f64, t_s: f64) {
+        let Some(t) = threat else {
+            self.emergency = false;
+            return;
+        };
+        let (e, lim) = (&self.s.emergency, &self.s.limits);
+        let ttc = t.ttc_s.unwrap_or(f64::INFINITY);
+        let beyond_comfort = t.needed_decel_mps2 > lim.decel_mps2 && ttc < e.release_ttc_s;
+        if !self.emergency && (ttc < e.brake_ttc_s || beyond_comfort) {
+            tracing::warn!(t_s, ttc_s = ttc, needed_decel_mps2 = t.needed_decel_mps2, "emergency braking");
+            self.emergency = true;
+        } else if self.emergency
+            && (v < STANDSTILL_MPS || (ttc > e.release_ttc_s && t.needed_decel_mps2 < 0.8 * lim.decel_mps2))
+        {
+            tracing::info!(t_s, ttc_s = ttc, "emergency over");
+            self.emergency = false;
+        }
+    }
+
+    /// Emergency deceleration: the vehicle's maximum when TTC is below full_brake_ttc_s, else
+    /// 1.5 times what the threat needs, at least the comfort limit.
+    fn emergency_decel(&self, t: &Threat) -> f64 {
+        let vehicle_max = self.params.max_brake_decel_mps2;
+        if t.ttc_s.is_some_and(|x| x < self.s.emergency.full_brake_ttc_s) {
+            vehicle_max
+        } else {
+            (1.5 * t.needed_decel_mps2).clamp(self.s.limits.decel_mps2, vehicle_max)
+        }
+    }
+
+    /// Speed or Follow mode within the comfort limits: the lower of the cruise law and the
+    /// time-gap law, moved toward from the last command at most at the jerk limit.
+    fn comfort_target(
+        &self,
+        v: f64,
+        lead: Option<LeadNow>,
+        threat: Option<&Threat>,
+        desired_gap: f64,
+        dt: f64,
+    ) -> (AccMode, f64) {
+        let (g, lim) = (&self.s.gains, &self.s.limits);
+        let cruise = (g.cruise_per_s * (self.set_speed_mps - v)).clamp(-lim.decel_mps2, lim.accel_mps2);
+        let follow = lead.map(|l| {
+            let law = g.gap_per_s2 * (l.gap_m - desired_gap) + g.speed_per_s * (l.speed_mps - v);
+            // Never less braking than avoiding a collision needs (once it matters).
+            let needed = threat.map_or(0.0, |t| t.needed_decel_mps2);
+            let mut a = if needed > 0.1 { law.min(-needed) } else { law };
+            // At standstill: stay until the lead has moved off.
+            if v < STANDSTILL_MPS && !(l.gap_m > self.s.standstill_m + 1.0 && l.speed_mps > 0.5) {
+                a = a.min(-0.5);
+            }
+            a
+        });
+        let (mode, target) = match follow {
+            Some(f) if f < cruise => (AccMode::Follow, f),
+            _ => (AccMode::Speed, cruise),
+        };
+        let target = target.clamp(-lim.decel_mps2, lim.accel_mps2);
+        let step = lim.jerk_mps3 * dt;
+        (mode, target.clamp(self.accel_cmd - step, self.accel_cmd + step))
     }
 
     /// The low-level loop: the vehicle model's throttle/brake for the target, plus an

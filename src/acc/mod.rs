@@ -6,19 +6,19 @@
 //!   emergency braking, stale-data fallback, low-level loop);
 //! - [`node`]: the controller on the bus (lockstep answers, input health, watchdog);
 //! - [`settings`]: config/acc.json5;
-//! - [`eval`]: `slipstream eval acc`, the scenario suite with the simulator, detector and ACC
-//!   as separate processes, its figures and plots; [`offline`] runs the same loop in one
-//!   process without the bus, for tests.
+//! - [`args`]: slipstream-acc's command-line flags.
+//!
+//! It knows the vehicle it drives through the shared model ([`crate::vehicle`]) and the
+//! simulator only through the bus: no simulator code is linked into these decisions, so the
+//! same controller can drive another simulator or a car. Its scenario suite lives in the eval
+//! layer (`slipstream eval acc`: src/eval/acc.rs).
 //!
 //! The control law and its numbers: docs/control.md.
 
 pub mod args;
 pub mod controller;
-pub mod eval;
 pub mod node;
-pub mod offline;
 pub mod settings;
-pub mod suite;
 
 pub use controller::{Controller, EgoNow, Object, PerceptionFrame};
 pub use settings::{AccSettings, PerceptionSource};

@@ -16,10 +16,13 @@ use std::time::{Duration, Instant};
 
 use serde::Serialize;
 
-use super::controller::{Controller, EgoNow, PerceptionFrame};
+use super::controller::{Controller, EgoNow, Output, PerceptionFrame};
 use super::settings::{AccSettings, PerceptionSource};
 use crate::bus::{Bus, BusError, NodeWatch, Received, Subscriber};
-use crate::msg::{AccMode, AccWarning, ControlCommand, Detections, GroundTruthObjects, VehicleState};
+use crate::msg::{
+    AccCommand, AccMode, AccStatus, AccWarning, CameraInfo, ControlCommand, Detections, GroundTruthObjects, Speed,
+    VehicleState,
+};
 use crate::topics;
 
 /// What a run did.
@@ -88,6 +91,8 @@ impl Every {
     }
 }
 
+/// The node between messages: the controller, what it knows of the simulator's clock, and
+/// its counters. Time is passed in (`now`), so the watchdog is tested on an injected clock.
 struct State {
     ctl: Controller,
     ego: EgoNow,
@@ -101,26 +106,66 @@ struct State {
     camera_rate_hz: Option<f64>,
     info_waited: bool,
     last_speed_at: Option<Instant>,
+    speed_max_age: Duration,
     mode: Option<AccMode>,
     status_tick: Option<i64>,
     stats: AccStats,
     lockstep_log: Every,
 }
 
+/// A command to publish, with the status when one is due.
+struct Answer {
+    stamp_ns: u64,
+    command: ControlCommand,
+    status: Option<AccStatus>,
+}
+
+/// How often the watchdog looks at the age of vehicle/speed.
+const WATCHDOG_PERIOD: Duration = Duration::from_millis(50);
+/// How long an answer waits for the vehicle/state of its step (published right after speed).
+const STATE_WAIT: Duration = Duration::from_millis(20);
+/// Lockstep log lines about missing perception: at most one per this.
+const LOCKSTEP_LOG_EVERY: Duration = Duration::from_secs(5);
+
+/// The node's subscriptions.
+struct Inputs {
+    speed: Subscriber<Speed>,
+    state: Subscriber<VehicleState>,
+    command: Subscriber<AccCommand>,
+    info: Subscriber<CameraInfo>,
+    perception: PerceptionSub,
+    /// The detector's liveliness (camera perception only).
+    detector: Option<NodeWatch>,
+}
+
+impl Inputs {
+    async fn open(bus: &Bus, settings: &AccSettings) -> Result<Inputs, BusError> {
+        let perception = match settings.perception {
+            PerceptionSource::Camera => PerceptionSub::Camera(bus.subscriber(topics::PERCEPTION_OBJECTS).await?),
+            PerceptionSource::GroundTruth => PerceptionSub::GroundTruth(bus.subscriber(topics::OBJECTS).await?),
+        };
+        let detector = match settings.perception {
+            PerceptionSource::Camera => Some(bus.watch_node(&settings.perception_node).await?),
+            PerceptionSource::GroundTruth => None,
+        };
+        Ok(Inputs {
+            speed: bus.subscriber(topics::VEHICLE_SPEED).await?,
+            state: bus.subscriber(topics::VEHICLE_STATE).await?,
+            command: bus.subscriber(topics::ACC_COMMAND).await?,
+            info: bus.subscriber(topics::CAMERA_FRONT_INFO).await?,
+            perception,
+            detector,
+        })
+    }
+
+    fn detector_alive(&self) -> bool {
+        self.detector.as_ref().is_none_or(|d| d.is_alive())
+    }
+}
+
 /// Runs until `shutdown` completes.
 pub async fn run(bus: &Bus, settings: AccSettings, shutdown: impl Future<Output = ()>) -> Result<AccStats, BusError> {
-    let speed_sub = bus.subscriber(topics::VEHICLE_SPEED).await?;
-    let state_sub = bus.subscriber(topics::VEHICLE_STATE).await?;
-    let command_sub = bus.subscriber(topics::ACC_COMMAND).await?;
-    let info_sub = bus.subscriber(topics::CAMERA_FRONT_INFO).await?;
-    let perception = match settings.perception {
-        PerceptionSource::Camera => PerceptionSub::Camera(bus.subscriber(topics::PERCEPTION_OBJECTS).await?),
-        PerceptionSource::GroundTruth => PerceptionSub::GroundTruth(bus.subscriber(topics::OBJECTS).await?),
-    };
-    let detector: Option<NodeWatch> = match settings.perception {
-        PerceptionSource::Camera => Some(bus.watch_node(&settings.perception_node).await?),
-        PerceptionSource::GroundTruth => None,
-    };
+    let inputs = Inputs::open(bus, &settings).await?;
     let control_pub = bus.publisher(topics::VEHICLE_CONTROL).await?;
     let status_pub = bus.publisher(topics::ACC_STATUS).await?;
     tracing::info!(
@@ -130,183 +175,233 @@ pub async fn run(bus: &Bus, settings: AccSettings, shutdown: impl Future<Output 
         time_gap_s = settings.time_gap_s,
         "acc up; waiting for vehicle/speed"
     );
-
-    let speed_max_age = Duration::from_millis(settings.stale.speed_max_age_ms);
-    let mut st = State {
-        ctl: Controller::new(settings.clone()),
-        ego: EgoNow::default(),
-        state: None,
-        physics_hz: None,
-        perception_stamp_s: None,
-        perception_pub_ns: None,
-        camera_rate_hz: None,
-        info_waited: false,
-        last_speed_at: None,
-        mode: None,
-        status_tick: None,
-        stats: AccStats::default(),
-        lockstep_log: Every::new(Duration::from_secs(5)),
-    };
-    let mut watchdog = tokio::time::interval(Duration::from_millis(50));
+    let mut st = State::new(settings.clone());
+    let mut watchdog = tokio::time::interval(WATCHDOG_PERIOD);
     watchdog.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
     tokio::pin!(shutdown);
     loop {
-        let speed = tokio::select! {
+        let answer = tokio::select! {
             _ = &mut shutdown => break,
-            s = speed_sub.recv() => s,
-            _ = watchdog.tick() => {
-                let stale = st.last_speed_at.is_some_and(|t| t.elapsed() > speed_max_age);
-                if stale {
-                    // Simulated time moves on with the wall clock as far as the ACC can tell.
-                    let since = st.last_speed_at.map_or(0.0, |t| t.elapsed().as_secs_f64());
-                    let ego = EgoNow { t_s: st.ego.t_s + since, ..st.ego };
-                    let detector_ok = detector.as_ref().is_none_or(|d| d.is_alive());
-                    let mut warnings = vec![AccWarning::StaleSpeed];
-                    if !detector_ok {
-                        warnings.push(AccWarning::PerceptionLost);
-                    }
-                    let out = st.ctl.step(&ego, &warnings);
-                    note_mode(&mut st, out.status.mode, &out.status.warnings);
-                    let cmd = ControlCommand {
-                        throttle: out.throttle,
-                        brake: out.brake,
-                        steer: 0.0,
-                        answers_step: None,
-                        perception_stamp_pub_ns: st.perception_pub_ns,
-                    };
-                    control_pub.put(st.ego_stamp_ns(), &cmd)?;
-                    status_pub.put(st.ego_stamp_ns(), &out.status)?;
-                    st.stats.watchdog_commands += 1;
-                    st.stats.status += 1;
-                }
-                continue;
-            }
+            speed = inputs.speed.recv() => answer_speed(&mut st, &inputs, &settings, speed).await,
+            _ = watchdog.tick() => match st.watchdog(Instant::now(), inputs.detector_alive()) {
+                Some(a) => a,
+                None => continue,
+            },
         };
-        st.last_speed_at = Some(Instant::now());
-        let t_ns = speed.header.stamp_sim_ns;
-        let t_s = t_ns as f64 / 1e9;
-
-        // The state of this step (published right after the speed).
-        let mut state = drain_states(&state_sub, &mut st);
-        if st.state.is_none_or(|(stamp, _)| stamp < t_ns) {
-            let deadline = Instant::now() + Duration::from_millis(20);
-            while st.state.is_none_or(|(stamp, _)| stamp < t_ns) {
-                let left = deadline.saturating_duration_since(Instant::now());
-                match state_sub.recv_timeout(left).await {
-                    Some(r) => {
-                        take_state(&mut st, &r);
-                        state = Some(r.msg);
-                    }
-                    None => break,
-                }
-            }
-        }
-        let answers_step = answers_step(&st, t_ns);
-        st.ego = EgoNow {
-            t_s,
-            speed_mps: speed.msg.speed_mps,
-            accel_mps2: state.as_ref().map_or(st.ego.accel_mps2, |s| s.acceleration_in_body_mps2[0]),
-            yaw_rate_radps: state.as_ref().map_or(st.ego.yaw_rate_radps, |s| s.yaw_rate_radps),
-        };
-
-        while let Some(c) = command_sub.try_recv() {
-            if let Some(note) = st.ctl.command(&c.msg) {
-                tracing::warn!("acc/command: {note}");
-            }
-        }
-        while let Some(info) = info_sub.try_recv() {
-            st.camera_rate_hz = Some(info.msg.rate_hz);
-        }
-        if settings.lockstep && st.camera_rate_hz.is_none() && !st.info_waited {
-            // Which steps bring a frame follows from the camera rate: wait for the (latched)
-            // camera info once, or a frame answered a step late makes the run differ.
-            st.info_waited = true;
-            match info_sub.recv_timeout(Duration::from_millis(settings.lockstep_wait_ms)).await {
-                Some(info) => st.camera_rate_hz = Some(info.msg.rate_hz),
-                None => tracing::warn!(
-                    waited_ms = settings.lockstep_wait_ms,
-                    "lockstep: no camera/front/info; perception is awaited only for the first frame"
-                ),
-            }
-        }
-        while let Some((frame, pub_ns)) = perception.frame(None).await {
-            take_perception(&mut st, &frame, pub_ns);
-        }
-        let have = |st: &State| st.perception_stamp_s.is_some_and(|p| p >= t_s - 1e-9);
-        if settings.lockstep && st.frame_expected_at(t_s) && !have(&st) {
-            let deadline = Instant::now() + Duration::from_millis(settings.lockstep_wait_ms);
-            let mut arrived = false;
-            while Instant::now() < deadline {
-                let left = deadline.saturating_duration_since(Instant::now());
-                if let Some((frame, pub_ns)) = perception.frame(Some(left)).await {
-                    take_perception(&mut st, &frame, pub_ns);
-                    arrived = have(&st);
-                    if arrived {
-                        break;
-                    }
-                }
-            }
-            if !arrived {
-                st.stats.lockstep_waits_timed_out += 1;
-                if let Some(more) = st.lockstep_log.ready() {
-                    tracing::warn!(
-                        t_s,
-                        waited_ms = settings.lockstep_wait_ms,
-                        suppressed = more,
-                        "lockstep: no perception for the frame at this step; answering with what there is (is the detector running?)"
-                    );
-                }
-            }
-        }
-
-        let mut warnings = Vec::new();
-        let max_age = settings.stale.perception_max_age_ms as f64 / 1e3;
-        if st.perception_stamp_s.is_none_or(|p| t_s - p > max_age) {
-            warnings.push(AccWarning::StalePerception);
-        }
-        if detector.as_ref().is_some_and(|d| !d.is_alive()) {
-            warnings.push(AccWarning::PerceptionLost);
-        }
-        let out = st.ctl.step(&st.ego, &warnings);
-        note_mode(&mut st, out.status.mode, &out.status.warnings);
-        let cmd = ControlCommand {
-            throttle: out.throttle,
-            brake: out.brake,
-            steer: 0.0,
-            answers_step,
-            perception_stamp_pub_ns: st.perception_pub_ns,
-        };
-        control_pub.put(t_ns, &cmd)?;
-        st.stats.commands += 1;
-        // Up to date from here: time spent waiting above (lockstep) does not age the speed.
-        st.last_speed_at = Some(Instant::now());
-        let tick = (t_s * settings.status_hz + 1e-9).floor() as i64;
-        if st.status_tick != Some(tick) {
-            st.status_tick = Some(tick);
-            status_pub.put(t_ns, &out.status)?;
-            st.stats.status += 1;
+        control_pub.put(answer.stamp_ns, &answer.command)?;
+        if let Some(status) = &answer.status {
+            status_pub.put(answer.stamp_ns, status)?;
         }
     }
     Ok(st.stats)
 }
 
+/// Everything one vehicle/speed message leads to: the state of its step, commands, camera
+/// info, perception (awaited in lockstep), then the controller's answer.
+async fn answer_speed(st: &mut State, inputs: &Inputs, settings: &AccSettings, speed: Received<Speed>) -> Answer {
+    st.last_speed_at = Some(Instant::now());
+    let t_ns = speed.header.stamp_sim_ns;
+    let t_s = t_ns as f64 / 1e9;
+    let state = await_state(st, &inputs.state, t_ns).await;
+    let answers_step = answers_step(st, t_ns);
+    st.ego = EgoNow {
+        t_s,
+        speed_mps: speed.msg.speed_mps,
+        accel_mps2: state.as_ref().map_or(st.ego.accel_mps2, |s| s.acceleration_in_body_mps2[0]),
+        yaw_rate_radps: state.as_ref().map_or(st.ego.yaw_rate_radps, |s| s.yaw_rate_radps),
+    };
+    while let Some(c) = inputs.command.try_recv() {
+        if let Some(note) = st.ctl.command(&c.msg) {
+            tracing::warn!("acc/command: {note}");
+        }
+    }
+    take_camera_info(st, &inputs.info, settings).await;
+    while let Some((frame, pub_ns)) = inputs.perception.frame(None).await {
+        take_perception(st, &frame, pub_ns);
+    }
+    if settings.lockstep && st.frame_expected_at(t_s) && !st.has_perception_at(t_s) {
+        await_perception(st, &inputs.perception, settings.lockstep_wait_ms, t_s).await;
+    }
+    let answer = st.answer(t_ns, answers_step, inputs.detector_alive());
+    // Up to date from here: time spent waiting above (lockstep) does not age the speed.
+    st.last_speed_at = Some(Instant::now());
+    answer
+}
+
+/// The vehicle/state of the step stamped `t_ns` (published right after its speed), waiting
+/// at most [`STATE_WAIT`] for it; the newest state taken, if any.
+async fn await_state(st: &mut State, sub: &Subscriber<VehicleState>, t_ns: u64) -> Option<VehicleState> {
+    let mut state = drain_states(sub, st);
+    if st.state.is_some_and(|(stamp, _)| stamp >= t_ns) {
+        return state;
+    }
+    let deadline = Instant::now() + STATE_WAIT;
+    while st.state.is_none_or(|(stamp, _)| stamp < t_ns) {
+        let left = deadline.saturating_duration_since(Instant::now());
+        let Some(r) = sub.recv_timeout(left).await else { break };
+        take_state(st, &r);
+        state = Some(r.msg);
+    }
+    state
+}
+
+/// The camera's rate, from camera/front/info. In lockstep, which steps bring a frame follows
+/// from it: wait for the (latched) info once, or a frame answered a step late makes the run
+/// differ.
+async fn take_camera_info(st: &mut State, sub: &Subscriber<CameraInfo>, settings: &AccSettings) {
+    while let Some(info) = sub.try_recv() {
+        st.camera_rate_hz = Some(info.msg.rate_hz);
+    }
+    if settings.lockstep && st.camera_rate_hz.is_none() && !st.info_waited {
+        st.info_waited = true;
+        match sub.recv_timeout(Duration::from_millis(settings.lockstep_wait_ms)).await {
+            Some(info) => st.camera_rate_hz = Some(info.msg.rate_hz),
+            None => tracing::warn!(
+                waited_ms = settings.lockstep_wait_ms,
+                "lockstep: no camera/front/info; perception is awaited only for the first frame"
+            ),
+        }
+    }
+}
+
+/// Lockstep: waits up to `wait_ms` for the perception of the frame at `t_s`.
+async fn await_perception(st: &mut State, perception: &PerceptionSub, wait_ms: u64, t_s: f64) {
+    let deadline = Instant::now() + Duration::from_millis(wait_ms);
+    while Instant::now() < deadline {
+        let left = deadline.saturating_duration_since(Instant::now());
+        if let Some((frame, pub_ns)) = perception.frame(Some(left)).await {
+            take_perception(st, &frame, pub_ns);
+            if st.has_perception_at(t_s) {
+                return;
+            }
+        }
+    }
+    st.stats.lockstep_waits_timed_out += 1;
+    if let Some(more) = st.lockstep_log.ready() {
+        tracing::warn!(
+            t_s,
+            waited_ms = wait_ms,
+            suppressed = more,
+            "lockstep: no perception for the frame at this step; answering with what there is (is the detector running?)"
+        );
+    }
+}
+
 impl State {
+    fn new(settings: AccSettings) -> State {
+        State {
+            speed_max_age: Duration::from_millis(settings.stale.speed_max_age_ms),
+            ctl: Controller::new(settings),
+            ego: EgoNow::default(),
+            state: None,
+            physics_hz: None,
+            perception_stamp_s: None,
+            perception_pub_ns: None,
+            camera_rate_hz: None,
+            info_waited: false,
+            last_speed_at: None,
+            mode: None,
+            status_tick: None,
+            stats: AccStats::default(),
+            lockstep_log: Every::new(LOCKSTEP_LOG_EVERY),
+        }
+    }
+
     fn ego_stamp_ns(&self) -> u64 {
         (self.ego.t_s * 1e9) as u64
     }
 
+    fn has_perception_at(&self, t_s: f64) -> bool {
+        self.perception_stamp_s.is_some_and(|p| p >= t_s - 1e-9)
+    }
+
+    /// The controller's answer to the speed message stamped `t_ns`.
+    fn answer(&mut self, t_ns: u64, answers_step: Option<u64>, detector_alive: bool) -> Answer {
+        let t_s = t_ns as f64 / 1e9;
+        let mut warnings = Vec::new();
+        let max_age = self.ctl.settings().stale.perception_max_age_ms as f64 / 1e3;
+        if self.perception_stamp_s.is_none_or(|p| t_s - p > max_age) {
+            warnings.push(AccWarning::StalePerception);
+        }
+        if !detector_alive {
+            warnings.push(AccWarning::PerceptionLost);
+        }
+        let out = self.ctl.step(&self.ego, &warnings);
+        self.note_mode(out.status.mode, &out.status.warnings);
+        self.stats.commands += 1;
+        let tick = (t_s * self.ctl.settings().status_hz + 1e-9).floor() as i64;
+        let status = (self.status_tick != Some(tick)).then(|| {
+            self.status_tick = Some(tick);
+            self.stats.status += 1;
+            out.status.clone()
+        });
+        Answer { stamp_ns: t_ns, command: self.command(&out, answers_step), status }
+    }
+
+    /// The watchdog at wall-clock time `now`: while vehicle/speed is older than
+    /// `stale.speed_max_age_ms`, a braking command answering no step (and its status).
+    fn watchdog(&mut self, now: Instant, detector_alive: bool) -> Option<Answer> {
+        let since = now.saturating_duration_since(self.last_speed_at?);
+        if since <= self.speed_max_age {
+            return None;
+        }
+        // Simulated time moves on with the wall clock as far as the ACC can tell.
+        let ego = EgoNow { t_s: self.ego.t_s + since.as_secs_f64(), ..self.ego };
+        let mut warnings = vec![AccWarning::StaleSpeed];
+        if !detector_alive {
+            warnings.push(AccWarning::PerceptionLost);
+        }
+        let out = self.ctl.step(&ego, &warnings);
+        self.note_mode(out.status.mode, &out.status.warnings);
+        self.stats.watchdog_commands += 1;
+        self.stats.status += 1;
+        let command = self.command(&out, None);
+        Some(Answer { stamp_ns: self.ego_stamp_ns(), command, status: Some(out.status) })
+    }
+
+    fn command(&self, out: &Output, answers_step: Option<u64>) -> ControlCommand {
+        ControlCommand {
+            throttle: out.throttle,
+            brake: out.brake,
+            steer: 0.0,
+            answers_step,
+            perception_stamp_pub_ns: self.perception_pub_ns,
+        }
+    }
+
     /// Whether a camera frame (and so a perception message) is due at simulated time `t_s`:
-    /// the simulator's own rule (`sim::node::due`) with the camera rate from camera/front/info
+    /// the clock contract's rule (`msg::due`) with the camera rate from camera/front/info
     /// and the physics rate learned from vehicle/state.
     fn frame_expected_at(&self, t_s: f64) -> bool {
         match (self.camera_rate_hz, self.physics_hz) {
             (Some(rate), Some(hz)) => {
                 let hz = hz.round().max(1.0);
-                crate::sim::node::due((t_s * hz).round() as u64, rate, hz as u32)
+                crate::msg::due((t_s * hz).round() as u64, rate, hz as u32)
             }
             // Before the rates are known: the first frame comes with step 0.
             _ => self.perception_stamp_s.is_none(),
         }
+    }
+
+    fn note_mode(&mut self, mode: AccMode, warnings: &[AccWarning]) {
+        if self.mode == Some(mode) {
+            return;
+        }
+        match mode {
+            AccMode::Stale => {
+                self.stats.stale_episodes += 1;
+                tracing::warn!(?warnings, "inputs stale: throttle released, braking smoothly");
+            }
+            AccMode::Emergency => self.stats.emergencies += 1,
+            _ => {
+                if self.mode == Some(AccMode::Stale) {
+                    tracing::info!(?mode, "fresh inputs again: control resumed");
+                } else {
+                    tracing::debug!(?mode, "mode");
+                }
+            }
+        }
+        self.mode = Some(mode);
     }
 }
 
@@ -349,23 +444,65 @@ fn take_perception(st: &mut State, frame: &PerceptionFrame, pub_ns: u64) {
     st.ctl.perceive(frame, &st.ego);
 }
 
-fn note_mode(st: &mut State, mode: AccMode, warnings: &[AccWarning]) {
-    if st.mode == Some(mode) {
-        return;
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ground_truth() -> AccSettings {
+        AccSettings { perception: PerceptionSource::GroundTruth, ..AccSettings::default() }
     }
-    match mode {
-        AccMode::Stale => {
-            st.stats.stale_episodes += 1;
-            tracing::warn!(?warnings, "inputs stale: throttle released, braking smoothly");
+
+    /// The watchdog on an injected clock: no wall time passes in this test.
+    #[test]
+    fn the_watchdog_brakes_only_while_speed_is_older_than_its_limit() {
+        let settings = ground_truth();
+        let max_age = Duration::from_millis(settings.stale.speed_max_age_ms);
+        let mut st = State::new(settings);
+        let t0 = Instant::now();
+        assert!(st.watchdog(t0 + max_age * 10, true).is_none(), "no speed yet: nothing to guard");
+
+        st.ego = EgoNow { t_s: 1.0, speed_mps: 20.0, ..EgoNow::default() };
+        st.last_speed_at = Some(t0);
+        assert!(st.watchdog(t0 + max_age, true).is_none(), "fresh up to its age limit");
+        let mut brakes = Vec::new();
+        for i in 1..=20 {
+            let a = st.watchdog(t0 + max_age + WATCHDOG_PERIOD * i, true).expect("stale speed: a command");
+            assert_eq!(a.command.answers_step, None, "answers no step");
+            assert_eq!(a.command.throttle, 0.0);
+            assert_eq!(a.stamp_ns, 1_000_000_000, "stamped with the last speed's time");
+            let status = a.status.expect("says why");
+            assert_eq!(status.mode, AccMode::Stale);
+            assert_eq!(status.warnings, [AccWarning::StaleSpeed]);
+            brakes.push(a.command.brake);
         }
-        AccMode::Emergency => st.stats.emergencies += 1,
-        _ => {
-            if st.mode == Some(AccMode::Stale) {
-                tracing::info!(?mode, "fresh inputs again: control resumed");
-            } else {
-                tracing::debug!(?mode, "mode");
-            }
-        }
+        assert!(brakes[19] > 0.0, "brakes: {brakes:?}");
+        assert!(brakes.windows(2).all(|w| w[1] >= w[0] - 1e-6), "brakes smoothly, never letting go: {brakes:?}");
+        assert_eq!(st.stats.watchdog_commands, 20);
+
+        // A vanished detector is said too.
+        let a = st.watchdog(t0 + max_age * 4, false).unwrap();
+        assert!(a.status.unwrap().warnings.contains(&AccWarning::PerceptionLost));
+
+        // Speed again: quiet until it ages once more.
+        let t1 = t0 + Duration::from_secs(10);
+        st.last_speed_at = Some(t1);
+        assert!(st.watchdog(t1 + max_age / 2, true).is_none());
+        assert!(st.watchdog(t1 + max_age * 2, true).is_some());
     }
-    st.mode = Some(mode);
+
+    #[test]
+    fn a_speed_message_is_answered_with_its_step_and_a_status_at_the_status_rate() {
+        let mut st = State::new(AccSettings { status_hz: 20.0, ..ground_truth() });
+        st.ego = EgoNow { t_s: 0.5, speed_mps: 20.0, ..EgoNow::default() };
+        let first = st.answer(500_000_000, Some(50), true);
+        assert_eq!(first.command.answers_step, Some(50));
+        let status = first.status.expect("the first answer carries a status");
+        assert!(status.warnings.contains(&AccWarning::StalePerception), "no perception yet: {status:?}");
+        // The next step, 10 ms on, is inside the same 50 ms status period; 50 ms on is not.
+        st.ego.t_s = 0.51;
+        assert!(st.answer(510_000_000, Some(51), true).status.is_none());
+        st.ego.t_s = 0.55;
+        assert!(st.answer(550_000_000, Some(55), true).status.is_some());
+        assert_eq!((st.stats.commands, st.stats.status), (3, 2));
+    }
 }

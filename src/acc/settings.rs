@@ -6,7 +6,7 @@ use std::path::Path;
 use serde::Deserialize;
 
 use crate::config::{parse_layered, read_config, ConfigError};
-use crate::sim::vehicle::VehicleParams;
+use crate::vehicle::VehicleParams;
 
 pub const DEFAULT_ACC_CONFIG: &str = include_str!("../../config/acc.json5");
 pub const DEFAULT_ACC_CONFIG_PATH: &str = "config/acc.json5";
@@ -146,8 +146,14 @@ impl AccSettings {
         Ok(s)
     }
 
-    /// Ranges and relations serde cannot check.
+    /// Ranges and relations serde cannot check: (key, problem, fix) of the first one off.
     pub fn check(&self) -> Result<(), (String, String, String)> {
+        self.check_law()?;
+        self.check_inputs_and_vehicle()
+    }
+
+    /// The control law: speeds, gaps, comfort limits, gains, emergency and stale thresholds.
+    fn check_law(&self) -> Result<(), (String, String, String)> {
         let err = |key: &str, problem: String, fix: &str| Err((key.to_string(), problem, fix.to_string()));
         let positive = |v: f64| v.is_finite() && v > 0.0;
         if !(self.set_speed_mps.is_finite() && (0.0..=70.0).contains(&self.set_speed_mps)) {
@@ -211,6 +217,13 @@ impl AccSettings {
                 "use a value in (0, limits.decel_mps2]",
             );
         }
+        Ok(())
+    }
+
+    /// Lead selection, the lead estimator, the vehicle model, the status rate, the detector.
+    fn check_inputs_and_vehicle(&self) -> Result<(), (String, String, String)> {
+        let err = |key: &str, problem: String, fix: &str| Err((key.to_string(), problem, fix.to_string()));
+        let positive = |v: f64| v.is_finite() && v > 0.0;
         let n = &self.lane;
         if !(positive(n.in_lane_m)
             && n.stay_in_lane_m >= n.in_lane_m

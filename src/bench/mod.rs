@@ -17,6 +17,8 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
 
+use crate::eval::fmt_opt;
+
 pub use peer::{run_receiver, run_sender};
 pub use spec::{Background, CaseSpec, Payload, RecvReport, SendReport, TcpBuffer, Transport};
 
@@ -431,11 +433,6 @@ fn ratios(rows: &[Row]) -> Vec<Ratio> {
         ratio(format!("speed p99 {p} / unloaded"), p99(c, p), p99(c, "unloaded"), "<= 3 (with QoS)");
     }
     out
-}
-
-/// A number with `digits` decimals, or "-" when there is none (tables).
-pub fn fmt_opt(v: Option<f64>, digits: usize) -> String {
-    v.map(|x| format!("{x:.digits$}")).unwrap_or_else(|| "-".into())
 }
 
 /// The report as markdown tables: one per suite, then the ratios.

@@ -131,147 +131,28 @@ pub fn peer_topics(spec: &CaseSpec) -> Result<TopicMap> {
     Ok(TopicMap::from_json5(&text, "bench case")?)
 }
 
+/// What a receiver keeps alive until the report: sessions, subscribers, reader threads.
+#[derive(Default)]
+struct Receiving {
+    keep: Vec<Box<dyn std::any::Any + Send>>,
+    threads: Vec<std::thread::JoinHandle<()>>,
+}
+
 /// Receiver: prints `READY <endpoint>`, collects until stdin closes (or a hard limit), then
 /// prints `RESULT <json>`.
 pub async fn run_receiver(spec: CaseSpec) -> Result<()> {
-    let col = Arc::new(Collector::default());
-    let stop = Arc::new(AtomicBool::new(false));
-    let mut keep: Vec<Box<dyn std::any::Any + Send>> = Vec::new();
-    let mut threads = Vec::new();
-
-    let endpoint = match spec.transport {
-        Transport::Udp => {
-            let sock = UdpSocket::bind("127.0.0.1:0")?;
-            sock.set_read_timeout(Some(Duration::from_millis(50)))?;
-            let addr = sock.local_addr()?;
-            let (col, stop) = (col.clone(), stop.clone());
-            threads.push(std::thread::spawn(move || {
-                let mut buf = [0u8; 2048];
-                while !stop.load(Ordering::Relaxed) {
-                    if let Ok(n) = sock.recv(&mut buf) {
-                        if let Some((seq, stamp)) = parse_record(&buf[..n]) {
-                            col.record(seq, stamp, n);
-                        }
-                    }
-                }
-            }));
-            addr.to_string()
-        }
-        Transport::Tcp => {
-            let listener = TcpListener::bind("127.0.0.1:0")?;
-            let addr = listener.local_addr()?;
-            let (col, stop) = (col.clone(), stop.clone());
-            threads.push(std::thread::spawn(move || {
-                let Ok((stream, _)) = listener.accept() else { return };
-                let _ = stream.set_nodelay(true);
-                let _ = stream.set_read_timeout(Some(Duration::from_millis(200)));
-                let mut stream = std::io::BufReader::with_capacity(1 << 16, stream);
-                let mut len_buf = [0u8; 4];
-                let mut body = Vec::new();
-                // read_fully keeps partial progress across read timeouts (read_exact would
-                // lose a half-read length prefix and desynchronise the stream).
-                while !stop.load(Ordering::Relaxed) {
-                    if read_fully(&mut stream, &mut len_buf, &stop).is_err() {
-                        return;
-                    }
-                    let len = u32::from_le_bytes(len_buf) as usize;
-                    body.resize(len, 0);
-                    if read_fully(&mut stream, &mut body, &stop).is_err() {
-                        return;
-                    }
-                    if let Some((seq, stamp)) = parse_record(&body) {
-                        col.record(seq, stamp, len + 4);
-                    }
-                }
-            }));
-            addr.to_string()
-        }
-        Transport::Zenoh => {
-            let session =
-                zenoh::open(peer_config(&spec, Some("tcp/127.0.0.1:0"), None)?).await.map_err(anyhow::Error::msg)?;
-            let key = if matches!(spec.payload, Payload::Speed) { SPEED_KEY } else { FRAME_KEY };
-            let c = col.clone();
-            let sub = session
-                .declare_subscriber(key)
-                .callback(move |s| {
-                    let p = s.payload();
-                    if p.as_shm().is_some() {
-                        c.shm.fetch_add(1, Ordering::Relaxed);
-                    }
-                    let bytes = p.to_bytes();
-                    if let Some((seq, stamp)) = parse_record(&bytes) {
-                        c.record(seq, stamp, bytes.len());
-                    }
-                })
-                .await
-                .map_err(anyhow::Error::msg)?;
-            let ep = first_locator(&session).await?;
-            keep.push(Box::new(sub));
-            keep.push(Box::new(session));
-            ep
-        }
-        Transport::Bus => {
-            let session =
-                zenoh::open(peer_config(&spec, Some("tcp/127.0.0.1:0"), None)?).await.map_err(anyhow::Error::msg)?;
-            let ep = first_locator(&session).await?;
-            let bus = Arc::new(Bus::from_session(session, peer_topics(&spec)?, "bench-recv").await?);
-            match spec.payload {
-                Payload::Speed => {
-                    let c = col.clone();
-                    let sub = bus
-                        .subscribe_with(topics::VEHICLE_SPEED, move |r| {
-                            c.record(r.header.seq, r.header.stamp_pub_ns, 0)
-                        })
-                        .await?;
-                    keep.push(Box::new(sub));
-                }
-                Payload::Frame { .. } => {}
-            }
-            let frames_measured = matches!(spec.payload, Payload::Frame { .. });
-            if frames_measured && spec.rate_hz.is_none() {
-                // Throughput: count frames where raw zenoh does, in the receive callback
-                // (validated, zero-copy), touching the last byte.
-                let c = col.clone();
-                let sub = bus
-                    .subscribe_frames_with(move |s| {
-                        let f = s.frame();
-                        let _ = std::hint::black_box(f.msg.data.last());
-                        if s.is_shared_memory() {
-                            c.shm.fetch_add(1, Ordering::Relaxed);
-                        }
-                        c.record(f.header.seq, f.header.stamp_pub_ns, s.bytes().len());
-                    })
-                    .await?;
-                keep.push(Box::new(sub));
-            } else if frames_measured || spec.background.is_some() {
-                // Latency and background load: the application's path, a latest-only
-                // FrameSubscriber read by its own task.
-                let sub = bus.frame_subscriber().await?;
-                let (c, stop, measured) = (col.clone(), stop.clone(), frames_measured);
-                tokio::spawn(async move {
-                    while !stop.load(Ordering::Relaxed) {
-                        let Some(s) = sub.recv_timeout(Duration::from_millis(100)).await else { continue };
-                        let f = s.frame();
-                        let _ = std::hint::black_box(f.msg.data.last());
-                        if s.is_shared_memory() {
-                            c.shm.fetch_add(1, Ordering::Relaxed);
-                        }
-                        if measured {
-                            c.record(f.header.seq, f.header.stamp_pub_ns, s.bytes().len());
-                        } else {
-                            c.background.fetch_add(1, Ordering::Relaxed);
-                        }
-                    }
-                });
-            }
-            keep.push(Box::new(bus));
-            ep
-        }
-    };
     if spec.transport != Transport::Bus && spec.background.is_some() {
         bail!("background frames are measured through the bus only");
     }
-
+    let col = Arc::new(Collector::default());
+    let stop = Arc::new(AtomicBool::new(false));
+    let mut receiving = Receiving::default();
+    let endpoint = match spec.transport {
+        Transport::Udp => receive_udp(&col, &stop, &mut receiving)?,
+        Transport::Tcp => receive_tcp(&col, &stop, &mut receiving)?,
+        Transport::Zenoh => receive_zenoh(&spec, &col, &mut receiving).await?,
+        Transport::Bus => receive_bus(&spec, &col, &stop, &mut receiving).await?,
+    };
     println!("READY {endpoint}");
     std::io::stdout().flush()?;
 
@@ -285,14 +166,148 @@ pub async fn run_receiver(spec: CaseSpec) -> Result<()> {
     });
     let _ = tokio::time::timeout(hard_limit, rx).await;
     stop.store(true, Ordering::Relaxed);
-    for t in threads {
+    for t in receiving.threads {
         let _ = t.join();
     }
     let report = col.report();
-    drop(keep);
+    drop(receiving.keep);
     println!("RESULT {}", serde_json::to_string(&report)?);
     std::io::stdout().flush()?;
     Ok(())
+}
+
+/// Raw UDP: one datagram per record, read by a thread of its own.
+fn receive_udp(col: &Arc<Collector>, stop: &Arc<AtomicBool>, r: &mut Receiving) -> Result<String> {
+    let sock = UdpSocket::bind("127.0.0.1:0")?;
+    sock.set_read_timeout(Some(Duration::from_millis(50)))?;
+    let addr = sock.local_addr()?;
+    let (col, stop) = (col.clone(), stop.clone());
+    r.threads.push(std::thread::spawn(move || {
+        let mut buf = [0u8; 2048];
+        while !stop.load(Ordering::Relaxed) {
+            if let Ok(n) = sock.recv(&mut buf) {
+                if let Some((seq, stamp)) = parse_record(&buf[..n]) {
+                    col.record(seq, stamp, n);
+                }
+            }
+        }
+    }));
+    Ok(addr.to_string())
+}
+
+/// Raw TCP: length-prefixed records on one connection, read by a thread of its own.
+fn receive_tcp(col: &Arc<Collector>, stop: &Arc<AtomicBool>, r: &mut Receiving) -> Result<String> {
+    let listener = TcpListener::bind("127.0.0.1:0")?;
+    let addr = listener.local_addr()?;
+    let (col, stop) = (col.clone(), stop.clone());
+    r.threads.push(std::thread::spawn(move || {
+        let Ok((stream, _)) = listener.accept() else { return };
+        let _ = stream.set_nodelay(true);
+        let _ = stream.set_read_timeout(Some(Duration::from_millis(200)));
+        let mut stream = std::io::BufReader::with_capacity(1 << 16, stream);
+        let mut len_buf = [0u8; 4];
+        let mut body = Vec::new();
+        // read_fully keeps partial progress across read timeouts (read_exact would lose a
+        // half-read length prefix and desynchronise the stream).
+        while !stop.load(Ordering::Relaxed) {
+            if read_fully(&mut stream, &mut len_buf, &stop).is_err() {
+                return;
+            }
+            let len = u32::from_le_bytes(len_buf) as usize;
+            body.resize(len, 0);
+            if read_fully(&mut stream, &mut body, &stop).is_err() {
+                return;
+            }
+            if let Some((seq, stamp)) = parse_record(&body) {
+                col.record(seq, stamp, len + 4);
+            }
+        }
+    }));
+    Ok(addr.to_string())
+}
+
+/// Raw Zenoh: a callback subscriber on the case's key.
+async fn receive_zenoh(spec: &CaseSpec, col: &Arc<Collector>, r: &mut Receiving) -> Result<String> {
+    let session = zenoh::open(peer_config(spec, Some("tcp/127.0.0.1:0"), None)?).await.map_err(anyhow::Error::msg)?;
+    let key = if matches!(spec.payload, Payload::Speed) { SPEED_KEY } else { FRAME_KEY };
+    let c = col.clone();
+    let sub = session
+        .declare_subscriber(key)
+        .callback(move |s| {
+            let p = s.payload();
+            if p.as_shm().is_some() {
+                c.shm.fetch_add(1, Ordering::Relaxed);
+            }
+            let bytes = p.to_bytes();
+            if let Some((seq, stamp)) = parse_record(&bytes) {
+                c.record(seq, stamp, bytes.len());
+            }
+        })
+        .await
+        .map_err(anyhow::Error::msg)?;
+    let ep = first_locator(&session).await?;
+    r.keep.push(Box::new(sub));
+    r.keep.push(Box::new(session));
+    Ok(ep)
+}
+
+/// The bus: speed by a callback subscriber; frames by a callback (throughput) or by the
+/// application's latest-only reader (latency, background load).
+async fn receive_bus(
+    spec: &CaseSpec,
+    col: &Arc<Collector>,
+    stop: &Arc<AtomicBool>,
+    r: &mut Receiving,
+) -> Result<String> {
+    let session = zenoh::open(peer_config(spec, Some("tcp/127.0.0.1:0"), None)?).await.map_err(anyhow::Error::msg)?;
+    let ep = first_locator(&session).await?;
+    let bus = Arc::new(Bus::from_session(session, peer_topics(spec)?, "bench-recv").await?);
+    if matches!(spec.payload, Payload::Speed) {
+        let c = col.clone();
+        let sub = bus
+            .subscribe_with(topics::VEHICLE_SPEED, move |r| c.record(r.header.seq, r.header.stamp_pub_ns, 0))
+            .await?;
+        r.keep.push(Box::new(sub));
+    }
+    let frames_measured = matches!(spec.payload, Payload::Frame { .. });
+    if frames_measured && spec.rate_hz.is_none() {
+        // Throughput: count frames where raw zenoh does, in the receive callback (validated,
+        // zero-copy), touching the last byte.
+        let c = col.clone();
+        let sub = bus
+            .subscribe_frames_with(move |s| {
+                let f = s.frame();
+                let _ = std::hint::black_box(f.msg.data.last());
+                if s.is_shared_memory() {
+                    c.shm.fetch_add(1, Ordering::Relaxed);
+                }
+                c.record(f.header.seq, f.header.stamp_pub_ns, s.bytes().len());
+            })
+            .await?;
+        r.keep.push(Box::new(sub));
+    } else if frames_measured || spec.background.is_some() {
+        // Latency and background load: the application's path, a latest-only
+        // FrameSubscriber read by its own task.
+        let sub = bus.frame_subscriber().await?;
+        let (c, stop, measured) = (col.clone(), stop.clone(), frames_measured);
+        tokio::spawn(async move {
+            while !stop.load(Ordering::Relaxed) {
+                let Some(s) = sub.recv_timeout(Duration::from_millis(100)).await else { continue };
+                let f = s.frame();
+                let _ = std::hint::black_box(f.msg.data.last());
+                if s.is_shared_memory() {
+                    c.shm.fetch_add(1, Ordering::Relaxed);
+                }
+                if measured {
+                    c.record(f.header.seq, f.header.stamp_pub_ns, s.bytes().len());
+                } else {
+                    c.background.fetch_add(1, Ordering::Relaxed);
+                }
+            }
+        });
+    }
+    r.keep.push(Box::new(bus));
+    Ok(ep)
 }
 
 fn read_fully(stream: &mut impl Read, buf: &mut [u8], stop: &AtomicBool) -> std::io::Result<()> {
@@ -338,167 +353,159 @@ impl Pacer {
     }
 }
 
+impl Pacer {
+    /// Calls `send(i)` for i in 0..count at the pace, until `deadline`; counts the sends that
+    /// returned true (a frame dropped by a rate limit returns false).
+    fn run(&self, count: u64, deadline: Instant, mut send: impl FnMut(u64) -> Result<bool>) -> Result<u64> {
+        let mut sent = 0;
+        for i in 0..count {
+            if Instant::now() > deadline {
+                break;
+            }
+            self.wait(i);
+            sent += send(i)? as u64;
+        }
+        Ok(sent)
+    }
+}
+
+/// After the last message: time for it to arrive before the session closes.
+const DRAIN: Duration = Duration::from_millis(300);
+
 /// Sender: connects to `endpoint`, sends the measured stream (and background frames), prints
 /// `SENT <json>`.
 pub async fn run_sender(spec: CaseSpec, endpoint: String) -> Result<()> {
     let deadline = Instant::now() + Duration::from_secs_f64(spec.max_duration_s);
     let started = Instant::now();
-    let mut report = SendReport::default();
-    match spec.transport {
-        Transport::Udp => {
-            let sock = UdpSocket::bind("127.0.0.1:0")?;
-            sock.connect(&endpoint)?;
-            let pacer = Pacer::new(spec.rate_hz);
-            for i in 0..spec.count {
-                if Instant::now() > deadline {
-                    break;
-                }
-                pacer.wait(i);
-                sock.send(&raw_record(i))?;
-                report.sent += 1;
-            }
-        }
-        Transport::Tcp => {
-            let mut stream = TcpStream::connect(&endpoint)?;
-            stream.set_nodelay(true)?;
-            let frame = match spec.payload {
-                Payload::Speed => Vec::new(),
-                Payload::Frame { width, height } => vec![7u8; (width * height * 3) as usize],
-            };
-            let pacer = Pacer::new(spec.rate_hz);
-            for i in 0..spec.count {
-                if Instant::now() > deadline {
-                    break;
-                }
-                pacer.wait(i);
-                let len = (RAW_HEADER + frame.len()) as u32;
-                let mut head = [0u8; 4 + RAW_HEADER];
-                head[..4].copy_from_slice(&len.to_le_bytes());
-                head[4..].copy_from_slice(&raw_record(i));
-                stream.write_all(&head)?;
-                if !frame.is_empty() {
-                    stream.write_all(&frame)?;
-                }
-                report.sent += 1;
-            }
-            stream.flush()?;
-        }
-        Transport::Zenoh => {
-            let session = zenoh::open(peer_config(&spec, None, Some(&endpoint))?).await.map_err(anyhow::Error::msg)?;
-            let (key, frame) = match spec.payload {
-                Payload::Speed => (SPEED_KEY, None),
-                Payload::Frame { width, height } => {
-                    (FRAME_KEY, Some(ZBytes::from(vec![7u8; (width * height * 3) as usize])))
-                }
-            };
-            // The same QoS the bus gives the topic (or Zenoh's defaults with qos off): the
-            // comparison isolates the typed layer.
-            let topic =
-                if frame.is_none() { crate::topics::Topic::VehicleSpeed } else { crate::topics::Topic::CameraFront };
-            let qos = peer_topics(&spec)?.qos(topic);
-            let publisher = session
-                .declare_publisher(key)
-                .priority(qos.priority.into())
-                .express(qos.express)
-                .congestion_control(qos.congestion_control.into())
-                .await
-                .map_err(anyhow::Error::msg)?;
-            wait_matching(&publisher).await?;
-            let pacer = Pacer::new(spec.rate_hz);
-            for i in 0..spec.count {
-                if Instant::now() > deadline {
-                    break;
-                }
-                pacer.wait(i);
-                let payload = match &frame {
-                    None => ZBytes::from(raw_record(i).to_vec()),
-                    Some(f) => {
-                        // Record then the frame: two slices, the frame shared, not copied.
-                        let mut w = ZBytes::writer();
-                        w.write_all(&raw_record(i))?;
-                        w.append(f.clone());
-                        w.finish()
-                    }
-                };
-                publisher.put(payload).wait().map_err(anyhow::Error::msg)?;
-                report.sent += 1;
-            }
-            tokio::time::sleep(Duration::from_millis(300)).await;
-            session.close().await.map_err(anyhow::Error::msg)?;
-        }
-        Transport::Bus => {
-            let bus = Bus::open(peer_config(&spec, None, Some(&endpoint))?, peer_topics(&spec)?, "bench-send").await?;
-            let bus = Arc::new(bus);
-            let done = Arc::new(AtomicBool::new(false));
-            let background = spec.background.map(|bg| {
-                let (bus, done) = (bus.clone(), done.clone());
-                tokio::spawn(async move { send_background(bus, bg, done, deadline).await })
-            });
-            match spec.payload {
-                Payload::Speed => {
-                    let publisher = bus.publisher(topics::VEHICLE_SPEED).await?;
-                    if !publisher.wait_for_subscriber(Duration::from_secs(10)).await {
-                        bail!("no subscriber matched vehicle/speed within 10 s");
-                    }
-                    let bus_for_pace = bus.clone();
-                    let count = spec.count;
-                    let rate = spec.rate_hz;
-                    let sent = tokio::task::spawn_blocking(move || {
-                        let _keep = bus_for_pace;
-                        let pacer = Pacer::new(rate);
-                        let mut sent = 0;
-                        for i in 0..count {
-                            if Instant::now() > deadline {
-                                break;
-                            }
-                            pacer.wait(i);
-                            if publisher.put(i * 10_000_000, &Speed { speed_mps: 20.0 }).is_ok() {
-                                sent += 1;
-                            }
-                        }
-                        sent
-                    })
-                    .await?;
-                    report.sent = sent;
-                }
-                Payload::Frame { width, height } => {
-                    let publisher = bus.frame_publisher().await?;
-                    if !publisher.publisher().wait_for_subscriber(Duration::from_secs(10)).await {
-                        bail!("no subscriber matched camera/front within 10 s");
-                    }
-                    let pacer = Pacer::new(spec.rate_hz);
-                    let len = (width * height * 3) as usize;
-                    for i in 0..spec.count {
-                        if Instant::now() > deadline {
-                            break;
-                        }
-                        pacer.wait(i);
-                        // The renderer would write every pixel here; the bench writes one
-                        // byte so that only transport costs are compared.
-                        let sent =
-                            publisher.put_with(i * 50_000_000, width, height, ImageEncoding::Rgb8, len, |px| {
-                                px[len - 1] = i as u8
-                            })?;
-                        if sent.is_some() {
-                            report.sent += 1;
-                        }
-                    }
-                }
-            }
-            done.store(true, Ordering::Relaxed);
-            if let Some(bg) = background {
-                report.background_sent = bg.await??;
-            }
-            tokio::time::sleep(Duration::from_millis(300)).await;
-            if let Ok(bus) = Arc::try_unwrap(bus) {
-                bus.close().await?;
-            }
-        }
-    }
+    let mut report = match spec.transport {
+        Transport::Udp => SendReport { sent: send_udp(&spec, &endpoint, deadline)?, ..SendReport::default() },
+        Transport::Tcp => SendReport { sent: send_tcp(&spec, &endpoint, deadline)?, ..SendReport::default() },
+        Transport::Zenoh => SendReport { sent: send_zenoh(&spec, &endpoint, deadline).await?, ..SendReport::default() },
+        Transport::Bus => send_bus(&spec, &endpoint, deadline).await?,
+    };
     report.elapsed_s = started.elapsed().as_secs_f64();
     println!("SENT {}", serde_json::to_string(&report)?);
     std::io::stdout().flush()?;
     Ok(())
+}
+
+fn frame_bytes(payload: &Payload) -> Vec<u8> {
+    match payload {
+        Payload::Speed => Vec::new(),
+        Payload::Frame { width, height } => vec![7u8; (width * height * 3) as usize],
+    }
+}
+
+fn send_udp(spec: &CaseSpec, endpoint: &str, deadline: Instant) -> Result<u64> {
+    let sock = UdpSocket::bind("127.0.0.1:0")?;
+    sock.connect(endpoint)?;
+    Pacer::new(spec.rate_hz).run(spec.count, deadline, |i| Ok(sock.send(&raw_record(i)).map(|_| true)?))
+}
+
+fn send_tcp(spec: &CaseSpec, endpoint: &str, deadline: Instant) -> Result<u64> {
+    let mut stream = TcpStream::connect(endpoint)?;
+    stream.set_nodelay(true)?;
+    let frame = frame_bytes(&spec.payload);
+    let sent = Pacer::new(spec.rate_hz).run(spec.count, deadline, |i| {
+        let len = (RAW_HEADER + frame.len()) as u32;
+        let mut head = [0u8; 4 + RAW_HEADER];
+        head[..4].copy_from_slice(&len.to_le_bytes());
+        head[4..].copy_from_slice(&raw_record(i));
+        stream.write_all(&head)?;
+        if !frame.is_empty() {
+            stream.write_all(&frame)?;
+        }
+        Ok(true)
+    })?;
+    stream.flush()?;
+    Ok(sent)
+}
+
+async fn send_zenoh(spec: &CaseSpec, endpoint: &str, deadline: Instant) -> Result<u64> {
+    let session = zenoh::open(peer_config(spec, None, Some(endpoint))?).await.map_err(anyhow::Error::msg)?;
+    let (key, topic, frame) = match spec.payload {
+        Payload::Speed => (SPEED_KEY, topics::Topic::VehicleSpeed, None),
+        Payload::Frame { .. } => {
+            (FRAME_KEY, topics::Topic::CameraFront, Some(ZBytes::from(frame_bytes(&spec.payload))))
+        }
+    };
+    // The same QoS the bus gives the topic (or Zenoh's defaults with qos off): the comparison
+    // isolates the typed layer.
+    let qos = peer_topics(spec)?.qos(topic);
+    let publisher = session
+        .declare_publisher(key)
+        .priority(qos.priority.into())
+        .express(qos.express)
+        .congestion_control(qos.congestion_control.into())
+        .await
+        .map_err(anyhow::Error::msg)?;
+    wait_matching(&publisher).await?;
+    let sent = Pacer::new(spec.rate_hz).run(spec.count, deadline, |i| {
+        let payload = match &frame {
+            None => ZBytes::from(raw_record(i).to_vec()),
+            Some(f) => {
+                // Record then the frame: two slices, the frame shared, not copied.
+                let mut w = ZBytes::writer();
+                w.write_all(&raw_record(i))?;
+                w.append(f.clone());
+                w.finish()
+            }
+        };
+        publisher.put(payload).wait().map_err(anyhow::Error::msg)?;
+        Ok(true)
+    })?;
+    tokio::time::sleep(DRAIN).await;
+    session.close().await.map_err(anyhow::Error::msg)?;
+    Ok(sent)
+}
+
+async fn send_bus(spec: &CaseSpec, endpoint: &str, deadline: Instant) -> Result<SendReport> {
+    let bus = Bus::open(peer_config(spec, None, Some(endpoint))?, peer_topics(spec)?, "bench-send").await?;
+    let bus = Arc::new(bus);
+    let done = Arc::new(AtomicBool::new(false));
+    let background = spec.background.map(|bg| {
+        let (bus, done) = (bus.clone(), done.clone());
+        tokio::spawn(async move { send_background(bus, bg, done, deadline).await })
+    });
+    let pacer = Pacer::new(spec.rate_hz);
+    let mut report = SendReport::default();
+    match spec.payload {
+        Payload::Speed => {
+            let publisher = bus.publisher(topics::VEHICLE_SPEED).await?;
+            if !publisher.wait_for_subscriber(Duration::from_secs(10)).await {
+                bail!("no subscriber matched vehicle/speed within 10 s");
+            }
+            // Paced on a blocking thread: a sleeping pacer must not hold a runtime worker.
+            let count = spec.count;
+            report.sent = tokio::task::spawn_blocking(move || {
+                pacer.run(count, deadline, |i| Ok(publisher.put(i * 10_000_000, &Speed { speed_mps: 20.0 }).is_ok()))
+            })
+            .await??;
+        }
+        Payload::Frame { width, height } => {
+            let publisher = bus.frame_publisher().await?;
+            if !publisher.publisher().wait_for_subscriber(Duration::from_secs(10)).await {
+                bail!("no subscriber matched camera/front within 10 s");
+            }
+            let len = (width * height * 3) as usize;
+            report.sent = pacer.run(spec.count, deadline, |i| {
+                // The renderer would write every pixel here; the bench writes one byte so
+                // that only transport costs are compared.
+                let sent = publisher
+                    .put_with(i * 50_000_000, width, height, ImageEncoding::Rgb8, len, |px| px[len - 1] = i as u8)?;
+                Ok(sent.is_some())
+            })?;
+        }
+    }
+    done.store(true, Ordering::Relaxed);
+    if let Some(bg) = background {
+        report.background_sent = bg.await??;
+    }
+    tokio::time::sleep(DRAIN).await;
+    if let Ok(bus) = Arc::try_unwrap(bus) {
+        bus.close().await?;
+    }
+    Ok(report)
 }
 
 async fn send_background(bus: Arc<Bus>, bg: Background, done: Arc<AtomicBool>, deadline: Instant) -> Result<u64> {

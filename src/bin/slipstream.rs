@@ -1,5 +1,7 @@
 //! `slipstream`: the tools. Parses the command line and calls the library.
 
+use std::process::ExitCode;
+
 use anyhow::{Context, Result};
 use clap::{Parser, Subcommand};
 use slipstream::bench::{self, BenchArgs, CaseSpec};
@@ -107,50 +109,7 @@ enum EvalCommand {
     ///
     ///   slipstream eval acc --perception ground-truth --plots plots/
     #[command(verbatim_doc_comment)]
-    Acc(slipstream::acc::suite::EvalAccArgs),
-}
-
-fn demo(connect: &ConnectArgs, args: &slipstream::tools::demo::DemoArgs) -> Result<()> {
-    use slipstream::tools::demo::{self, Role};
-    let duration = std::time::Duration::from_secs_f64(args.duration);
-    if args.role == Role::Both {
-        // Two real processes, started separately, as nodes will be: same flags, one role each.
-        let exe = std::env::current_exe()?;
-        let mut passed: Vec<String> = Vec::new();
-        let mut it = std::env::args().skip(1);
-        while let Some(a) = it.next() {
-            if a == "--role" {
-                it.next();
-            } else if !a.starts_with("--role=") {
-                passed.push(a);
-            }
-        }
-        let spawn = |role: &str| std::process::Command::new(&exe).args(&passed).args(["--role", role]).spawn();
-        let mut publisher = spawn("pub").context("start the publisher")?;
-        let subscriber = spawn("sub").context("start the subscriber")?;
-        let status = subscriber.wait_with_output()?.status;
-        let _ = publisher.wait();
-        anyhow::ensure!(status.success(), "the subscriber failed");
-        return Ok(());
-    }
-    let rt = tokio::runtime::Runtime::new()?;
-    rt.block_on(async {
-        let node = if args.role == Role::Pub { "demo-pub" } else { "demo-sub" };
-        let bus = slipstream::Bus::open(connect.zenoh_config()?, connect.topic_map()?, node).await?;
-        if args.role == Role::Pub {
-            demo::publish(&bus, duration).await?;
-        } else {
-            let summary = demo::subscribe(&bus, duration).await?;
-            if args.json {
-                println!("{}", serde_json::to_string_pretty(&summary)?);
-            } else {
-                println!("{}", demo::render(&summary));
-            }
-            demo::verdict(&summary)?;
-        }
-        bus.close().await?;
-        Ok(())
-    })
+    Acc(slipstream::eval::acc::EvalAccArgs),
 }
 
 /// Opens a bus as `node`, runs `f` with it, closes it.
@@ -168,7 +127,7 @@ where
     })
 }
 
-fn main() -> Result<()> {
+fn main() -> ExitCode {
     let cli = Cli::parse();
     // A router forwards what it receives: its receive path must not share the tx pool, or a
     // message of several batches (a raw camera frame) waits for the threads busy receiving it
@@ -177,85 +136,59 @@ fn main() -> Result<()> {
         slipstream::cli::apply_zenoh_runtime_default();
     }
     slipstream::cli::init_tracing();
+    match run(cli) {
+        Ok(code) => code,
+        Err(e) => {
+            eprintln!("Error: {e:?}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+fn run(cli: Cli) -> Result<ExitCode> {
+    let connect = &cli.connect;
+    let done = |r: Result<()>| r.map(|()| ExitCode::SUCCESS);
     match cli.command {
-        Command::Bench(args) => {
-            let report = bench::run(&args)?;
-            let md = bench::markdown(&report);
-            if args.json {
-                println!("{}", serde_json::to_string_pretty(&report)?);
-            } else {
-                println!("{md}");
-            }
-            if let Some(path) = &args.markdown {
-                std::fs::write(path, format!("Command: `{}`\n{md}", report.command))
-                    .with_context(|| format!("write {}", path.display()))?;
-            }
-            Ok(())
-        }
-        Command::Demo(args) => demo(&cli.connect, &args),
-        Command::Up(args) => {
-            let outcome = slipstream::tools::up::run(&args, &cli.connect)?;
-            std::process::exit(outcome.exit_code());
-        }
-        Command::Top(args) => on_bus(&cli.connect, &format!("top-{}", std::process::id()), |bus| async move {
+        Command::Up(args) => Ok(ExitCode::from(slipstream::tools::up::run(&args, connect)?.exit_code())),
+        Command::Top(args) => done(on_bus(connect, &format!("top-{}", std::process::id()), |bus| async move {
             slipstream::tools::top::run(&bus, &args).await?;
             Ok(bus)
-        }),
-        Command::Router => {
-            let rt = tokio::runtime::Runtime::new()?;
-            rt.block_on(async {
-                let mut config = cli.connect.router_config()?;
-                config.insert_json5("mode", "\"router\"").map_err(|e| anyhow::anyhow!("router mode: {e}"))?;
-                let session = zenoh::open(config).await.map_err(|e| anyhow::anyhow!("start the router: {e}"))?;
-                let locators: Vec<String> = session.info().locators().await.iter().map(|l| l.to_string()).collect();
-                tracing::info!(zid = %session.zid(), ?locators, "router up (Ctrl-C to stop)");
-                println!("router {} listening on {}", session.zid(), locators.join(", "));
-                tokio::signal::ctrl_c().await?;
-                session.close().await.map_err(|e| anyhow::anyhow!("close the router: {e}"))?;
-                anyhow::Ok(())
-            })
-        }
-        Command::Echo(args) => on_bus(&cli.connect, &format!("echo-{}", std::process::id()), |bus| async move {
+        })),
+        Command::Echo(args) => done(on_bus(connect, &format!("echo-{}", std::process::id()), |bus| async move {
             let printed = slipstream::tools::echo::run(&bus, &args).await?;
             if args.count.is_some_and(|n| printed < n) {
                 anyhow::bail!("{printed} of {} messages seen on {}", args.count.unwrap_or(0), args.topic);
             }
             Ok(bus)
-        }),
+        })),
+        Command::Router => done(slipstream::tools::router::run(connect)),
+        Command::Demo(args) => done(slipstream::tools::demo::run(connect, &args)),
+        Command::Bench(args) => done(bench_command(&args)),
         Command::Info { json } => {
-            let info = slipstream::tools::info::gather(&cli.connect)?;
+            let info = slipstream::tools::info::gather(connect)?;
             if json {
                 println!("{}", serde_json::to_string_pretty(&info)?);
             } else {
                 print!("{}", slipstream::tools::info::render(&info));
             }
-            Ok(())
+            Ok(ExitCode::SUCCESS)
         }
         Command::Eval(EvalCommand::Detect { scenarios, seconds, json }) => {
-            use slipstream::perception::eval;
-            let names: Vec<String> = if scenarios.is_empty() { eval::standard() } else { scenarios };
-            let settings = slipstream::sim::SimSettings::default();
-            let report = eval::evaluate(&names, seconds, &settings)?;
-            if json {
-                println!("{}", serde_json::to_string_pretty(&report)?);
-            } else {
-                println!("{}", eval::markdown(&report));
-            }
-            Ok(())
+            use slipstream::eval::detect;
+            let names: Vec<String> = if scenarios.is_empty() { detect::standard() } else { scenarios };
+            let report = detect::evaluate(&names, seconds, &slipstream::sim::SimSettings::default())?;
+            print_report(json, &report, detect::markdown)?;
+            Ok(ExitCode::SUCCESS)
         }
         Command::Eval(EvalCommand::Acc(args)) => {
-            use slipstream::acc::suite;
-            let report = suite::run(&args, &cli.connect)?;
-            if args.json {
-                println!("{}", serde_json::to_string_pretty(&report)?);
-            } else {
-                println!("{}", suite::markdown(&report));
-            }
+            use slipstream::eval::acc;
+            let report = acc::run(&args, connect)?;
+            print_report(args.json, &report, acc::markdown)?;
             let failed = report.results.iter().filter(|r| !r.metrics.pass || r.lockstep_timeouts > 0).count();
             if failed > 0 {
                 anyhow::bail!("{failed} of {} scenarios missed an aim", report.results.len());
             }
-            Ok(())
+            Ok(ExitCode::SUCCESS)
         }
         Command::WireExamples => {
             let all: Vec<_> = slipstream::msg::examples()
@@ -263,18 +196,43 @@ fn main() -> Result<()> {
                 .map(|(kind, bytes)| serde_json::json!({ "kind": kind.name(), "hex": slipstream::msg::hex_lines(&bytes).replace('\n', " ") }))
                 .collect();
             println!("{}", serde_json::to_string_pretty(&all)?);
-            Ok(())
+            Ok(ExitCode::SUCCESS)
         }
         Command::BenchPeer { role, spec, endpoint } => {
             let spec: CaseSpec = serde_json::from_str(&spec).context("bench-peer: parse --spec")?;
             let rt = tokio::runtime::Runtime::new()?;
-            rt.block_on(async move {
+            done(rt.block_on(async move {
                 match (role.as_str(), endpoint) {
                     ("send", Some(ep)) => bench::run_sender(spec, ep).await,
                     ("send", None) => anyhow::bail!("bench-peer send needs --endpoint"),
                     _ => bench::run_receiver(spec).await,
                 }
-            })
+            }))
         }
     }
+}
+
+/// A report as JSON or as its markdown rendering.
+fn print_report<R: serde::Serialize>(json: bool, report: &R, markdown: fn(&R) -> String) -> Result<()> {
+    if json {
+        println!("{}", serde_json::to_string_pretty(report)?);
+    } else {
+        println!("{}", markdown(report));
+    }
+    Ok(())
+}
+
+fn bench_command(args: &BenchArgs) -> Result<()> {
+    let report = bench::run(args)?;
+    let md = bench::markdown(&report);
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report)?);
+    } else {
+        println!("{md}");
+    }
+    if let Some(path) = &args.markdown {
+        std::fs::write(path, format!("Command: `{}`\n{md}", report.command))
+            .with_context(|| format!("write {}", path.display()))?;
+    }
+    Ok(())
 }

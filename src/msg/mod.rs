@@ -27,7 +27,7 @@ pub use any::{decode_json, peek_kind};
 pub use camera::{encode_jpeg, frame_prefix, CameraFrame, CameraFrameRef, CameraInfo, ImageEncoding};
 pub use codec::{decode, decode_header, encode, encode_into, DecodeError, Stamped};
 pub use objects::{BoundingBox2d, Detection, Detections, GroundTruthObject, GroundTruthObjects, ObjectClass};
-pub use sim::{SimClock, SimEvent, SimEventKind, SimMode};
+pub use sim::{due, SimClock, SimEvent, SimEventKind, SimMode};
 pub use vehicle::{ControlCommand, ControlTiming, Speed, VehicleState};
 
 use serde::{Deserialize, Serialize};

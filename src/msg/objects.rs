@@ -21,6 +21,22 @@ pub struct BoundingBox2d {
     pub v_max_px: f32,
 }
 
+impl BoundingBox2d {
+    /// Intersection over union with `other`: 0 (apart) to 1 (the same box).
+    pub fn iou(&self, other: &BoundingBox2d) -> f32 {
+        let iw = (self.u_max_px.min(other.u_max_px) - self.u_min_px.max(other.u_min_px)).max(0.0);
+        let ih = (self.v_max_px.min(other.v_max_px) - self.v_min_px.max(other.v_min_px)).max(0.0);
+        let inter = iw * ih;
+        let area = |r: &BoundingBox2d| (r.u_max_px - r.u_min_px) * (r.v_max_px - r.v_min_px);
+        let union = area(self) + area(other) - inter;
+        if union <= 0.0 {
+            0.0
+        } else {
+            inter / union
+        }
+    }
+}
+
 /// One other vehicle as the simulator knows it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct GroundTruthObject {

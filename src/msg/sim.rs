@@ -15,6 +15,14 @@ pub enum SimMode {
     Lockstep,
 }
 
+/// The clock contract: whether a publisher with `rate_hz` is due at step `k` of a `physics_hz`
+/// clock: at step 0 and whenever floor(t * rate) moves on. The simulator publishes by this rule,
+/// and a controller in lockstep uses it to know which steps bring a camera frame.
+pub fn due(k: u64, rate_hz: f64, physics_hz: u32) -> bool {
+    let tick = |k: u64| ((k as f64 * rate_hz) / physics_hz as f64 + 1e-9).floor();
+    k == 0 || tick(k) > tick(k - 1)
+}
+
 /// sim/clock: published every physics step (or at its configured rate).
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct SimClock {
@@ -57,4 +65,18 @@ pub struct SimEvent {
 
 impl Message for SimEvent {
     const KIND: MessageKind = MessageKind::SimEvent;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rates_tick_on_the_right_steps() {
+        let steps = |rate| (0..100u64).filter(|k| due(*k, rate, 100)).count();
+        assert_eq!(steps(100.0), 100);
+        assert_eq!(steps(20.0), 20);
+        assert!((0..100u64).filter(|k| due(*k, 20.0, 100)).all(|k| k % 5 == 0));
+        assert_eq!(steps(30.0), 30);
+    }
 }

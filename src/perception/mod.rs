@@ -4,13 +4,14 @@
 //! - [`geometry`]: the calibrated camera: rays, the ground plane, distances.
 //! - [`detector`]: one frame -> vehicles, classical computer vision (pixels + camera info only).
 //! - [`tracker`]: detections joined into tracks; distance and relative speed by a Kalman filter.
-//! - [`eval`]: scores detections against the simulator's ground truth.
 //! - [`node`]: slipstream-detect on the bus (camera/front -> perception/objects).
+//!
+//! It reads pixels and the camera's calibration only, never the simulator: scoring against the
+//! simulator's ground truth is the eval layer's (`slipstream eval detect`: src/eval/detect.rs).
 //!
 //! docs/perception.md describes the method, its limits and its measured scores.
 
 pub mod detector;
-pub mod eval;
 pub mod geometry;
 pub mod node;
 pub mod tracker;

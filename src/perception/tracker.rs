@@ -4,7 +4,6 @@
 use nalgebra::{Matrix2, Vector2};
 
 use super::detector::FrameDetection;
-use super::eval::iou;
 use crate::msg::{BoundingBox2d, Detection, ObjectClass};
 
 /// Acceleration noise of the constant-velocity model, m/s2 (a lead can brake hard).
@@ -90,7 +89,7 @@ impl Tracker {
         let mut pairs: Vec<(f32, usize, usize)> = Vec::new();
         for (i, d) in detections.iter().enumerate() {
             for (j, t) in self.tracks.iter().enumerate() {
-                let overlap = iou(&d.bbox, &t.bbox);
+                let overlap = d.bbox.iou(&t.bbox);
                 let gate = (d.distance_m - t.distance_m()).abs() < 3.0 + 0.15 * d.distance_m;
                 if overlap > 0.1 && gate {
                     pairs.push((overlap, i, j));

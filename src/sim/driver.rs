@@ -9,10 +9,12 @@
 
 use nalgebra::Vector2;
 
+use super::dynamics::Actuation;
 use super::rng::SimRng;
 use super::road::Road;
 use super::scenario::Action;
-use super::vehicle::{Actuation, VehicleParams};
+use crate::vehicle::actuate_acceleration;
+use crate::vehicle::VehicleParams;
 
 /// Where a vehicle is and how it moves, as a driver sees it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -36,16 +38,6 @@ pub struct Lead {
 /// Time gap and standstill distance traffic keeps to the vehicle ahead.
 const FOLLOW_TIME_GAP_S: f64 = 1.4;
 const FOLLOW_STANDSTILL_M: f64 = 4.0;
-
-/// Turns a demanded acceleration into throttle/brake with the vehicle model's own numbers.
-pub fn actuate_acceleration(params: &VehicleParams, speed_mps: f64, accel_mps2: f64) -> (f64, f64) {
-    let needed = params.mass_kg * accel_mps2 + params.resistance_n(speed_mps);
-    if needed >= 0.0 {
-        ((needed / params.drive_force_limit_n(speed_mps)).min(1.0), 0.0)
-    } else {
-        (0.0, (-needed / (params.mass_kg * params.max_brake_decel_mps2)).min(1.0))
-    }
-}
 
 /// Steering that pursues the point `lookahead` ahead on the road at lateral offset `d_target`.
 pub fn pursue(params: &VehicleParams, road: &Road, me: &Observation, d_target: f64) -> f64 {
@@ -233,15 +225,6 @@ impl TrafficDriver {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn inverse_model_brakes_for_deceleration_and_drives_against_drag() {
-        let car = VehicleParams::CAR;
-        let (t, b) = actuate_acceleration(&car, 30.0, 0.0);
-        assert!(t > 0.0 && b == 0.0, "cruising needs throttle against drag");
-        let (t, b) = actuate_acceleration(&car, 30.0, -6.0);
-        assert!(t == 0.0 && b > 0.5 && b < 0.7, "6 m/s2 needs about 2/3 brake: {b}");
-    }
 
     #[test]
     fn lane_change_moves_smoothly_from_one_lane_to_the_other() {

@@ -3,7 +3,8 @@
 //! # Layout
 //! - [`scenario`]: the scenario file format (scenarios/*.json5) and its checks.
 //! - [`road`]: the road's centre line, lanes and road coordinates (s, d).
-//! - [`vehicle`]: the vehicle model: engine, brakes, drag, rolling resistance, tyres, steering.
+//! - [`dynamics`]: the forces on a vehicle's body (engine, brakes, drag, rolling resistance,
+//!   tyres, steering) from the shared model in [`crate::vehicle`].
 //! - [`physics`]: the one boundary to rapier3d (rigid bodies, contacts).
 //! - [`driver`]: traffic drivers (speed profiles, following, lane changes).
 //! - [`world`]: road + vehicles + drivers stepped at a fixed rate; no I/O.
@@ -18,6 +19,7 @@
 
 pub mod args;
 pub mod driver;
+pub mod dynamics;
 pub mod ground_truth;
 pub mod node;
 pub mod physics;
@@ -27,7 +29,6 @@ pub mod rng;
 pub mod road;
 pub mod scenario;
 pub mod settings;
-pub mod vehicle;
 pub mod world;
 
 pub use node::{run, SimReport};

@@ -20,10 +20,14 @@ use parking_lot::Mutex;
 
 use super::ground_truth::ground_truth;
 use super::render::{ObjectVisibility, Renderer};
+use super::rng::SimRng;
 use super::settings::{BeforeFirst, ControlPolicy, Mode, OnTimeout, SimSettings};
-use super::world::{End, World, EGO_ID};
-use crate::bus::{Bus, BusError, Received};
-use crate::msg::{ControlCommand, ControlTiming, ImageEncoding, SimClock, SimEvent, SimEventKind, Speed, VehicleState};
+use super::world::{End, StepEvents, World, EGO_ID};
+use crate::bus::{Bus, BusError, CallbackSubscriber, FramePublisher, Publisher, Received};
+use crate::msg::{
+    due, CameraInfo, ControlCommand, ControlTiming, GroundTruthObjects, ImageEncoding, SimClock, SimEvent,
+    SimEventKind, Speed, VehicleState,
+};
 use crate::topics;
 
 #[derive(Debug, thiserror::Error)]
@@ -37,7 +41,7 @@ pub enum SimError {
 }
 
 /// How a run went.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct SimReport {
     pub scenario: String,
     pub seed: u64,
@@ -85,13 +89,6 @@ impl SimReport {
             self.control_stale
         )
     }
-}
-
-/// Whether a publisher with `rate_hz` is due at step `k` of a `physics_hz` clock: at step 0 and
-/// whenever floor(t * rate) moves on.
-pub fn due(k: u64, rate_hz: f64, physics_hz: u32) -> bool {
-    let tick = |k: u64| ((k as f64 * rate_hz) / physics_hz as f64 + 1e-9).floor();
-    k == 0 || tick(k) > tick(k - 1)
 }
 
 /// Commands as they arrive, handed from Zenoh's thread to the loop.
@@ -219,195 +216,305 @@ pub async fn run(
     result
 }
 
+/// How often a running simulator logs its progress.
+const PROGRESS_EVERY: Duration = Duration::from_secs(5);
+/// The window the real-time factor is measured over.
+const RTF_WINDOW: Duration = Duration::from_secs(1);
+/// Fast and lockstep modes yield to the runtime every this many steps.
+const YIELD_EVERY_STEPS: u64 = 64;
+/// Lockstep: how long to wait for a vehicle/state subscriber before the first step.
+const STATE_SUBSCRIBER_WAIT: Duration = Duration::from_secs(5);
+
+/// The real-time factor over the last [`RTF_WINDOW`] of wall time, and the progress log.
+struct Pace {
+    started: Instant,
+    /// Start of the current window: wall time and simulation time.
+    window: (Instant, u64),
+    rtf: f32,
+    last_progress: Instant,
+}
+
+impl Pace {
+    fn new() -> Pace {
+        let now = Instant::now();
+        Pace { started: now, window: (now, 0), rtf: 0.0, last_progress: now }
+    }
+
+    /// Updates the factor at step `k`, time `t_ns`; logs progress now and then.
+    fn measure(&mut self, k: u64, t_ns: u64, frames_sent: u64) {
+        let now = Instant::now();
+        let window_s = now.duration_since(self.window.0).as_secs_f64();
+        if window_s >= RTF_WINDOW.as_secs_f64() || (k > 0 && self.window.1 == 0 && window_s > 0.0) {
+            self.rtf = ((t_ns - self.window.1) as f64 / 1e9 / window_s) as f32;
+            if window_s >= RTF_WINDOW.as_secs_f64() {
+                self.window = (now, t_ns);
+            }
+        }
+        if now.duration_since(self.last_progress) >= PROGRESS_EVERY {
+            self.last_progress = now;
+            tracing::info!(sim_s = t_ns as f64 / 1e9, rtf = self.rtf, frames = frames_sent, "running");
+        }
+    }
+
+    /// Waits as the clock mode says before step `k` + 1 at `t_next_ns`.
+    async fn wait(&self, mode: Mode, realtime_factor: f64, k: u64, t_next_ns: u64) {
+        match mode {
+            Mode::Realtime => {
+                let target = self.started + Duration::from_secs_f64(t_next_ns as f64 / 1e9 / realtime_factor);
+                tokio::time::sleep_until(target.into()).await;
+            }
+            Mode::Fast | Mode::Lockstep => {
+                if k % YIELD_EVERY_STEPS == 0 {
+                    tokio::task::yield_now().await;
+                }
+            }
+        }
+    }
+}
+
+/// The simulator's publishers, its camera and its control input: what one step uses.
+struct Node<'a> {
+    settings: &'a SimSettings,
+    speed: Publisher<Speed>,
+    state: Publisher<VehicleState>,
+    clock: Publisher<SimClock>,
+    events: Publisher<SimEvent>,
+    objects: Publisher<GroundTruthObjects>,
+    info_pub: Publisher<CameraInfo>,
+    frames: FramePublisher,
+    info: CameraInfo,
+    renderer: Renderer,
+    look_rng: SimRng,
+    brightness: f64,
+    /// Where JPEG frames and frames dropped by a rate limit are rendered.
+    scratch: Vec<u8>,
+    inbox: Arc<ControlInbox>,
+    control_sub: CallbackSubscriber,
+    policy: Policy,
+    frames_sent: u64,
+    lockstep_timeouts: u64,
+}
+
+/// Which of the ego's topics step k published (lockstep answers those steps).
+struct Published {
+    speed: bool,
+    state: bool,
+}
+
+impl<'a> Node<'a> {
+    async fn open(bus: &Bus, world: &World, settings: &'a SimSettings) -> Result<Node<'a>, SimError> {
+        let frames = bus.frame_publisher().await?;
+        let info = settings.camera_info(frames.encoding());
+        let noise = &world.scenario().noise;
+        let (renderer, look_rng) = Renderer::seeded(&info, noise.camera_stddev, world.seed());
+        let inbox = Arc::new(ControlInbox::default());
+        let control_sub = {
+            let inbox = inbox.clone();
+            bus.subscribe_with(topics::VEHICLE_CONTROL, move |r| inbox.push(r)).await?
+        };
+        Ok(Node {
+            settings,
+            speed: bus.publisher(topics::VEHICLE_SPEED).await?,
+            state: bus.publisher(topics::VEHICLE_STATE).await?,
+            clock: bus.publisher(topics::SIM_CLOCK).await?,
+            events: bus.publisher(topics::SIM_EVENTS).await?,
+            objects: bus.publisher(topics::OBJECTS).await?,
+            info_pub: bus.publisher(topics::CAMERA_FRONT_INFO).await?,
+            frames,
+            scratch: vec![0u8; renderer.frame_len()],
+            info,
+            renderer,
+            look_rng,
+            brightness: noise.brightness,
+            inbox,
+            control_sub,
+            policy: Policy::new(settings.control.clone()),
+            frames_sent: 0,
+            lockstep_timeouts: 0,
+        })
+    }
+
+    /// The camera info (latched), the lockstep start (its nodes up), the scenario's start.
+    async fn start(&self, bus: &Bus, world: &World, stop: &AtomicBool) -> Result<(), SimError> {
+        self.info_pub.put(0, &self.info)?;
+        let lockstep = &self.settings.lockstep;
+        if self.settings.mode == Mode::Lockstep {
+            wait_for_nodes(bus, &lockstep.wait_for, lockstep.start_timeout_ms, stop).await?;
+            if !self.state.wait_for_subscriber(STATE_SUBSCRIBER_WAIT).await {
+                tracing::warn!("lockstep: nobody subscribes to vehicle/state yet; starting anyway");
+            }
+        }
+        let (name, seed) = (world.scenario().name.clone(), world.seed());
+        tracing::info!(scenario = %name, seed, mode = ?self.settings.mode, physics_hz = self.settings.physics_hz, "scenario start");
+        self.events.put(0, &SimEvent { kind: SimEventKind::ScenarioStart { name, seed } })?;
+        Ok(())
+    }
+
+    /// Publishes what is due at step `k` (time `t_ns`): speed, state, clock, camera frame
+    /// with its ground truth.
+    fn publish(&mut self, world: &mut World, k: u64, t_ns: u64, rtf: f32) -> Result<Published, SimError> {
+        let (hz, rates) = (self.settings.physics_hz, &self.settings.rates_hz);
+        let published = Published { speed: due(k, rates.speed, hz), state: due(k, rates.state, hz) };
+        if published.speed {
+            self.speed.put(t_ns, &Speed { speed_mps: world.measured_speed_mps() })?;
+        }
+        if published.state {
+            let state = VehicleState { control_timing: self.policy.timing(), ..world.ego_state() };
+            self.state.put(t_ns, &state)?;
+        }
+        if due(k, rates.clock, hz) {
+            let mode = self.settings.mode.into();
+            self.clock.put(t_ns, &SimClock { step: k, real_time_factor: rtf, mode, physics_hz: hz as f64 })?;
+        }
+        if due(k, rates.camera, hz) {
+            self.publish_frame(world, t_ns)?;
+        }
+        Ok(published)
+    }
+
+    /// Renders the frame (into shared memory when raw), publishes it and its ground truth.
+    fn publish_frame(&mut self, world: &World, t_ns: u64) -> Result<(), SimError> {
+        let look = self.renderer.draw_look(self.brightness, &mut self.look_rng);
+        let mut visibility: Option<Vec<ObjectVisibility>> = None;
+        let (w, h) = (self.info.width, self.info.height);
+        let renderer = &mut self.renderer;
+        let sent = match self.frames.encoding() {
+            ImageEncoding::Rgb8 => {
+                self.frames.put_with(t_ns, w, h, ImageEncoding::Rgb8, renderer.frame_len(), |buf| {
+                    visibility = Some(renderer.render(world.road(), world.ego(), world.vehicles(), look, buf));
+                })?
+            }
+            _ => {
+                visibility =
+                    Some(renderer.render(world.road(), world.ego(), world.vehicles(), look, &mut self.scratch));
+                self.frames.put_rgb(t_ns, w, h, &self.scratch)?
+            }
+        };
+        self.frames_sent += sent.is_some() as u64;
+        // A frame dropped by the topic's max_rate still gets its ground truth.
+        let visibility = match visibility {
+            Some(v) => v,
+            None => renderer.render(world.road(), world.ego(), world.vehicles(), look, &mut self.scratch),
+        };
+        self.objects.put(t_ns, &ground_truth(world, &visibility))?;
+        Ok(())
+    }
+
+    /// Takes the commands for the step from `k` to `k` + 1: in lockstep (on steps that
+    /// published speed or state) the awaited nodes' answers, else whatever arrived. Some(end)
+    /// when a lockstep timeout stops the run.
+    async fn take_commands(
+        &mut self,
+        k: u64,
+        t_ns: u64,
+        published: &Published,
+        stop: &AtomicBool,
+    ) -> Result<Option<End>, SimError> {
+        let lockstep = &self.settings.lockstep;
+        if self.settings.mode != Mode::Lockstep || !(published.speed || published.state) {
+            for r in self.inbox.drain() {
+                self.policy.on_command(&r, t_ns);
+            }
+            return Ok(None);
+        }
+        let Answers { command, late, strangers } =
+            await_answers(&self.inbox, &lockstep.wait_for, k, lockstep.step_timeout_ms, stop).await;
+        if let Some(cmd) = &command {
+            self.policy.on_command(cmd, t_ns);
+        }
+        if late.is_empty() || stop.load(Ordering::SeqCst) {
+            return Ok(None);
+        }
+        self.lockstep_timeouts += 1;
+        let hint = if strangers.is_empty() {
+            String::new()
+        } else {
+            format!(
+                "; this step was answered by {}, which lockstep.wait_for does not list (a controller must attach its node name)",
+                strangers.iter().cloned().collect::<Vec<_>>().join(", ")
+            )
+        };
+        tracing::warn!(
+            step = k,
+            ?late,
+            timeout_ms = lockstep.step_timeout_ms,
+            "lockstep: no answer to this step from {}{hint}",
+            late.join(", ")
+        );
+        self.events.put(t_ns, &SimEvent { kind: SimEventKind::ControlTimeout { late: late.clone() } })?;
+        Ok((lockstep.on_timeout == OnTimeout::Stop).then(|| End {
+            reason: format!("lockstep timeout at step {k} waiting for {}", late.join(", ")),
+            success: false,
+        }))
+    }
+
+    /// Publishes the ego's collisions of the step that ended at `t_ns`.
+    fn publish_collisions(&self, events: &StepEvents, t_ns: u64) -> Result<(), SimError> {
+        for c in events.collisions.iter().filter(|c| c.involves_ego()) {
+            let other_id = if c.id_a == EGO_ID { c.id_b } else { c.id_a };
+            tracing::warn!(other_id, relative_speed_mps = c.relative_speed_mps, "collision");
+            let kind = SimEventKind::Collision { other_id, relative_speed_mps: c.relative_speed_mps };
+            self.events.put(t_ns, &SimEvent { kind })?;
+        }
+        Ok(())
+    }
+
+    /// The scenario's end on sim/events, and the run's report.
+    fn finish(&self, world: &World, end: Option<End>, pace: &Pace) -> Result<SimReport, SimError> {
+        let t_end = world.time_ns();
+        let (reason, success) = match &end {
+            Some(e) => (e.reason.clone(), e.success),
+            None => ("stopped".to_string(), world.ego_collisions() == 0),
+        };
+        tracing::info!(%reason, success, sim_s = t_end as f64 / 1e9, collisions = world.ego_collisions(), "scenario end");
+        self.events.put(t_end, &SimEvent { kind: SimEventKind::ScenarioEnd { reason, success } })?;
+        let wall = pace.started.elapsed().as_secs_f64();
+        Ok(SimReport {
+            scenario: world.scenario().name.clone(),
+            seed: world.seed(),
+            steps: world.step_count(),
+            sim_time_s: t_end as f64 / 1e9,
+            wall_time_s: wall,
+            real_time_factor: t_end as f64 / 1e9 / wall.max(1e-9),
+            frames: self.frames_sent,
+            ego_collisions: world.ego_collisions(),
+            traffic_collisions: world.traffic_collisions(),
+            lockstep_timeouts: self.lockstep_timeouts,
+            control_timeouts: self.policy.timeouts,
+            control_stale: self.policy.stale,
+            control_rejected: self.control_sub.stats().snapshot().decode_errors,
+            end,
+        })
+    }
+}
+
 async fn run_loop(
     bus: &Bus,
     world: &mut World,
     settings: &SimSettings,
     stop: &AtomicBool,
 ) -> Result<SimReport, SimError> {
-    let speed_pub = bus.publisher(topics::VEHICLE_SPEED).await?;
-    let state_pub = bus.publisher(topics::VEHICLE_STATE).await?;
-    let clock_pub = bus.publisher(topics::SIM_CLOCK).await?;
-    let events_pub = bus.publisher(topics::SIM_EVENTS).await?;
-    let objects_pub = bus.publisher(topics::OBJECTS).await?;
-    let info_pub = bus.publisher(topics::CAMERA_FRONT_INFO).await?;
-    let frames = bus.frame_publisher().await?;
-    let inbox = Arc::new(ControlInbox::default());
-    let control_sub = {
-        let inbox = inbox.clone();
-        bus.subscribe_with(topics::VEHICLE_CONTROL, move |r| inbox.push(r)).await?
-    };
-
-    let hz = settings.physics_hz;
-    let rates = &settings.rates_hz;
-    let mode = settings.mode;
-    let info = settings.camera_info(frames.encoding());
-    let seed = world.seed();
-    let noise = world.scenario().noise.clone();
-    let (mut renderer, mut look_rng) = Renderer::seeded(&info, noise.camera_stddev, seed);
-    let mut scratch = vec![0u8; renderer.frame_len()];
-    let mut policy = Policy::new(settings.control.clone());
-
-    info_pub.put(0, &info)?;
-    if mode == Mode::Lockstep {
-        wait_for_nodes(bus, &settings.lockstep.wait_for, settings.lockstep.start_timeout_ms, stop).await?;
-        if !state_pub.wait_for_subscriber(Duration::from_secs(5)).await {
-            tracing::warn!("lockstep: nobody subscribes to vehicle/state yet; starting anyway");
-        }
-    }
-    let scenario_name = world.scenario().name.clone();
-    tracing::info!(scenario = %scenario_name, seed, ?mode, physics_hz = hz, "scenario start");
-    events_pub.put(0, &SimEvent { kind: SimEventKind::ScenarioStart { name: scenario_name.clone(), seed } })?;
-
-    let started = Instant::now();
-    let mut window = (started, 0u64);
-    let mut rtf = 0.0f32;
-    let mut last_progress = started;
-    let (mut frames_sent, mut lockstep_timeouts) = (0u64, 0u64);
+    let mut node = Node::open(bus, world, settings).await?;
+    node.start(bus, world, stop).await?;
+    let mut pace = Pace::new();
     let end: Option<End> = loop {
-        let k = world.step_count();
-        let t_ns = world.time_ns();
-
-        let now = Instant::now();
-        let window_s = now.duration_since(window.0).as_secs_f64();
-        if window_s >= 1.0 || (k > 0 && window.1 == 0 && window_s > 0.0) {
-            rtf = ((t_ns - window.1) as f64 / 1e9 / window_s) as f32;
-            if window_s >= 1.0 {
-                window = (now, t_ns);
-            }
-        }
-        if now.duration_since(last_progress) >= Duration::from_secs(5) {
-            last_progress = now;
-            tracing::info!(sim_s = t_ns as f64 / 1e9, rtf, frames = frames_sent, "running");
-        }
-
-        let speed_due = due(k, rates.speed, hz);
-        let state_due = due(k, rates.state, hz);
-        if speed_due {
-            speed_pub.put(t_ns, &Speed { speed_mps: world.measured_speed_mps() })?;
-        }
-        if state_due {
-            let state = VehicleState { control_timing: policy.timing(), ..world.ego_state() };
-            state_pub.put(t_ns, &state)?;
-        }
-        if due(k, rates.clock, hz) {
-            clock_pub
-                .put(t_ns, &SimClock { step: k, real_time_factor: rtf, mode: mode.into(), physics_hz: hz as f64 })?;
-        }
-        if due(k, rates.camera, hz) {
-            let look = renderer.draw_look(noise.brightness, &mut look_rng);
-            let mut visibility: Option<Vec<ObjectVisibility>> = None;
-            let (w, h) = (info.width, info.height);
-            let sent = match frames.encoding() {
-                ImageEncoding::Rgb8 => {
-                    frames.put_with(t_ns, w, h, ImageEncoding::Rgb8, renderer.frame_len(), |buf| {
-                        visibility = Some(renderer.render(world.road(), world.ego(), world.vehicles(), look, buf));
-                    })?
-                }
-                _ => {
-                    visibility = Some(renderer.render(world.road(), world.ego(), world.vehicles(), look, &mut scratch));
-                    frames.put_rgb(t_ns, w, h, &scratch)?
-                }
-            };
-            frames_sent += sent.is_some() as u64;
-            // A frame dropped by the topic's max_rate still gets its ground truth.
-            let visibility = match visibility {
-                Some(v) => v,
-                None => renderer.render(world.road(), world.ego(), world.vehicles(), look, &mut scratch),
-            };
-            objects_pub.put(t_ns, &ground_truth(world, &visibility))?;
-        }
-
-        // The ego's input for the step from k to k + 1.
-        if mode == Mode::Lockstep && (speed_due || state_due) {
-            let Answers { command, late, strangers } =
-                await_answers(&inbox, &settings.lockstep.wait_for, k, settings.lockstep.step_timeout_ms, stop).await;
-            if let Some(cmd) = &command {
-                policy.on_command(cmd, t_ns);
-            }
-            if !late.is_empty() && !stop.load(Ordering::SeqCst) {
-                lockstep_timeouts += 1;
-                let hint = if strangers.is_empty() {
-                    String::new()
-                } else {
-                    format!(
-                        "; this step was answered by {}, which lockstep.wait_for does not list (a controller must attach its node name)",
-                        strangers.iter().cloned().collect::<Vec<_>>().join(", ")
-                    )
-                };
-                tracing::warn!(
-                    step = k,
-                    ?late,
-                    timeout_ms = settings.lockstep.step_timeout_ms,
-                    "lockstep: no answer to this step from {}{hint}",
-                    late.join(", ")
-                );
-                events_pub.put(t_ns, &SimEvent { kind: SimEventKind::ControlTimeout { late: late.clone() } })?;
-                if settings.lockstep.on_timeout == OnTimeout::Stop {
-                    break Some(End {
-                        reason: format!("lockstep timeout at step {k} waiting for {}", late.join(", ")),
-                        success: false,
-                    });
-                }
-            }
-        } else {
-            for r in inbox.drain() {
-                policy.on_command(&r, t_ns);
-            }
+        let (k, t_ns) = (world.step_count(), world.time_ns());
+        pace.measure(k, t_ns, node.frames_sent);
+        let published = node.publish(world, k, t_ns, pace.rtf)?;
+        if let Some(end) = node.take_commands(k, t_ns, &published, stop).await? {
+            break Some(end);
         }
         if stop.load(Ordering::SeqCst) {
             break None;
         }
-
-        let events = world.step(policy.input(t_ns));
-        let t_next = world.time_ns();
-        for c in events.collisions.iter().filter(|c| c.involves_ego()) {
-            let other_id = if c.id_a == EGO_ID { c.id_b } else { c.id_a };
-            tracing::warn!(other_id, relative_speed_mps = c.relative_speed_mps, "collision");
-            let kind = SimEventKind::Collision { other_id, relative_speed_mps: c.relative_speed_mps };
-            events_pub.put(t_next, &SimEvent { kind })?;
-        }
+        let events = world.step(node.policy.input(t_ns));
+        node.publish_collisions(&events, world.time_ns())?;
         if let Some(end) = events.ended {
             break Some(end);
         }
-
-        match mode {
-            Mode::Realtime => {
-                let target = started + Duration::from_secs_f64(t_next as f64 / 1e9 / settings.realtime_factor);
-                tokio::time::sleep_until(target.into()).await;
-            }
-            Mode::Fast | Mode::Lockstep => {
-                if k % 64 == 0 {
-                    tokio::task::yield_now().await;
-                }
-            }
-        }
+        pace.wait(settings.mode, settings.realtime_factor, k, world.time_ns()).await;
     };
-
-    let t_end = world.time_ns();
-    let (reason, success) = match &end {
-        Some(e) => (e.reason.clone(), e.success),
-        None => ("stopped".to_string(), world.ego_collisions() == 0),
-    };
-    tracing::info!(%reason, success, sim_s = t_end as f64 / 1e9, collisions = world.ego_collisions(), "scenario end");
-    events_pub.put(t_end, &SimEvent { kind: SimEventKind::ScenarioEnd { reason, success } })?;
-    let wall = started.elapsed().as_secs_f64();
-    Ok(SimReport {
-        scenario: scenario_name,
-        seed,
-        steps: world.step_count(),
-        sim_time_s: t_end as f64 / 1e9,
-        wall_time_s: wall,
-        real_time_factor: t_end as f64 / 1e9 / wall.max(1e-9),
-        frames: frames_sent,
-        ego_collisions: world.ego_collisions(),
-        traffic_collisions: world.traffic_collisions(),
-        lockstep_timeouts,
-        control_timeouts: policy.timeouts,
-        control_stale: policy.stale,
-        control_rejected: control_sub.stats().snapshot().decode_errors,
-        end,
-    })
+    node.finish(world, end, &pace)
 }
 
 /// Waits until every awaited node's liveliness token is up.
@@ -539,14 +646,5 @@ mod tests {
         p.on_command(&cmd(0.2, 0), 10_020_000_000);
         assert_eq!(p.input(10_020_000_000), EgoInput::Command(cmd(0.2, 0).msg));
         assert_eq!(p.stale, 1);
-    }
-
-    #[test]
-    fn rates_tick_on_the_right_steps() {
-        let steps = |rate| (0..100u64).filter(|k| due(*k, rate, 100)).count();
-        assert_eq!(steps(100.0), 100);
-        assert_eq!(steps(20.0), 20);
-        assert!((0..100u64).filter(|k| due(*k, 20.0, 100)).all(|k| k % 5 == 0));
-        assert_eq!(steps(30.0), 30);
     }
 }

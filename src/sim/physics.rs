@@ -3,7 +3,7 @@
 //! rapier 0.36 speaks glam (f32); everything else in the simulator speaks nalgebra (f64). The
 //! conversions live here and nowhere else. Each vehicle is a dynamic rigid body with a box
 //! collider, free to move only in the road plane (x, y translation, yaw): the vehicle model
-//! (src/sim/vehicle.rs) supplies its forces as impulses each step; rapier integrates them and
+//! (src/sim/dynamics.rs) supplies its forces as impulses each step; rapier integrates them and
 //! resolves contacts between vehicles, which become collision events.
 
 use std::collections::BTreeSet;
@@ -12,7 +12,8 @@ use nalgebra::Vector2;
 use rapier3d::math::Vec3 as GVec3;
 use rapier3d::prelude::*;
 
-use super::vehicle::{PlanarState, PlanarWrench, VehicleParams};
+use super::dynamics::{PlanarState, PlanarWrench};
+use crate::vehicle::VehicleParams;
 
 fn to_glam(v: Vector2<f64>) -> GVec3 {
     GVec3::new(v.x as f32, v.y as f32, 0.0)

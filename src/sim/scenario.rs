@@ -25,6 +25,9 @@ pub const BUILT_IN: &[(&str, &str)] = &[
 
 const FIX: &str = "see docs/simulator.md (scenario format) for every field and its allowed values";
 
+/// A check that failed: (key, problem, fix).
+type Invalid = (String, String, String);
+
 /// Vehicle class as written in scenario files.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -267,8 +270,20 @@ impl Scenario {
         Ok(scenario)
     }
 
-    /// The checks serde cannot make: ranges and references between fields.
-    fn check(&self) -> Result<(), (String, String, String)> {
+    /// The checks serde cannot make: ranges and references between fields. The first one
+    /// off, as (key, problem, fix).
+    fn check(&self) -> Result<(), Invalid> {
+        self.check_road_and_ego()?;
+        for (i, t) in self.traffic.iter().enumerate() {
+            self.check_traffic(i, t)?;
+        }
+        if let Some(r) = &self.random_traffic {
+            self.check_random_traffic(r)?;
+        }
+        self.check_variation_and_noise()
+    }
+
+    fn check_road_and_ego(&self) -> Result<(), Invalid> {
         let err = |key: &str, problem: String, fix: &str| Err((key.to_string(), problem, fix.to_string()));
         let lanes = self.road.lanes;
         let lane_fix = format!("lanes are numbered 0 (rightmost) to {}", lanes.saturating_sub(1));
@@ -303,72 +318,82 @@ impl Scenario {
         if !speed_ok(self.ego.speed_mps) {
             return err("ego.speed_mps", format!("{} m/s", self.ego.speed_mps), "use 0 to 70 m/s");
         }
-        for (i, t) in self.traffic.iter().enumerate() {
-            let key = |field: &str| format!("traffic[{i}].{field}");
-            if t.lane >= lanes {
-                return err(&key("lane"), format!("lane {} does not exist on a {lanes}-lane road", t.lane), &lane_fix);
+        Ok(())
+    }
+
+    /// Scripted vehicle `i`: its lane, speed, start gap and actions.
+    fn check_traffic(&self, i: usize, t: &TrafficSpec) -> Result<(), Invalid> {
+        let err = |key: &str, problem: String, fix: &str| Err((key.to_string(), problem, fix.to_string()));
+        let lanes = self.road.lanes;
+        let lane_fix = format!("lanes are numbered 0 (rightmost) to {}", lanes.saturating_sub(1));
+        let speed_ok = |v: f64| v.is_finite() && (0.0..=70.0).contains(&v);
+        let key = |field: &str| format!("traffic[{i}].{field}");
+        if t.lane >= lanes {
+            return err(&key("lane"), format!("lane {} does not exist on a {lanes}-lane road", t.lane), &lane_fix);
+        }
+        if !speed_ok(t.speed_mps) {
+            return err(&key("speed_mps"), format!("{} m/s", t.speed_mps), "use 0 to 70 m/s");
+        }
+        if t.lane == self.ego.lane && t.gap_m.abs() < 2.0 {
+            return err(&key("gap_m"), format!("{} m overlaps the ego in its lane", t.gap_m), "use |gap_m| >= 2");
+        }
+        for (j, a) in t.actions.iter().enumerate() {
+            let key = |field: &str| format!("traffic[{i}].actions[{j}]{field}");
+            match (a.at_s, a.when_gap_m) {
+                (Some(_), None) | (None, Some(_)) => {}
+                _ => return err(&key(""), "needs exactly one trigger".into(), "give either at_s or when_gap_m"),
             }
-            if !speed_ok(t.speed_mps) {
-                return err(&key("speed_mps"), format!("{} m/s", t.speed_mps), "use 0 to 70 m/s");
+            if a.speed_mps.is_none() && a.lane.is_none() {
+                return err(&key(""), "does nothing".into(), "give speed_mps, lane, or both");
             }
-            if t.lane == self.ego.lane && t.gap_m.abs() < 2.0 {
-                return err(&key("gap_m"), format!("{} m overlaps the ego in its lane", t.gap_m), "use |gap_m| >= 2");
+            if let Some(v) = a.speed_mps.filter(|v| !speed_ok(*v)) {
+                return err(&key(".speed_mps"), format!("{v} m/s"), "use 0 to 70 m/s");
             }
-            for (j, a) in t.actions.iter().enumerate() {
-                let key = |field: &str| format!("traffic[{i}].actions[{j}]{field}");
-                match (a.at_s, a.when_gap_m) {
-                    (Some(_), None) | (None, Some(_)) => {}
-                    _ => return err(&key(""), "needs exactly one trigger".into(), "give either at_s or when_gap_m"),
-                }
-                if a.speed_mps.is_none() && a.lane.is_none() {
-                    return err(&key(""), "does nothing".into(), "give speed_mps, lane, or both");
-                }
-                if let Some(v) = a.speed_mps.filter(|v| !speed_ok(*v)) {
-                    return err(&key(".speed_mps"), format!("{v} m/s"), "use 0 to 70 m/s");
-                }
-                if let Some(l) = a.lane.filter(|l| *l >= lanes) {
-                    return err(&key(".lane"), format!("lane {l} does not exist on a {lanes}-lane road"), &lane_fix);
-                }
-                if !(a.accel_mps2 > 0.0 && a.accel_mps2 <= 10.0) {
-                    return err(&key(".accel_mps2"), format!("{} m/s2", a.accel_mps2), "use (0, 10] m/s2");
-                }
-                if !(a.duration_s >= 0.5 && a.duration_s <= 30.0) {
-                    return err(&key(".duration_s"), format!("{} s", a.duration_s), "use 0.5 to 30 s");
-                }
+            if let Some(l) = a.lane.filter(|l| *l >= lanes) {
+                return err(&key(".lane"), format!("lane {l} does not exist on a {lanes}-lane road"), &lane_fix);
+            }
+            if !(a.accel_mps2 > 0.0 && a.accel_mps2 <= 10.0) {
+                return err(&key(".accel_mps2"), format!("{} m/s2", a.accel_mps2), "use (0, 10] m/s2");
+            }
+            if !(a.duration_s >= 0.5 && a.duration_s <= 30.0) {
+                return err(&key(".duration_s"), format!("{} s", a.duration_s), "use 0.5 to 30 s");
             }
         }
-        if let Some(r) = &self.random_traffic {
-            if let Some(l) = r.lanes.iter().find(|l| **l >= lanes) {
-                return err(
-                    "random_traffic.lanes",
-                    format!("lane {l} does not exist on a {lanes}-lane road"),
-                    &lane_fix,
-                );
-            }
-            if r.count > 500 {
-                return err("random_traffic.count", format!("{} vehicles", r.count), "use at most 500");
-            }
-            if !(speed_ok(r.speed_mps[0]) && speed_ok(r.speed_mps[1]) && r.speed_mps[0] <= r.speed_mps[1]) {
-                return err(
-                    "random_traffic.speed_mps",
-                    format!("{:?}", r.speed_mps),
-                    "give [low, high] within 0..70 m/s",
-                );
-            }
-            if r.range_m[0].is_nan() || r.range_m[0] >= r.range_m[1] {
-                return err(
-                    "random_traffic.range_m",
-                    format!("{:?}", r.range_m),
-                    "give [behind, ahead] with behind < ahead",
-                );
-            }
-            if r.min_spacing_m.is_nan() || r.min_spacing_m < 8.0 {
-                return err("random_traffic.min_spacing_m", format!("{} m", r.min_spacing_m), "use at least 8 m");
-            }
-            if !(0.0..=1.0).contains(&(r.van_share + r.truck_share)) || r.van_share < 0.0 || r.truck_share < 0.0 {
-                return err("random_traffic.van_share", "shares must be >= 0 and add up to <= 1".into(), FIX);
-            }
+        Ok(())
+    }
+
+    fn check_random_traffic(&self, r: &RandomTraffic) -> Result<(), Invalid> {
+        let err = |key: &str, problem: String, fix: &str| Err((key.to_string(), problem, fix.to_string()));
+        let lanes = self.road.lanes;
+        let lane_fix = format!("lanes are numbered 0 (rightmost) to {}", lanes.saturating_sub(1));
+        let speed_ok = |v: f64| v.is_finite() && (0.0..=70.0).contains(&v);
+        if let Some(l) = r.lanes.iter().find(|l| **l >= lanes) {
+            return err("random_traffic.lanes", format!("lane {l} does not exist on a {lanes}-lane road"), &lane_fix);
         }
+        if r.count > 500 {
+            return err("random_traffic.count", format!("{} vehicles", r.count), "use at most 500");
+        }
+        if !(speed_ok(r.speed_mps[0]) && speed_ok(r.speed_mps[1]) && r.speed_mps[0] <= r.speed_mps[1]) {
+            return err("random_traffic.speed_mps", format!("{:?}", r.speed_mps), "give [low, high] within 0..70 m/s");
+        }
+        if r.range_m[0].is_nan() || r.range_m[0] >= r.range_m[1] {
+            return err(
+                "random_traffic.range_m",
+                format!("{:?}", r.range_m),
+                "give [behind, ahead] with behind < ahead",
+            );
+        }
+        if r.min_spacing_m.is_nan() || r.min_spacing_m < 8.0 {
+            return err("random_traffic.min_spacing_m", format!("{} m", r.min_spacing_m), "use at least 8 m");
+        }
+        if !(0.0..=1.0).contains(&(r.van_share + r.truck_share)) || r.van_share < 0.0 || r.truck_share < 0.0 {
+            return err("random_traffic.van_share", "shares must be >= 0 and add up to <= 1".into(), FIX);
+        }
+        Ok(())
+    }
+
+    fn check_variation_and_noise(&self) -> Result<(), Invalid> {
+        let err = |key: &str, problem: String, fix: &str| Err((key.to_string(), problem, fix.to_string()));
         if let Some(d) = self.end.ego_distance_m.filter(|d| d.is_nan() || *d <= 0.0) {
             return err("end.ego_distance_m", format!("{d} m"), "give a distance > 0");
         }

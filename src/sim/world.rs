@@ -4,12 +4,13 @@
 use nalgebra::{Rotation2, Vector2};
 
 use super::driver::{pursue, Cruise, Lead, Neighbour, Observation, TrafficDriver, Wander};
+use super::dynamics::{forces, Actuation};
 use super::physics::{BodyId, Physics};
 use super::rng::SimRng;
 use super::road::Road;
-use super::scenario::{ClassSpec, Scenario};
-use super::vehicle::{forces, Actuation, VehicleParams};
+use super::scenario::{ClassSpec, RandomTraffic, Scenario};
 use crate::msg::{ControlCommand, ObjectClass, VehicleState};
+use crate::vehicle::VehicleParams;
 
 /// The ego's id in ground truth and collisions; traffic is numbered from 1.
 pub const EGO_ID: u32 = 0;
@@ -108,7 +109,7 @@ impl Collision {
 }
 
 /// Why a scenario ended.
-#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct End {
     pub reason: String,
     pub success: bool,
@@ -150,92 +151,115 @@ pub struct World {
     end: Option<End>,
 }
 
-impl World {
-    /// Builds the start of `scenario` with `seed` (the scenario's own unless overridden).
-    pub fn new(scenario: Scenario, seed: u64, physics_hz: u32) -> World {
-        let dt = 1.0 / physics_hz as f64;
-        let road = Road::new(scenario.road.clone());
-        let mut rng = SimRng::new(seed);
-        let mut physics = Physics::new(dt);
-        let mut bodies = Vec::new();
+/// Vehicles being placed at a scenario's start (the ego first, id 0).
+struct Placing<'a> {
+    road: &'a Road,
+    physics: Physics,
+    bodies: Vec<Body>,
+    /// (lane, s of the rear axle) of every vehicle placed: random traffic keeps its distance.
+    starts: Vec<(u32, f64)>,
+}
 
-        let ego_params = VehicleParams::of_class(scenario.ego.class.into());
-        let ego_d = road.lane_center_d(scenario.ego.lane);
+impl Placing<'_> {
+    fn next_id(&self) -> u32 {
+        self.bodies.len() as u32
+    }
+
+    /// A vehicle at road position `s` (rear axle) in the centre of `lane`, moving at `speed`.
+    fn add(
+        &mut self,
+        class: ObjectClass,
+        color: [u8; 3],
+        lane: u32,
+        s: f64,
+        speed: f64,
+        driver: Option<TrafficDriver>,
+    ) {
+        let id = self.next_id();
+        let params = VehicleParams::of_class(class);
+        let (_, heading) = self.road.center(s);
+        let at = self.road.to_world(s, self.road.lane_center_d(lane));
+        let body = self.physics.add_vehicle(id, &params, at, heading, speed);
+        self.starts.push((lane, s));
+        self.bodies.push(Body { id, class, params, color, body, driver });
+    }
+
+    /// The scenario's scripted traffic: start gaps and speeds vary a little with the seed.
+    fn scripted_traffic(&mut self, scenario: &Scenario, rng: &mut SimRng) {
+        let ego = &self.bodies[0].params;
         let ego_s = scenario.ego.s_m;
-        let place = |physics: &mut Physics, id: u32, params: &VehicleParams, s: f64, d: f64, v: f64| {
-            let (_, heading) = road.center(s);
-            physics.add_vehicle(id, params, road.to_world(s, d), heading, v)
-        };
-        bodies.push(Body {
-            id: EGO_ID,
-            class: scenario.ego.class.into(),
-            params: ego_params,
-            color: scenario.ego.color.unwrap_or([235, 235, 235]),
-            body: place(&mut physics, EGO_ID, &ego_params, ego_s, ego_d, scenario.ego.speed_mps),
-            driver: None,
-        });
-
-        // Scripted traffic: start gaps and speeds vary a little with the seed.
-        let ego_front = ego_s - ego_params.rear_overhang_m + ego_params.size_m[0];
-        let ego_rear = ego_s - ego_params.rear_overhang_m;
-        let mut starts: Vec<(u32, f64)> = vec![(scenario.ego.lane, ego_s)];
+        let (ego_front, ego_rear) = (ego_s - ego.rear_overhang_m + ego.size_m[0], ego_s - ego.rear_overhang_m);
+        let variation = &scenario.variation;
         for t in &scenario.traffic {
-            let id = bodies.len() as u32;
-            let mut vrng = rng.fork(id as u64);
+            let mut vrng = rng.fork(self.next_id() as u64);
             let params = VehicleParams::of_class(t.class.into());
-            let gap = t.gap_m + vrng.range(-scenario.variation.gap_m, scenario.variation.gap_m);
-            let speed =
-                (t.speed_mps + vrng.range(-scenario.variation.speed_mps, scenario.variation.speed_mps)).max(0.0);
+            let gap = t.gap_m + vrng.range(-variation.gap_m, variation.gap_m);
+            let speed = (t.speed_mps + vrng.range(-variation.speed_mps, variation.speed_mps)).max(0.0);
             let s = if t.gap_m >= 0.0 {
                 ego_front + gap.max(0.5) + params.rear_overhang_m
             } else {
                 ego_rear + gap.min(-0.5) - (params.size_m[0] - params.rear_overhang_m)
             };
             let color = t.color.unwrap_or(PALETTE[vrng.below(PALETTE.len() as u64) as usize]);
-            let body = place(&mut physics, id, &params, s, road.lane_center_d(t.lane), speed);
             let driver = TrafficDriver::new(t.lane, speed, t.follow, t.actions.clone(), None);
-            starts.push((t.lane, s));
-            bodies.push(Body { id, class: t.class.into(), params, color, body, driver: Some(driver) });
+            self.add(t.class.into(), color, t.lane, s, speed, Some(driver));
         }
+    }
 
-        // Generated traffic: random lanes, positions, speeds, classes; never too close.
-        if let Some(r) = &scenario.random_traffic {
-            let lanes: Vec<u32> = if r.lanes.is_empty() { (0..road.lanes()).collect() } else { r.lanes.clone() };
-            let mut grng = rng.fork(0xBEEF);
-            for _ in 0..r.count {
-                for _attempt in 0..30 {
-                    let lane = lanes[grng.below(lanes.len() as u64) as usize];
-                    let s = ego_s + grng.range(r.range_m[0], r.range_m[1]);
-                    if s < 10.0 || starts.iter().any(|&(l, s2)| l == lane && (s - s2).abs() < r.min_spacing_m) {
-                        continue;
-                    }
-                    let id = bodies.len() as u32;
-                    let pick = grng.unit();
-                    let class = if pick < r.truck_share {
-                        ClassSpec::Truck
-                    } else if pick < r.truck_share + r.van_share {
-                        ClassSpec::Van
-                    } else {
-                        ClassSpec::Car
-                    };
-                    let params = VehicleParams::of_class(class.into());
-                    let speed = grng.range(r.speed_mps[0], r.speed_mps[1]);
-                    let color = PALETTE[grng.below(PALETTE.len() as u64) as usize];
-                    let wander = r.lane_change_every_s.map(|every| Wander {
-                        mean_interval_s: every,
-                        lanes: lanes.clone(),
-                        next_s: every * (0.5 + grng.unit()),
-                        rng: grng.fork(id as u64),
-                    });
-                    let body = place(&mut physics, id, &params, s, road.lane_center_d(lane), speed);
-                    let driver = TrafficDriver::new(lane, speed, true, Vec::new(), wander);
-                    starts.push((lane, s));
-                    bodies.push(Body { id, class: class.into(), params, color, body, driver: Some(driver) });
-                    break;
+    /// Generated traffic: random lanes, positions, speeds, classes; never too close to a
+    /// vehicle already placed (up to 30 tries each).
+    fn random_traffic(&mut self, r: &RandomTraffic, ego_s: f64, rng: &mut SimRng) {
+        let lanes: Vec<u32> = if r.lanes.is_empty() { (0..self.road.lanes()).collect() } else { r.lanes.clone() };
+        let mut grng = rng.fork(0xBEEF);
+        for _ in 0..r.count {
+            for _attempt in 0..30 {
+                let lane = lanes[grng.below(lanes.len() as u64) as usize];
+                let s = ego_s + grng.range(r.range_m[0], r.range_m[1]);
+                if s < 10.0 || self.starts.iter().any(|&(l, s2)| l == lane && (s - s2).abs() < r.min_spacing_m) {
+                    continue;
                 }
+                let id = self.next_id();
+                let pick = grng.unit();
+                let class = if pick < r.truck_share {
+                    ClassSpec::Truck
+                } else if pick < r.truck_share + r.van_share {
+                    ClassSpec::Van
+                } else {
+                    ClassSpec::Car
+                };
+                let speed = grng.range(r.speed_mps[0], r.speed_mps[1]);
+                let color = PALETTE[grng.below(PALETTE.len() as u64) as usize];
+                let wander = r.lane_change_every_s.map(|every| Wander {
+                    mean_interval_s: every,
+                    lanes: lanes.clone(),
+                    next_s: every * (0.5 + grng.unit()),
+                    rng: grng.fork(id as u64),
+                });
+                let driver = TrafficDriver::new(lane, speed, true, Vec::new(), wander);
+                self.add(class.into(), color, lane, s, speed, Some(driver));
+                break;
             }
         }
+    }
+}
 
+impl World {
+    /// Builds the start of `scenario` with `seed` (the scenario's own unless overridden).
+    pub fn new(scenario: Scenario, seed: u64, physics_hz: u32) -> World {
+        let dt = 1.0 / physics_hz as f64;
+        let road = Road::new(scenario.road.clone());
+        let mut rng = SimRng::new(seed);
+        let mut placing = Placing { road: &road, physics: Physics::new(dt), bodies: Vec::new(), starts: Vec::new() };
+        let ego = &scenario.ego;
+        let ego_class: ObjectClass = ego.class.into();
+        let ego_color = ego.color.unwrap_or([235, 235, 235]);
+        placing.add(ego_class, ego_color, ego.lane, ego.s_m, ego.speed_mps, None);
+        placing.scripted_traffic(&scenario, &mut rng);
+        if let Some(r) = &scenario.random_traffic {
+            placing.random_traffic(r, ego.s_m, &mut rng);
+        }
+        let Placing { physics, bodies, starts, .. } = placing;
+        let ego_s = scenario.ego.s_m;
         let mut world = World {
             ego_cruise: Cruise::new(scenario.ego.speed_mps),
             scenario,

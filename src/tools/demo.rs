@@ -5,10 +5,11 @@
 
 use std::time::{Duration, Instant};
 
-use anyhow::{bail, Result};
+use anyhow::{bail, Context, Result};
 use serde::Serialize;
 
 use crate::bus::{Bus, StatsSnapshot};
+use crate::config::ConnectArgs;
 use crate::msg::{CameraInfo, ImageEncoding, SimClock, SimMode, Speed};
 use crate::topics;
 
@@ -185,4 +186,48 @@ pub fn verdict(summary: &DemoSummary) -> Result<()> {
         bail!("the subscriber received nothing: are both processes on the same config and namespace?");
     }
     Ok(())
+}
+
+/// `slipstream demo`: with `--role both`, the publisher and the subscriber as two processes
+/// (this binary again, one role each, the same flags); with one role, that side.
+pub fn run(connect: &ConnectArgs, args: &DemoArgs) -> Result<()> {
+    let duration = std::time::Duration::from_secs_f64(args.duration);
+    if args.role == Role::Both {
+        // Two real processes, started separately, as nodes will be: same flags, one role each.
+        let exe = std::env::current_exe()?;
+        let mut passed: Vec<String> = Vec::new();
+        let mut it = std::env::args().skip(1);
+        while let Some(a) = it.next() {
+            if a == "--role" {
+                it.next();
+            } else if !a.starts_with("--role=") {
+                passed.push(a);
+            }
+        }
+        let spawn = |role: &str| std::process::Command::new(&exe).args(&passed).args(["--role", role]).spawn();
+        let mut publisher = spawn("pub").context("start the publisher")?;
+        let subscriber = spawn("sub").context("start the subscriber")?;
+        let status = subscriber.wait_with_output()?.status;
+        let _ = publisher.wait();
+        anyhow::ensure!(status.success(), "the subscriber failed");
+        return Ok(());
+    }
+    let rt = tokio::runtime::Runtime::new()?;
+    rt.block_on(async {
+        let node = if args.role == Role::Pub { "demo-pub" } else { "demo-sub" };
+        let bus = Bus::open(connect.zenoh_config()?, connect.topic_map()?, node).await?;
+        if args.role == Role::Pub {
+            publish(&bus, duration).await?;
+        } else {
+            let summary = subscribe(&bus, duration).await?;
+            if args.json {
+                println!("{}", serde_json::to_string_pretty(&summary)?);
+            } else {
+                println!("{}", render(&summary));
+            }
+            verdict(&summary)?;
+        }
+        bus.close().await?;
+        Ok(())
+    })
 }

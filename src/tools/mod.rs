@@ -1,9 +1,9 @@
-//! The `slipstream` command's tools that are not benchmarks.
+//! The `slipstream` command's tools that are not benchmarks: `up` (the whole loop, through the
+//! launch and eval layers), `top`, `echo`, `info`, `demo`, `router`.
 
-pub mod children;
 pub mod demo;
 pub mod echo;
 pub mod info;
-pub mod latency;
+pub mod router;
 pub mod top;
 pub mod up;

@@ -12,8 +12,8 @@ use anyhow::Result;
 use parking_lot::Mutex;
 use serde::Serialize;
 
-use crate::bench::fmt_opt;
 use crate::bus::{Bus, StatsSnapshot, TopicStats};
+use crate::eval::fmt_opt;
 use crate::msg::{self, MessageKind};
 
 #[derive(Debug, Clone, clap::Args)]

@@ -50,3 +50,25 @@ def test_bad_topic_configs_name_the_file_key_and_fix(tmp_path):
         Topics(remap={"vehicle/speed": "car/**"})
     with pytest.raises(ConfigError, match="line 3.*expected `,` or `]`"):
         parse_json5('{\n  a: [1, 2\n}')
+
+
+def test_connection_flags_are_spelled_as_in_rust(slipstream_bin, tmp_path):
+    """The same command line works for a Rust node and a Python client script."""
+    import argparse
+
+    from slipstream_client import connect
+
+    cfg = tmp_path / "zenoh.json5"
+    cfg.write_text('{ mode: "peer", scouting: { multicast: { enabled: true } }, listen: { endpoints: [] } }')
+    parser = argparse.ArgumentParser()
+    connect.add_args(parser)
+    for spelled in ("-c", "--config"):
+        argv = [spelled, str(cfg), "--no-multicast-scouting", "-m", "peer", "-e", "tcp/127.0.0.1:1",
+                "--cfg", "scouting/gossip/enabled:true", "-n", "car7"]
+        args = parser.parse_args(argv)
+        assert (args.zenoh_config, args.no_multicast_scouting, args.namespace) == (str(cfg), True, "car7")
+        # The Rust binary takes the very same flags.
+        subprocess.run([slipstream_bin, "info", "--json", *argv], capture_output=True, text=True, timeout=30,
+                       cwd=ROOT, check=True)
+    conf = connect.zenoh_config(str(cfg), no_multicast_scouting=True)
+    assert json.loads(conf.get_json("scouting/multicast/enabled")) is False

@@ -41,7 +41,9 @@ def test_python_subscriber_decodes_rust_publications(slipstream_bin, free_port):
         assert len(got["Speed"]) >= 100, {k: len(v) for k, v in got.items()}
         assert len(got["CameraFrame"]) >= 10
         seqs = [h["seq"] for h, _ in got["Speed"]]
-        assert seqs == sorted(seqs) and seqs[-1] - seqs[0] == len(seqs) - 1, "in order, none lost"
+        # Speed is published with congestion control "drop": a loaded machine may lose one, so
+        # the test asserts order and no repeats, not a loss count.
+        assert all(a < b for a, b in zip(seqs, seqs[1:])), "in order, none twice"
         assert all(15.0 <= b["speed_mps"] <= 25.0 for _, b in got["Speed"])
         h, frame = got["CameraFrame"][-1]
         assert (frame["width"], frame["height"], frame["encoding"]) == (640, 480, "Rgb8")

@@ -61,6 +61,36 @@ pub struct Renderer {
     pub draw_distance_m: f64,
 }
 
+/// A vehicle's visibility in a `w` x `h` frame: its projected `bounds` (u0, v0, u1, v1,
+/// possibly beyond the image), the pixels its faces covered when drawn and the pixels still
+/// its own at the end. The fraction is unoccluded share x share inside the image.
+fn visibility(
+    id: u32,
+    bounds: Option<[f32; 4]>,
+    covered_px: u32,
+    visible_px: u32,
+    w: usize,
+    h: usize,
+) -> ObjectVisibility {
+    let (wf, hf) = (w as f32, h as f32);
+    let hidden = ObjectVisibility { id, bbox: None, visible_px, visible_fraction: 0.0 };
+    let Some([u0, v0, u1, v1]) = bounds else { return hidden };
+    let clamped = BoundingBox2d {
+        u_min_px: u0.clamp(0.0, wf),
+        v_min_px: v0.clamp(0.0, hf),
+        u_max_px: u1.clamp(0.0, wf),
+        v_max_px: v1.clamp(0.0, hf),
+    };
+    let area = |b: [f32; 4]| ((b[2] - b[0]) * (b[3] - b[1])).max(0.0);
+    let inside = area([clamped.u_min_px, clamped.v_min_px, clamped.u_max_px, clamped.v_max_px]);
+    if inside <= 0.0 {
+        return hidden;
+    }
+    let in_image = inside / area([u0, v0, u1, v1]).max(f32::MIN_POSITIVE);
+    let unoccluded = if covered_px == 0 { 0.0 } else { visible_px as f32 / covered_px as f32 };
+    ObjectVisibility { id, bbox: Some(clamped), visible_px, visible_fraction: (unoccluded * in_image).clamp(0.0, 1.0) }
+}
+
 impl Renderer {
     /// A renderer for the camera `info` describes; `noise_stddev` > 0 adds pixel noise drawn
     /// from `rng`.
@@ -189,35 +219,10 @@ impl Renderer {
         }
         apply_look(&self.noise, look, target.rgb);
 
-        let (wf, hf) = (w as f32, h as f32);
         found
             .into_iter()
             .enumerate()
-            .map(|(slot, (id, bounds, covered_px))| {
-                let visible_px = visible[slot + 1];
-                let Some([u0, v0, u1, v1]) = bounds else {
-                    return ObjectVisibility { id, bbox: None, visible_px, visible_fraction: 0.0 };
-                };
-                let clamped = BoundingBox2d {
-                    u_min_px: u0.clamp(0.0, wf),
-                    v_min_px: v0.clamp(0.0, hf),
-                    u_max_px: u1.clamp(0.0, wf),
-                    v_max_px: v1.clamp(0.0, hf),
-                };
-                let area = |b: [f32; 4]| ((b[2] - b[0]) * (b[3] - b[1])).max(0.0);
-                let inside = area([clamped.u_min_px, clamped.v_min_px, clamped.u_max_px, clamped.v_max_px]);
-                if inside <= 0.0 {
-                    return ObjectVisibility { id, bbox: None, visible_px, visible_fraction: 0.0 };
-                }
-                let in_image = inside / area([u0, v0, u1, v1]).max(f32::MIN_POSITIVE);
-                let unoccluded = if covered_px == 0 { 0.0 } else { visible_px as f32 / covered_px as f32 };
-                ObjectVisibility {
-                    id,
-                    bbox: Some(clamped),
-                    visible_px,
-                    visible_fraction: (unoccluded * in_image).clamp(0.0, 1.0),
-                }
-            })
+            .map(|(slot, (id, bounds, covered_px))| visibility(id, bounds, covered_px, visible[slot + 1], w, h))
             .collect()
     }
 

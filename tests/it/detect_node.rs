@@ -2,8 +2,6 @@
 //! publishes perception/objects, and a third node matches them to ground truth by simulation
 //! time.
 
-mod common;
-
 use std::sync::Arc;
 use std::time::Duration;
 

@@ -9,9 +9,8 @@
 
 use serde::Serialize;
 
-use super::detector::{Detector, DetectorParams};
-use super::tracker::Tracker;
-use crate::msg::{BoundingBox2d, Detection, GroundTruthObject, ImageEncoding};
+use crate::msg::{Detection, GroundTruthObject, ImageEncoding};
+use crate::perception::{Detector, DetectorParams, Tracker};
 use crate::sim::ground_truth::ground_truth;
 use crate::sim::render::Renderer;
 use crate::sim::settings::SimSettings;
@@ -22,19 +21,6 @@ pub const IOU_MATCH: f32 = 0.3;
 
 /// Distance bands errors are reported in.
 pub const RANGES_M: [(f64, f64); 4] = [(0.0, 20.0), (20.0, 40.0), (40.0, 60.0), (60.0, f64::INFINITY)];
-
-pub fn iou(a: &BoundingBox2d, b: &BoundingBox2d) -> f32 {
-    let iw = (a.u_max_px.min(b.u_max_px) - a.u_min_px.max(b.u_min_px)).max(0.0);
-    let ih = (a.v_max_px.min(b.v_max_px) - a.v_min_px.max(b.v_min_px)).max(0.0);
-    let inter = iw * ih;
-    let area = |r: &BoundingBox2d| (r.u_max_px - r.u_min_px) * (r.v_max_px - r.v_min_px);
-    let union = area(a) + area(b) - inter;
-    if union <= 0.0 {
-        0.0
-    } else {
-        inter / union
-    }
-}
 
 /// One matched pair's errors.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -72,7 +58,7 @@ impl Tally {
         let mut pairs: Vec<(f32, usize, usize)> = Vec::new();
         for (i, d) in dets.iter().enumerate() {
             for (j, o) in in_view.iter().enumerate() {
-                let score = iou(&d.bbox, o.bbox.as_ref().unwrap_or(&d.bbox));
+                let score = d.bbox.iou(o.bbox.as_ref().unwrap_or(&d.bbox));
                 if score >= IOU_MATCH {
                     pairs.push((score, i, j));
                 }
@@ -295,4 +281,82 @@ pub fn markdown(report: &DetectReport) -> String {
     }
     s.push_str("\nErrors: median / p90 over matched detections (relative speed: tracks seen twice or more).\n");
     s
+}
+
+/// The detector on frames the simulator renders: distances, offsets, colours, noise.
+#[cfg(test)]
+mod rendered {
+    use crate::msg::{ImageEncoding, ObjectClass};
+    use crate::perception::{Detector, DetectorParams, FrameDetection};
+    use crate::sim::ground_truth::ground_truth;
+    use crate::sim::render::{FrameLook, Renderer};
+    use crate::sim::rng::SimRng;
+    use crate::sim::settings::SimSettings;
+    use crate::sim::world::World;
+    use crate::sim::Scenario;
+
+    /// Renders the start of a one-off scenario and runs the detector on it.
+    fn detect_in(traffic: &str, noise: f64, look: FrameLook) -> (Vec<FrameDetection>, crate::msg::GroundTruthObjects) {
+        let text = format!(
+            "{{ name: 't', duration_s: 10, variation: {{ gap_m: 0, speed_mps: 0 }}, ego: {{ lane: 1, speed_mps: 0 }}, traffic: [{traffic}] }}"
+        );
+        let world = World::new(Scenario::parse(&text, "test").unwrap(), 1, 100);
+        let info = SimSettings::default().camera_info(ImageEncoding::Rgb8);
+        let mut renderer = Renderer::new(&info, noise, &mut SimRng::new(3));
+        let mut rgb = vec![0; renderer.frame_len()];
+        let vis = renderer.render(world.road(), world.ego(), world.vehicles(), look, &mut rgb);
+        (Detector::new(&info, DetectorParams::default()).detect(&rgb), ground_truth(&world, &vis))
+    }
+
+    #[test]
+    fn an_empty_road_gives_no_detection() {
+        assert!(detect_in("", 0.0, FrameLook::PLAIN).0.is_empty());
+        assert!(detect_in("", 4.0, FrameLook { brightness: 0.85, noise_offset: 77 }).0.is_empty());
+    }
+
+    #[test]
+    fn a_car_ahead_is_found_at_its_distance_and_offset() {
+        for (lane, gap, d_tol) in [(1, 15.0, 0.03), (1, 35.0, 0.03), (0, 25.0, 0.03), (2, 50.0, 0.05)] {
+            let (dets, truth) = detect_in(
+                &format!("{{ lane: {lane}, gap_m: {gap}, speed_mps: 0, color: [200, 30, 35] }}"),
+                0.0,
+                FrameLook::PLAIN,
+            );
+            let o = &truth.objects[0];
+            assert_eq!(dets.len(), 1, "lane {lane} gap {gap}: {dets:?}");
+            let d = dets[0];
+            let x = o.position_in_ego_m[0];
+            assert!((d.distance_m - x).abs() / x < d_tol, "lane {lane}: distance {:.2} vs true {x:.2}", d.distance_m);
+            assert!(
+                (d.lateral_offset_m - o.position_in_ego_m[1]).abs() < 0.4,
+                "lateral {:.2} vs {:?}",
+                d.lateral_offset_m,
+                o.position_in_ego_m
+            );
+            assert_eq!(d.class, ObjectClass::Car);
+            assert!(d.bbox.iou(&o.bbox.unwrap()) > 0.5, "{:?} vs {:?}", d.bbox, o.bbox);
+        }
+    }
+
+    #[test]
+    fn colours_brightness_and_noise_do_not_break_it() {
+        let colours = [[25, 25, 28], [140, 142, 148], [235, 235, 235], [20, 110, 60], [84, 84, 88], [230, 170, 30]];
+        for c in colours {
+            for (noise, look) in [
+                (0.0, FrameLook::PLAIN),
+                (5.0, FrameLook { brightness: 0.8, noise_offset: 5 }),
+                (5.0, FrameLook { brightness: 1.15, noise_offset: 999 }),
+            ] {
+                let traffic = format!("{{ lane: 1, gap_m: 30, speed_mps: 0, color: {c:?} }}, {{ lane: 0, gap_m: 12, speed_mps: 0, class: 'van', color: {c:?} }}");
+                let (dets, truth) = detect_in(&traffic, noise, look);
+                assert_eq!(dets.len(), 2, "colour {c:?} noise {noise} {look:?}: {dets:?}");
+                for o in &truth.objects {
+                    let x = o.position_in_ego_m[0];
+                    let found = dets.iter().find(|d| d.bbox.iou(o.bbox.as_ref().unwrap()) > 0.3);
+                    let d = found.unwrap_or_else(|| panic!("colour {c:?}: vehicle {} not found in {dets:?}", o.id));
+                    assert!((d.distance_m - x).abs() / x < 0.05, "colour {c:?}: {:.2} vs {x:.2}", d.distance_m);
+                }
+            }
+        }
+    }
 }

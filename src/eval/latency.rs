@@ -16,8 +16,13 @@ use std::collections::HashMap;
 
 use serde::Serialize;
 
-/// The hops, in loop order.
+/// The hops, in loop order; the constants below index them.
 pub const HOPS: [&str; 4] = ["frame -> detections", "detections -> control", "control -> applied", "frame -> applied"];
+pub const FRAME_TO_DETECTIONS: usize = 0;
+pub const DETECTIONS_TO_CONTROL: usize = 1;
+pub const CONTROL_TO_APPLIED: usize = 2;
+/// The whole loop: frame published -> control applied.
+pub const WHOLE_LOOP: usize = 3;
 /// The same, short (the live view).
 pub const HOPS_SHORT: [&str; 4] = ["frame>det", "det>ctl", "ctl>applied", "loop"];
 
@@ -58,7 +63,7 @@ impl LoopLatency {
     /// A detections message: published at `pub_ns`, from the frame published at `frame_pub_ns`.
     pub fn on_detections(&mut self, pub_ns: u64, frame_pub_ns: u64) {
         insert_bounded(&mut self.origin, pub_ns, frame_pub_ns);
-        self.samples[0].push((pub_ns, pub_ns as i64 - frame_pub_ns as i64));
+        self.samples[FRAME_TO_DETECTIONS].push((pub_ns, pub_ns as i64 - frame_pub_ns as i64));
     }
 
     /// A ground-truth message (the perception of `--perception ground-truth`).
@@ -75,7 +80,7 @@ impl LoopLatency {
         }
         self.last_basis = basis;
         insert_bounded(&mut self.basis, pub_ns, basis);
-        self.samples[1].push((pub_ns, pub_ns as i64 - basis as i64));
+        self.samples[DETECTIONS_TO_CONTROL].push((pub_ns, pub_ns as i64 - basis as i64));
     }
 
     /// A state saying the command published at `command_pub_ns` was first applied at
@@ -85,11 +90,11 @@ impl LoopLatency {
             return;
         }
         self.last_applied = command_pub_ns;
-        self.samples[2].push((applied_ns, applied_ns as i64 - command_pub_ns as i64));
+        self.samples[CONTROL_TO_APPLIED].push((applied_ns, applied_ns as i64 - command_pub_ns as i64));
         // The whole loop, once per perception message: its reacting command applied.
         let Some(basis) = self.basis.remove(&command_pub_ns) else { return };
         if let Some(origin) = self.origin.remove(&basis) {
-            self.samples[3].push((applied_ns, applied_ns as i64 - origin as i64));
+            self.samples[WHOLE_LOOP].push((applied_ns, applied_ns as i64 - origin as i64));
         }
     }
 

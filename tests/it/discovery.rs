@@ -3,8 +3,6 @@
 //! the rendezvous port leaving. The test uses a free port instead of 7447 so it cannot meet
 //! anything else on the machine; everything stays on 127.0.0.1.
 
-mod common;
-
 use std::time::Duration;
 
 use slipstream::msg::Speed;

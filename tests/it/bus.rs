@@ -1,12 +1,11 @@
 //! The bus across two Zenoh sessions on tcp/127.0.0.1 with scouting off.
 
-mod common;
-
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
-use common::{bus_pair, map, TIMEOUT};
+use crate::common;
+use crate::common::{bus_pair, map, TIMEOUT};
 use slipstream::msg::{ControlCommand, ImageEncoding, Speed};
 use slipstream::topics::{CAMERA_FRONT, VEHICLE_CONTROL, VEHICLE_SPEED};
 use slipstream::TopicMap;

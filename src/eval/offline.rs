@@ -2,12 +2,10 @@
 //! the camera rate, the controller at every step. Deterministic and fast; the tests tune and
 //! check the control law with it. `slipstream eval acc` runs the real processes instead.
 
-use super::controller::{Controller, EgoNow, PerceptionFrame};
-use super::eval::{truth_lead, Sample, Trace};
-use super::settings::AccSettings;
-use crate::msg::ControlCommand;
+use super::trace::{truth_lead, Sample, Trace};
+use crate::acc::{AccSettings, Controller, EgoNow, PerceptionFrame};
+use crate::msg::{due, ControlCommand};
 use crate::sim::ground_truth::ground_truth;
-use crate::sim::node::due;
 use crate::sim::world::{EgoInput, World};
 use crate::sim::Scenario;
 
@@ -49,6 +47,30 @@ pub fn run(scenario: Scenario, settings: AccSettings, physics_hz: u32, camera_hz
         if let Some(end) = events.ended {
             trace.end = end.reason;
             return trace;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::acc::{AccSettings, PerceptionSource};
+    use crate::eval::Metrics;
+    use crate::sim::scenario::{Scenario, BUILT_IN};
+
+    #[test]
+    fn every_built_in_scenario_passes_on_ground_truth_in_one_process() {
+        for (name, _) in BUILT_IN {
+            let scenario = Scenario::find(name).unwrap();
+            let settings = AccSettings {
+                perception: PerceptionSource::GroundTruth,
+                set_speed_mps: scenario.ego.set_speed_mps.unwrap_or(scenario.ego.speed_mps),
+                ..AccSettings::default()
+            };
+            let trace = super::run(scenario, settings, 100, 20.0);
+            let m = Metrics::of(&trace);
+            let failed: Vec<_> = m.checks.iter().filter(|c| !c.pass).collect();
+            assert!(m.pass, "{name}: {failed:?}");
+            assert!(trace.samples.len() > 1000, "{name}: {} samples", trace.samples.len());
         }
     }
 }

@@ -1,5 +1,4 @@
 //! Test helpers: loopback sessions with scouting off, timeouts on every await.
-#![allow(dead_code)]
 
 use std::time::Duration;
 
@@ -13,6 +12,14 @@ macro_rules! within {
     ($fut:expr) => {
         tokio::time::timeout($crate::common::TIMEOUT, $fut).await.expect("timed out")
     };
+}
+
+/// Tests that run whole loops, realtime simulators or the node binaries take this: one at a
+/// time, or on two cores they starve each other (and the realtime pacing some of them need).
+static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+pub fn serial() -> std::sync::MutexGuard<'static, ()> {
+    ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner())
 }
 
 fn base_config() -> zenoh::Config {

@@ -1,0 +1,234 @@
+//! `slipstream eval acc`: the scenario suite. For each scenario it runs the loop through the
+//! launch layer ([`crate::launch::LoopRun`], the same path as `slipstream up`): slipstream-sim
+//! in lockstep, slipstream-detect (camera perception only) and slipstream-acc as separate
+//! processes on loopback ports and a namespace of their own ([`Network::Isolated`]), records
+//! vehicle/state, acc/status, objects and sim/events from a session of its own, and judges the
+//! run against the ground truth ([`super::trace::judge`], [`super::Metrics`]).
+//!
+//! The nodes' logs go to a directory per scenario under `--logs` (default: a temporary
+//! directory, removed when every scenario passed and kept, with its path printed, when not).
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use anyhow::{bail, Context, Result};
+use serde::Serialize;
+
+use super::fmt_opt;
+use super::metrics::{aims, Metrics};
+use super::plot;
+use super::trace::{judge, Recorder};
+use crate::acc::PerceptionSource;
+use crate::launch::{ClockMode, LoopRun, LoopSpec, Network, NODE_POLL};
+use crate::sim::Scenario;
+
+#[derive(Debug, Clone, clap::Args)]
+pub struct EvalAccArgs {
+    /// Scenarios to run (built-in names or .json5 files) [default: every built-in scenario]
+    #[arg(long = "scenario", value_name = "NAME")]
+    pub scenarios: Vec<String>,
+    /// Where the ACC's vehicles ahead come from: camera (slipstream-detect on the rendered
+    /// frames) or ground-truth (the simulator's objects)
+    #[arg(long, value_enum, default_value = "camera")]
+    pub perception: PerceptionSource,
+    /// Write a PNG per scenario here (ego speed, lead speed, gap, desired gap, acceleration)
+    #[arg(long, value_name = "DIR")]
+    pub plots: Option<PathBuf>,
+    /// Print JSON instead of the table
+    #[arg(long)]
+    pub json: bool,
+    /// End each scenario after this many simulated seconds instead of its own duration
+    #[arg(long)]
+    pub duration: Option<f64>,
+    /// Wall-clock limit per scenario, seconds
+    #[arg(long, default_value_t = 600.0)]
+    pub timeout: f64,
+    /// Keep the nodes' logs here, one directory per scenario [default: a temporary directory,
+    /// removed when every scenario passes]
+    #[arg(long, value_name = "DIR")]
+    pub logs: Option<PathBuf>,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct ScenarioResult {
+    pub scenario: String,
+    pub perception: PerceptionSource,
+    pub set_speed_mps: f64,
+    pub metrics: Metrics,
+    /// Steps the simulator waited out without the ACC's answer (should be 0).
+    pub lockstep_timeouts: u64,
+    pub end: String,
+    pub wall_time_s: f64,
+    pub plot: Option<PathBuf>,
+}
+
+#[derive(Debug, Clone, Serialize)]
+pub struct AccReport {
+    pub command: String,
+    pub results: Vec<ScenarioResult>,
+    pub pass: bool,
+}
+
+/// Runs the suite; progress goes to stderr. The nodes and the recorder use the topic config
+/// of `connect` (-t, SLIPSTREAM_CONFIG or ./config/slipstream.json5) under a namespace of the
+/// run's own; the connection flags do not apply (each run has its own loopback ports).
+pub fn run(args: &EvalAccArgs, connect: &crate::config::ConnectArgs) -> Result<AccReport> {
+    // The topic config is checked here, once, before any process starts.
+    connect.topic_map()?;
+    let names: Vec<String> = if args.scenarios.is_empty() {
+        crate::sim::scenario::BUILT_IN.iter().map(|(n, _)| n.to_string()).collect()
+    } else {
+        args.scenarios.clone()
+    };
+    let scenarios: Vec<Scenario> = names.iter().map(|n| Scenario::find(n)).collect::<Result<_, _>>()?;
+    if let Some(dir) = &args.plots {
+        std::fs::create_dir_all(dir).with_context(|| format!("create {}", dir.display()))?;
+    }
+    anyhow::ensure!(args.timeout > 0.0, "--timeout must be > 0");
+    let logs = match &args.logs {
+        Some(dir) => dir.clone(),
+        None => std::env::temp_dir().join(format!("slipstream-eval-acc-{}", std::process::id())),
+    };
+    let rt = tokio::runtime::Runtime::new()?;
+    let mut results = Vec::new();
+    for (i, (arg, scenario)) in names.iter().zip(scenarios).enumerate() {
+        let name = scenario.name.clone();
+        eprint!("[{}/{}] {name} ({:?} perception) ... ", i + 1, names.len(), args.perception);
+        let started = Instant::now();
+        let result = rt
+            .block_on(run_one(arg, scenario, args, connect.topics.as_deref(), &logs.join(&name)))
+            .with_context(|| format!("scenario {name} (node logs in {})", logs.join(&name).display()))?;
+        eprintln!(
+            "{} in {:.1} s{}",
+            if result.metrics.pass { "pass" } else { "FAIL" },
+            started.elapsed().as_secs_f64(),
+            result.plot.as_ref().map_or(String::new(), |p| format!(", plot {}", p.display()))
+        );
+        results.push(result);
+    }
+    let pass = results.iter().all(|r| r.metrics.pass && r.lockstep_timeouts == 0);
+    if pass && args.logs.is_none() {
+        let _ = std::fs::remove_dir_all(&logs);
+    } else {
+        eprintln!("node logs: {}", logs.display());
+    }
+    Ok(AccReport { command: std::env::args().collect::<Vec<_>>().join(" "), results, pass })
+}
+
+async fn run_one(
+    scenario_arg: &str,
+    mut scenario: Scenario,
+    args: &EvalAccArgs,
+    topics_file: Option<&Path>,
+    logs: &Path,
+) -> Result<ScenarioResult> {
+    if let Some(d) = args.duration {
+        anyhow::ensure!(d > 0.0, "--duration must be > 0");
+        scenario.duration_s = d;
+    }
+    let name = scenario.name.clone();
+    let set_speed = scenario.ego.set_speed_mps.unwrap_or(scenario.ego.speed_mps);
+    let spec = LoopSpec {
+        scenario: scenario_arg.to_string(),
+        duration_s: scenario.duration_s,
+        clock: ClockMode::Lockstep,
+        perception: args.perception,
+        set_speed_mps: set_speed,
+    };
+    // A namespace and ports of this run's own: nothing else on the machine is disturbed.
+    let namespace =
+        format!("eval-acc-{}-{}", std::process::id(), name.replace(|c: char| !c.is_ascii_alphanumeric(), "-"));
+    let network = Network::Isolated { topics: topics_file.map(Path::to_path_buf), namespace };
+    let mut lp = LoopRun::open(spec, network, logs, "eval-acc").await?;
+    let recorder = Recorder::start(lp.bus()).await?;
+    let started = Instant::now();
+    lp.start().await?;
+    let timeout = Duration::from_secs_f64(args.timeout);
+    let progress = loop {
+        let progress = lp.check();
+        if progress.over() || started.elapsed() > timeout {
+            break progress;
+        }
+        tokio::time::sleep(NODE_POLL).await;
+    };
+    let wall = started.elapsed().as_secs_f64();
+    lp.stop().await;
+    let rec = recorder.take();
+    drop(recorder);
+    let sim = lp.sim_report();
+    lp.close().await;
+    if progress.sim_ended.is_none() && progress.died.is_empty() {
+        bail!("slipstream-sim did not finish within {} s (--timeout)", args.timeout);
+    }
+    anyhow::ensure!(progress.died.is_empty(), "{} ended before the run was over", progress.died.join(", "));
+    let sim = sim?;
+
+    let judged = judge(&rec, &scenario, Some(&sim), "stopped");
+    let trace = judged.trace;
+    let metrics = judged
+        .metrics
+        .with_context(|| format!("recorded only {} states (did the nodes connect?)", trace.samples.len()))?;
+    let plot = match &args.plots {
+        Some(dir) => {
+            let path = dir.join(format!("{name}.png"));
+            let title =
+                format!("{name} ({:?} perception): {}", args.perception, if metrics.pass { "pass" } else { "FAIL" });
+            plot::plot(&trace, &title, &path)?;
+            Some(path)
+        }
+        None => None,
+    };
+    Ok(ScenarioResult {
+        scenario: name,
+        perception: args.perception,
+        set_speed_mps: set_speed,
+        metrics,
+        lockstep_timeouts: sim.lockstep_timeouts,
+        end: trace.end.clone(),
+        wall_time_s: wall,
+        plot,
+    })
+}
+
+/// The report as a markdown table.
+pub fn markdown(report: &AccReport) -> String {
+    let f = fmt_opt;
+    let mut out = String::new();
+    out.push_str("| scenario | perception | collisions | min gap m | min TTC s | time-gap RMS s | speed RMSE m/s | max accel | max decel | max jerk | emergency s | result |\n");
+    out.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    for r in &report.results {
+        let m = &r.metrics;
+        let failed: Vec<&str> = m.checks.iter().filter(|c| !c.pass).map(|c| c.name.as_str()).collect();
+        let verdict = if m.pass && r.lockstep_timeouts == 0 {
+            "pass".to_string()
+        } else if r.lockstep_timeouts > 0 {
+            format!("FAIL: {} lockstep timeouts {}", r.lockstep_timeouts, failed.join(", "))
+        } else {
+            format!("FAIL: {}", failed.join(", "))
+        };
+        out.push_str(&format!(
+            "| {} | {:?} | {} | {} | {} | {} | {} | {:.2} | {:.2} | {:.2} | {:.1} | {} |\n",
+            r.scenario,
+            r.perception,
+            m.collisions,
+            f(m.min_gap_m, 1),
+            f(m.min_ttc_s, 2),
+            f(m.time_gap_rms_error_s, 3),
+            f(m.speed_rmse_mps, 3),
+            m.max_accel_mps2,
+            m.max_decel_mps2,
+            m.max_jerk_mps3,
+            m.emergency_s,
+            verdict
+        ));
+    }
+    out.push_str(&format!(
+        "\nAims: no collision; time-gap RMS error <= {} s in steady following; accel <= {}, decel <= {} m/s2 and jerk <= {} m/s3 outside emergencies, at speed (+{:.0}% tolerance).\n",
+        aims::TIME_GAP_RMS_S,
+        aims::MAX_ACCEL_MPS2,
+        aims::MAX_DECEL_MPS2,
+        aims::MAX_JERK_MPS3,
+        aims::COMFORT_TOLERANCE * 100.0
+    ));
+    out
+}

@@ -1,0 +1,35 @@
+//! Orchestration: judging runs of the loop. What a run recorded, the figures and plots made
+//! from it, and the suites that score the detector and the ACC.
+//!
+//! One path from a run to its figures, whichever way the loop ran (`slipstream up`, `eval acc`,
+//! the in-process loop of the tests): [`trace::Recorder`] (or the in-process loop) ->
+//! [`trace::Trace`] -> [`metrics::Metrics`] and [`plot`]. The loop's latency per hop comes from
+//! the message stamps ([`latency`]).
+//!
+//! # Layout
+//! - [`trace`]: the recorder of a run on the bus and the trace built from it (one sample per
+//!   vehicle/state with the ACC's status and the true lead); trace.csv.
+//! - [`metrics`]: the ACC's figures against ground truth and its aims.
+//! - [`latency`]: the loop's latency hop by hop from the message stamps; the string-stability
+//!   bound.
+//! - [`plot`]: PNG plots of a trace and of the loop latency.
+//! - [`acc`]: `slipstream eval acc`, the scenario suite over separate processes (through
+//!   [`crate::launch`]).
+//! - [`detect`]: `slipstream eval detect`, the detector scored against ground truth, in process.
+//! - [`offline`]: the closed loop in one process without the bus (tests and tuning).
+
+pub mod acc;
+pub mod detect;
+pub mod latency;
+pub mod metrics;
+pub mod offline;
+pub mod plot;
+pub mod trace;
+
+pub use metrics::Metrics;
+pub use trace::{Recorder, Trace};
+
+/// An optional figure with `digits` decimals, or "-" (tables of `eval`, `bench`, `up`, `top`).
+pub fn fmt_opt(v: Option<f64>, digits: usize) -> String {
+    v.map_or("-".into(), |v| format!("{v:.digits$}"))
+}

@@ -1,0 +1,209 @@
+//! The record of a run: what a recorder kept from the bus ([`Recorder`]: vehicle/state,
+//! acc/status, objects, collisions), and the [`Trace`] built from it: one [`Sample`] per
+//! vehicle/state message (every physics step by default) with the ego's motion, the ACC's
+//! status and the true lead in the ego's lane. Metrics, plots and trace.csv are made from a
+//! trace, whichever way the loop ran (`up`, `eval acc`, the in-process loop).
+
+use std::path::Path;
+use std::sync::Arc;
+
+use anyhow::Context;
+use parking_lot::Mutex;
+use serde::Serialize;
+
+use super::metrics::Metrics;
+use crate::acc::AccSettings;
+use crate::bus::{Bus, CallbackSubscriber, Received};
+use crate::msg::{SimEvent, SimEventKind};
+use crate::sim::{Scenario, SimReport};
+use crate::topics;
+use crate::vehicle::VehicleParams;
+
+use crate::msg::{AccMode, AccStatus, GroundTruthObjects, VehicleState};
+
+/// The true lead: the nearest vehicle ahead whose centre is in the ego's lane.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct TruthLead {
+    pub id: u32,
+    /// Bumper to bumper.
+    pub gap_m: f64,
+    /// Lead speed minus ego speed along ego x.
+    pub relative_speed_mps: f64,
+}
+
+pub fn truth_lead(gt: &GroundTruthObjects, ego_lane: i32, ego_front_m: f64) -> Option<TruthLead> {
+    gt.objects
+        .iter()
+        .filter(|o| o.lane == ego_lane && ego_lane >= 0 && o.position_in_ego_m[0] > 0.0)
+        .min_by(|a, b| a.position_in_ego_m[0].total_cmp(&b.position_in_ego_m[0]))
+        .map(|o| TruthLead {
+            id: o.id,
+            gap_m: o.position_in_ego_m[0] - ego_front_m,
+            relative_speed_mps: o.velocity_in_ego_mps[0],
+        })
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Sample {
+    pub t_s: f64,
+    pub speed_mps: f64,
+    pub accel_mps2: f64,
+    pub mode: AccMode,
+    pub target_accel_mps2: f64,
+    pub set_speed_mps: f64,
+    pub time_gap_s: f64,
+    /// The gap the ACC measured to its lead.
+    pub acc_gap_m: Option<f64>,
+    pub truth: Option<TruthLead>,
+}
+
+impl Sample {
+    pub fn new(t_s: f64, state: &VehicleState, status: &AccStatus, truth: Option<TruthLead>) -> Self {
+        Sample {
+            t_s,
+            speed_mps: state.speed_mps,
+            accel_mps2: state.acceleration_in_body_mps2[0],
+            mode: status.mode,
+            target_accel_mps2: status.target_accel_mps2,
+            set_speed_mps: status.set_speed_mps,
+            time_gap_s: status.time_gap_s,
+            acc_gap_m: status.lead.map(|l| l.gap_m),
+            truth,
+        }
+    }
+}
+
+/// One run of a scenario.
+#[derive(Debug, Clone, Default, Serialize)]
+pub struct Trace {
+    pub standstill_m: f64,
+    pub samples: Vec<Sample>,
+    pub collisions: u64,
+    /// Why the scenario ended.
+    pub end: String,
+}
+
+/// What the recorder keeps, in arrival order.
+#[derive(Default)]
+pub struct Recorded {
+    pub states: Vec<Received<VehicleState>>,
+    pub statuses: Vec<Received<AccStatus>>,
+    pub objects: Vec<Received<GroundTruthObjects>>,
+    pub collisions: u64,
+}
+
+/// Records vehicle/state, acc/status, objects and the collisions on sim/events: what a run is
+/// judged by.
+pub struct Recorder {
+    pub rec: Arc<Mutex<Recorded>>,
+    _subs: [CallbackSubscriber; 4],
+}
+
+impl Recorder {
+    pub async fn start(bus: &Bus) -> anyhow::Result<Recorder> {
+        let rec = Arc::new(Mutex::new(Recorded::default()));
+        let r = rec.clone();
+        let s1 = bus.subscribe_with(topics::VEHICLE_STATE, move |m| r.lock().states.push(m)).await?;
+        let r = rec.clone();
+        let s2 = bus.subscribe_with(topics::ACC_STATUS, move |m| r.lock().statuses.push(m)).await?;
+        let r = rec.clone();
+        let s3 = bus.subscribe_with(topics::OBJECTS, move |m| r.lock().objects.push(m)).await?;
+        let r = rec.clone();
+        let s4 = bus
+            .subscribe_with(topics::SIM_EVENTS, move |m: Received<SimEvent>| {
+                if matches!(m.msg.kind, SimEventKind::Collision { .. }) {
+                    r.lock().collisions += 1;
+                }
+            })
+            .await?;
+        Ok(Recorder { rec, _subs: [s1, s2, s3, s4] })
+    }
+
+    /// Everything recorded so far, leaving the recorder empty.
+    pub fn take(&self) -> Recorded {
+        std::mem::take(&mut *self.rec.lock())
+    }
+}
+
+/// One sample per recorded state, with the newest status and ground truth at its time.
+pub fn build_trace(rec: &Recorded, ego_front: f64, standstill_m: f64) -> Trace {
+    let mut states: Vec<&Received<VehicleState>> = rec.states.iter().collect();
+    states.sort_by_key(|r| r.header.stamp_sim_ns);
+    states.dedup_by_key(|r| r.header.stamp_sim_ns);
+    let mut statuses: Vec<&Received<AccStatus>> = rec.statuses.iter().collect();
+    statuses.sort_by_key(|r| r.header.stamp_sim_ns);
+    let mut objects: Vec<&Received<GroundTruthObjects>> = rec.objects.iter().collect();
+    objects.sort_by_key(|r| r.header.stamp_sim_ns);
+    let (mut si, mut oi) = (0usize, 0usize);
+    let mut samples = Vec::with_capacity(states.len());
+    for st in states {
+        let t = st.header.stamp_sim_ns;
+        while si + 1 < statuses.len() && statuses[si + 1].header.stamp_sim_ns <= t {
+            si += 1;
+        }
+        while oi + 1 < objects.len() && objects[oi + 1].header.stamp_sim_ns <= t {
+            oi += 1;
+        }
+        let Some(status) = statuses.get(si).filter(|s| s.header.stamp_sim_ns <= t) else { continue };
+        let truth = objects.get(oi).filter(|o| o.header.stamp_sim_ns <= t).and_then(|o| {
+            let lead = truth_lead(&o.msg, st.msg.lane, ego_front)?;
+            // Moved on from the frame's time at the relative speed.
+            let ahead = (t - o.header.stamp_sim_ns) as f64 / 1e9;
+            Some(TruthLead { gap_m: lead.gap_m + lead.relative_speed_mps * ahead, ..lead })
+        });
+        samples.push(Sample::new(t as f64 / 1e9, &st.msg, &status.msg, truth));
+    }
+    Trace { standstill_m, samples, collisions: 0, end: String::new() }
+}
+
+impl Trace {
+    /// Writes the trace as CSV: one row per vehicle/state, what the plot shows, for a
+    /// spreadsheet or pandas.
+    pub fn write_csv(&self, path: &Path) -> anyhow::Result<()> {
+        let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.4}"));
+        let mut out = String::from(
+        "t_s,speed_mps,accel_mps2,acc_mode,target_accel_mps2,set_speed_mps,time_gap_s,acc_gap_m,truth_gap_m,truth_lead_speed_mps\n",
+    );
+        for x in &self.samples {
+            out.push_str(&format!(
+                "{:.3},{:.4},{:.4},{:?},{:.4},{:.3},{:.3},{},{},{}\n",
+                x.t_s,
+                x.speed_mps,
+                x.accel_mps2,
+                x.mode,
+                x.target_accel_mps2,
+                x.set_speed_mps,
+                x.time_gap_s,
+                opt(x.acc_gap_m),
+                opt(x.truth.map(|t| t.gap_m)),
+                opt(x.truth.map(|t| x.speed_mps + t.relative_speed_mps)),
+            ));
+        }
+        std::fs::write(path, out).with_context(|| format!("write {}", path.display()))
+    }
+}
+
+/// Fewer samples than this and a run is not judged (it hardly ran).
+pub const MIN_SAMPLES: usize = 10;
+
+/// A finished run of the loop on the bus, judged: the one tail of `slipstream up` and
+/// `eval acc` (recording -> trace -> metrics).
+#[derive(Debug, Clone)]
+pub struct Judged {
+    pub trace: Trace,
+    /// None when the run has fewer than [`MIN_SAMPLES`] samples.
+    pub metrics: Option<Metrics>,
+}
+
+/// Builds the trace of `scenario` from what was recorded and the simulator's report (its
+/// collision count and end reason win over the recorder's, which may miss the last events),
+/// and judges it. `end_if_unknown` names the end when the simulator said nothing.
+pub fn judge(rec: &Recorded, scenario: &Scenario, sim: Option<&SimReport>, end_if_unknown: &str) -> Judged {
+    let ego = VehicleParams::of_class(scenario.ego.class.into());
+    let front_m = ego.size_m[0] - ego.rear_overhang_m;
+    let mut trace = build_trace(rec, front_m, AccSettings::default().standstill_m);
+    trace.collisions = sim.map_or(0, |s| s.ego_collisions).max(rec.collisions);
+    trace.end = sim.and_then(|s| s.end.as_ref()).map_or_else(|| end_if_unknown.to_string(), |e| e.reason.clone());
+    let metrics = (trace.samples.len() > MIN_SAMPLES).then(|| Metrics::of(&trace));
+    Judged { trace, metrics }
+}

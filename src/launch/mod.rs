@@ -1,0 +1,41 @@
+//! Orchestration: the loop's nodes as child processes. One launch path for `slipstream up`,
+//! `slipstream eval acc` and whatever runs the loop next: the same flags for every node, the
+//! same wait for the nodes on the bus, the same way of stopping them, the same logs.
+//!
+//! # Layout
+//! - [`child`]: one child process (found next to this binary, stopped with SIGINT then
+//!   SIGKILL), free loopback ports.
+//! - [`nodes`]: the loop (slipstream-acc, slipstream-detect with camera perception,
+//!   slipstream-sim): [`LoopRun`] opens an observer session, starts the controllers, waits for
+//!   their liveliness tokens, starts the simulator, watches for its end or a death, stops
+//!   everything and reads the simulator's report.
+//!
+//! # Timings (chosen here once, for every caller)
+//! | constant | value | what for |
+//! |---|---|---|
+//! | [`NODE_START_TIMEOUT`] | 30 s | the controllers must be alive on the bus before the simulator starts (its first frame must find them listening) |
+//! | [`NODE_POLL`] | 50 ms | how often the launcher looks at the bus and the processes while waiting |
+//! | [`SETTLE`] | 200 ms | after the simulator ends, for its last messages to land before the others stop |
+//! | [`STOP_GRACE`] | 5 s | SIGINT, then this long to exit, then SIGKILL |
+//! | [`CLOSE_TIMEOUT`] | 5 s | closing the observer's session never holds up the report |
+
+use std::time::Duration;
+
+pub mod child;
+pub mod nodes;
+
+pub use child::{free_ports, sibling_binary, Child};
+pub use nodes::{ClockMode, LoopRun, LoopSpec, Network, NodeEnd};
+
+/// How long the controllers may take to appear on the bus.
+pub const NODE_START_TIMEOUT: Duration = Duration::from_secs(30);
+/// How often the launcher checks the bus and the processes.
+pub const NODE_POLL: Duration = Duration::from_millis(50);
+/// After the simulator ends: time for its last messages to reach the observer.
+pub const SETTLE: Duration = Duration::from_millis(200);
+/// SIGINT, then this long, then SIGKILL.
+pub const STOP_GRACE: Duration = Duration::from_secs(5);
+/// The longest the observer's session may take to close.
+pub const CLOSE_TIMEOUT: Duration = Duration::from_secs(5);
+/// RUST_LOG for the nodes when the user set none: lifecycle at INFO, Zenoh's chatter off.
+pub const DEFAULT_RUST_LOG: &str = "info,zenoh=warn,zenoh_ext=warn";

@@ -1,0 +1,392 @@
+//! The loop as child processes: slipstream-acc, slipstream-detect (camera perception only) and
+//! slipstream-sim, watched from an observer session of the launcher's own.
+//!
+//! The order is fixed: [`LoopRun::open`] joins the bus (the caller subscribes to what it records
+//! before anything is published), [`LoopRun::start`] starts the controllers, waits until their
+//! liveliness tokens are seen, then starts the simulator; [`LoopRun::check`] reports its end or
+//! a node's death; [`LoopRun::stop`] stops the simulator first (it publishes the scenario's
+//! end), lets the last messages land, then the others; [`LoopRun::close`] leaves the bus.
+//!
+//! Connection, by [`Network`]: with the user's flags in peer mode every node listens on a
+//! loopback port of its own and dials the observer and the nodes started before it, so the
+//! loop does not depend on discovery, and the observer also listens where the config says
+//! (by default tcp/127.0.0.1:7447, so `slipstream top` in another terminal finds the loop); in
+//! client mode (through a router) the nodes get the flags as given. [`Network::Isolated`] uses
+//! only loopback ports and a namespace of the run's own: nothing else on the machine is seen
+//! or disturbed (the suites).
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, ExitStatus, Stdio};
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use serde::Serialize;
+
+use super::child::{free_ports, sibling_binary, Child};
+use super::{CLOSE_TIMEOUT, DEFAULT_RUST_LOG, NODE_POLL, NODE_START_TIMEOUT, SETTLE, STOP_GRACE};
+use crate::acc::PerceptionSource;
+use crate::config::{ConnectArgs, DEFAULT_ZENOH_CONFIG};
+use crate::sim::SimReport;
+use crate::Bus;
+
+/// How the simulator's clock runs (slipstream-sim --clock).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum ClockMode {
+    /// Paced to the wall clock: watch it drive; latency is felt by the vehicle
+    Realtime,
+    /// As fast as the simulator can; the detector and the ACC may fall behind
+    Fast,
+    /// Every step waits for the ACC's answer: deterministic, as fast as the loop allows
+    Lockstep,
+}
+
+impl ClockMode {
+    pub fn name(self) -> &'static str {
+        match self {
+            ClockMode::Realtime => "realtime",
+            ClockMode::Fast => "fast",
+            ClockMode::Lockstep => "lockstep",
+        }
+    }
+}
+
+/// Which loop to run.
+#[derive(Debug, Clone)]
+pub struct LoopSpec {
+    /// As given to slipstream-sim --scenario: a built-in name or a .json5 file.
+    pub scenario: String,
+    pub duration_s: f64,
+    pub clock: ClockMode,
+    pub perception: PerceptionSource,
+    pub set_speed_mps: f64,
+}
+
+/// How the loop's processes find each other.
+#[derive(Debug, Clone)]
+pub enum Network<'a> {
+    /// The user's connection and topic flags (see the module doc).
+    User(&'a ConnectArgs),
+    /// Loopback ports and a namespace of the run's own; the topic config file, if any.
+    Isolated { topics: Option<PathBuf>, namespace: String },
+}
+
+/// How a node process ended.
+#[derive(Debug, Clone, Serialize)]
+pub struct NodeEnd {
+    pub node: String,
+    pub pid: u32,
+    /// Exit code; None when killed by a signal.
+    pub exit_code: Option<i32>,
+    /// Ended on its own before the run was over.
+    pub died: bool,
+    pub log: PathBuf,
+}
+
+/// What [`LoopRun::check`] saw.
+#[derive(Debug, Clone, Default)]
+pub struct Progress {
+    /// The simulator has exited, with this status.
+    pub sim_ended: Option<ExitStatus>,
+    /// Nodes that ended before the run was over (the simulator too, if it failed).
+    pub died: Vec<String>,
+}
+
+impl Progress {
+    /// Nothing more to wait for.
+    pub fn over(&self) -> bool {
+        self.sim_ended.is_some() || !self.died.is_empty()
+    }
+}
+
+/// The node binaries, in start order.
+const ACC: &str = "slipstream-acc";
+const DETECT: &str = "slipstream-detect";
+const SIM: &str = "slipstream-sim";
+/// The file slipstream-sim --json writes its report to, in the logs directory.
+const SIM_REPORT: &str = "slipstream-sim.json";
+
+/// Loopback ports: the observer's and each node's.
+#[derive(Debug, Clone, Copy)]
+struct Ports {
+    observer: u16,
+    acc: u16,
+    detect: u16,
+    sim: u16,
+}
+
+fn endpoint(port: u16) -> String {
+    format!("tcp/127.0.0.1:{port}")
+}
+
+/// The loop's processes and the observer's session.
+pub struct LoopRun {
+    bus: Bus,
+    spec: LoopSpec,
+    logs: PathBuf,
+    /// Flags every node gets (config, topics, namespace, mode, ...).
+    base_flags: Vec<String>,
+    /// Endpoints the user gave with -e (peer mode: dialled besides the loop's own ports).
+    user_connect: Vec<String>,
+    /// Peer mode: each node listens on its own port and dials the ones before it.
+    peer: bool,
+    ports: Ports,
+    nodes: Vec<Child>,
+    died: Vec<String>,
+}
+
+impl LoopRun {
+    /// Joins the bus as `observer`, with the node logs going to `logs` (created). Nothing is
+    /// started yet: subscribe to what you record first, then [`LoopRun::start`].
+    pub async fn open(spec: LoopSpec, network: Network<'_>, logs: &Path, observer: &str) -> Result<LoopRun> {
+        std::fs::create_dir_all(logs).with_context(|| format!("create the log directory {}", logs.display()))?;
+        let [p_obs, p_acc, p_det, p_sim] = free_ports::<4>()?;
+        let ports = Ports { observer: p_obs, acc: p_acc, detect: p_det, sim: p_sim };
+        let (config, topic_map, base_flags, user_connect, peer) = match network {
+            Network::User(connect) => {
+                let mut config = connect.zenoh_config()?;
+                let mode = config.get_json("mode").ok().and_then(|m| serde_json::from_str::<String>(&m).ok());
+                anyhow::ensure!(
+                    mode.as_deref() != Some("router"),
+                    "the loop runs its nodes as peers or clients, not routers (-m)"
+                );
+                let peer = mode.as_deref().unwrap_or("peer") == "peer";
+                if peer {
+                    let mut listen: Vec<serde_json::Value> = config
+                        .get_json("listen/endpoints")
+                        .ok()
+                        .and_then(|s| serde_json::from_str(&s).ok())
+                        .unwrap_or_default();
+                    listen.push(endpoint(p_obs).into());
+                    config
+                        .insert_json5("listen/endpoints", &serde_json::Value::Array(listen).to_string())
+                        .map_err(|e| anyhow::anyhow!("add a listen endpoint for the nodes: {e}"))?;
+                }
+                (config, connect.topic_map()?, user_flags(connect), connect.connect.clone(), peer)
+            }
+            Network::Isolated { topics, namespace } => {
+                let mut config = zenoh::Config::from_json5(DEFAULT_ZENOH_CONFIG).map_err(anyhow::Error::msg)?;
+                config
+                    .insert_json5("listen/endpoints", &format!("[\"{}\"]", endpoint(p_obs)))
+                    .map_err(anyhow::Error::msg)?;
+                config.insert_json5("connect/endpoints", "[]").map_err(anyhow::Error::msg)?;
+                let map = crate::TopicMap::load_or_default(topics.as_deref())?.with_namespace(&namespace)?;
+                let mut flags = vec!["-n".to_string(), namespace];
+                if let Some(file) = topics {
+                    flags.extend(["-t".into(), file.display().to_string()]);
+                }
+                (config, map, flags, Vec::new(), true)
+            }
+        };
+        let bus = Bus::open(config, topic_map, observer).await.context("join the bus")?;
+        Ok(LoopRun {
+            bus,
+            spec,
+            logs: logs.to_path_buf(),
+            base_flags,
+            user_connect,
+            peer,
+            ports,
+            nodes: Vec::new(),
+            died: Vec::new(),
+        })
+    }
+
+    /// The observer's session: subscribe here to what the run is judged by.
+    pub fn bus(&self) -> &Bus {
+        &self.bus
+    }
+
+    pub fn spec(&self) -> &LoopSpec {
+        &self.spec
+    }
+
+    /// Where the nodes' logs go: `<node>.log` (stderr), `<node>.out` (stdout).
+    pub fn logs(&self) -> &Path {
+        &self.logs
+    }
+
+    fn camera(&self) -> bool {
+        self.spec.perception == PerceptionSource::Camera
+    }
+
+    /// Starts the controllers, waits until they are alive on the bus (at most
+    /// [`NODE_START_TIMEOUT`]), then starts the simulator.
+    pub async fn start(&mut self) -> Result<()> {
+        let spec = self.spec.clone();
+        let lockstep = spec.clock == ClockMode::Lockstep;
+        let mut acc_args = vec![
+            "--set-speed".to_string(),
+            spec.set_speed_mps.to_string(),
+            "--perception".into(),
+            if self.camera() { "camera" } else { "ground-truth" }.into(),
+        ];
+        if lockstep {
+            acc_args.push("--lockstep".into());
+        }
+        self.spawn(ACC, acc_args, self.ports.acc, &[])?;
+        let mut controllers = vec![self.ports.acc];
+        if self.camera() {
+            self.spawn(DETECT, Vec::new(), self.ports.detect, &[self.ports.acc])?;
+            controllers.push(self.ports.detect);
+        }
+        self.await_controllers().await?;
+        let mut sim_args = vec![
+            "--scenario".to_string(),
+            spec.scenario.clone(),
+            "--clock".into(),
+            spec.clock.name().into(),
+            "--duration".into(),
+            spec.duration_s.to_string(),
+            "--json".into(),
+        ];
+        if lockstep {
+            sim_args.extend(["--wait-for".into(), "acc".into()]);
+        }
+        self.spawn(SIM, sim_args, self.ports.sim, &controllers)
+    }
+
+    /// The simulator's first frame must find the detector and the ACC listening.
+    async fn await_controllers(&mut self) -> Result<()> {
+        let wanted: Vec<&str> = if self.camera() { vec!["acc", "detect"] } else { vec!["acc"] };
+        let seen = self.bus.watch_nodes().await?;
+        let deadline = Instant::now() + NODE_START_TIMEOUT;
+        loop {
+            let alive = seen.names();
+            if wanted.iter().all(|w| alive.iter().any(|a| a == w)) {
+                return Ok(());
+            }
+            for n in &mut self.nodes {
+                if let Some(status) = n.exited() {
+                    bail!("{} exited at start ({status}); see {}", n.name, log_of(&self.logs, &n.name).display());
+                }
+            }
+            anyhow::ensure!(
+                Instant::now() < deadline,
+                "{wanted:?} not all up after {NODE_START_TIMEOUT:?} (alive: {alive:?}); see the logs in {}",
+                self.logs.display()
+            );
+            tokio::time::sleep(NODE_POLL).await;
+        }
+    }
+
+    /// The flags of one node: the shared ones, then its own port and whom it dials.
+    fn flags(&self, own: u16, earlier: &[u16]) -> Vec<String> {
+        let mut f = self.base_flags.clone();
+        if self.peer {
+            f.extend(["-l".into(), endpoint(own)]);
+            for p in std::iter::once(&self.ports.observer).chain(earlier) {
+                f.extend(["-e".into(), endpoint(*p)]);
+            }
+        }
+        for e in &self.user_connect {
+            f.extend(["-e".into(), e.clone()]);
+        }
+        f
+    }
+
+    fn spawn(&mut self, bin: &str, args: Vec<String>, own: u16, earlier: &[u16]) -> Result<()> {
+        let stderr = create(&log_of(&self.logs, bin))?;
+        let stdout_name = if bin == SIM { SIM_REPORT.to_string() } else { format!("{bin}.out") };
+        let stdout = create(&self.logs.join(stdout_name))?;
+        let mut cmd = Command::new(sibling_binary(bin)?);
+        cmd.args(self.flags(own, earlier)).args(args).stdin(Stdio::null()).stdout(stdout).stderr(stderr);
+        if std::env::var_os("RUST_LOG").is_none() {
+            cmd.env("RUST_LOG", DEFAULT_RUST_LOG);
+        }
+        self.nodes.push(Child::spawn(bin, &mut cmd)?);
+        Ok(())
+    }
+
+    /// Whether the simulator has ended and which nodes died (each named once, when first seen).
+    pub fn check(&mut self) -> Progress {
+        let mut progress = Progress::default();
+        for n in &mut self.nodes {
+            let Some(status) = n.exited() else { continue };
+            if n.name == SIM {
+                progress.sim_ended = Some(status);
+                if status.success() {
+                    continue;
+                }
+            }
+            if !self.died.contains(&n.name) {
+                self.died.push(n.name.clone());
+            }
+        }
+        progress.died = self.died.clone();
+        progress
+    }
+
+    /// Stops the simulator first (it publishes the scenario's end), waits [`SETTLE`] for the
+    /// last messages, then stops the others. Returns how each node ended.
+    pub async fn stop(&mut self) -> Vec<NodeEnd> {
+        if let Some(sim) = self.nodes.iter_mut().find(|n| n.name == SIM) {
+            sim.stop(STOP_GRACE);
+        }
+        tokio::time::sleep(SETTLE).await;
+        for n in &mut self.nodes {
+            n.stop(STOP_GRACE);
+        }
+        let logs = self.logs.clone();
+        self.nodes
+            .iter_mut()
+            .map(|n| NodeEnd {
+                node: n.name.clone(),
+                pid: n.pid(),
+                exit_code: n.exited().and_then(|s| s.code()),
+                died: self.died.contains(&n.name),
+                log: log_of(&logs, &n.name),
+            })
+            .collect()
+    }
+
+    /// The simulator's report (its --json output), once it has ended.
+    pub fn sim_report(&self) -> Result<SimReport> {
+        let path = self.logs.join(SIM_REPORT);
+        let bytes = std::fs::read(&path).with_context(|| format!("read {}", path.display()))?;
+        serde_json::from_slice(&bytes).with_context(|| format!("{} is no simulator report", path.display()))
+    }
+
+    /// Leaves the bus, waiting at most [`CLOSE_TIMEOUT`]: other sessions still attached (a
+    /// `top`, a Python client) must not hold up the caller's report.
+    pub async fn close(self) {
+        match tokio::time::timeout(CLOSE_TIMEOUT, self.bus.close()).await {
+            Ok(Ok(())) => {}
+            Ok(Err(e)) => tracing::warn!("closing the observer's session: {e}"),
+            Err(_) => tracing::warn!("closing the observer's session took over {CLOSE_TIMEOUT:?}; left open"),
+        }
+    }
+}
+
+/// A node's stderr log in `logs`.
+pub fn log_of(logs: &Path, node: &str) -> PathBuf {
+    logs.join(format!("{node}.log"))
+}
+
+fn create(path: &Path) -> Result<std::fs::File> {
+    std::fs::File::create(path).with_context(|| format!("create {}", path.display()))
+}
+
+/// The user's flags as the nodes take them (endpoints are added per node).
+fn user_flags(connect: &ConnectArgs) -> Vec<String> {
+    let mut base: Vec<String> = Vec::new();
+    if let Some(c) = &connect.zenoh_config {
+        base.extend(["-c".into(), c.display().to_string()]);
+    }
+    if let Some(t) = &connect.topics {
+        base.extend(["-t".into(), t.display().to_string()]);
+    }
+    if let Some(n) = &connect.namespace {
+        base.extend(["-n".into(), n.clone()]);
+    }
+    if let Some(m) = connect.mode {
+        base.extend(["-m".into(), format!("{m:?}").to_lowercase()]);
+    }
+    if connect.no_multicast_scouting {
+        base.push("--no-multicast-scouting".into());
+    }
+    for kv in &connect.cfg {
+        base.extend(["--cfg".into(), kv.clone()]);
+    }
+    base
+}
