@@ -11,6 +11,7 @@ or `-c config/lan-peer.json5` for multicast discovery, or any Zenoh config file 
 """
 
 import json
+import os
 import signal
 
 import zenoh
@@ -22,13 +23,17 @@ DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 
 def add_args(parser):
     g = parser.add_argument_group("connection (same flags as the Rust nodes)")
-    g.add_argument("-c", "--zenoh-config", metavar="FILE",
-                   help="Zenoh config file (JSON5); without it: peer mode on loopback, scouting off")
+    g.add_argument("-c", "--config", "--zenoh-config", dest="zenoh_config", metavar="FILE",
+                   default=os.environ.get("SLIPSTREAM_ZENOH_CONFIG"),
+                   help="Zenoh config file (JSON5) [env: SLIPSTREAM_ZENOH_CONFIG]; without it: peer mode on "
+                        "loopback, scouting off")
     g.add_argument("-m", "--zenoh-mode", choices=["peer", "client"], help="Zenoh mode [default: peer]")
     g.add_argument("-e", "--connect", action="append", metavar="ENDPOINT", default=[],
                    help=f"endpoint to connect to, repeatable [default without -c: {DEFAULT_ENDPOINT}]")
     g.add_argument("-l", "--listen", action="append", metavar="ENDPOINT", default=[],
                    help="endpoint to listen on, repeatable [default: none]")
+    g.add_argument("--no-multicast-scouting", action="store_true",
+                   help="turn multicast scouting off (it is already off without -c)")
     g.add_argument("--cfg", action="append", metavar="KEY:VALUE", default=[],
                    help="any Zenoh config key, value in JSON5, e.g. --cfg 'transport/auth/usrpwd/user:\"acc\"'")
     g.add_argument("-t", "--topics", metavar="FILE",
@@ -37,8 +42,9 @@ def add_args(parser):
     g.add_argument("-n", "--namespace", help="put every key under this namespace [env: SLIPSTREAM_NAMESPACE]")
 
 
-def zenoh_config(config_file=None, mode=None, connect=(), listen=(), cfg=()):
-    """A zenoh.Config: the file, else loopback peer defaults; then mode, endpoints and --cfg pairs."""
+def zenoh_config(config_file=None, mode=None, connect=(), listen=(), cfg=(), no_multicast_scouting=False):
+    """A zenoh.Config: the file, else loopback peer defaults; then mode, endpoints, scouting and
+    --cfg pairs (the order the Rust nodes apply them in)."""
     if config_file:
         conf = zenoh.Config.from_file(config_file)
     else:
@@ -53,6 +59,8 @@ def zenoh_config(config_file=None, mode=None, connect=(), listen=(), cfg=()):
         conf.insert_json5("connect/endpoints", json.dumps(list(connect)))
     if listen:
         conf.insert_json5("listen/endpoints", json.dumps(list(listen)))
+    if no_multicast_scouting:
+        conf.insert_json5("scouting/multicast/enabled", "false")
     for kv in cfg:
         key, sep, value = kv.partition(":")
         if not sep:
@@ -73,7 +81,8 @@ def open_from_args(args):
     # SIGTERM (a process manager, `kill`) stops as cleanly as Ctrl-C.
     signal.signal(signal.SIGTERM, _interrupt)
     topics = Topics.load(args.topics, args.namespace)
-    conf = zenoh_config(args.zenoh_config, args.zenoh_mode, args.connect, args.listen, args.cfg)
+    conf = zenoh_config(args.zenoh_config, args.zenoh_mode, args.connect, args.listen, args.cfg,
+                        args.no_multicast_scouting)
     try:
         session = zenoh.open(conf)
     except Exception as e:
