@@ -23,6 +23,16 @@ pub enum PerceptionSource {
     GroundTruth,
 }
 
+impl PerceptionSource {
+    /// As written on the command line (`--perception`) and in the config.
+    pub fn name(self) -> &'static str {
+        match self {
+            PerceptionSource::Camera => "camera",
+            PerceptionSource::GroundTruth => "ground-truth",
+        }
+    }
+}
+
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct AccSettings {

@@ -219,7 +219,7 @@ impl LoopRun {
             "--set-speed".to_string(),
             spec.set_speed_mps.to_string(),
             "--perception".into(),
-            if self.camera() { "camera" } else { "ground-truth" }.into(),
+            spec.perception.name().into(),
         ];
         if lockstep {
             acc_args.push("--lockstep".into());

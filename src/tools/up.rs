@@ -106,13 +106,6 @@ pub struct Outcome {
     pub report: UpReport,
 }
 
-fn perception_name(p: PerceptionSource) -> &'static str {
-    match p {
-        PerceptionSource::Camera => "camera",
-        PerceptionSource::GroundTruth => "ground-truth",
-    }
-}
-
 impl Outcome {
     /// 0 clean run; 1 collision or a node died; 130 stopped with Ctrl-C.
     pub fn exit_code(&self) -> u8 {
@@ -305,7 +298,7 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
         "slipstream up: {} ({} clock, {} perception), report in {}",
         scenario.name,
         args.mode.name(),
-        perception_name(args.perception),
+        args.perception.name(),
         dir.display()
     );
     lp.start().await?;
@@ -367,7 +360,7 @@ fn judged_outputs(
     let mut plots = Vec::new();
     if trace.samples.len() > 1 {
         let path = dir.join(format!("{name}.png"));
-        let title = format!("{name} ({} clock, {} perception)", args.mode.name(), perception_name(args.perception));
+        let title = format!("{name} ({} clock, {} perception)", args.mode.name(), args.perception.name());
         plot::plot(trace, &title, &path)?;
         plots.push(path);
     }
@@ -404,7 +397,7 @@ pub fn summary(r: &UpReport) -> String {
         "\n{} ({} clock, {} perception): {}\n  {:.1} s simulated in {:.1} s (real-time factor {:.2}); collisions {}\n",
         r.scenario,
         r.mode.name(),
-        perception_name(r.perception), r.ended, r.sim_time_s, r.wall_time_s, r.real_time_factor, r.collisions
+        r.perception.name(), r.ended, r.sim_time_s, r.wall_time_s, r.real_time_factor, r.collisions
     );
     if let Some(m) = &r.metrics {
         s.push_str(&format!(
