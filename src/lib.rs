@@ -24,10 +24,11 @@
 //!
 //! **Orchestration**: running and judging the loop.
 //! - [`launch`]: the nodes as child processes: start, await on the bus, stop, logs.
+//! - [`record`]: the bus into MCAP files, lossless and with every loss counted.
 //! - [`eval`]: recording a run, metrics, plots, latency per hop; the detect and ACC suites.
 //!
 //! **Tools**: what the `slipstream` command offers.
-//! - [`tools`]: `up`, `top`, `echo`, `info`, `demo`.
+//! - [`tools`]: `up`, `record`, `top`, `echo`, `info`, `demo`, `router`.
 //! - [`bench`]: `slipstream bench`, the bus against raw Zenoh, UDP and TCP in one run.
 //! - [`cli`]: what every binary does first (Zenoh's runtime layout, logging).
 
@@ -45,6 +46,7 @@ pub mod vehicle;
 
 pub mod eval;
 pub mod launch;
+pub mod record;
 
 pub mod bench;
 pub mod cli;

@@ -43,6 +43,13 @@ enum Command {
     Top(slipstream::tools::top::TopArgs),
     /// Print the messages of a topic as JSON lines (decoded by their type)
     Echo(slipstream::tools::echo::EchoArgs),
+    /// Record every key of the namespace (or the topics and key expressions given) into an
+    /// MCAP file, payloads byte for byte, until Ctrl-C or --duration
+    ///
+    /// The file opens in Foxglove and any MCAP reader (docs/recording.md). The summary counts
+    /// per key the messages, the ones lost before the recorder (sequence gaps) and the ones it
+    /// dropped; it exits with 1 when anything was lost.
+    Record(slipstream::tools::record::RecordArgs),
     /// Run a Zenoh router (for nodes on several PCs, in client mode) with config/router.json5
     /// (or -c FILE): for users who have no zenohd. Runs until Ctrl-C.
     ///
@@ -161,6 +168,19 @@ fn run(cli: Cli) -> Result<ExitCode> {
             }
             Ok(bus)
         })),
+        Command::Record(args) => {
+            let rt = tokio::runtime::Runtime::new()?;
+            let summary = rt.block_on(async {
+                let bus = slipstream::Bus::open(connect.zenoh_config()?, connect.topic_map()?, "record").await?;
+                let summary = slipstream::tools::record::run(&bus, &args).await;
+                let closed = tokio::time::timeout(slipstream::launch::CLOSE_TIMEOUT, bus.close()).await;
+                if !matches!(closed, Ok(Ok(()))) {
+                    tracing::warn!("the recorder's session did not close cleanly");
+                }
+                summary
+            })?;
+            Ok(if summary.lost_anything() { ExitCode::FAILURE } else { ExitCode::SUCCESS })
+        }
         Command::Router => done(slipstream::tools::router::run(connect)),
         Command::Demo(args) => done(slipstream::tools::demo::run(connect, &args)),
         Command::Bench(args) => done(bench_command(&args)),

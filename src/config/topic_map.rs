@@ -283,6 +283,20 @@ impl TopicMap {
     }
 
     /// Every key of this namespace (for tools that watch all topics).
+    /// Key expressions that cover every key of this map: the namespace, and any topic
+    /// remapped to an absolute key outside it (`top`, `record`).
+    pub fn every_key(&self) -> Vec<OwnedKeyExpr> {
+        let all = self.all_selector();
+        let mut selectors = vec![all.clone()];
+        for t in crate::topics::Topic::ALL {
+            let key = self.key(t);
+            if !all.includes(&key) && !selectors.contains(&key) {
+                selectors.push(key);
+            }
+        }
+        selectors
+    }
+
     pub fn all_selector(&self) -> OwnedKeyExpr {
         if self.namespace.is_empty() {
             key_expr("**").expect("valid")

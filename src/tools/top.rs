@@ -88,17 +88,8 @@ impl Watcher {
     pub async fn start(bus: &Bus) -> Result<Watcher> {
         let seen = Arc::new(Mutex::new(Seen::default()));
         let topics = bus.topics();
-        // The namespace, and any topic remapped to an absolute key outside it.
-        let all = topics.all_selector();
-        let mut selectors = vec![all.clone()];
-        for t in crate::topics::Topic::ALL {
-            let key = topics.key(t);
-            if !all.includes(&key) && !selectors.contains(&key) {
-                selectors.push(key);
-            }
-        }
         let mut subs = Vec::new();
-        for sel in selectors {
+        for sel in topics.every_key() {
             let seen = seen.clone();
             let map = topics.clone();
             subs.push(bus.subscribe_samples(sel, false, move |sample| record(&seen, &map, &sample)).await?);

@@ -28,6 +28,7 @@ use crate::eval::trace::{judge, Recorder};
 use crate::eval::{fmt_opt, plot, Metrics};
 use crate::launch::{ClockMode, LoopRun, LoopSpec, Network, NodeEnd};
 use crate::msg::{AccStatus, SimClock, SimEvent, SimEventKind};
+use crate::record::{Recording, RecordingSummary};
 use crate::sim::Scenario;
 use crate::{topics, Bus};
 
@@ -36,6 +37,8 @@ const REFRESH_TTY: Duration = Duration::from_millis(250);
 const REFRESH_PLAIN: Duration = Duration::from_millis(2000);
 /// Width of the live view's progress bar, characters.
 const BAR_WIDTH: usize = 24;
+/// The recording's file in the report directory (`--record`).
+const RECORDING: &str = "run.mcap";
 
 #[derive(Debug, Clone, clap::Args)]
 pub struct UpArgs {
@@ -64,6 +67,9 @@ pub struct UpArgs {
     /// terminal)
     #[arg(long)]
     pub plain: bool,
+    /// Record every key of the run into run.mcap in the report directory (docs/recording.md)
+    #[arg(long)]
+    pub record: bool,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -98,6 +104,8 @@ pub struct UpReport {
     /// Every key seen during the run (as `slipstream top` shows it), at the end.
     pub topics: Vec<KeyRow>,
     pub plots: Vec<PathBuf>,
+    /// With --record: the recording and what it lost.
+    pub recording: Option<RecordingSummary>,
     pub report_dir: PathBuf,
 }
 
@@ -107,10 +115,12 @@ pub struct Outcome {
 }
 
 impl Outcome {
-    /// 0 clean run; 1 collision or a node died; 130 stopped with Ctrl-C.
+    /// 0 clean run; 1 collision, a node died or the recording lost messages; 130 stopped
+    /// with Ctrl-C.
     pub fn exit_code(&self) -> u8 {
         let r = &self.report;
-        if r.collisions > 0 || r.nodes.iter().any(|n| n.died) {
+        let lost = r.recording.as_ref().is_some_and(|s| s.lost_anything());
+        if r.collisions > 0 || r.nodes.iter().any(|n| n.died) || lost {
             1
         } else if r.interrupted {
             130
@@ -132,7 +142,7 @@ pub fn run(args: &UpArgs, connect: &ConnectArgs) -> Result<Outcome> {
     );
     let dir = match &args.report {
         Some(d) => d.clone(),
-        None => PathBuf::from("reports").join(format!("{}-{}", scenario.name, utc_stamp())),
+        None => PathBuf::from("reports").join(format!("{}-{}", scenario.name, super::utc_stamp())),
     };
     let rt = tokio::runtime::Runtime::new()?;
     let report = rt.block_on(run_loop(args, connect, scenario, &dir))?;
@@ -294,6 +304,10 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
     };
     let mut lp = LoopRun::open(spec, Network::User(connect), &dir.join("logs"), "up").await.context("up")?;
     let watch = Watch::start(lp.bus(), args.perception == PerceptionSource::Camera).await?;
+    let recording = match args.record {
+        true => Some(Recording::start(lp.bus(), &lp.bus().topics().every_key(), &dir.join(RECORDING)).await?),
+        false => None,
+    };
     eprintln!(
         "slipstream up: {} ({} clock, {} perception), report in {}",
         scenario.name,
@@ -314,6 +328,10 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
     }
     let nodes = lp.stop().await;
     let wall = started.elapsed().as_secs_f64();
+    let recording = match recording {
+        Some(r) => Some(tokio::task::spawn_blocking(move || r.finish()).await??),
+        None => None,
+    };
     let sim = lp.sim_report().ok();
     let topics_seen = watch.keys.view(lp.bus()).keys;
     let rec = watch.recorder.take();
@@ -343,6 +361,7 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
         metrics: judged.metrics,
         topics: topics_seen,
         plots,
+        recording,
         report_dir: dir.to_path_buf(),
     })
 }
@@ -447,35 +466,9 @@ pub fn summary(r: &UpReport) -> String {
     for p in &r.plots {
         s.push_str(&format!(", {}", p.display()));
     }
-    s
-}
-
-/// UTC date and time for directory names: 20261122-041530.
-fn utc_stamp() -> String {
-    let secs = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs());
-    let (days, rem) = (secs / 86_400, secs % 86_400);
-    // Civil date from days since 1970-01-01 (Howard Hinnant's algorithm).
-    let z = days as i64 + 719_468;
-    let era = z.div_euclid(146_097);
-    let doe = z - era * 146_097;
-    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
-    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
-    let mp = (5 * doy + 2) / 153;
-    let d = doy - (153 * mp + 2) / 5 + 1;
-    let m = if mp < 10 { mp + 3 } else { mp - 9 };
-    let y = yoe + era * 400 + i64::from(m <= 2);
-    format!("{y:04}{m:02}{d:02}-{:02}{:02}{:02}", rem / 3600, rem % 3600 / 60, rem % 60)
-}
-
-#[cfg(test)]
-mod tests {
-    #[test]
-    fn utc_stamp_has_the_shape_of_a_date() {
-        let s = super::utc_stamp();
-        assert_eq!(s.len(), 15, "{s}");
-        assert!(s.starts_with("20"), "{s}");
-        let month: u32 = s[4..6].parse().unwrap();
-        let day: u32 = s[6..8].parse().unwrap();
-        assert!((1..=12).contains(&month) && (1..=31).contains(&day), "{s}");
+    if let Some(rec) = &r.recording {
+        s.push('\n');
+        s.push_str(&rec.render(std::io::stdout().is_terminal()));
     }
+    s
 }

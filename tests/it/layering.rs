@@ -17,6 +17,7 @@ const LAYER_OF: &[(&str, u8)] = &[
     ("perception", 1),
     ("acc", 1),
     ("launch", 2),
+    ("record", 2),
     ("eval", 2),
     ("tools", 3),
     ("bench", 3),
@@ -26,8 +27,9 @@ const LAYER_OF: &[(&str, u8)] = &[
 /// Within the domain layer, the only imports across modules: the shared vehicle model.
 const DOMAIN_SHARED: &str = "vehicle";
 
-/// Within orchestration: evaluation runs the loop through launch, never the other way.
-const ORCHESTRATION_ORDER: &[&str] = &["launch", "eval"];
+/// Within orchestration: evaluation runs the loop through launch and may read recordings,
+/// never the other way.
+const ORCHESTRATION_ORDER: &[&str] = &["launch", "record", "eval"];
 
 /// Names the crate root re-exports from the contract (`crate::Bus`, ...).
 const ROOT_REEXPORTS: &[(&str, &str)] =

@@ -1,0 +1,373 @@
+//! The recorder: Zenoh callbacks -> a bounded queue -> a writer thread -> an MCAP file.
+
+use std::collections::{BTreeMap, HashMap};
+use std::fs::File;
+use std::io::BufWriter;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
+use std::sync::mpsc::{sync_channel, Receiver, RecvTimeoutError, SyncSender};
+use std::sync::Arc;
+use std::thread::JoinHandle;
+use std::time::Instant;
+
+use anyhow::{anyhow, Context, Result};
+use parking_lot::Mutex;
+use serde::Serialize;
+use zenoh::key_expr::OwnedKeyExpr;
+
+use super::{message_encoding, schema_name, FLUSH_EVERY, METADATA_NAME, QUEUE_BYTES};
+use crate::bus::{Bus, Declared};
+use crate::msg::{self, MessageKind, WIRE_VERSION};
+
+/// Items the queue holds at most (besides the byte bound).
+const QUEUE_ITEMS: usize = 1 << 16;
+
+/// One sample on its way to the file.
+struct Item {
+    key: String,
+    source: Option<String>,
+    payload: Vec<u8>,
+    received_ns: u64,
+}
+
+enum ToWriter {
+    Item(Item),
+    /// Every subscriber is gone: write the summary and close the file.
+    Finish,
+}
+
+/// A channel: its key, the message type its payloads say (None: not a slipstream payload) and
+/// the publisher (the node name in the samples' attachment): lockstep and replay need it.
+type ChannelKey = (String, Option<MessageKind>, Option<String>);
+
+/// What the callbacks and the writer share.
+#[derive(Default)]
+struct Shared {
+    queued_bytes: AtomicUsize,
+    /// Accepted into the queue (for progress).
+    messages: AtomicU64,
+    bytes: AtomicU64,
+    dropped: Mutex<HashMap<ChannelKey, u64>>,
+    /// Set when finishing: samples after it belong to no recording.
+    closing: AtomicBool,
+}
+
+/// One channel of a recording.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct ChannelSummary {
+    pub topic: String,
+    pub schema: String,
+    pub messages: u64,
+    pub bytes: u64,
+    /// Sequence numbers never seen, per publisher: lost before the recorder (a publisher's
+    /// drop-when-congested QoS, the network).
+    pub lost_upstream: u64,
+    /// Messages the recorder dropped itself (its queue was full).
+    pub dropped_by_recorder: u64,
+    /// The publishing node (the samples' attachment), if it names itself.
+    pub publisher: Option<String>,
+}
+
+/// A finished recording.
+#[derive(Debug, Clone, Serialize)]
+pub struct RecordingSummary {
+    pub path: PathBuf,
+    pub duration_s: f64,
+    pub file_bytes: u64,
+    pub messages: u64,
+    pub lost_upstream: u64,
+    pub dropped_by_recorder: u64,
+    pub channels: Vec<ChannelSummary>,
+}
+
+impl RecordingSummary {
+    pub fn lost_anything(&self) -> bool {
+        self.lost_upstream > 0 || self.dropped_by_recorder > 0
+    }
+
+    /// A table for people: one line per channel, then the verdict (red on a terminal when
+    /// anything was lost).
+    pub fn render(&self, color: bool) -> String {
+        let mut s = format!(
+            "recording {}: {} messages, {:.1} MB in {:.1} s\n  {:<34} {:<30} {:<10} {:>8} {:>10} {:>6} {:>8}\n",
+            self.path.display(),
+            self.messages,
+            self.file_bytes as f64 / 1e6,
+            self.duration_s,
+            "key",
+            "schema",
+            "from",
+            "messages",
+            "MB",
+            "lost",
+            "dropped"
+        );
+        for c in &self.channels {
+            s.push_str(&format!(
+                "  {:<34} {:<30} {:<10} {:>8} {:>10.2} {:>6} {:>8}\n",
+                c.topic,
+                c.schema,
+                c.publisher.as_deref().unwrap_or("-"),
+                c.messages,
+                c.bytes as f64 / 1e6,
+                c.lost_upstream,
+                c.dropped_by_recorder
+            ));
+        }
+        let verdict = if self.lost_anything() {
+            format!(
+                "LOST: {} messages never reached the recorder (sequence gaps), {} dropped by the recorder",
+                self.lost_upstream, self.dropped_by_recorder
+            )
+        } else {
+            "nothing lost: every sequence number of every publisher is in the file".to_string()
+        };
+        match (color, self.lost_anything()) {
+            (true, true) => s.push_str(&format!("  \x1b[31m{verdict}\x1b[0m")),
+            _ => s.push_str(&format!("  {verdict}")),
+        }
+        s
+    }
+}
+
+/// A recording in progress; [`Recording::finish`] closes the file.
+pub struct Recording {
+    shared: Arc<Shared>,
+    tx: SyncSender<ToWriter>,
+    subs: Vec<Declared>,
+    writer: Option<JoinHandle<Result<RecordingSummary>>>,
+}
+
+impl Recording {
+    /// Starts recording `selectors` (key expressions) of `bus` into `path` (created, with its
+    /// directory). The file's metadata names the namespace and the selectors.
+    pub async fn start(bus: &Bus, selectors: &[OwnedKeyExpr], path: &Path) -> Result<Recording> {
+        if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
+            std::fs::create_dir_all(dir).with_context(|| format!("create {}", dir.display()))?;
+        }
+        let file = File::create(path).with_context(|| format!("create {}", path.display()))?;
+        let options = mcap::WriteOptions::new()
+            .compression(Some(mcap::Compression::Lz4))
+            .profile("slipstream")
+            .library(format!("slipstream {}", env!("CARGO_PKG_VERSION")));
+        let writer = options.create(BufWriter::new(file)).map_err(|e| anyhow!("start {}: {e}", path.display()))?;
+        let shared = Arc::new(Shared::default());
+        let (tx, rx) = sync_channel(QUEUE_ITEMS);
+        let mut about = BTreeMap::new();
+        about.insert("namespace".to_string(), bus.topics().namespace().to_string());
+        about.insert("selectors".to_string(), selectors.iter().map(|s| s.to_string()).collect::<Vec<_>>().join(" "));
+        about.insert("wire_version".to_string(), WIRE_VERSION.to_string());
+        about.insert("started_unix_ns".to_string(), msg::wall_clock_ns().to_string());
+        let thread = {
+            let (shared, path) = (shared.clone(), path.to_path_buf());
+            std::thread::Builder::new()
+                .name("mcap-writer".into())
+                .spawn(move || write_loop(rx, shared, writer, about, path))
+                .context("start the recorder's writer thread")?
+        };
+        let mut subs = Vec::new();
+        for sel in selectors {
+            let (tx, shared) = (tx.clone(), shared.clone());
+            subs.push(bus.subscribe_samples(sel.clone(), false, move |s| enqueue(&tx, &shared, &s)).await?);
+        }
+        Ok(Recording { shared, tx, subs, writer: Some(thread) })
+    }
+
+    /// Messages and payload bytes taken so far.
+    pub fn progress(&self) -> (u64, u64) {
+        (self.shared.messages.load(Ordering::Relaxed), self.shared.bytes.load(Ordering::Relaxed))
+    }
+
+    /// Stops taking samples, writes what is queued, the summary (metadata) and the file's
+    /// index, and closes it.
+    pub fn finish(mut self) -> Result<RecordingSummary> {
+        self.shared.closing.store(true, Ordering::SeqCst);
+        self.subs.clear();
+        let _ = self.tx.send(ToWriter::Finish);
+        let thread = self.writer.take().context("recording already finished")?;
+        thread.join().map_err(|_| anyhow!("the recorder's writer thread panicked"))?
+    }
+}
+
+/// Zenoh's callback: copy the payload (one copy: the sample's buffer, possibly shared memory
+/// a publisher wants back, is not held) and queue it, or count it dropped. Never blocks.
+fn enqueue(tx: &SyncSender<ToWriter>, shared: &Shared, sample: &zenoh::sample::Sample) {
+    if shared.closing.load(Ordering::Relaxed) {
+        return;
+    }
+    let payload = sample.payload().to_bytes().into_owned();
+    let key = sample.key_expr().as_str().to_string();
+    let len = payload.len();
+    let room = shared.queued_bytes.load(Ordering::Relaxed) + len <= QUEUE_BYTES;
+    let item = Item {
+        source: sample.attachment().and_then(|a| a.try_to_string().ok()).map(|s| s.into_owned()),
+        received_ns: msg::wall_clock_ns(),
+        key,
+        payload,
+    };
+    let channel = (item.key.clone(), kind_of(&item.payload), item.source.clone());
+    if room && tx.try_send(ToWriter::Item(item)).is_ok() {
+        shared.queued_bytes.fetch_add(len, Ordering::Relaxed);
+        shared.messages.fetch_add(1, Ordering::Relaxed);
+        shared.bytes.fetch_add(len as u64, Ordering::Relaxed);
+    } else {
+        *shared.dropped.lock().entry(channel).or_default() += 1;
+    }
+}
+
+/// The message type a payload says it holds (version and kind bytes).
+fn kind_of(payload: &[u8]) -> Option<MessageKind> {
+    match payload {
+        [v, k, ..] if *v == WIRE_VERSION => MessageKind::from_u8(*k),
+        _ => None,
+    }
+}
+
+/// A channel being written.
+struct Channel {
+    id: u16,
+    summary: ChannelSummary,
+    /// The highest seq seen.
+    last_seq: Option<u64>,
+}
+
+/// The writer thread: items in, records out; at Finish the summary and the index.
+fn write_loop(
+    rx: Receiver<ToWriter>,
+    shared: Arc<Shared>,
+    mut writer: mcap::Writer<BufWriter<File>>,
+    mut about: BTreeMap<String, String>,
+    path: PathBuf,
+) -> Result<RecordingSummary> {
+    let started = Instant::now();
+    let mut channels: HashMap<ChannelKey, Channel> = HashMap::new();
+    let mut schemas: HashMap<Option<MessageKind>, u16> = HashMap::new();
+    let mut last_flush = Instant::now();
+    let fail = |e: mcap::McapError| anyhow!("write {}: {e}", path.display());
+    loop {
+        let item = match rx.recv_timeout(FLUSH_EVERY) {
+            Ok(ToWriter::Item(item)) => Some(item),
+            Ok(ToWriter::Finish) | Err(RecvTimeoutError::Disconnected) => break,
+            Err(RecvTimeoutError::Timeout) => None,
+        };
+        if let Some(item) = item {
+            shared.queued_bytes.fetch_sub(item.payload.len(), Ordering::Relaxed);
+            write_item(&mut writer, &mut channels, &mut schemas, item).map_err(fail)?;
+        }
+        if last_flush.elapsed() >= FLUSH_EVERY {
+            writer.flush().map_err(fail)?;
+            last_flush = Instant::now();
+        }
+    }
+    // Drops are counted per channel, also on channels that never got a message through.
+    for (key, n) in shared.dropped.lock().drain() {
+        let channel = match channels.get_mut(&key) {
+            Some(c) => c,
+            None => {
+                let id = add_channel(&mut writer, &mut schemas, &key).map_err(fail)?;
+                channels.entry(key.clone()).or_insert(Channel::new(id, &key))
+            }
+        };
+        channel.summary.dropped_by_recorder += n;
+    }
+    let mut list: Vec<ChannelSummary> = channels.into_values().map(|c| c.summary).collect();
+    list.sort_by(|a, b| (&a.topic, &a.schema, &a.publisher).cmp(&(&b.topic, &b.schema, &b.publisher)));
+    let mut summary = RecordingSummary {
+        path: path.clone(),
+        duration_s: started.elapsed().as_secs_f64(),
+        file_bytes: 0,
+        messages: list.iter().map(|c| c.messages).sum(),
+        lost_upstream: list.iter().map(|c| c.lost_upstream).sum(),
+        dropped_by_recorder: list.iter().map(|c| c.dropped_by_recorder).sum(),
+        channels: list,
+    };
+    about.insert("ended_unix_ns".to_string(), msg::wall_clock_ns().to_string());
+    about.insert("messages".to_string(), summary.messages.to_string());
+    about.insert("lost_upstream".to_string(), summary.lost_upstream.to_string());
+    about.insert("dropped_by_recorder".to_string(), summary.dropped_by_recorder.to_string());
+    about.insert("channels".to_string(), serde_json::to_string(&summary.channels)?);
+    writer
+        .write_metadata(&mcap::records::Metadata { name: METADATA_NAME.to_string(), metadata: about })
+        .map_err(fail)?;
+    writer.finish().map_err(fail)?;
+    drop(writer);
+    summary.file_bytes = std::fs::metadata(&path).map(|m| m.len()).unwrap_or(0);
+    Ok(summary)
+}
+
+impl Channel {
+    fn new(id: u16, key: &ChannelKey) -> Channel {
+        Channel {
+            id,
+            summary: ChannelSummary {
+                topic: key.0.clone(),
+                schema: schema_name(key.1),
+                messages: 0,
+                bytes: 0,
+                lost_upstream: 0,
+                dropped_by_recorder: 0,
+                publisher: key.2.clone(),
+            },
+            last_seq: None,
+        }
+    }
+}
+
+/// The schema of the key's message type (added once) and a channel for the key.
+fn add_channel(
+    writer: &mut mcap::Writer<BufWriter<File>>,
+    schemas: &mut HashMap<Option<MessageKind>, u16>,
+    key: &ChannelKey,
+) -> mcap::McapResult<u16> {
+    let schema = match schemas.get(&key.1) {
+        Some(id) => *id,
+        None => {
+            // No registered schema encoding describes postcard: the name says the type and
+            // docs/wire-format.md its bytes.
+            let id = writer.add_schema(&schema_name(key.1), "", &[])?;
+            schemas.insert(key.1, id);
+            id
+        }
+    };
+    let mut meta = BTreeMap::new();
+    if let Some(kind) = key.1 {
+        meta.insert("zenoh_encoding".to_string(), format!("application/octet-stream;{}", kind.encoding_schema()));
+    }
+    if let Some(publisher) = &key.2 {
+        meta.insert("publisher".to_string(), publisher.clone());
+    }
+    writer.add_channel(schema, &key.0, &message_encoding(), &meta)
+}
+
+fn write_item(
+    writer: &mut mcap::Writer<BufWriter<File>>,
+    channels: &mut HashMap<ChannelKey, Channel>,
+    schemas: &mut HashMap<Option<MessageKind>, u16>,
+    item: Item,
+) -> mcap::McapResult<()> {
+    let kind = kind_of(&item.payload);
+    let key = (item.key, kind, item.source);
+    if !channels.contains_key(&key) {
+        let id = add_channel(writer, schemas, &key)?;
+        channels.insert(key.clone(), Channel::new(id, &key));
+    }
+    let channel = channels.get_mut(&key).expect("just added");
+    let header = kind.and_then(|k| msg::decode_header(&item.payload, k).ok()).map(|(h, _)| h);
+    if let Some(h) = &header {
+        let last = channel.last_seq.unwrap_or(h.seq);
+        if h.seq > last + 1 {
+            channel.summary.lost_upstream += h.seq - last - 1;
+        }
+        channel.last_seq = Some(last.max(h.seq));
+    }
+    channel.summary.messages += 1;
+    channel.summary.bytes += item.payload.len() as u64;
+    let time = header.map_or(item.received_ns, |h| h.stamp_pub_ns);
+    let record = mcap::records::MessageHeader {
+        channel_id: channel.id,
+        sequence: header.map_or(0, |h| h.seq as u32),
+        log_time: time,
+        publish_time: time,
+    };
+    writer.write_to_known_channel(&record, &item.payload)
+}
