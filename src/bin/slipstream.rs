@@ -50,6 +50,10 @@ enum Command {
     /// per key the messages, the ones lost before the recorder (sequence gaps) and the ones it
     /// dropped; it exits with 1 when anything was lost.
     Record(slipstream::tools::record::RecordArgs),
+    /// Play a recording back onto the bus: every payload on its key, in this namespace (-n),
+    /// with the recorded timing (--rate for faster), or as fast as the subscribers take it
+    /// without dropping anything (--max)
+    Play(slipstream::tools::play::PlayArgs),
     /// Run a Zenoh router (for nodes on several PCs, in client mode) with config/router.json5
     /// (or -c FILE): for users who have no zenohd. Runs until Ctrl-C.
     ///
@@ -181,6 +185,13 @@ fn run(cli: Cli) -> Result<ExitCode> {
             })?;
             Ok(if summary.lost_anything() { ExitCode::FAILURE } else { ExitCode::SUCCESS })
         }
+        Command::Play(args) => done(on_bus(connect, "play", |bus| async move {
+            // The player paces with blocking sleeps and puts: on a thread of its own.
+            let bus = std::sync::Arc::new(bus);
+            let b = bus.clone();
+            tokio::task::spawn_blocking(move || slipstream::tools::play::run(&b, &args)).await??;
+            std::sync::Arc::try_unwrap(bus).map_err(|_| anyhow::anyhow!("the player still holds the session"))
+        })),
         Command::Router => done(slipstream::tools::router::run(connect)),
         Command::Demo(args) => done(slipstream::tools::demo::run(connect, &args)),
         Command::Bench(args) => done(bench_command(&args)),

@@ -240,6 +240,7 @@ fn write_loop(
     path: PathBuf,
 ) -> Result<RecordingSummary> {
     let started = Instant::now();
+    let namespace = about.get("namespace").cloned().unwrap_or_default();
     let mut channels: HashMap<ChannelKey, Channel> = HashMap::new();
     let mut schemas: HashMap<Option<MessageKind>, u16> = HashMap::new();
     let mut last_flush = Instant::now();
@@ -252,7 +253,7 @@ fn write_loop(
         };
         if let Some(item) = item {
             shared.queued_bytes.fetch_sub(item.payload.len(), Ordering::Relaxed);
-            write_item(&mut writer, &mut channels, &mut schemas, item).map_err(fail)?;
+            write_item(&mut writer, &mut channels, &mut schemas, &namespace, item).map_err(fail)?;
         }
         if last_flush.elapsed() >= FLUSH_EVERY {
             writer.flush().map_err(fail)?;
@@ -264,7 +265,7 @@ fn write_loop(
         let channel = match channels.get_mut(&key) {
             Some(c) => c,
             None => {
-                let id = add_channel(&mut writer, &mut schemas, &key).map_err(fail)?;
+                let id = add_channel(&mut writer, &mut schemas, &key, &namespace).map_err(fail)?;
                 channels.entry(key.clone()).or_insert(Channel::new(id, &key))
             }
         };
@@ -318,6 +319,7 @@ fn add_channel(
     writer: &mut mcap::Writer<BufWriter<File>>,
     schemas: &mut HashMap<Option<MessageKind>, u16>,
     key: &ChannelKey,
+    namespace: &str,
 ) -> mcap::McapResult<u16> {
     let schema = match schemas.get(&key.1) {
         Some(id) => *id,
@@ -336,6 +338,7 @@ fn add_channel(
     if let Some(publisher) = &key.2 {
         meta.insert("publisher".to_string(), publisher.clone());
     }
+    meta.insert("namespace".to_string(), namespace.to_string());
     writer.add_channel(schema, &key.0, &message_encoding(), &meta)
 }
 
@@ -343,12 +346,13 @@ fn write_item(
     writer: &mut mcap::Writer<BufWriter<File>>,
     channels: &mut HashMap<ChannelKey, Channel>,
     schemas: &mut HashMap<Option<MessageKind>, u16>,
+    namespace: &str,
     item: Item,
 ) -> mcap::McapResult<()> {
     let kind = kind_of(&item.payload);
     let key = (item.key, kind, item.source);
     if !channels.contains_key(&key) {
-        let id = add_channel(writer, schemas, &key)?;
+        let id = add_channel(writer, schemas, &key, namespace)?;
         channels.insert(key.clone(), Channel::new(id, &key));
     }
     let channel = channels.get_mut(&key).expect("just added");

@@ -4,6 +4,7 @@
 pub mod demo;
 pub mod echo;
 pub mod info;
+pub mod play;
 pub mod record;
 pub mod router;
 pub mod top;

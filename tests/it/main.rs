@@ -16,6 +16,7 @@ mod config;
 mod detect_node;
 mod discovery;
 mod layering;
+mod record;
 mod sim_node;
 mod sim_world;
 mod tools;
