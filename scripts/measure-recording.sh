@@ -7,9 +7,10 @@ cd "$(dirname "$0")/.."
 bin=target/release/slipstream
 out=${1:-target/measure-recording}
 rm -rf "$out" && mkdir -p "$out"
-rtf() { python3 -c 'import json,sys; r=json.load(open(sys.argv[1])); print("%.2f" % r["real_time_factor"])' "$1/report.json"; }
+# The simulator's own real-time factor (up's includes starting and stopping the nodes).
+rtf() { python3 -c 'import json,sys; r=json.load(open(sys.argv[1])); print("%.2f" % r["real_time_factor"])' "$1/logs/slipstream-sim.json"; }
 
-echo "== fast mode, camera perception, cut-in (40 s simulated): real-time factor without / with --record"
+echo "== fast mode, camera perception, cut-in (40 s simulated): the simulator's real-time factor without / with --record"
 for i in 1 2 3; do
   "$bin" up --mode fast --plain --report "$out/plain-$i" >/dev/null 2>&1 || true
   "$bin" up --mode fast --plain --record --report "$out/rec-$i" >/dev/null 2>&1 || true

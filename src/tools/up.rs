@@ -26,7 +26,7 @@ use crate::config::ConnectArgs;
 use crate::eval::latency::{self, HopStats, LoopLatency, HOPS_SHORT, WHOLE_LOOP};
 use crate::eval::trace::{judge, Recorder};
 use crate::eval::{fmt_opt, plot, Metrics};
-use crate::launch::{ClockMode, LoopRun, LoopSpec, Network, NodeEnd};
+use crate::launch::{ClockMode, LoopRun, LoopSpec, Network, NodeEnd, NODE_POLL};
 use crate::msg::{AccStatus, SimClock, SimEvent, SimEventKind};
 use crate::record::{Recording, RecordingSummary};
 use crate::sim::Scenario;
@@ -261,17 +261,24 @@ impl Watch {
 async fn watch_until_over(lp: &mut LoopRun, watch: &Watch, args: &UpArgs, duration_s: f64) -> Result<bool> {
     let name = lp.spec().scenario.clone();
     let plain = args.plain || !std::io::stderr().is_terminal();
+    let refresh = if plain { REFRESH_PLAIN } else { REFRESH_TTY };
     let nodes_seen = lp.bus().watch_nodes().await?;
     let ctrl_c = tokio::signal::ctrl_c();
     tokio::pin!(ctrl_c);
-    let mut tick = tokio::time::interval(if plain { REFRESH_PLAIN } else { REFRESH_TTY });
+    // The end is noticed within NODE_POLL; the view is drawn at its own refresh rate.
+    let mut poll = tokio::time::interval(NODE_POLL);
+    let mut drawn_at: Option<Instant> = None;
     let mut drawn_lines = 0usize;
     loop {
         tokio::select! {
             _ = &mut ctrl_c => return Ok(true),
-            _ = tick.tick() => {}
+            _ = poll.tick() => {}
         }
-        let progress = lp.check();
+        let over = lp.check().over();
+        if !over && drawn_at.is_some_and(|t| t.elapsed() < refresh) {
+            continue;
+        }
+        drawn_at = Some(Instant::now());
         let lines = watch.lines(&name, args.mode, duration_s, &nodes_seen.names());
         let mut err = std::io::stderr().lock();
         if plain {
@@ -286,7 +293,7 @@ async fn watch_until_over(lp: &mut LoopRun, watch: &Watch, args: &UpArgs, durati
             drawn_lines = lines.len();
         }
         let _ = err.flush();
-        if progress.over() {
+        if over {
             return Ok(false);
         }
     }
