@@ -14,7 +14,6 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
 
-use super::fmt_opt;
 use super::metrics::{aims, Metrics};
 use super::plot;
 use super::trace::{judge, Recorder};
@@ -192,7 +191,6 @@ async fn run_one(
 
 /// The report as a markdown table.
 pub fn markdown(report: &AccReport) -> String {
-    let f = fmt_opt;
     let mut out = String::new();
     out.push_str("| scenario | perception | collisions | min gap m | min TTC s | time-gap RMS s | speed RMSE m/s | max accel | max decel | max jerk | emergency s | result |\n");
     out.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
@@ -206,20 +204,10 @@ pub fn markdown(report: &AccReport) -> String {
         } else {
             format!("FAIL: {}", failed.join(", "))
         };
+        let [gap, ttc, time_gap, speed, accel, decel, jerk] = m.headline();
         out.push_str(&format!(
-            "| {} | {:?} | {} | {} | {} | {} | {} | {:.2} | {:.2} | {:.2} | {:.1} | {} |\n",
-            r.scenario,
-            r.perception,
-            m.collisions,
-            f(m.min_gap_m, 1),
-            f(m.min_ttc_s, 2),
-            f(m.time_gap_rms_error_s, 3),
-            f(m.speed_rmse_mps, 3),
-            m.max_accel_mps2,
-            m.max_decel_mps2,
-            m.max_jerk_mps3,
-            m.emergency_s,
-            verdict
+            "| {} | {:?} | {} | {gap} | {ttc} | {time_gap} | {speed} | {accel} | {decel} | {jerk} | {:.1} | {} |\n",
+            r.scenario, r.perception, m.collisions, m.emergency_s, verdict
         ));
     }
     out.push_str(&format!(

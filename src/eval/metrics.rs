@@ -3,6 +3,7 @@
 
 use serde::Serialize;
 
+use super::fmt_opt;
 use super::trace::{Sample, Trace};
 use crate::msg::AccMode;
 
@@ -191,6 +192,21 @@ impl Tally {
 }
 
 impl Metrics {
+    /// The headline figures as text, each with its own precision, in this order: min gap (m),
+    /// min TTC (s), time-gap RMS error (s), speed RMSE (m/s), max accel, max decel (m/s2), max
+    /// jerk (m/s3). "-" where a figure does not apply. The same in every report.
+    pub fn headline(&self) -> [String; 7] {
+        [
+            fmt_opt(self.min_gap_m, 1),
+            fmt_opt(self.min_ttc_s, 2),
+            fmt_opt(self.time_gap_rms_error_s, 3),
+            fmt_opt(self.speed_rmse_mps, 3),
+            format!("{:.2}", self.max_accel_mps2),
+            format!("{:.2}", self.max_decel_mps2),
+            format!("{:.2}", self.max_jerk_mps3),
+        ]
+    }
+
     pub fn of(trace: &Trace) -> Metrics {
         let s = &trace.samples;
         let dt = if s.len() > 1 { (s[s.len() - 1].t_s - s[0].t_s) / (s.len() - 1) as f64 } else { 0.01 };

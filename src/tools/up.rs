@@ -426,16 +426,10 @@ pub fn summary(r: &UpReport) -> String {
         r.perception.name(), r.ended, r.sim_time_s, r.wall_time_s, r.real_time_factor, r.collisions
     );
     if let Some(m) = &r.metrics {
+        let [gap, ttc, time_gap, speed, accel, decel, jerk] = m.headline();
+        let verdict = if m.pass { "meets the ACC aims" } else { "misses an ACC aim" };
         s.push_str(&format!(
-            "  min gap {} m, min TTC {} s, time-gap RMS error {} s, speed RMSE {} m/s, max accel {:.2} / decel {:.2} m/s2, max jerk {:.2} m/s3 ({})\n",
-            f(m.min_gap_m, 1),
-            f(m.min_ttc_s, 2),
-            f(m.time_gap_rms_error_s, 3),
-            f(m.speed_rmse_mps, 3),
-            m.max_accel_mps2,
-            m.max_decel_mps2,
-            m.max_jerk_mps3,
-            if m.pass { "meets the ACC aims" } else { "misses an ACC aim" }
+            "  min gap {gap} m, min TTC {ttc} s, time-gap RMS error {time_gap} s, speed RMSE {speed} m/s, max accel {accel} / decel {decel} m/s2, max jerk {jerk} m/s3 ({verdict})\n"
         ));
     }
     s.push_str("\n  loop latency            count    p50 ms    p99 ms    max ms\n");
