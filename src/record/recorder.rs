@@ -5,7 +5,7 @@ use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, AtomicU64, AtomicUsize, Ordering};
-use std::sync::mpsc::{sync_channel, Receiver, RecvTimeoutError, SyncSender};
+use std::sync::mpsc::{sync_channel, Receiver, RecvTimeoutError, SyncSender, TrySendError};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::Instant;
@@ -196,22 +196,36 @@ fn enqueue(tx: &SyncSender<ToWriter>, shared: &Shared, sample: &zenoh::sample::S
         return;
     }
     let payload = sample.payload().to_bytes().into_owned();
-    let key = sample.key_expr().as_str().to_string();
     let len = payload.len();
-    let room = shared.queued_bytes.load(Ordering::Relaxed) + len <= QUEUE_BYTES;
     let item = Item {
+        key: sample.key_expr().as_str().to_string(),
         source: sample.attachment().and_then(|a| a.try_to_string().ok()).map(|s| s.into_owned()),
         received_ns: msg::wall_clock_ns(),
-        key,
         payload,
     };
-    let channel = (item.key.clone(), kind_of(&item.payload), item.source.clone());
-    if room && tx.try_send(ToWriter::Item(item)).is_ok() {
-        shared.queued_bytes.fetch_add(len, Ordering::Relaxed);
-        shared.messages.fetch_add(1, Ordering::Relaxed);
-        shared.bytes.fetch_add(len as u64, Ordering::Relaxed);
+    // Reserve the bytes before sending: the writer may take the item (and give them back)
+    // before this thread runs again.
+    let queued = shared.queued_bytes.fetch_add(len, Ordering::Relaxed) + len;
+    let rejected = if queued > QUEUE_BYTES {
+        Some(item)
     } else {
-        *shared.dropped.lock().entry(channel).or_default() += 1;
+        match tx.try_send(ToWriter::Item(item)) {
+            Ok(()) => None,
+            Err(TrySendError::Full(ToWriter::Item(i)) | TrySendError::Disconnected(ToWriter::Item(i))) => Some(i),
+            Err(_) => None,
+        }
+    };
+    match rejected {
+        None => {
+            shared.messages.fetch_add(1, Ordering::Relaxed);
+            shared.bytes.fetch_add(len as u64, Ordering::Relaxed);
+        }
+        Some(item) => {
+            shared.queued_bytes.fetch_sub(len, Ordering::Relaxed);
+            // Only a dropped sample pays for naming its channel.
+            let kind = kind_of(&item.payload);
+            *shared.dropped.lock().entry((item.key, kind, item.source)).or_default() += 1;
+        }
     }
 }
 
