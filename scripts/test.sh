@@ -3,7 +3,8 @@
 #   - system packages: iproute2 (network-namespace tests), openssl (the security tests make
 #     their certificates), python3 venv support;
 #   - a Python venv in .venv with eclipse-zenoh 1.10, numpy and pytest (the Python client and
-#     its examples run against the Rust nodes), mcap (an independent reader of recordings);
+#     its examples run against the Rust nodes), mcap (an independent reader of recordings),
+#     websockets (an independent Foxglove WebSocket client of the live view);
 #   - the Rust tests in the release profile, the profile of the quick start's
 #     `cargo build --release`: the package has no dev-dependencies and resolves the same
 #     features for both, so after that build no dependency (Zenoh included) compiles again;
@@ -30,9 +31,9 @@ fi
 echo "ok"
 
 step "python venv (.venv) with eclipse-zenoh 1.10"
-if ! .venv/bin/python -c 'import zenoh, numpy, pytest, mcap' >/dev/null 2>&1; then
+if ! .venv/bin/python -c 'import zenoh, numpy, pytest, mcap, websockets' >/dev/null 2>&1; then
   python3 -m venv .venv
-  .venv/bin/pip install --quiet --disable-pip-version-check 'eclipse-zenoh==1.10.*' numpy pytest mcap
+  .venv/bin/pip install --quiet --disable-pip-version-check 'eclipse-zenoh==1.10.*' numpy pytest mcap websockets
 fi
 .venv/bin/python -c 'import zenoh; print("eclipse-zenoh", zenoh.__version__ if hasattr(zenoh, "__version__") else "installed")'
 

@@ -26,9 +26,10 @@
 //! - [`launch`]: the nodes as child processes: start, await on the bus, stop, logs.
 //! - [`record`]: the bus into MCAP files, lossless and with every loss counted.
 //! - [`eval`]: recording a run, metrics, plots, latency per hop; the detect and ACC suites.
+//! - [`view`]: the live view, a Foxglove WebSocket server of camera, boxes, scene and series.
 //!
 //! **Tools**: what the `slipstream` command offers.
-//! - [`tools`]: `up`, `record`, `top`, `echo`, `info`, `demo`, `router`.
+//! - [`tools`]: `up`, `record`, `play`, `view`, `top`, `echo`, `info`, `demo`, `router`.
 //! - [`bench`]: `slipstream bench`, the bus against raw Zenoh, UDP and TCP in one run.
 //! - [`cli`]: what every binary does first (Zenoh's runtime layout, logging).
 
@@ -47,6 +48,7 @@ pub mod vehicle;
 pub mod eval;
 pub mod launch;
 pub mod record;
+pub mod view;
 
 pub mod bench;
 pub mod cli;

@@ -33,6 +33,7 @@ enum Command {
     ///   slipstream up
     ///   slipstream up --scenario cut-in --mode lockstep --report reports/cut-in
     ///   slipstream up --perception ground-truth --duration 20
+    ///   slipstream up --record --view           (keep run.mcap; watch it live in Foxglove)
     #[command(verbatim_doc_comment)]
     Up(slipstream::tools::up::UpArgs),
     /// Live view of every key: rate, bandwidth, latency p50/p99, losses, malformed payloads,
@@ -54,6 +55,13 @@ enum Command {
     /// with the recorded timing (--rate for faster), or as fast as the subscribers take it
     /// without dropping anything (--max)
     Play(slipstream::tools::play::PlayArgs),
+    /// Serve a live view of the running loop for Foxglove: the camera with detections and
+    /// ground-truth boxes, a 3D scene of the road and vehicles, the ACC's speed, gap and mode
+    ///
+    /// A Foxglove WebSocket server on ws://localhost:8765 (loopback) until Ctrl-C; `up --view`
+    /// runs the same view inside `up`. Viewers never slow the loop: each gets the latest
+    /// updates, at most --rate a second.
+    View(slipstream::tools::view::ViewArgs),
     /// Run a Zenoh router (for nodes on several PCs, in client mode) with config/router.json5
     /// (or -c FILE): for users who have no zenohd. Runs until Ctrl-C.
     ///
@@ -191,6 +199,10 @@ fn run(cli: Cli) -> Result<ExitCode> {
             let b = bus.clone();
             tokio::task::spawn_blocking(move || slipstream::tools::play::run(&b, &args)).await??;
             std::sync::Arc::try_unwrap(bus).map_err(|_| anyhow::anyhow!("the player still holds the session"))
+        })),
+        Command::View(args) => done(on_bus(connect, &format!("view-{}", std::process::id()), |bus| async move {
+            slipstream::tools::view::run(&bus, &args).await?;
+            Ok(bus)
         })),
         Command::Router => done(slipstream::tools::router::run(connect)),
         Command::Demo(args) => done(slipstream::tools::demo::run(connect, &args)),

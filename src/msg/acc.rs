@@ -76,7 +76,7 @@ impl Message for AccCommand {
     }
 }
 
-pub(super) fn example_status() -> AccStatus {
+pub(crate) fn example_status() -> AccStatus {
     AccStatus {
         mode: AccMode::Follow,
         set_speed_mps: 30.0,

@@ -29,6 +29,9 @@ pub use codec::{decode, decode_header, encode, encode_into, DecodeError, Stamped
 pub use objects::{BoundingBox2d, Detection, Detections, GroundTruthObject, GroundTruthObjects, ObjectClass};
 pub use sim::{due, SimClock, SimEvent, SimEventKind, SimMode};
 pub use vehicle::{ControlCommand, ControlTiming, Speed, VehicleState};
+/// Example messages of docs/wire-format.md, for tests elsewhere in the crate.
+#[cfg(test)]
+pub(crate) use {acc::example_status, vehicle::example_state};
 
 use serde::{Deserialize, Serialize};
 

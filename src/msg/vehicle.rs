@@ -95,7 +95,7 @@ impl Message for ControlCommand {
     }
 }
 
-pub(super) fn example_state() -> VehicleState {
+pub(crate) fn example_state() -> VehicleState {
     VehicleState {
         step: 125,
         position_in_world_m: [31.25, -1.75, 0.0],

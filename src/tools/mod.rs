@@ -1,5 +1,5 @@
 //! The `slipstream` command's tools that are not benchmarks: `up` (the whole loop, through the
-//! launch and eval layers), `record`, `top`, `echo`, `info`, `demo`, `router`.
+//! launch and eval layers), `record`, `play`, `view`, `top`, `echo`, `info`, `demo`, `router`.
 
 pub mod demo;
 pub mod echo;
@@ -9,6 +9,7 @@ pub mod record;
 pub mod router;
 pub mod top;
 pub mod up;
+pub mod view;
 
 /// UTC date and time for directory names: 20261122-041530.
 pub(crate) fn utc_stamp() -> String {

@@ -30,6 +30,7 @@ use crate::launch::{ClockMode, LoopRun, LoopSpec, Network, NodeEnd, NODE_POLL};
 use crate::msg::{AccStatus, SimClock, SimEvent, SimEventKind};
 use crate::record::{Recording, RecordingSummary};
 use crate::sim::Scenario;
+use crate::view::{LiveView, ViewOptions, ViewStats};
 use crate::{topics, Bus};
 
 /// Live view refresh on a terminal, and in plain mode (one line each).
@@ -70,6 +71,13 @@ pub struct UpArgs {
     /// Record every key of the run into run.mcap in the report directory (docs/recording.md)
     #[arg(long)]
     pub record: bool,
+    /// Serve a live view for Foxglove (camera with boxes, 3D scene, ACC series) on
+    /// ws://localhost:8765 while the loop runs (docs/viewing.md)
+    #[arg(long)]
+    pub view: bool,
+    /// The live view's port (0: any free port, printed)
+    #[arg(long, default_value_t = crate::view::live::DEFAULT_PORT, requires = "view")]
+    pub view_port: u16,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -106,6 +114,8 @@ pub struct UpReport {
     pub plots: Vec<PathBuf>,
     /// With --record: the recording and what it lost.
     pub recording: Option<RecordingSummary>,
+    /// With --view: what the live view sent.
+    pub view: Option<ViewStats>,
     pub report_dir: PathBuf,
 }
 
@@ -315,6 +325,15 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
         true => Some(Recording::start(lp.bus(), &lp.bus().topics().every_key(), &dir.join(RECORDING)).await?),
         false => None,
     };
+    let view = match args.view {
+        true => {
+            let opts = ViewOptions::new(crate::view::live::DEFAULT_HOST, args.view_port).with_scenario(&scenario);
+            let view = LiveView::start(lp.bus(), opts).await?;
+            eprintln!("{}", super::view::how_to_open(crate::view::live::DEFAULT_HOST, view.port()));
+            Some(view)
+        }
+        false => None,
+    };
     eprintln!(
         "slipstream up: {} ({} clock, {} perception), report in {}",
         scenario.name,
@@ -335,6 +354,10 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
     }
     let nodes = lp.stop().await;
     let wall = started.elapsed().as_secs_f64();
+    let view = match view {
+        Some(v) => Some(v.stop().await),
+        None => None,
+    };
     let recording = match recording {
         Some(r) => Some(tokio::task::spawn_blocking(move || r.finish()).await??),
         None => None,
@@ -369,6 +392,7 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
         topics: topics_seen,
         plots,
         recording,
+        view,
         report_dir: dir.to_path_buf(),
     })
 }
@@ -466,6 +490,9 @@ pub fn summary(r: &UpReport) -> String {
     s.push_str(&format!("  report: {}", r.report_dir.join("report.json").display()));
     for p in &r.plots {
         s.push_str(&format!(", {}", p.display()));
+    }
+    if let Some(v) = &r.view {
+        s.push_str(&format!("\n  live view: {}", super::view::status_line(v)));
     }
     if let Some(rec) = &r.recording {
         s.push('\n');

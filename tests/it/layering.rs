@@ -19,6 +19,7 @@ const LAYER_OF: &[(&str, u8)] = &[
     ("launch", 2),
     ("record", 2),
     ("eval", 2),
+    ("view", 2),
     ("tools", 3),
     ("bench", 3),
     ("cli", 3),
@@ -28,8 +29,8 @@ const LAYER_OF: &[(&str, u8)] = &[
 const DOMAIN_SHARED: &str = "vehicle";
 
 /// Within orchestration: evaluation runs the loop through launch and may read recordings,
-/// never the other way.
-const ORCHESTRATION_ORDER: &[&str] = &["launch", "record", "eval"];
+/// the view may use evaluation's reading of ground truth; never the other way.
+const ORCHESTRATION_ORDER: &[&str] = &["launch", "record", "eval", "view"];
 
 /// Names the crate root re-exports from the contract (`crate::Bus`, ...).
 const ROOT_REEXPORTS: &[(&str, &str)] =
