@@ -34,6 +34,7 @@ enum Command {
     ///   slipstream up --scenario cut-in --mode lockstep --report reports/cut-in
     ///   slipstream up --perception ground-truth --duration 20
     ///   slipstream up --record --view           (keep run.mcap; watch it live in Foxglove)
+    ///   slipstream up --from reports/RUN/run.mcap  (today's detector and ACC on a recorded run)
     #[command(verbatim_doc_comment)]
     Up(slipstream::tools::up::UpArgs),
     /// Live view of every key: rate, bandwidth, latency p50/p99, losses, malformed payloads,
@@ -168,7 +169,10 @@ fn run(cli: Cli) -> Result<ExitCode> {
     let connect = &cli.connect;
     let done = |r: Result<()>| r.map(|()| ExitCode::SUCCESS);
     match cli.command {
-        Command::Up(args) => Ok(ExitCode::from(slipstream::tools::up::run(&args, connect)?.exit_code())),
+        Command::Up(args) => match &args.from {
+            Some(path) => Ok(ExitCode::from(slipstream::tools::up::run_from(path, &args, connect)?)),
+            None => Ok(ExitCode::from(slipstream::tools::up::run(&args, connect)?.exit_code())),
+        },
         Command::Top(args) => done(on_bus(connect, &format!("top-{}", std::process::id()), |bus| async move {
             slipstream::tools::top::run(&bus, &args).await?;
             Ok(bus)

@@ -17,6 +17,8 @@
 //!   [`crate::launch`]).
 //! - [`detect`]: `slipstream eval detect`, the detector scored against ground truth, in process.
 //! - [`offline`]: the closed loop in one process without the bus (tests and tuning).
+//! - [`resim`]: a recording in place of the simulator: today's detector and ACC answer the
+//!   recorded inputs, and their outputs are compared with the recorded ones (`up --from`).
 
 pub mod acc;
 pub mod detect;
@@ -24,6 +26,7 @@ pub mod latency;
 pub mod metrics;
 pub mod offline;
 pub mod plot;
+pub mod resim;
 pub mod trace;
 
 pub use metrics::Metrics;

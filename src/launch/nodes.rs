@@ -213,24 +213,37 @@ impl LoopRun {
     /// Starts the controllers, waits until they are alive on the bus (at most
     /// [`NODE_START_TIMEOUT`]), then starts the simulator.
     pub async fn start(&mut self) -> Result<()> {
+        self.start_controllers().await?;
+        self.start_sim()
+    }
+
+    /// Starts the ACC (and the detector with camera perception) and waits until they are alive:
+    /// what a replay drives in place of the simulator ([`crate::eval::resim`]).
+    pub async fn start_controllers(&mut self) -> Result<()> {
         let spec = self.spec.clone();
-        let lockstep = spec.clock == ClockMode::Lockstep;
         let mut acc_args = vec![
             "--set-speed".to_string(),
             spec.set_speed_mps.to_string(),
             "--perception".into(),
             spec.perception.name().into(),
         ];
-        if lockstep {
+        if spec.clock == ClockMode::Lockstep {
             acc_args.push("--lockstep".into());
         }
         self.spawn(ACC, acc_args, self.ports.acc, &[])?;
-        let mut controllers = vec![self.ports.acc];
         if self.camera() {
             self.spawn(DETECT, Vec::new(), self.ports.detect, &[self.ports.acc])?;
+        }
+        self.await_controllers().await
+    }
+
+    /// Starts the simulator, after [`LoopRun::start_controllers`].
+    fn start_sim(&mut self) -> Result<()> {
+        let spec = self.spec.clone();
+        let mut controllers = vec![self.ports.acc];
+        if self.camera() {
             controllers.push(self.ports.detect);
         }
-        self.await_controllers().await?;
         let mut sim_args = vec![
             "--scenario".to_string(),
             spec.scenario.clone(),
@@ -240,7 +253,7 @@ impl LoopRun {
             spec.duration_s.to_string(),
             "--json".into(),
         ];
-        if lockstep {
+        if spec.clock == ClockMode::Lockstep {
             sim_args.extend(["--wait-for".into(), "acc".into()]);
         }
         self.spawn(SIM, sim_args, self.ports.sim, &controllers)

@@ -128,7 +128,7 @@ pub(super) fn example_ground_truth() -> GroundTruthObjects {
     }
 }
 
-pub(super) fn example_detections() -> Detections {
+pub(crate) fn example_detections() -> Detections {
     Detections {
         frame_seq: 25,
         frame_stamp_pub_ns: 1_700_000_000_100_000_000,

@@ -51,9 +51,20 @@ pub struct PlayReport {
 }
 
 /// A key of the recording on this bus, with its publisher.
-struct Output {
+pub(crate) struct Output {
     publisher: zenoh::pubsub::Publisher<'static>,
     attachment: Option<String>,
+}
+
+impl Output {
+    /// Publishes a recorded payload as it was, with its publisher's name.
+    pub(crate) fn put(&self, payload: Vec<u8>) -> Result<()> {
+        let mut put = self.publisher.put(payload);
+        if let Some(a) = &self.attachment {
+            put = put.attachment(a.clone());
+        }
+        put.wait().map_err(|e| anyhow!("publish on {}: {e}", self.publisher.key_expr()))
+    }
 }
 
 /// Plays `path` onto `bus`; `progress` is called about once a second with the report so far.
@@ -85,7 +96,7 @@ pub fn play(
         let output = match outputs.get(&message.channel.id) {
             Some(o) => o,
             None => {
-                let o = output_for(bus, &message.channel, options)?;
+                let o = output_for(bus, &message.channel, &options.keys, options.pace == Pace::Max)?;
                 outputs.entry(message.channel.id).or_insert(o)
             }
         };
@@ -101,11 +112,7 @@ pub fn play(
             }
         }
         let len = message.data.len() as u64;
-        let mut put = output.publisher.put(message.data.into_owned());
-        if let Some(a) = &output.attachment {
-            put = put.attachment(a.clone());
-        }
-        put.wait().map_err(|e| anyhow!("publish: {e}"))?;
+        output.put(message.data.into_owned())?;
         report.messages += 1;
         report.bytes += len;
         report.recorded_s = offset_s;
@@ -119,8 +126,15 @@ pub fn play(
     Ok(report)
 }
 
-/// The publisher of a recorded channel on this bus, or None when --keys leaves it out.
-fn output_for(bus: &Bus, channel: &mcap::Channel<'static>, options: &PlayOptions) -> Result<Option<Output>> {
+/// The publisher of a recorded channel on this bus, or None when `keys` (relative to the
+/// recording's namespace; empty: all) leave it out. `block`: congestion control "block" on
+/// every key, so that nothing is dropped.
+pub(crate) fn output_for(
+    bus: &Bus,
+    channel: &mcap::Channel<'static>,
+    keys: &[OwnedKeyExpr],
+    block: bool,
+) -> Result<Option<Output>> {
     let recorded_ns = channel.metadata.get("namespace").map(String::as_str).unwrap_or("");
     let relative = match recorded_ns {
         "" => channel.topic.as_str(),
@@ -128,7 +142,7 @@ fn output_for(bus: &Bus, channel: &mcap::Channel<'static>, options: &PlayOptions
     };
     let relative_key = OwnedKeyExpr::autocanonize(relative.to_string())
         .map_err(|e| anyhow!("recorded key `{}`: {e}", channel.topic))?;
-    if !options.keys.is_empty() && !options.keys.iter().any(|k| k.intersects(&relative_key)) {
+    if !keys.is_empty() && !keys.iter().any(|k| k.intersects(&relative_key)) {
         return Ok(None);
     }
     let topics = bus.topics();
@@ -143,7 +157,7 @@ fn output_for(bus: &Bus, channel: &mcap::Channel<'static>, options: &PlayOptions
         builder =
             builder.priority(q.priority.into()).express(q.express).congestion_control(q.congestion_control.into());
     }
-    if options.pace == Pace::Max {
+    if block {
         builder = builder.congestion_control(CongestionControl::Block);
     }
     if let Some(encoding) = channel.metadata.get("zenoh_encoding") {

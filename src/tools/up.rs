@@ -78,6 +78,12 @@ pub struct UpArgs {
     /// The live view's port (0: any free port, printed)
     #[arg(long, default_value_t = crate::view::live::DEFAULT_PORT, requires = "view")]
     pub view_port: u16,
+    /// Re-simulate: a recording (`up --record`, `slipstream record`) drives today's detector
+    /// and ACC in place of the simulator, step by step, and the report compares their outputs
+    /// with the recorded ones (docs/recording.md). Scenario, clock, perception and set speed
+    /// come from the recording.
+    #[arg(long, value_name = "FILE.mcap", conflicts_with_all = ["record", "view", "mode", "duration", "perception"])]
+    pub from: Option<PathBuf>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -138,6 +144,35 @@ impl Outcome {
             0
         }
     }
+}
+
+/// `up --from FILE`: re-simulation ([`crate::eval::resim`]); prints the summary, writes the
+/// report. Exit code 0 when every recorded output was answered (the same or not: differences
+/// are in the report), 1 when a node died or stopped answering.
+pub fn run_from(path: &Path, args: &UpArgs, connect: &ConnectArgs) -> Result<u8> {
+    anyhow::ensure!(path.is_file(), "{} is no file (a recording made with `up --record` or `slipstream record`)", path.display());
+    let stem = path.file_stem().map_or("recording".into(), |s| s.to_string_lossy().into_owned());
+    let dir = match &args.report {
+        Some(d) => d.clone(),
+        None => PathBuf::from("reports").join(format!("resim-{stem}-{}", super::utc_stamp())),
+    };
+    std::fs::create_dir_all(&dir).with_context(|| format!("create {}", dir.display()))?;
+    let plain = args.plain || !std::io::stderr().is_terminal();
+    eprintln!("slipstream up --from {}: today's detector and ACC answer the recording; report in {}", path.display(), dir.display());
+    let mut progress = |t_s: f64| {
+        let mut err = std::io::stderr().lock();
+        let _ = if plain { writeln!(err, "replayed {t_s:.1} s") } else { write!(err, "\r\x1b[2Kreplayed {t_s:.1} s") };
+        let _ = err.flush();
+    };
+    let rt = tokio::runtime::Runtime::new()?;
+    let report = rt.block_on(crate::eval::resim::run(path, connect, &dir, &mut progress))?;
+    if !plain {
+        eprintln!();
+    }
+    let file = dir.join("report.json");
+    std::fs::write(&file, serde_json::to_string_pretty(&report)?).with_context(|| format!("write {}", file.display()))?;
+    println!("{}", crate::eval::resim::summary(&report));
+    Ok(if report.complete() { 0 } else { 1 })
 }
 
 /// Runs the loop to the end of the scenario (or Ctrl-C), prints the summary, writes the report.

@@ -3,6 +3,8 @@ and `slipstream record` keep every payload byte for byte, one channel per key, s
 encodings as docs/recording.md says, and account for every sequence number."""
 
 import json
+import os
+import socket
 import subprocess
 from collections import defaultdict
 
@@ -64,12 +66,23 @@ def check_recording(path):
     return channels, info
 
 
-def test_up_record_is_read_whole_by_an_independent_reader(slipstream_bin, free_port, tmp_path):
-    report = tmp_path / "report"
+@pytest.fixture(scope="module")
+def lockstep_run(slipstream_bin, tmp_path_factory):
+    """One recorded lockstep run of `up` (6 s simulated), shared by the tests of this module:
+    (report dir, the finished process)."""
+    report = tmp_path_factory.mktemp("lockstep") / "report"
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
     run = subprocess.run(
-        [slipstream_bin, "-l", f"tcp/127.0.0.1:{free_port}", "up", "--mode", "lockstep", "--duration", "6",
+        [slipstream_bin, "-l", f"tcp/127.0.0.1:{port}", "up", "--mode", "lockstep", "--duration", "6",
          "--record", "--plain", "--report", str(report)],
         capture_output=True, text=True, timeout=300, cwd=ROOT)
+    return report, run
+
+
+def test_up_record_is_read_whole_by_an_independent_reader(lockstep_run):
+    report, run = lockstep_run
     up = json.loads((report / "report.json").read_text())
     rec = up["recording"]
     assert rec is not None, run.stderr[-2000:]
@@ -121,3 +134,55 @@ def test_a_cut_recording_reads_up_to_its_last_chunk(slipstream_bin, sim_bin, fre
             complete = True
     assert complete, "the cut file should end in a partial record"
     assert got > 0, "messages before the cut are readable"
+
+
+def resim(slipstream_bin, free_port, recording, report, env=None):
+    run = subprocess.run(
+        [slipstream_bin, "-l", f"tcp/127.0.0.1:{free_port}", "up", "--from", str(recording), "--plain",
+         "--report", str(report)],
+        capture_output=True, text=True, timeout=300, cwd=ROOT, env=env)
+    assert (report / "report.json").is_file(), (run.returncode, run.stdout, run.stderr[-3000:])
+    return run, json.loads((report / "report.json").read_text())
+
+
+def test_a_lockstep_recording_replays_into_the_same_nodes_byte_for_byte(slipstream_bin, free_port, lockstep_run,
+                                                                         tmp_path):
+    """copper's record == replay check: the recorded camera, speed and state drive today's
+    detector and ACC in place of the simulator; they answer with the same bytes (wall-clock
+    stamps aside), every frame and every step."""
+    recording = lockstep_run[0] / "run.mcap"
+    run, r = resim(slipstream_bin, free_port, recording, tmp_path / "resim")
+    assert run.returncode == 0, (run.stdout, run.stderr[-3000:])
+    assert (r["clock"], r["perception"], r["scenario"]) == ("lockstep", "camera", "cut-in"), r
+    d, c = r["detections"], r["commands"]
+    _, _, messages = read_all(recording)
+    recorded = {"perception/objects": 0, "vehicle/control": 0}
+    for channel, _ in messages:
+        if channel.topic in recorded:
+            recorded[channel.topic] += 1
+    # Every frame's detections and every step's command, answered the same.
+    assert d["recorded"] == recorded["perception/objects"] > 50, (d, recorded)
+    assert d["identical"] == d["recorded"] == d["replayed"], d
+    assert c["recorded"] > 500 and c["identical"] == c["recorded"] == c["replayed"], c
+    assert (d["differing"], d["missing"], d["extra"], c["differing"], c["missing"]) == (0, 0, 0, 0, 0)
+    assert r["replay"]["steps_timed_out"] == 0
+    assert "answer exactly as recorded" in run.stdout, run.stdout
+
+
+def test_a_changed_controller_is_shown_where_it_first_answers_differently(slipstream_bin, free_port, lockstep_run,
+                                                                          tmp_path):
+    """The same recording into an ACC with another time gap (its config file): the detector's
+    answers stay the same, the commands differ and the report names the first one."""
+    config = (ROOT / "config" / "acc.json5").read_text()
+    assert "time_gap_s: 1.8," in config
+    changed = tmp_path / "acc.json5"
+    changed.write_text(config.replace("time_gap_s: 1.8,", "time_gap_s: 1.0,"))
+    env = dict(os.environ, SLIPSTREAM_ACC_CONFIG=str(changed))
+    run, r = resim(slipstream_bin, free_port, lockstep_run[0] / "run.mcap", tmp_path / "resim", env)
+    assert run.returncode == 0, (run.stdout, run.stderr[-3000:])
+    d, c = r["detections"], r["commands"]
+    assert d["identical"] == d["recorded"] > 0 and d["differing"] == 0, d
+    assert c["differing"] > 0 and c["max_abs_difference"] > 0, c
+    first = c["first_difference"]
+    assert first["answers"].startswith("the speed at ") and first["recorded"] != first["replayed"], first
+    assert "first difference" in run.stdout and "answer differently" in run.stdout, run.stdout
