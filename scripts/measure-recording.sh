@@ -10,10 +10,10 @@ rm -rf "$out" && mkdir -p "$out"
 # The simulator's own real-time factor (up's includes starting and stopping the nodes).
 rtf() { python3 -c 'import json,sys; r=json.load(open(sys.argv[1])); print("%.2f" % r["real_time_factor"])' "$1/logs/slipstream-sim.json"; }
 
-echo "== fast mode, camera perception, cut-in (40 s simulated): the simulator's real-time factor without / with --record"
+echo "== fast mode, camera perception, cut-in for 200 s simulated: the simulator's real-time factor without / with --record"
 for i in 1 2 3; do
-  "$bin" up --mode fast --plain --report "$out/plain-$i" >/dev/null 2>&1 || true
-  "$bin" up --mode fast --plain --record --report "$out/rec-$i" >/dev/null 2>&1 || true
+  "$bin" up --mode fast --duration 200 --plain --report "$out/plain-$i" >/dev/null 2>&1 || true
+  "$bin" up --mode fast --duration 200 --plain --record --report "$out/rec-$i" >/dev/null 2>&1 || true
   echo "run $i: without $(rtf "$out/plain-$i")  with $(rtf "$out/rec-$i")  lost $(python3 -c 'import json,sys; r=json.load(open(sys.argv[1]))["recording"]; print(r["lost_upstream"], r["dropped_by_recorder"])' "$out/rec-$i/report.json")"
 done
 

@@ -32,11 +32,7 @@ pub struct TruthLead {
 }
 
 pub fn truth_lead(gt: &GroundTruthObjects, ego_lane: i32, ego_front_m: f64) -> Option<TruthLead> {
-    gt.objects
-        .iter()
-        .filter(|o| o.lane == ego_lane && ego_lane >= 0 && o.position_in_ego_m[0] > 0.0)
-        .min_by(|a, b| a.position_in_ego_m[0].total_cmp(&b.position_in_ego_m[0]))
-        .map(|o| TruthLead {
+    gt.nearest_ahead_in_lane(ego_lane).map(|o| TruthLead {
             id: o.id,
             gap_m: o.position_in_ego_m[0] - ego_front_m,
             relative_speed_mps: o.velocity_in_ego_mps[0],

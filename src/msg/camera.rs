@@ -193,7 +193,7 @@ impl Message for CameraInfo {
     }
 }
 
-pub(super) fn example_info() -> CameraInfo {
+pub(crate) fn example_info() -> CameraInfo {
     CameraInfo::pinhole(
         640,
         480,

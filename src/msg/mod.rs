@@ -31,7 +31,7 @@ pub use sim::{due, SimClock, SimEvent, SimEventKind, SimMode};
 pub use vehicle::{ControlCommand, ControlTiming, Speed, VehicleState};
 /// Example messages of docs/wire-format.md, for tests elsewhere in the crate.
 #[cfg(test)]
-pub(crate) use {acc::example_status, objects::example_detections, vehicle::example_state};
+pub(crate) use {acc::example_status, camera::example_info, objects::example_detections, vehicle::example_state};
 
 use serde::{Deserialize, Serialize};
 

@@ -72,6 +72,16 @@ impl Message for GroundTruthObjects {
     const KIND: MessageKind = MessageKind::GroundTruthObjects;
 }
 
+impl GroundTruthObjects {
+    /// The nearest vehicle ahead of the ego whose centre is in `lane` (none off the road).
+    pub fn nearest_ahead_in_lane(&self, lane: i32) -> Option<&GroundTruthObject> {
+        self.objects
+            .iter()
+            .filter(|o| o.lane == lane && lane >= 0 && o.position_in_ego_m[0] > 0.0)
+            .min_by(|a, b| a.position_in_ego_m[0].total_cmp(&b.position_in_ego_m[0]))
+    }
+}
+
 /// One detected and tracked vehicle.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Detection {

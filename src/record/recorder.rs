@@ -18,6 +18,7 @@ use zenoh::key_expr::OwnedKeyExpr;
 use super::{message_encoding, schema_name, FLUSH_EVERY, METADATA_NAME, QUEUE_BYTES};
 use crate::bus::{Bus, Declared};
 use crate::msg::{self, MessageKind, WIRE_VERSION};
+use crate::view::copies::{Copies, ViewableCopy};
 
 /// Items the queue holds at most (besides the byte bound).
 const QUEUE_ITEMS: usize = 1 << 16;
@@ -78,6 +79,8 @@ pub struct RecordingSummary {
     pub lost_upstream: u64,
     pub dropped_by_recorder: u64,
     pub channels: Vec<ChannelSummary>,
+    /// Foxglove-viewable copies written besides (`--viewable`; not part of the counts above).
+    pub viewable_copies: u64,
 }
 
 impl RecordingSummary {
@@ -114,6 +117,9 @@ impl RecordingSummary {
                 c.dropped_by_recorder
             ));
         }
+        if self.viewable_copies > 0 {
+            s.push_str(&format!("  and {} Foxglove-viewable copies (camera, boxes, scene, series)\n", self.viewable_copies));
+        }
         let verdict = if self.lost_anything() {
             format!(
                 "LOST: {} messages never reached the recorder (sequence gaps), {} dropped by the recorder",
@@ -142,6 +148,17 @@ impl Recording {
     /// Starts recording `selectors` (key expressions) of `bus` into `path` (created, with its
     /// directory). The file's metadata names the namespace and the selectors.
     pub async fn start(bus: &Bus, selectors: &[OwnedKeyExpr], path: &Path) -> Result<Recording> {
+        Recording::start_with(bus, selectors, path, None).await
+    }
+
+    /// [`Recording::start`], and with `viewable` Foxglove-viewable copies of the loop's
+    /// messages on channels of their own (the live view's topics; docs/recording.md).
+    pub async fn start_with(
+        bus: &Bus,
+        selectors: &[OwnedKeyExpr],
+        path: &Path,
+        viewable: Option<Copies>,
+    ) -> Result<Recording> {
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
             std::fs::create_dir_all(dir).with_context(|| format!("create {}", dir.display()))?;
         }
@@ -158,11 +175,12 @@ impl Recording {
         about.insert("selectors".to_string(), selectors.iter().map(|s| s.to_string()).collect::<Vec<_>>().join(" "));
         about.insert("wire_version".to_string(), WIRE_VERSION.to_string());
         about.insert("started_unix_ns".to_string(), msg::wall_clock_ns().to_string());
+        about.insert("viewable_copies".to_string(), viewable.is_some().to_string());
         let thread = {
             let (shared, path) = (shared.clone(), path.to_path_buf());
             std::thread::Builder::new()
                 .name("mcap-writer".into())
-                .spawn(move || write_loop(rx, shared, writer, about, path))
+                .spawn(move || write_loop(rx, shared, Files { writer, path, viewable }, about))
                 .context("start the recorder's writer thread")?
         };
         let mut subs = Vec::new();
@@ -245,15 +263,38 @@ struct Channel {
     last_seq: Option<u64>,
 }
 
+/// Niceness of the writer thread: below the loop's processes, so that in a saturated loop
+/// (fast mode) the simulator keeps the CPU and the writer catches up from the queue.
+const WRITER_NICE: i32 = 10;
+
+/// Lowers this thread's scheduling priority (Linux: nice is per thread); best effort.
+fn lower_priority() {
+    // SAFETY: setpriority reads no memory of ours; `who` 0 is the calling thread on Linux.
+    let r = unsafe { libc::setpriority(libc::PRIO_PROCESS, 0, WRITER_NICE) };
+    if r != 0 {
+        tracing::debug!("recorder: could not lower the writer's priority: {}", std::io::Error::last_os_error());
+    }
+}
+
 /// The writer thread: items in, records out; at Finish the summary and the index.
+/// What the writer thread writes into.
+struct Files {
+    writer: mcap::Writer<BufWriter<File>>,
+    path: PathBuf,
+    viewable: Option<Copies>,
+}
+
 fn write_loop(
     rx: Receiver<ToWriter>,
     shared: Arc<Shared>,
-    mut writer: mcap::Writer<BufWriter<File>>,
+    files: Files,
     mut about: BTreeMap<String, String>,
-    path: PathBuf,
 ) -> Result<RecordingSummary> {
+    let Files { mut writer, path, mut viewable } = files;
+    let mut viewable_channels: HashMap<&'static str, u16> = HashMap::new();
+    let mut viewable_copies = 0u64;
     let started = Instant::now();
+    lower_priority();
     let namespace = about.get("namespace").cloned().unwrap_or_default();
     let mut channels: HashMap<ChannelKey, Channel> = HashMap::new();
     let mut schemas: HashMap<Option<MessageKind>, u16> = HashMap::new();
@@ -267,6 +308,12 @@ fn write_loop(
         };
         if let Some(item) = item {
             shared.queued_bytes.fetch_sub(item.payload.len(), Ordering::Relaxed);
+            if let Some(copies) = viewable.as_mut() {
+                for c in copies.of(&item.payload) {
+                    write_copy(&mut writer, &mut viewable_channels, c).map_err(fail)?;
+                    viewable_copies += 1;
+                }
+            }
             write_item(&mut writer, &mut channels, &mut schemas, &namespace, item).map_err(fail)?;
         }
         if last_flush.elapsed() >= FLUSH_EVERY {
@@ -295,11 +342,13 @@ fn write_loop(
         lost_upstream: list.iter().map(|c| c.lost_upstream).sum(),
         dropped_by_recorder: list.iter().map(|c| c.dropped_by_recorder).sum(),
         channels: list,
+        viewable_copies,
     };
     about.insert("ended_unix_ns".to_string(), msg::wall_clock_ns().to_string());
     about.insert("messages".to_string(), summary.messages.to_string());
     about.insert("lost_upstream".to_string(), summary.lost_upstream.to_string());
     about.insert("dropped_by_recorder".to_string(), summary.dropped_by_recorder.to_string());
+    about.insert("viewable_copies_written".to_string(), summary.viewable_copies.to_string());
     about.insert("channels".to_string(), serde_json::to_string(&summary.channels)?);
     writer
         .write_metadata(&mcap::records::Metadata { name: METADATA_NAME.to_string(), metadata: about })
@@ -354,6 +403,27 @@ fn add_channel(
     }
     meta.insert("namespace".to_string(), namespace.to_string());
     writer.add_channel(schema, &key.0, &message_encoding(), &meta)
+}
+
+/// A viewable copy on its topic's channel (made with its schema at the first copy).
+fn write_copy(
+    writer: &mut mcap::Writer<BufWriter<File>>,
+    channels: &mut HashMap<&'static str, u16>,
+    c: ViewableCopy,
+) -> mcap::McapResult<()> {
+    let id = match channels.get(c.topic) {
+        Some(id) => *id,
+        None => {
+            let schema = writer.add_schema(&c.schema.name, &c.schema.encoding, &c.schema.data)?;
+            let mut meta = BTreeMap::new();
+            meta.insert("viewable_copy".to_string(), "true".to_string());
+            let id = writer.add_channel(schema, c.topic, &c.message_encoding, &meta)?;
+            channels.insert(c.topic, id);
+            id
+        }
+    };
+    let header = mcap::records::MessageHeader { channel_id: id, sequence: 0, log_time: c.log_time, publish_time: c.log_time };
+    writer.write_to_known_channel(&header, &c.data)
 }
 
 fn write_item(

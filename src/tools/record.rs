@@ -10,6 +10,7 @@ use anyhow::Result;
 use crate::bus::Bus;
 use crate::record::{Recording, RecordingSummary};
 use crate::topics::Topic;
+use crate::view::copies::Copies;
 
 /// How often the progress line is refreshed.
 const PROGRESS_EVERY: Duration = Duration::from_secs(1);
@@ -28,6 +29,14 @@ pub struct RecordArgs {
     /// Stop after this many seconds [default: until Ctrl-C]
     #[arg(long, value_parser = super::top::positive)]
     pub duration: Option<f64>,
+    /// Also write copies Foxglove's own panels show (camera image, boxes, 3D scene, the ACC's
+    /// series) on the live view's topics, besides the byte-for-byte channels
+    #[arg(long)]
+    pub viewable: bool,
+    /// With --viewable: the scenario whose road to draw (a built-in name or a .json5 file)
+    /// [default: the one the simulator announces, if built in]
+    #[arg(long, requires = "viewable")]
+    pub scenario: Option<String>,
 }
 
 /// The key expressions `args.keys` name: a topic's key after namespace and remapping, or a
@@ -61,7 +70,12 @@ pub fn selectors(bus: &Bus, keys: &[String]) -> Result<Vec<zenoh::key_expr::Owne
 pub async fn run(bus: &Bus, args: &RecordArgs) -> Result<RecordingSummary> {
     let path = args.output.clone().unwrap_or_else(|| PathBuf::from(format!("recording-{}.mcap", super::utc_stamp())));
     let selectors = selectors(bus, &args.keys)?;
-    let recording = Recording::start(bus, &selectors, &path).await?;
+    let viewable = match (args.viewable, &args.scenario) {
+        (false, _) => None,
+        (true, None) => Some(Copies::new(None)),
+        (true, Some(name)) => Some(Copies::new(Some(&crate::sim::Scenario::find(name)?))),
+    };
+    let recording = Recording::start_with(bus, &selectors, &path, viewable).await?;
     let tty = std::io::stderr().is_terminal();
     eprintln!(
         "recording {} into {} ({})",

@@ -71,6 +71,10 @@ pub struct UpArgs {
     /// Record every key of the run into run.mcap in the report directory (docs/recording.md)
     #[arg(long)]
     pub record: bool,
+    /// With --record: also write copies Foxglove's own panels show (camera, boxes, 3D scene,
+    /// the ACC's series)
+    #[arg(long, requires = "record")]
+    pub viewable: bool,
     /// Serve a live view for Foxglove (camera with boxes, 3D scene, ACC series) on
     /// ws://localhost:8765 while the loop runs (docs/viewing.md)
     #[arg(long)]
@@ -82,7 +86,7 @@ pub struct UpArgs {
     /// and ACC in place of the simulator, step by step, and the report compares their outputs
     /// with the recorded ones (docs/recording.md). Scenario, clock, perception and set speed
     /// come from the recording.
-    #[arg(long, value_name = "FILE.mcap", conflicts_with_all = ["record", "view", "mode", "duration", "perception"])]
+    #[arg(long, value_name = "FILE.mcap", conflicts_with_all = ["record", "viewable", "view", "mode", "duration", "perception"])]
     pub from: Option<PathBuf>,
 }
 
@@ -357,7 +361,10 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
     let mut lp = LoopRun::open(spec, Network::User(connect), &dir.join("logs"), "up").await.context("up")?;
     let watch = Watch::start(lp.bus(), args.perception == PerceptionSource::Camera).await?;
     let recording = match args.record {
-        true => Some(Recording::start(lp.bus(), &lp.bus().topics().every_key(), &dir.join(RECORDING)).await?),
+        true => {
+            let viewable = args.viewable.then(|| crate::view::copies::Copies::new(Some(&scenario)));
+            Some(Recording::start_with(lp.bus(), &lp.bus().topics().every_key(), &dir.join(RECORDING), viewable).await?)
+        }
         false => None,
     };
     let view = match args.view {

@@ -12,8 +12,7 @@ use std::time::Duration;
 
 use anyhow::{Context as _, Result};
 use foxglove::schemas::{CameraCalibration, CompressedImage, FrameTransforms, ImageAnnotations, RawImage, SceneUpdate};
-use foxglove::{Channel, Context, Encode, PartialMetadata, RawChannel, Schema, WebSocketServerHandle};
-use nalgebra::Vector2;
+use foxglove::{Channel, Context, Encode, PartialMetadata, RawChannel, WebSocketServerHandle};
 use parking_lot::Mutex;
 use serde::Serialize;
 
@@ -116,12 +115,7 @@ struct Channels {
 
 impl Channels {
     fn new(ctx: &Arc<Context>) -> Result<Channels> {
-        let schema = serde_json::to_vec(&scene::acc_series_schema())?;
-        let acc = ctx
-            .channel_builder(TOPIC_ACC)
-            .message_encoding("json")
-            .schema(Schema::new("slipstream.view.AccSeries", "jsonschema", schema))
-            .build_raw()?;
+        let acc = ctx.channel_builder(TOPIC_ACC).message_encoding("json").schema(scene::acc_series_schema()).build_raw()?;
         Ok(Channels {
             ctx: ctx.clone(),
             raw: None,
@@ -208,11 +202,7 @@ impl Painter {
         Channels::log(&c.tf, &scene::ego_frame(stamp, ego), stamp);
         if let Some(road) = &self.road {
             if c.road.has_sinks() {
-                let p = Vector2::new(ego.position_in_world_m[0], ego.position_in_world_m[1]);
-                let (s, _) = match self.road_s {
-                    Some(hint) => road.project(p, hint),
-                    None => road.project_anywhere(p),
-                };
+                let s = scene::road_position(road, ego, self.road_s);
                 self.road_s = Some(s);
                 Channels::log(&c.road, &scene::road(stamp, road, s), stamp);
             }

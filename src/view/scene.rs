@@ -3,6 +3,7 @@
 //! ego's frame) and the ACC's series. Pure functions: the live view calls them at its own pace.
 
 use foxglove::bytes::Bytes;
+use foxglove::Schema;
 use foxglove::schemas::{
     line_primitive, points_annotation, scene_entity_deletion, CameraCalibration, Color, CompressedImage, CubePrimitive, FrameTransform,
     FrameTransforms, ImageAnnotations, LinePrimitive, Point2, Point3, PointsAnnotation, Pose, Quaternion, RawImage,
@@ -12,8 +13,7 @@ use nalgebra::Vector2;
 use serde::Serialize;
 
 use crate::bus::FrameSample;
-use crate::eval::trace::truth_lead;
-use crate::msg::{AccMode, AccStatus, CameraInfo, Detections, GroundTruthObjects, ImageEncoding, ObjectClass, VehicleState};
+use crate::msg::{AccMode, AccStatus, CameraFrameRef, CameraInfo, Detections, GroundTruthObjects, ImageEncoding, ObjectClass, VehicleState};
 use crate::sim::road::Road;
 use crate::vehicle::VehicleParams;
 
@@ -64,13 +64,20 @@ impl AsRef<[u8]> for Payload {
 /// The frame as an image message, its pixels borrowed from the payload.
 pub fn image(sample: FrameSample) -> Image {
     let frame = sample.frame();
-    let stamp = Some(timestamp(frame.header.stamp_pub_ns));
-    let (width, height, encoding) = (frame.msg.width, frame.msg.height, frame.msg.encoding);
-    let offset = frame.msg.data.as_ptr() as usize - sample.bytes().as_ptr() as usize;
-    let len = frame.msg.data.len();
+    let (stamp, f) = (frame.header.stamp_pub_ns, frame.msg);
+    let offset = f.data.as_ptr() as usize - sample.bytes().as_ptr() as usize;
+    let len = f.data.len();
+    let header = CameraFrameRef { data: &[], ..f };
     let data = Bytes::from_owner(Payload(sample)).slice(offset..offset + len);
+    frame_image(stamp, &header, data)
+}
+
+/// A frame (its size and encoding from `frame`, its pixels `data`) as an image message.
+pub fn frame_image(stamp_ns: u64, frame: &CameraFrameRef<'_>, data: Bytes) -> Image {
+    let stamp = Some(timestamp(stamp_ns));
+    let (width, height) = (frame.width, frame.height);
     let frame_id = FRAME_CAMERA.to_string();
-    match encoding {
+    match frame.encoding {
         ImageEncoding::Rgb8 => {
             Image::Raw(RawImage { timestamp: stamp, frame_id, width, height, encoding: "rgb8".into(), step: width * 3, data })
         }
@@ -183,8 +190,7 @@ pub fn vehicles(stamp_ns: u64, ego: &VehicleState, ego_params: &VehicleParams, t
         "ego".into(),
         body(ego.position_in_world_m, ego.yaw_in_world_rad, ego_params, EGO_BLUE),
     )];
-    let front = ego_params.size_m[0] - ego_params.rear_overhang_m;
-    let lead = truth.and_then(|t| truth_lead(t, ego.lane, front)).map(|l| l.id);
+    let lead = truth.and_then(|t| t.nearest_ahead_in_lane(ego.lane)).map(|l| l.id);
     for o in truth.iter().flat_map(|t| &t.objects) {
         let color = if lead == Some(o.id) { ORANGE } else { GREY };
         let params = VehicleParams::of_class(o.class);
@@ -241,6 +247,15 @@ pub fn road(stamp_ns: u64, road: &Road, s_m: f64) -> SceneUpdate {
     }
 }
 
+/// The ego's distance along the road, searched near `hint` (the last one) when known.
+pub fn road_position(road: &Road, ego: &VehicleState, hint: Option<f64>) -> f64 {
+    let p = Vector2::new(ego.position_in_world_m[0], ego.position_in_world_m[1]);
+    match hint {
+        Some(h) => road.project(p, h).0,
+        None => road.project_anywhere(p).0,
+    }
+}
+
 /// world -> ego: lets the 3D panel follow the ego (display frame `ego`).
 pub fn ego_frame(stamp_ns: u64, ego: &VehicleState) -> FrameTransforms {
     let p = ego.position_in_world_m;
@@ -293,16 +308,16 @@ pub fn acc_series(
         gap_m: lead.map(|l| l.gap_m),
         desired_gap_m: lead.map(|l| l.desired_gap_m),
         ttc_s: lead.and_then(|l| l.ttc_s),
-        truth_gap_m: truth.and_then(|t| truth_lead(t, ego.lane, front)).map(|l| l.gap_m),
+        truth_gap_m: truth.and_then(|t| t.nearest_ahead_in_lane(ego.lane)).map(|o| o.position_in_ego_m[0] - front),
         warnings: status.map(|s| s.warnings.iter().map(|w| format!("{w:?}")).collect()).unwrap_or_default(),
     }
 }
 
 /// The JSON schema of [`AccSeries`], for the channel's advertisement.
-pub fn acc_series_schema() -> serde_json::Value {
+pub fn acc_series_schema() -> Schema {
     let num = serde_json::json!({ "type": "number" });
     let opt = serde_json::json!({ "type": ["number", "null"] });
-    serde_json::json!({
+    let schema = serde_json::json!({
         "type": "object",
         "properties": {
             "t_s": num, "speed_mps": num, "accel_mps2": num,
@@ -311,8 +326,12 @@ pub fn acc_series_schema() -> serde_json::Value {
             "mode": { "type": ["string", "null"] },
             "warnings": { "type": "array", "items": { "type": "string" } },
         },
-    })
+    });
+    Schema::new(ACC_SERIES_SCHEMA, "jsonschema", schema.to_string().into_bytes())
 }
+
+/// The name of [`acc_series_schema`].
+pub const ACC_SERIES_SCHEMA: &str = "slipstream.view.AccSeries";
 
 /// The ego's vehicle type: the scenario's when known, else a car.
 pub fn ego_params(class: Option<ObjectClass>) -> VehicleParams {
@@ -432,7 +451,7 @@ mod tests {
         assert_eq!(s.truth_gap_m, Some(45.0 - front));
         let json = serde_json::to_value(&s).unwrap();
         assert_eq!(json["mode"], "Follow");
-        let schema = acc_series_schema();
+        let schema: serde_json::Value = serde_json::from_slice(&acc_series_schema().data).unwrap();
         for key in json.as_object().unwrap().keys() {
             assert!(schema["properties"].get(key).is_some(), "{key} missing from the schema");
         }

@@ -18,8 +18,8 @@ const LAYER_OF: &[(&str, u8)] = &[
     ("acc", 1),
     ("launch", 2),
     ("record", 2),
-    ("eval", 2),
     ("view", 2),
+    ("eval", 2),
     ("tools", 3),
     ("bench", 3),
     ("cli", 3),
@@ -28,9 +28,9 @@ const LAYER_OF: &[(&str, u8)] = &[
 /// Within the domain layer, the only imports across modules: the shared vehicle model.
 const DOMAIN_SHARED: &str = "vehicle";
 
-/// Within orchestration: evaluation runs the loop through launch and may read recordings,
-/// the view may use evaluation's reading of ground truth; never the other way.
-const ORCHESTRATION_ORDER: &[&str] = &["launch", "record", "eval", "view"];
+/// Within orchestration: recordings may hold the view's Foxglove copies, evaluation runs the
+/// loop through launch and reads recordings; never the other way.
+const ORCHESTRATION_ORDER: &[&str] = &["launch", "view", "record", "eval"];
 
 /// Names the crate root re-exports from the contract (`crate::Bus`, ...).
 const ROOT_REEXPORTS: &[(&str, &str)] =

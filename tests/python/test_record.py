@@ -30,8 +30,11 @@ def read_all(path):
 
 
 def check_recording(path):
-    """Every property a recording promises; returns the channels' topics and the metadata."""
+    """Every property a recording promises; returns the channels' topics and the metadata.
+    Viewable copies (`--viewable`) are left out: they are checked on their own."""
     summary, meta, messages = read_all(path)
+    summary.channels = {i: c for i, c in summary.channels.items() if "viewable_copy" not in c.metadata}
+    messages = [(c, m) for c, m in messages if "viewable_copy" not in c.metadata]
     assert "slipstream.recording" in meta, meta.keys()
     info = meta["slipstream.recording"]
     channels = {c["topic"]: c for c in json.loads(info["channels"])}
@@ -62,7 +65,8 @@ def check_recording(path):
         # Every sequence number is accounted for: in the file, or counted as lost.
         lo, hi = spans[topic]
         assert c["messages"] + c["lost_upstream"] == hi - lo + 1, (topic, c, spans[topic])
-    assert int(info["messages"]) == len(messages) == summary.statistics.message_count
+    viewable = int(meta["slipstream.recording"].get("viewable_copies_written", 0))
+    assert int(info["messages"]) == len(messages) == summary.statistics.message_count - viewable
     return channels, info
 
 
@@ -186,3 +190,36 @@ def test_a_changed_controller_is_shown_where_it_first_answers_differently(slipst
     first = c["first_difference"]
     assert first["answers"].startswith("the speed at ") and first["recorded"] != first["replayed"], first
     assert "first difference" in run.stdout and "answer differently" in run.stdout, run.stdout
+
+
+def test_viewable_copies_stand_beside_the_payloads(slipstream_bin, free_port, tmp_path):
+    """`up --record --viewable`: next to the byte-for-byte channels, Foxglove's schemas on the
+    live view's topics, one copy per frame, per detections and per state."""
+    report = tmp_path / "report"
+    run = subprocess.run(
+        [slipstream_bin, "-l", f"tcp/127.0.0.1:{free_port}", "up", "--mode", "lockstep", "--duration", "3",
+         "--record", "--viewable", "--plain", "--report", str(report)],
+        capture_output=True, text=True, timeout=300, cwd=ROOT)
+    assert (report / "run.mcap").is_file(), run.stderr[-2000:]
+    channels, info = check_recording(report / "run.mcap")
+    assert info["viewable_copies"] == "true"
+    summary, _, messages = read_all(report / "run.mcap")
+    counts = defaultdict(int)
+    for channel, _ in messages:
+        counts[channel.topic] += 1
+    schemas = {c.topic: summary.schemas[c.schema_id] for c in summary.channels.values()}
+    expected = {"/camera/front": "foxglove.RawImage", "/camera/front/calibration": "foxglove.CameraCalibration",
+                "/camera/front/annotations": "foxglove.ImageAnnotations", "/scene/vehicles": "foxglove.SceneUpdate",
+                "/scene/road": "foxglove.SceneUpdate", "/tf": "foxglove.FrameTransforms",
+                "/acc": "slipstream.view.AccSeries"}
+    for topic, name in expected.items():
+        assert schemas[topic].name == name, (topic, schemas[topic].name)
+        assert schemas[topic].encoding == ("jsonschema" if topic == "/acc" else "protobuf")
+        assert len(schemas[topic].data) > 0, topic
+    assert counts["/camera/front"] == counts["camera/front"] > 0
+    assert counts["/camera/front/annotations"] == counts["perception/objects"] > 0
+    assert counts["/scene/vehicles"] == counts["/acc"] == counts["vehicle/state"] > 0
+    assert 0 < counts["/scene/road"] <= 4, "the road once per simulated second"
+    up = json.loads((report / "report.json").read_text())
+    assert up["recording"]["viewable_copies"] == sum(counts[t] for t in expected)
+    assert int(info["viewable_copies_written"]) == up["recording"]["viewable_copies"]

@@ -1,0 +1,201 @@
+//! Foxglove-viewable copies of the loop's messages, one recorded message at a time: what
+//! `record --viewable` (and `up --record --viewable`) writes next to the byte-for-byte
+//! channels, so that Foxglove's own panels show a recording: the camera with its boxes, the 3D
+//! scene, the ACC's series. The same drawings as the live view ([`super::scene`]), for every
+//! message instead of the latest.
+
+use foxglove::{Encode, Schema};
+
+use super::scene::{self, Image};
+use crate::msg::{
+    self, AccStatus, CameraFrameRef, CameraInfo, Detections, GroundTruthObjects, MessageKind, SimEvent, SimEventKind,
+    VehicleState,
+};
+use crate::sim::road::Road;
+use crate::sim::Scenario;
+use crate::vehicle::VehicleParams;
+
+/// The copies' topics: the live view's (docs/viewing.md), so one layout shows both.
+use super::live::{TOPIC_ACC, TOPIC_ANNOTATIONS, TOPIC_CALIBRATION, TOPIC_CAMERA, TOPIC_ROAD, TOPIC_TF, TOPIC_VEHICLES};
+
+/// The road is drawn again after this much simulated time (it follows the ego).
+const ROAD_EVERY_NS: u64 = 1_000_000_000;
+
+/// One viewable message: its topic, schema and encoding (the channel it goes on), its bytes
+/// and its log time (the original's publish stamp).
+#[derive(Debug, Clone)]
+pub struct ViewableCopy {
+    pub topic: &'static str,
+    pub schema: Schema,
+    pub message_encoding: String,
+    pub data: Vec<u8>,
+    pub log_time: u64,
+}
+
+fn copy<T: Encode>(topic: &'static str, msg: &T, log_time: u64) -> Option<ViewableCopy> {
+    let mut data = Vec::with_capacity(msg.encoded_len().unwrap_or(256));
+    msg.encode(&mut data).ok()?;
+    Some(ViewableCopy { topic, schema: T::get_schema()?, message_encoding: T::get_message_encoding(), data, log_time })
+}
+
+/// What the copies remember between messages: boxes need the latest ground truth and the
+/// ACC's lead, the scene the road.
+#[derive(Default)]
+pub struct Copies {
+    info: Option<CameraInfo>,
+    truth: Option<GroundTruthObjects>,
+    status: Option<AccStatus>,
+    road: Option<Road>,
+    road_s: Option<f64>,
+    road_drawn_ns: Option<u64>,
+    ego: Option<VehicleParams>,
+}
+
+impl Copies {
+    /// With the road and ego of a known scenario; otherwise they come from the scenario the
+    /// simulator announces (a built-in one).
+    pub fn new(scenario: Option<&Scenario>) -> Copies {
+        Copies {
+            road: scenario.map(|s| Road::new(s.road.clone())),
+            ego: scenario.map(|s| VehicleParams::of_class(s.ego.class.into())),
+            ..Copies::default()
+        }
+    }
+
+    /// The viewable copies of one payload (none for what has no view, or a malformed payload).
+    pub fn of(&mut self, payload: &[u8]) -> Vec<ViewableCopy> {
+        let Ok(kind) = msg::peek_kind(payload) else { return Vec::new() };
+        match kind {
+            MessageKind::CameraFrame => self.frame(payload),
+            MessageKind::Detections => self.detections(payload),
+            MessageKind::VehicleState => self.state(payload),
+            MessageKind::CameraInfo => {
+                self.info = msg::decode::<CameraInfo>(payload).ok().map(|i| i.msg);
+                Vec::new()
+            }
+            MessageKind::GroundTruthObjects => {
+                self.truth = msg::decode::<GroundTruthObjects>(payload).ok().map(|t| t.msg);
+                Vec::new()
+            }
+            MessageKind::AccStatus => {
+                self.status = msg::decode::<AccStatus>(payload).ok().map(|s| s.msg);
+                Vec::new()
+            }
+            MessageKind::SimEvent => {
+                self.event(payload);
+                Vec::new()
+            }
+            _ => Vec::new(),
+        }
+    }
+
+    fn frame(&mut self, payload: &[u8]) -> Vec<ViewableCopy> {
+        let Ok(f) = msg::decode::<CameraFrameRef>(payload) else { return Vec::new() };
+        let stamp = f.header.stamp_pub_ns;
+        // One copy of the pixels, into the protobuf message.
+        let image = scene::frame_image(stamp, &f.msg, foxglove::bytes::Bytes::copy_from_slice(f.msg.data));
+        let mut out: Vec<ViewableCopy> = match &image {
+            Image::Raw(i) => copy(TOPIC_CAMERA, i, stamp),
+            Image::Compressed(i) => copy(TOPIC_CAMERA, i, stamp),
+        }
+        .into_iter()
+        .collect();
+        if let Some(info) = &self.info {
+            out.extend(copy(TOPIC_CALIBRATION, &scene::calibration(stamp, info), stamp));
+        }
+        out
+    }
+
+    fn detections(&mut self, payload: &[u8]) -> Vec<ViewableCopy> {
+        let Ok(d) = msg::decode::<Detections>(payload) else { return Vec::new() };
+        let lead = self.status.as_ref().and_then(|s| s.lead.map(|l| l.id));
+        let stamp = d.msg.frame_stamp_pub_ns;
+        let a = scene::annotations(stamp, Some(&d.msg), self.truth.as_ref(), lead);
+        copy(TOPIC_ANNOTATIONS, &a, d.header.stamp_pub_ns).into_iter().collect()
+    }
+
+    fn state(&mut self, payload: &[u8]) -> Vec<ViewableCopy> {
+        let Ok(s) = msg::decode::<VehicleState>(payload) else { return Vec::new() };
+        let (stamp, ego) = (s.header.stamp_pub_ns, &s.msg);
+        let params = self.ego.unwrap_or(VehicleParams::CAR);
+        let truth = self.truth.as_ref();
+        let mut out = Vec::new();
+        out.extend(copy(TOPIC_VEHICLES, &scene::vehicles(stamp, ego, &params, truth), stamp));
+        out.extend(copy(TOPIC_TF, &scene::ego_frame(stamp, ego), stamp));
+        let due = self.road_drawn_ns.is_none_or(|t| s.header.stamp_sim_ns >= t + ROAD_EVERY_NS);
+        if let (Some(road), true) = (&self.road, due) {
+            let s_m = scene::road_position(road, ego, self.road_s);
+            self.road_s = Some(s_m);
+            self.road_drawn_ns = Some(s.header.stamp_sim_ns);
+            out.extend(copy(TOPIC_ROAD, &scene::road(stamp, road, s_m), stamp));
+        }
+        let series = scene::acc_series(ego, s.header.stamp_sim_ns, &params, self.status.as_ref(), truth);
+        if let Ok(data) = serde_json::to_vec(&series) {
+            out.push(ViewableCopy {
+                topic: TOPIC_ACC,
+                schema: scene::acc_series_schema(),
+                message_encoding: "json".into(),
+                data,
+                log_time: stamp,
+            });
+        }
+        out
+    }
+
+    fn event(&mut self, payload: &[u8]) {
+        let Ok(e) = msg::decode::<SimEvent>(payload) else { return };
+        if let (None, SimEventKind::ScenarioStart { name, .. }) = (&self.road, e.msg.kind) {
+            if let Ok(s) = Scenario::find(&name) {
+                self.road = Some(Road::new(s.road.clone()));
+                self.ego = Some(VehicleParams::of_class(s.ego.class.into()));
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::msg::{CameraFrame, Header, ImageEncoding, Message};
+
+    fn payload<M: Message>(stamp_sim_ns: u64, m: &M) -> Vec<u8> {
+        msg::encode(&Header { seq: 1, stamp_sim_ns, stamp_pub_ns: 5_000_000_000 + stamp_sim_ns }, m)
+    }
+
+    #[test]
+    fn each_kind_gets_its_copies_on_the_live_views_topics() {
+        let mut c = Copies::new(Some(&Scenario::find("cut-in").unwrap()));
+        let topics = |v: Vec<ViewableCopy>| v.iter().map(|c| c.topic).collect::<Vec<_>>();
+        let frame = CameraFrame { width: 4, height: 2, encoding: ImageEncoding::Rgb8, data: (0..24).collect() };
+        // No calibration before camera/front/info.
+        assert_eq!(topics(c.of(&payload(0, &frame))), [TOPIC_CAMERA]);
+        assert!(c.of(&payload(0, &crate::msg::example_info())).is_empty());
+        let copies = c.of(&payload(50, &frame));
+        assert_eq!(copies.iter().map(|c| c.topic).collect::<Vec<_>>(), [TOPIC_CAMERA, TOPIC_CALIBRATION]);
+        assert_eq!(copies[0].schema.name, "foxglove.RawImage");
+        assert_eq!((copies[0].message_encoding.as_str(), copies[0].log_time), ("protobuf", 5_000_000_050));
+        assert!(copies[0].data.windows(24).any(|w| w == (0..24).collect::<Vec<u8>>()), "the pixels, whole");
+        assert_eq!(topics(c.of(&payload(60, &msg::example_detections()))), [TOPIC_ANNOTATIONS]);
+        // The road with the first state and again a simulated second later, not in between.
+        let state = crate::msg::example_state();
+        assert_eq!(topics(c.of(&payload(0, &state))), [TOPIC_VEHICLES, TOPIC_TF, TOPIC_ROAD, TOPIC_ACC]);
+        assert_eq!(topics(c.of(&payload(10_000_000, &state))), [TOPIC_VEHICLES, TOPIC_TF, TOPIC_ACC]);
+        assert_eq!(topics(c.of(&payload(1_000_000_000, &state))), [TOPIC_VEHICLES, TOPIC_TF, TOPIC_ROAD, TOPIC_ACC]);
+        let acc = c.of(&payload(1_010_000_000, &state)).pop().unwrap();
+        assert_eq!((acc.message_encoding.as_str(), acc.schema.encoding.as_str()), ("json", "jsonschema"));
+        assert_eq!(serde_json::from_slice::<serde_json::Value>(&acc.data).unwrap()["t_s"], 1.01);
+        // Nothing to draw, or not a payload at all.
+        assert!(c.of(&payload(0, &msg::Speed { speed_mps: 1.0 })).is_empty());
+        assert!(c.of(&[1, 2, 3]).is_empty());
+    }
+
+    #[test]
+    fn without_a_scenario_the_announced_one_gives_the_road() {
+        let mut c = Copies::new(None);
+        let state = crate::msg::example_state();
+        assert!(!c.of(&payload(0, &state)).iter().any(|c| c.topic == TOPIC_ROAD));
+        let start = SimEvent { kind: SimEventKind::ScenarioStart { name: "cut-in".into(), seed: 1 } };
+        c.of(&payload(0, &start));
+        assert!(c.of(&payload(0, &state)).iter().any(|c| c.topic == TOPIC_ROAD));
+    }
+}
