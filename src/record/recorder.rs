@@ -81,6 +81,8 @@ pub struct RecordingSummary {
     pub channels: Vec<ChannelSummary>,
     /// Foxglove-viewable copies written besides (`--viewable`; not part of the counts above).
     pub viewable_copies: u64,
+    /// Copies not made because the writer was behind (the payloads always come first).
+    pub viewable_skipped: u64,
 }
 
 impl RecordingSummary {
@@ -117,8 +119,12 @@ impl RecordingSummary {
                 c.dropped_by_recorder
             ));
         }
-        if self.viewable_copies > 0 {
-            s.push_str(&format!("  and {} Foxglove-viewable copies (camera, boxes, scene, series)\n", self.viewable_copies));
+        if self.viewable_copies > 0 || self.viewable_skipped > 0 {
+            s.push_str(&format!("  and {} Foxglove-viewable copies (camera, boxes, scene, series)", self.viewable_copies));
+            if self.viewable_skipped > 0 {
+                s.push_str(&format!("; {} not made while the writer was behind", self.viewable_skipped));
+            }
+            s.push('\n');
         }
         let verdict = if self.lost_anything() {
             format!(
@@ -263,6 +269,10 @@ struct Channel {
     last_seq: Option<u64>,
 }
 
+/// Queued payload bytes beyond which the writer makes no viewable copies (it is behind: the
+/// byte-for-byte payloads come first).
+const VIEWABLE_BACKLOG: usize = QUEUE_BYTES / 8;
+
 /// Niceness of the writer thread: below the loop's processes, so that in a saturated loop
 /// (fast mode) the simulator keeps the CPU and the writer catches up from the queue.
 const WRITER_NICE: i32 = 10;
@@ -292,7 +302,7 @@ fn write_loop(
 ) -> Result<RecordingSummary> {
     let Files { mut writer, path, mut viewable } = files;
     let mut viewable_channels: HashMap<&'static str, u16> = HashMap::new();
-    let mut viewable_copies = 0u64;
+    let (mut viewable_copies, mut viewable_skipped) = (0u64, 0u64);
     let started = Instant::now();
     lower_priority();
     let namespace = about.get("namespace").cloned().unwrap_or_default();
@@ -309,9 +319,14 @@ fn write_loop(
         if let Some(item) = item {
             shared.queued_bytes.fetch_sub(item.payload.len(), Ordering::Relaxed);
             if let Some(copies) = viewable.as_mut() {
-                for c in copies.of(&item.payload) {
-                    write_copy(&mut writer, &mut viewable_channels, c).map_err(fail)?;
-                    viewable_copies += 1;
+                // The payloads first: copies wait for a writer that keeps up.
+                if shared.queued_bytes.load(Ordering::Relaxed) > VIEWABLE_BACKLOG {
+                    viewable_skipped += copies.skip(&item.payload);
+                } else {
+                    for c in copies.of(&item.payload) {
+                        write_copy(&mut writer, &mut viewable_channels, c).map_err(fail)?;
+                        viewable_copies += 1;
+                    }
                 }
             }
             write_item(&mut writer, &mut channels, &mut schemas, &namespace, item).map_err(fail)?;
@@ -343,12 +358,14 @@ fn write_loop(
         dropped_by_recorder: list.iter().map(|c| c.dropped_by_recorder).sum(),
         channels: list,
         viewable_copies,
+        viewable_skipped,
     };
     about.insert("ended_unix_ns".to_string(), msg::wall_clock_ns().to_string());
     about.insert("messages".to_string(), summary.messages.to_string());
     about.insert("lost_upstream".to_string(), summary.lost_upstream.to_string());
     about.insert("dropped_by_recorder".to_string(), summary.dropped_by_recorder.to_string());
     about.insert("viewable_copies_written".to_string(), summary.viewable_copies.to_string());
+    about.insert("viewable_copies_skipped".to_string(), summary.viewable_skipped.to_string());
     about.insert("channels".to_string(), serde_json::to_string(&summary.channels)?);
     writer
         .write_metadata(&mcap::records::Metadata { name: METADATA_NAME.to_string(), metadata: about })

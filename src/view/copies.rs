@@ -89,6 +89,18 @@ impl Copies {
         }
     }
 
+    /// Takes what `payload` tells (ground truth, status, ...) without making its copies
+    /// (the recorder is behind); returns how many copies it would have made.
+    pub fn skip(&mut self, payload: &[u8]) -> u64 {
+        match msg::peek_kind(payload) {
+            Ok(MessageKind::CameraFrame) => 1 + u64::from(self.info.is_some()),
+            Ok(MessageKind::Detections) => 1,
+            Ok(MessageKind::VehicleState) => 3,
+            Ok(_) => self.of(payload).len() as u64,
+            Err(_) => 0,
+        }
+    }
+
     fn frame(&mut self, payload: &[u8]) -> Vec<ViewableCopy> {
         let Ok(f) = msg::decode::<CameraFrameRef>(payload) else { return Vec::new() };
         let stamp = f.header.stamp_pub_ns;
@@ -184,6 +196,9 @@ mod tests {
         let acc = c.of(&payload(1_010_000_000, &state)).pop().unwrap();
         assert_eq!((acc.message_encoding.as_str(), acc.schema.encoding.as_str()), ("json", "jsonschema"));
         assert_eq!(serde_json::from_slice::<serde_json::Value>(&acc.data).unwrap()["t_s"], 1.01);
+        // Skipped while the recorder is behind: counted, and what it tells is still taken.
+        assert_eq!(c.skip(&payload(1_020_000_000, &frame)), 2);
+        assert_eq!(c.skip(&payload(0, &crate::msg::example_status())), 0);
         // Nothing to draw, or not a payload at all.
         assert!(c.of(&payload(0, &msg::Speed { speed_mps: 1.0 })).is_empty());
         assert!(c.of(&[1, 2, 3]).is_empty());

@@ -93,6 +93,19 @@ async fn a_recording_plays_back_whole_in_order_into_another_namespace() {
             assert_eq!(before.len(), 50, "{key}");
             assert_eq!(before, after, "{key}: the same payloads from the same publisher, in the same order");
         }
+
+        // At the recorded pace (and twice as fast) no message goes out before its time: the
+        // playback spans the recording (/ the rate). Upper bounds only catch a hang: a loaded
+        // machine may play late, never early.
+        for rate in [1.0, 2.0] {
+            let options = PlayOptions { pace: Pace::Rate(rate), start_s: 0.0, keys: Vec::new() };
+            let (p, file) = (player.clone(), dir.join("run.mcap"));
+            let report = tokio::task::spawn_blocking(move || play(&p, &file, &options, |_| {})).await.unwrap().unwrap();
+            assert_eq!(report.messages, 100);
+            assert!(report.recorded_s > 0.09, "50 steps 2 ms apart at least: {report:?}");
+            assert!(report.wall_s >= report.recorded_s / rate, "rate {rate}: {report:?}");
+            assert!(report.wall_s < report.recorded_s / rate + 10.0, "rate {rate}: {report:?}");
+        }
     });
     let _ = std::fs::remove_dir_all(&dir);
 }

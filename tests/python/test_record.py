@@ -216,10 +216,17 @@ def test_viewable_copies_stand_beside_the_payloads(slipstream_bin, free_port, tm
         assert schemas[topic].name == name, (topic, schemas[topic].name)
         assert schemas[topic].encoding == ("jsonschema" if topic == "/acc" else "protobuf")
         assert len(schemas[topic].data) > 0, topic
-    assert counts["/camera/front"] == counts["camera/front"] > 0
-    assert counts["/camera/front/annotations"] == counts["perception/objects"] > 0
-    assert counts["/scene/vehicles"] == counts["/acc"] == counts["vehicle/state"] > 0
-    assert 0 < counts["/scene/road"] <= 4, "the road once per simulated second"
     up = json.loads((report / "report.json").read_text())
+    pairs = [("/camera/front", "camera/front"), ("/camera/front/annotations", "perception/objects"),
+             ("/scene/vehicles", "vehicle/state"), ("/acc", "vehicle/state")]
+    if up["recording"]["viewable_skipped"] == 0:
+        # One copy per frame, per detections message and per state.
+        for copy, original in pairs:
+            assert counts[copy] == counts[original] > 0, (copy, counts[copy], original, counts[original])
+    else:
+        # The writer fell behind (a loaded machine): copies were skipped, payloads never.
+        for copy, original in pairs:
+            assert 0 < counts[copy] <= counts[original], (copy, counts[copy], original, counts[original])
+    assert 0 < counts["/scene/road"] <= 4, "the road once per simulated second"
     assert up["recording"]["viewable_copies"] == sum(counts[t] for t in expected)
     assert int(info["viewable_copies_written"]) == up["recording"]["viewable_copies"]
