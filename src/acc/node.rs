@@ -39,6 +39,8 @@ pub struct AccStats {
     pub emergencies: u64,
     /// Lockstep steps whose perception did not come within lockstep_wait_ms.
     pub lockstep_waits_timed_out: u64,
+    /// Answers given without the vehicle/state of their step (it came too late).
+    pub state_waits_timed_out: u64,
 }
 
 /// The perception input, by source.
@@ -122,7 +124,8 @@ struct Answer {
 
 /// How often the watchdog looks at the age of vehicle/speed.
 const WATCHDOG_PERIOD: Duration = Duration::from_millis(50);
-/// How long an answer waits for the vehicle/state of its step (published right after speed).
+/// How long an answer waits for the vehicle/state of its step (published right after speed),
+/// outside lockstep.
 const STATE_WAIT: Duration = Duration::from_millis(20);
 /// Lockstep log lines about missing perception: at most one per this.
 const LOCKSTEP_LOG_EVERY: Duration = Duration::from_secs(5);
@@ -202,7 +205,10 @@ async fn answer_speed(st: &mut State, inputs: &Inputs, settings: &AccSettings, s
     st.last_speed_at = Some(Instant::now());
     let t_ns = speed.header.stamp_sim_ns;
     let t_s = t_ns as f64 / 1e9;
-    let state = await_state(st, &inputs.state, t_ns).await;
+    // In lockstep the answer must not depend on how fast the state travelled: wait for it as
+    // long as for perception. Otherwise never hold the answer long for it.
+    let state_wait = if settings.lockstep { Duration::from_millis(settings.lockstep_wait_ms) } else { STATE_WAIT };
+    let state = await_state(st, &inputs.state, t_ns, state_wait).await;
     let answers_step = answers_step(st, t_ns);
     st.ego = EgoNow {
         t_s,
@@ -229,18 +235,21 @@ async fn answer_speed(st: &mut State, inputs: &Inputs, settings: &AccSettings, s
 }
 
 /// The vehicle/state of the step stamped `t_ns` (published right after its speed), waiting
-/// at most [`STATE_WAIT`] for it; the newest state taken, if any.
-async fn await_state(st: &mut State, sub: &Subscriber<VehicleState>, t_ns: u64) -> Option<VehicleState> {
+/// at most `wait` for it; the newest state taken, if any.
+async fn await_state(st: &mut State, sub: &Subscriber<VehicleState>, t_ns: u64, wait: Duration) -> Option<VehicleState> {
     let mut state = drain_states(sub, st);
     if st.state.is_some_and(|(stamp, _)| stamp >= t_ns) {
         return state;
     }
-    let deadline = Instant::now() + STATE_WAIT;
+    let deadline = Instant::now() + wait;
     while st.state.is_none_or(|(stamp, _)| stamp < t_ns) {
         let left = deadline.saturating_duration_since(Instant::now());
         let Some(r) = sub.recv_timeout(left).await else { break };
         take_state(st, &r);
         state = Some(r.msg);
+    }
+    if st.state.is_none_or(|(stamp, _)| stamp < t_ns) {
+        st.stats.state_waits_timed_out += 1;
     }
     state
 }

@@ -45,13 +45,14 @@ fn main() -> Result<()> {
         };
         let stats = slipstream::acc::node::run(&bus, settings, shutdown).await.context("acc: run")?;
         tracing::info!(
-            "{} commands ({} from the watchdog), {} perception frames, {} stale episodes, {} emergencies, {} lockstep waits timed out",
+            "{} commands ({} from the watchdog), {} perception frames, {} stale episodes, {} emergencies, {} lockstep waits timed out, {} answers without their step's state",
             stats.commands,
             stats.watchdog_commands,
             stats.perception_frames,
             stats.stale_episodes,
             stats.emergencies,
-            stats.lockstep_waits_timed_out
+            stats.lockstep_waits_timed_out,
+            stats.state_waits_timed_out
         );
         bus.close().await.context("acc: leave the bus")?;
         anyhow::Ok(())

@@ -244,70 +244,130 @@ pub struct ReplayStats {
     pub steps: u64,
     /// Steps whose recorded outputs did not all come within OUTPUT_WAIT.
     pub steps_timed_out: u64,
+    /// Inputs that came in the file after a later step's (beyond the reorder window) and
+    /// were played late.
+    pub late_inputs: u64,
     pub wall_s: f64,
 }
 
-/// Plays the recording's inputs step by step, waiting after each for the outputs the
-/// recording has for it.
-fn replay(bus: &Bus, path: &Path, recorded: &Outputs, inbox: &Inbox, progress: &mut dyn FnMut(f64)) -> Result<ReplayStats> {
-    let started = Instant::now();
-    let mut stats = ReplayStats::default();
-    let mut outputs: BTreeMap<u16, Option<Output>> = BTreeMap::new();
-    let mut step = Step::default();
-    let mut in_a_row = 0u32;
-    let mut finish_step = |step: &Step, stats: &mut ReplayStats| -> Result<()> {
-        let Some(stamp) = step.stamp_sim_ns else { return Ok(()) };
-        let frames: Vec<u64> = step.frames.iter().copied().filter(|f| recorded.detections.contains_key(f)).collect();
+/// Inputs read ahead and played in simulated-time order: the recorder receives each key on
+/// its own path, so a step's state may sit in the file after the next step's speed.
+const REORDER_WINDOW: usize = 512;
+
+/// An input waiting in the reorder window.
+struct Pending {
+    channel: Arc<mcap::Channel<'static>>,
+    kind: MessageKind,
+    seq: u64,
+    bytes: Vec<u8>,
+}
+
+/// The replay's state: the step being played, the publishers, the outputs to wait for.
+struct Replayer<'a> {
+    bus: &'a Bus,
+    recorded: &'a Outputs,
+    inbox: &'a Inbox,
+    outputs: BTreeMap<u16, Option<Output>>,
+    step: Step,
+    in_a_row: u32,
+    stats: ReplayStats,
+    last_progress: Instant,
+}
+
+impl Replayer<'_> {
+    /// Plays one input: a later step first finishes the one before (waits for its outputs).
+    fn play(&mut self, stamp_sim_ns: u64, p: Pending, progress: &mut dyn FnMut(f64)) -> Result<()> {
+        match self.step.stamp_sim_ns {
+            Some(s) if stamp_sim_ns < s => self.stats.late_inputs += 1,
+            Some(s) if stamp_sim_ns == s => {}
+            _ => {
+                self.finish_step()?;
+                self.step = Step { stamp_sim_ns: Some(stamp_sim_ns), frames: Vec::new() };
+                if self.last_progress.elapsed() >= Duration::from_secs(1) {
+                    progress(stamp_sim_ns as f64 / 1e9);
+                    self.last_progress = Instant::now();
+                }
+            }
+        }
+        if p.kind == MessageKind::CameraFrame {
+            self.step.frames.push(p.seq);
+        }
+        let output = match self.outputs.get(&p.channel.id) {
+            Some(o) => o,
+            None => {
+                let o = output_for(self.bus, &p.channel, &[], true)?;
+                self.outputs.entry(p.channel.id).or_insert(o)
+            }
+        };
+        if let Some(o) = output {
+            o.put(p.bytes)?;
+            self.stats.messages += 1;
+        }
+        Ok(())
+    }
+
+    /// Waits for the outputs the recording has for the step being played.
+    fn finish_step(&mut self) -> Result<()> {
+        let Some(stamp) = self.step.stamp_sim_ns else { return Ok(()) };
+        let recorded = self.recorded;
+        let frames: Vec<u64> = self.step.frames.iter().copied().filter(|f| recorded.detections.contains_key(f)).collect();
         let command = recorded.commands.contains_key(&stamp).then_some(stamp);
-        stats.steps += 1;
-        if inbox.wait(&frames, command, OUTPUT_WAIT) {
-            in_a_row = 0;
+        self.stats.steps += 1;
+        if self.inbox.wait(&frames, command, OUTPUT_WAIT) {
+            self.in_a_row = 0;
             return Ok(());
         }
-        stats.steps_timed_out += 1;
-        in_a_row += 1;
-        if in_a_row >= GIVE_UP_AFTER {
+        self.stats.steps_timed_out += 1;
+        self.in_a_row += 1;
+        if self.in_a_row >= GIVE_UP_AFTER {
             bail!(
-                "today's nodes stopped answering: {in_a_row} steps in a row without their outputs (at {:.2} s simulated); see their logs",
+                "today's nodes stopped answering: {} steps in a row without their outputs (at {:.2} s simulated); see their logs",
+                self.in_a_row,
                 stamp as f64 / 1e9
             );
         }
         Ok(())
+    }
+}
+
+/// Plays the recording's inputs step by step, in simulated-time order, waiting after each
+/// step for the outputs the recording has for it.
+fn replay(bus: &Bus, path: &Path, recorded: &Outputs, inbox: &Inbox, progress: &mut dyn FnMut(f64)) -> Result<ReplayStats> {
+    let started = Instant::now();
+    let mut r = Replayer {
+        bus,
+        recorded,
+        inbox,
+        outputs: BTreeMap::new(),
+        step: Step::default(),
+        in_a_row: 0,
+        stats: ReplayStats::default(),
+        last_progress: Instant::now(),
     };
-    let mut last_progress = Instant::now();
+    // Keyed by (simulated time, place in the file): time order, the file's order within a step.
+    let mut window: BTreeMap<(u64, u64), Pending> = BTreeMap::new();
+    let mut index = 0u64;
     for_each_message(path, |channel, bytes| {
         let Ok(kind) = msg::peek_kind(&bytes) else { return Ok(()) };
         if role(kind) == Role::Output {
             return Ok(());
         }
         let Ok((header, _)) = msg::decode_header(&bytes, kind) else { return Ok(()) };
-        if step.stamp_sim_ns.is_none_or(|s| header.stamp_sim_ns > s) {
-            finish_step(&step, &mut stats)?;
-            step = Step { stamp_sim_ns: Some(header.stamp_sim_ns), frames: Vec::new() };
-            if last_progress.elapsed() >= Duration::from_secs(1) {
-                progress(header.stamp_sim_ns as f64 / 1e9);
-                last_progress = Instant::now();
+        window.insert((header.stamp_sim_ns, index), Pending { channel: channel.clone(), kind, seq: header.seq, bytes });
+        index += 1;
+        if window.len() > REORDER_WINDOW {
+            if let Some(((stamp, _), p)) = window.pop_first() {
+                r.play(stamp, p, progress)?;
             }
-        }
-        if kind == MessageKind::CameraFrame {
-            step.frames.push(header.seq);
-        }
-        let output = match outputs.get(&channel.id) {
-            Some(o) => o,
-            None => {
-                let o = output_for(bus, channel, &[], true)?;
-                outputs.entry(channel.id).or_insert(o)
-            }
-        };
-        if let Some(o) = output {
-            o.put(bytes)?;
-            stats.messages += 1;
         }
         Ok(())
     })?;
-    finish_step(&step, &mut stats)?;
-    stats.wall_s = started.elapsed().as_secs_f64();
-    Ok(stats)
+    while let Some(((stamp, _), p)) = window.pop_first() {
+        r.play(stamp, p, progress)?;
+    }
+    r.finish_step()?;
+    r.stats.wall_s = started.elapsed().as_secs_f64();
+    Ok(r.stats)
 }
 
 /// Recorded against replayed outputs of one kind.
