@@ -121,6 +121,11 @@ fn cases(suites: &[Suite], quick: bool) -> Vec<Case> {
 
     if suites.contains(&Suite::Speed) {
         let s = "a. speed 100 Hz";
+        if python_available() {
+            push(s, "seed: Python UDP", speed_spec(Transport::SeedPythonUdp, speed_n));
+        } else {
+            eprintln!("note: no {PYTHON} here: the seed's Python UDP row is left out");
+        }
         push(s, "raw UDP", speed_spec(Transport::Udp, speed_n));
         push(s, "raw TCP", speed_spec(Transport::Tcp, speed_n));
         push(s, "raw zenoh", speed_spec(Transport::Zenoh, speed_n));
@@ -212,10 +217,46 @@ impl Drop for Peer {
     }
 }
 
+/// The seed design's peer (Python, standard library), shipped inside the binary.
+const SEED_PEER: &str = include_str!("seed_udp.py");
+/// The Python that runs it.
+const PYTHON: &str = "python3";
+
+/// Whether the seed's Python peer can run here.
+fn python_available() -> bool {
+    Command::new(PYTHON).arg("--version").stdout(Stdio::null()).stderr(Stdio::null()).status().is_ok_and(|s| s.success())
+}
+
+/// Where the seed peer's script was written (removed at the end of the run).
+static SEED_SCRIPT: std::sync::OnceLock<std::path::PathBuf> = std::sync::OnceLock::new();
+
+/// The seed peer's script, written once per process into the temp directory.
+fn seed_peer_script() -> Result<std::path::PathBuf> {
+    if let Some(p) = SEED_SCRIPT.get() {
+        return Ok(p.clone());
+    }
+    let path = std::env::temp_dir().join(format!("slipstream-seed-udp-{}.py", std::process::id()));
+    std::fs::write(&path, SEED_PEER).with_context(|| format!("write {}", path.display()))?;
+    Ok(SEED_SCRIPT.get_or_init(|| path).clone())
+}
+
+fn remove_seed_script() {
+    if let Some(p) = SEED_SCRIPT.get() {
+        let _ = std::fs::remove_file(p);
+    }
+}
+
 fn spawn_peer(role: &str, spec: &CaseSpec, endpoint: Option<&str>) -> Result<Peer> {
-    let exe = std::env::current_exe().context("find the slipstream binary")?;
-    let mut cmd = Command::new(exe);
-    cmd.arg("bench-peer").arg(role).arg("--spec").arg(serde_json::to_string(spec)?);
+    let mut cmd = if spec.transport == Transport::SeedPythonUdp {
+        let mut c = Command::new(PYTHON);
+        c.arg(seed_peer_script()?);
+        c
+    } else {
+        let mut c = Command::new(std::env::current_exe().context("find the slipstream binary")?);
+        c.arg("bench-peer");
+        c
+    };
+    cmd.arg(role).arg("--spec").arg(serde_json::to_string(spec)?);
     if let Some(ep) = endpoint {
         cmd.arg("--endpoint").arg(ep);
     }
@@ -337,7 +378,11 @@ pub fn run(args: &BenchArgs) -> Result<BenchReport> {
         for _ in 0..repeat {
             done += 1;
             eprint!("[{done}/{total}] {} / {} ... ", case.suite, case.path);
-            let (s, r) = run_case(&case.spec).with_context(|| format!("{} / {}", case.suite, case.path))?;
+            let result = run_case(&case.spec).with_context(|| format!("{} / {}", case.suite, case.path));
+            if result.is_err() {
+                remove_seed_script();
+            }
+            let (s, r) = result?;
             let f = figures(&case.spec, &s, &r);
             eprintln!(
                 "{} sent, {} received{}",
@@ -364,6 +409,7 @@ pub fn run(args: &BenchArgs) -> Result<BenchReport> {
             background_frames_per_s: med(&|r| r.bg_fps),
         });
     }
+    remove_seed_script();
     let ratios = ratios(&rows);
     let sim = if suites.contains(&Suite::Sim) { sim::run(args.quick, repeat)? } else { Vec::new() };
     let command = std::env::args().collect::<Vec<_>>().join(" ");
@@ -385,6 +431,7 @@ fn ratios(rows: &[Row]) -> Vec<Ratio> {
     };
     let p50 = |s: &str, p: &str| find(rows, s, p).and_then(|r| r.p50_us);
     let p99 = |s: &str, p: &str| find(rows, s, p).and_then(|r| r.p99_us);
+    ratio("speed p50: bus / seed Python UDP".into(), p50("a.", "bus"), p50("a.", "seed: Python UDP"), "< 1");
     ratio("speed p50: bus / raw UDP".into(), p50("a.", "bus"), p50("a.", "raw UDP"), "<= 1.5");
     ratio("speed p50: bus / raw zenoh".into(), p50("a.", "bus"), p50("a.", "raw zenoh"), "<= 1.1");
     ratio("speed p50: bus / raw TCP".into(), p50("a.", "bus"), p50("a.", "raw TCP"), "-");

@@ -152,6 +152,7 @@ pub async fn run_receiver(spec: CaseSpec) -> Result<()> {
         Transport::Tcp => receive_tcp(&col, &stop, &mut receiving)?,
         Transport::Zenoh => receive_zenoh(&spec, &col, &mut receiving).await?,
         Transport::Bus => receive_bus(&spec, &col, &stop, &mut receiving).await?,
+        Transport::SeedPythonUdp => anyhow::bail!("the seed's peers are the Python script, not bench-peer"),
     };
     println!("READY {endpoint}");
     std::io::stdout().flush()?;
@@ -382,6 +383,7 @@ pub async fn run_sender(spec: CaseSpec, endpoint: String) -> Result<()> {
         Transport::Tcp => SendReport { sent: send_tcp(&spec, &endpoint, deadline)?, ..SendReport::default() },
         Transport::Zenoh => SendReport { sent: send_zenoh(&spec, &endpoint, deadline).await?, ..SendReport::default() },
         Transport::Bus => send_bus(&spec, &endpoint, deadline).await?,
+        Transport::SeedPythonUdp => anyhow::bail!("the seed's peers are the Python script, not bench-peer"),
     };
     report.elapsed_s = started.elapsed().as_secs_f64();
     println!("SENT {}", serde_json::to_string(&report)?);

@@ -14,6 +14,9 @@ pub enum Transport {
     Udp,
     /// Length-prefixed messages on one TCP connection (the seed design's image port).
     Tcp,
+    /// The seed design itself: a Python script (standard library) sending the speed as text,
+    /// one UDP datagram per message (src/bench/seed_udp.py).
+    SeedPythonUdp,
 }
 
 /// What flows in the measured stream.
