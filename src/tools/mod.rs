@@ -11,6 +11,34 @@ pub mod top;
 pub mod up;
 pub mod view;
 
+/// Waits for Ctrl-C or `duration_s`, printing `status()` on stderr every `every`: one line
+/// redrawn in place on a terminal, a line each otherwise (`record`, `view`).
+pub(crate) async fn until_stopped(duration_s: Option<f64>, every: std::time::Duration, mut status: impl FnMut() -> String) {
+    use std::io::{IsTerminal, Write};
+    use std::time::{Duration, Instant};
+    let tty = std::io::stderr().is_terminal();
+    let deadline = duration_s.map(|d| Instant::now() + Duration::from_secs_f64(d));
+    let ctrl_c = tokio::signal::ctrl_c();
+    tokio::pin!(ctrl_c);
+    let mut tick = tokio::time::interval(every);
+    loop {
+        let left = deadline.map_or(Duration::from_secs(3600), |d| d.saturating_duration_since(Instant::now()));
+        tokio::select! {
+            _ = &mut ctrl_c => break,
+            _ = tokio::time::sleep(left) => if deadline.is_some() { break },
+            _ = tick.tick() => {
+                let line = status();
+                let mut err = std::io::stderr().lock();
+                let _ = if tty { write!(err, "\r\x1b[2K{line}") } else { writeln!(err, "{line}") };
+                let _ = err.flush();
+            }
+        }
+    }
+    if tty {
+        eprintln!();
+    }
+}
+
 /// UTC date and time for directory names: 20261122-041530.
 pub(crate) fn utc_stamp() -> String {
     let secs = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs());

@@ -1,7 +1,7 @@
 //! `slipstream record`: every key of the namespace (or the keys and topics given) into an MCAP
 //! file until Ctrl-C or --duration, with progress; the summary at the end says what was lost.
 
-use std::io::{IsTerminal, Write};
+use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
@@ -76,7 +76,6 @@ pub async fn run(bus: &Bus, args: &RecordArgs) -> Result<RecordingSummary> {
         (true, Some(name)) => Some(Copies::new(Some(&crate::sim::Scenario::find(name)?))),
     };
     let recording = Recording::start_with(bus, &selectors, &path, viewable).await?;
-    let tty = std::io::stderr().is_terminal();
     eprintln!(
         "recording {} into {} ({})",
         selectors.iter().map(|s| s.to_string()).collect::<Vec<_>>().join(" "),
@@ -84,27 +83,11 @@ pub async fn run(bus: &Bus, args: &RecordArgs) -> Result<RecordingSummary> {
         args.duration.map_or("Ctrl-C stops".to_string(), |d| format!("for {d} s"))
     );
     let started = Instant::now();
-    let deadline = args.duration.map(|d| started + Duration::from_secs_f64(d));
-    let ctrl_c = tokio::signal::ctrl_c();
-    tokio::pin!(ctrl_c);
-    let mut tick = tokio::time::interval(PROGRESS_EVERY);
-    loop {
-        let left = deadline.map_or(Duration::from_secs(3600), |d| d.saturating_duration_since(Instant::now()));
-        tokio::select! {
-            _ = &mut ctrl_c => break,
-            _ = tokio::time::sleep(left) => if deadline.is_some() { break },
-            _ = tick.tick() => {
-                let (n, bytes) = recording.progress();
-                let line = format!("{:6.1} s  {n} messages  {:.1} MB", started.elapsed().as_secs_f64(), bytes as f64 / 1e6);
-                let mut err = std::io::stderr().lock();
-                let _ = if tty { write!(err, "\r\x1b[2K{line}") } else { writeln!(err, "{line}") };
-                let _ = err.flush();
-            }
-        }
-    }
-    if tty {
-        eprintln!();
-    }
+    super::until_stopped(args.duration, PROGRESS_EVERY, || {
+        let (n, bytes) = recording.progress();
+        format!("{:6.1} s  {n} messages  {:.1} MB", started.elapsed().as_secs_f64(), bytes as f64 / 1e6)
+    })
+    .await;
     let summary = tokio::task::spawn_blocking(move || recording.finish()).await??;
     println!("{}", summary.render(std::io::stdout().is_terminal()));
     Ok(summary)

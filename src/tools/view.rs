@@ -2,8 +2,7 @@
 //! other PCs): a Foxglove WebSocket server until Ctrl-C or --duration. `up --view` runs the
 //! same view inside `up`.
 
-use std::io::{IsTerminal, Write};
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use anyhow::Result;
 
@@ -79,27 +78,7 @@ pub fn status_line(s: &ViewStats) -> String {
 pub async fn run(bus: &Bus, args: &ViewArgs) -> Result<ViewStats> {
     let view = LiveView::start(bus, options(args)?).await?;
     eprintln!("{}", how_to_open(&args.host, view.port()));
-    let tty = std::io::stderr().is_terminal();
-    let deadline = args.duration.map(|d| Instant::now() + Duration::from_secs_f64(d));
-    let ctrl_c = tokio::signal::ctrl_c();
-    tokio::pin!(ctrl_c);
-    let mut tick = tokio::time::interval(STATUS_EVERY);
-    loop {
-        let left = deadline.map_or(Duration::from_secs(3600), |d| d.saturating_duration_since(Instant::now()));
-        tokio::select! {
-            _ = &mut ctrl_c => break,
-            _ = tokio::time::sleep(left) => if deadline.is_some() { break },
-            _ = tick.tick() => {
-                let line = status_line(&view.stats());
-                let mut err = std::io::stderr().lock();
-                let _ = if tty { write!(err, "\r\x1b[2K{line}") } else { writeln!(err, "{line}") };
-                let _ = err.flush();
-            }
-        }
-    }
-    if tty {
-        eprintln!();
-    }
+    super::until_stopped(args.duration, STATUS_EVERY, || status_line(&view.stats())).await;
     let stats = view.stop().await;
     eprintln!("{}", status_line(&stats));
     Ok(stats)
