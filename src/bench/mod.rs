@@ -109,6 +109,7 @@ fn speed_spec(transport: Transport, count: u64) -> CaseSpec {
         lowlatency: false,
         runtime: None,
         tcp_buffer: TcpBuffer::Default,
+        unix_socket: false,
         background: None,
     }
 }
@@ -138,6 +139,8 @@ fn cases(suites: &[Suite], quick: bool) -> Vec<Case> {
         );
         push(s, "bus, zenoh's runtime", CaseSpec { runtime: zenoh_rt(), ..speed_spec(Transport::Bus, speed_n) });
         push(s, "bus, lowlatency transport", CaseSpec { lowlatency: true, ..speed_spec(Transport::Bus, speed_n) });
+        push(s, "raw zenoh, unix socket", CaseSpec { unix_socket: true, ..speed_spec(Transport::Zenoh, speed_n) });
+        push(s, "bus, unix socket", CaseSpec { unix_socket: true, ..speed_spec(Transport::Bus, speed_n) });
     }
     if suites.contains(&Suite::Frames) {
         for (w, h) in [(640u32, 480u32), (1280, 720)] {
@@ -161,6 +164,7 @@ fn cases(suites: &[Suite], quick: bool) -> Vec<Case> {
                 lowlatency: false,
                 runtime: None,
                 tcp_buffer: TcpBuffer::Default,
+        unix_socket: false,
                 background: None,
             };
             for (phase, rate) in [("throughput", None), ("latency @20 Hz", Some(20.0))] {
@@ -433,6 +437,8 @@ fn ratios(rows: &[Row]) -> Vec<Ratio> {
     let p99 = |s: &str, p: &str| find(rows, s, p).and_then(|r| r.p99_us);
     ratio("speed p50: bus / seed Python UDP".into(), p50("a.", "bus"), p50("a.", "seed: Python UDP"), "< 1");
     ratio("speed p50: bus / raw UDP".into(), p50("a.", "bus"), p50("a.", "raw UDP"), "<= 1.5");
+    ratio("speed p50: bus, unix socket / bus".into(), p50("a.", "bus, unix socket"), p50("a.", "bus"), "-");
+    ratio("speed p50: bus, unix socket / seed Python UDP".into(), p50("a.", "bus, unix socket"), p50("a.", "seed: Python UDP"), "< 1");
     ratio("speed p50: bus / raw zenoh".into(), p50("a.", "bus"), p50("a.", "raw zenoh"), "<= 1.1");
     ratio("speed p50: bus / raw TCP".into(), p50("a.", "bus"), p50("a.", "raw TCP"), "-");
     ratio("speed p99: bus / raw UDP".into(), p99("a.", "bus"), p99("a.", "raw UDP"), "-");

@@ -229,7 +229,7 @@ fn receive_tcp(col: &Arc<Collector>, stop: &Arc<AtomicBool>, r: &mut Receiving) 
 
 /// Raw Zenoh: a callback subscriber on the case's key.
 async fn receive_zenoh(spec: &CaseSpec, col: &Arc<Collector>, r: &mut Receiving) -> Result<String> {
-    let session = zenoh::open(peer_config(spec, Some("tcp/127.0.0.1:0"), None)?).await.map_err(anyhow::Error::msg)?;
+    let session = zenoh::open(peer_config(spec, Some(&listen_endpoint(spec)), None)?).await.map_err(anyhow::Error::msg)?;
     let key = if matches!(spec.payload, Payload::Speed) { SPEED_KEY } else { FRAME_KEY };
     let c = col.clone();
     let sub = session
@@ -260,7 +260,7 @@ async fn receive_bus(
     stop: &Arc<AtomicBool>,
     r: &mut Receiving,
 ) -> Result<String> {
-    let session = zenoh::open(peer_config(spec, Some("tcp/127.0.0.1:0"), None)?).await.map_err(anyhow::Error::msg)?;
+    let session = zenoh::open(peer_config(spec, Some(&listen_endpoint(spec)), None)?).await.map_err(anyhow::Error::msg)?;
     let ep = first_locator(&session).await?;
     let bus = Arc::new(Bus::from_session(session, peer_topics(spec)?, "bench-recv").await?);
     if matches!(spec.payload, Payload::Speed) {
@@ -326,6 +326,18 @@ fn read_fully(stream: &mut impl Read, buf: &mut [u8], stop: &AtomicBool) -> std:
         }
     }
     Ok(())
+}
+
+/// Where a Zenoh receiver listens: a free loopback TCP port, or a unix socket of this
+/// process in the temp directory (removed first if a crashed run left it).
+fn listen_endpoint(spec: &CaseSpec) -> String {
+    if spec.unix_socket {
+        let path = std::env::temp_dir().join(format!("slipstream-bench-{}.sock", std::process::id()));
+        let _ = std::fs::remove_file(&path);
+        format!("unixsock-stream/{}", path.display())
+    } else {
+        "tcp/127.0.0.1:0".to_string()
+    }
 }
 
 async fn first_locator(session: &zenoh::Session) -> Result<String> {

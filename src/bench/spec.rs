@@ -67,6 +67,9 @@ pub struct CaseSpec {
     pub runtime: Option<String>,
     /// TCP send and receive buffer sizes of Zenoh's links.
     pub tcp_buffer: TcpBuffer,
+    /// Zenoh over a unix socket (`unixsock-stream`) instead of TCP on loopback (one host).
+    #[serde(default)]
+    pub unix_socket: bool,
     pub background: Option<Background>,
 }
 
