@@ -388,13 +388,15 @@ const DRAIN: Duration = Duration::from_millis(300);
 /// Sender: connects to `endpoint`, sends the measured stream (and background frames), prints
 /// `SENT <json>`.
 pub async fn run_sender(spec: CaseSpec, endpoint: String) -> Result<()> {
-    let deadline = Instant::now() + Duration::from_secs_f64(spec.max_duration_s);
+    // The sending time a case allows counts from its first message, once the receiver is
+    // matched: a session that is slow to connect on a loaded machine does not eat it.
+    let max = Duration::from_secs_f64(spec.max_duration_s);
     let started = Instant::now();
     let mut report = match spec.transport {
-        Transport::Udp => SendReport { sent: send_udp(&spec, &endpoint, deadline)?, ..SendReport::default() },
-        Transport::Tcp => SendReport { sent: send_tcp(&spec, &endpoint, deadline)?, ..SendReport::default() },
-        Transport::Zenoh => SendReport { sent: send_zenoh(&spec, &endpoint, deadline).await?, ..SendReport::default() },
-        Transport::Bus => send_bus(&spec, &endpoint, deadline).await?,
+        Transport::Udp => SendReport { sent: send_udp(&spec, &endpoint, Instant::now() + max)?, ..SendReport::default() },
+        Transport::Tcp => SendReport { sent: send_tcp(&spec, &endpoint, Instant::now() + max)?, ..SendReport::default() },
+        Transport::Zenoh => SendReport { sent: send_zenoh(&spec, &endpoint, max).await?, ..SendReport::default() },
+        Transport::Bus => send_bus(&spec, &endpoint, max).await?,
         Transport::SeedPythonUdp => anyhow::bail!("the seed's peers are the Python script, not bench-peer"),
     };
     report.elapsed_s = started.elapsed().as_secs_f64();
@@ -435,7 +437,7 @@ fn send_tcp(spec: &CaseSpec, endpoint: &str, deadline: Instant) -> Result<u64> {
     Ok(sent)
 }
 
-async fn send_zenoh(spec: &CaseSpec, endpoint: &str, deadline: Instant) -> Result<u64> {
+async fn send_zenoh(spec: &CaseSpec, endpoint: &str, max: Duration) -> Result<u64> {
     let session = zenoh::open(peer_config(spec, None, Some(endpoint))?).await.map_err(anyhow::Error::msg)?;
     let (key, topic, frame) = match spec.payload {
         Payload::Speed => (SPEED_KEY, topics::Topic::VehicleSpeed, None),
@@ -454,6 +456,7 @@ async fn send_zenoh(spec: &CaseSpec, endpoint: &str, deadline: Instant) -> Resul
         .await
         .map_err(anyhow::Error::msg)?;
     wait_matching(&publisher).await?;
+    let deadline = Instant::now() + max;
     let sent = Pacer::new(spec.rate_hz).run(spec.count, deadline, |i| {
         let payload = match &frame {
             None => ZBytes::from(raw_record(i).to_vec()),
@@ -473,22 +476,24 @@ async fn send_zenoh(spec: &CaseSpec, endpoint: &str, deadline: Instant) -> Resul
     Ok(sent)
 }
 
-async fn send_bus(spec: &CaseSpec, endpoint: &str, deadline: Instant) -> Result<SendReport> {
+async fn send_bus(spec: &CaseSpec, endpoint: &str, max: Duration) -> Result<SendReport> {
+    // Background frames stop with the measured stream; this only bounds them if it hangs.
+    let guard = Instant::now() + max + MATCH_WAIT;
     let bus = Bus::open(peer_config(spec, None, Some(endpoint))?, peer_topics(spec)?, "bench-send").await?;
     let bus = Arc::new(bus);
     let done = Arc::new(AtomicBool::new(false));
     let background = spec.background.map(|bg| {
         let (bus, done) = (bus.clone(), done.clone());
-        tokio::spawn(async move { send_background(bus, bg, done, deadline).await })
+        tokio::spawn(async move { send_background(bus, bg, done, guard).await })
     });
-    let pacer = Pacer::new(spec.rate_hz);
     let mut report = SendReport::default();
     match spec.payload {
         Payload::Speed => {
             let publisher = bus.publisher(topics::VEHICLE_SPEED).await?;
-            if !publisher.wait_for_subscriber(Duration::from_secs(10)).await {
-                bail!("no subscriber matched vehicle/speed within 10 s");
+            if !publisher.wait_for_subscriber(MATCH_WAIT).await {
+                bail!("no subscriber matched vehicle/speed within {MATCH_WAIT:?}");
             }
+            let (pacer, deadline) = (Pacer::new(spec.rate_hz), Instant::now() + max);
             // Paced on a blocking thread: a sleeping pacer must not hold a runtime worker.
             let count = spec.count;
             report.sent = tokio::task::spawn_blocking(move || {
@@ -498,9 +503,10 @@ async fn send_bus(spec: &CaseSpec, endpoint: &str, deadline: Instant) -> Result<
         }
         Payload::Frame { width, height } => {
             let publisher = bus.frame_publisher().await?;
-            if !publisher.publisher().wait_for_subscriber(Duration::from_secs(10)).await {
-                bail!("no subscriber matched camera/front within 10 s");
+            if !publisher.publisher().wait_for_subscriber(MATCH_WAIT).await {
+                bail!("no subscriber matched camera/front within {MATCH_WAIT:?}");
             }
+            let (pacer, deadline) = (Pacer::new(spec.rate_hz), Instant::now() + max);
             let len = (width * height * 3) as usize;
             report.sent = pacer.run(spec.count, deadline, |i| {
                 // The renderer would write every pixel here; the bench writes one byte so
@@ -545,8 +551,11 @@ async fn send_background(bus: Arc<Bus>, bg: Background, done: Arc<AtomicBool>, d
     .await?
 }
 
+/// How long a sender waits for its receiver to match.
+const MATCH_WAIT: Duration = Duration::from_secs(10);
+
 async fn wait_matching(publisher: &zenoh::pubsub::Publisher<'_>) -> Result<()> {
-    let deadline = Instant::now() + Duration::from_secs(10);
+    let deadline = Instant::now() + MATCH_WAIT;
     while Instant::now() < deadline {
         if publisher.matching_status().await.map(|s| s.matching()).unwrap_or(false) {
             return Ok(());

@@ -160,7 +160,7 @@ pub fn run_from(path: &Path, args: &UpArgs, connect: &ConnectArgs) -> Result<u8>
         Some(d) => d.clone(),
         None => PathBuf::from("reports").join(format!("resim-{stem}-{}", super::utc_stamp())),
     };
-    std::fs::create_dir_all(&dir).with_context(|| format!("create {}", dir.display()))?;
+    // The directory comes with the nodes' logs, once the recording has been read.
     let plain = args.plain || !std::io::stderr().is_terminal();
     eprintln!("slipstream up --from {}: today's detector and ACC answer the recording; report in {}", path.display(), dir.display());
     let mut progress = |t_s: f64| {
