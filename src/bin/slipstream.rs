@@ -79,6 +79,9 @@ enum Command {
     /// own, with the built-in config/zenoh.json5: connection flags do not apply. About 14
     /// minutes for all suites; --quick checks every path in about a minute.
     Bench(BenchArgs),
+    /// Feed every message decoder and config parser mutated valid inputs (seeded) and count
+    /// what is accepted, rejected, or panics; exits with 1 on any panic
+    Fuzz(slipstream::tools::fuzz::FuzzArgs),
     /// Show the key of every topic after namespace and remapping, its QoS, and the Zenoh
     /// mode and endpoints in use
     Info {
@@ -208,6 +211,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             slipstream::tools::view::run(&bus, &args).await?;
             Ok(bus)
         })),
+        Command::Fuzz(args) => done(slipstream::tools::fuzz::command(&args)),
         Command::Router => done(slipstream::tools::router::run(connect)),
         Command::Demo(args) => done(slipstream::tools::demo::run(connect, &args)),
         Command::Bench(args) => done(bench_command(&args)),

@@ -3,6 +3,7 @@
 
 pub mod demo;
 pub mod echo;
+pub mod fuzz;
 pub mod info;
 pub mod play;
 pub mod record;
