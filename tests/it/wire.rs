@@ -397,6 +397,8 @@ fn the_wire_format_doc_quotes_every_example() {
 /// (`slipstream fuzz --count 10000000` is the long run, docs/performance.md).
 #[test]
 fn mutated_inputs_are_accepted_or_rejected_never_a_panic() {
+    // Seconds of one core at full load: not beside the loop tests, whose timing it would squeeze.
+    let _serial = crate::common::serial();
     let reports = slipstream::tools::fuzz::run(100_000, 5_000, 7);
     assert!(reports.len() >= 15, "{} targets", reports.len());
     for r in &reports {
