@@ -195,9 +195,6 @@ pub fn run(args: &UpArgs, connect: &ConnectArgs) -> Result<Outcome> {
     };
     let rt = tokio::runtime::Runtime::new()?;
     let report = rt.block_on(run_loop(args, connect, scenario, &dir))?;
-    let path = dir.join("report.json");
-    std::fs::write(&path, serde_json::to_string_pretty(&report)?)
-        .with_context(|| format!("write {}", path.display()))?;
     println!("{}", summary(&report));
     Ok(Outcome { report })
 }
@@ -410,14 +407,13 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
     let latency = std::mem::take(&mut *watch.latency.lock());
     let end_event = watch.end_event.lock().clone();
     drop(watch);
-    lp.close().await;
 
     let fallback = end_event.unwrap_or_else(|| if interrupted { "stopped (Ctrl-C)".into() } else { "stopped".into() });
     let judged = judge(&rec, &scenario, sim.as_ref(), &fallback);
     let trace = judged.trace;
     let plots = judged_outputs(&trace, &latency, &scenario.name, args, t0_ns, dir)?;
     let sim_time_s = trace.samples.last().map_or(0.0, |s| s.t_s);
-    Ok(UpReport {
+    let report = UpReport {
         command: std::env::args().collect::<Vec<_>>().join(" "),
         scenario: scenario.name.clone(),
         mode: args.mode,
@@ -436,7 +432,13 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
         recording,
         view,
         report_dir: dir.to_path_buf(),
-    })
+    };
+    // The report is on disk before the session closes: sessions still attached (top, echo, a
+    // Python client) can hold the close up, bounded as it is.
+    let path = dir.join("report.json");
+    std::fs::write(&path, serde_json::to_string_pretty(&report)?).with_context(|| format!("write {}", path.display()))?;
+    lp.close().await;
+    Ok(report)
 }
 
 /// trace.csv, the run's plot and the latency plot; returns the plots written.
