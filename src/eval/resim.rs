@@ -15,13 +15,11 @@
 //! `perception_stamp_pub_ns` (the publish stamp of the detections it used, new in a replay).
 
 use std::collections::BTreeMap;
-use std::fs::File;
-use std::io::BufReader;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{anyhow, bail, Result};
 use parking_lot::{Condvar, Mutex};
 use serde::Serialize;
 
@@ -30,7 +28,7 @@ use crate::bus::{Bus, Declared};
 use crate::config::ConnectArgs;
 use crate::launch::{ClockMode, LoopRun, LoopSpec, Network, NodeEnd};
 use crate::msg::{self, AccStatus, ControlCommand, Detections, MessageKind, SimClock, SimEvent, SimEventKind, SimMode};
-use crate::record::play::{output_for, Output};
+use crate::record::play::{each_message, output_for, Output};
 use crate::topics::Topic;
 
 /// How long a step waits for the outputs the recording has for it.
@@ -114,7 +112,8 @@ struct Recorded {
 impl Recorded {
     fn scan(path: &Path) -> Result<Recorded> {
         let mut rec = Recorded::default();
-        for_each_message(path, |_, bytes| {
+        each_message(path, |m| {
+            let bytes = m.data.into_owned();
             let Ok(kind) = msg::peek_kind(&bytes) else { return Ok(()) };
             match kind {
                 MessageKind::SimEvent => {
@@ -162,30 +161,6 @@ impl Recorded {
             PerceptionSource::Camera
         }
     }
-}
-
-/// Calls `f` with every message of the recording in file order (its channel and payload);
-/// a file cut by a crash is read up to the cut.
-fn for_each_message(
-    path: &Path,
-    mut f: impl FnMut(&Arc<mcap::Channel<'static>>, Vec<u8>) -> Result<()>,
-) -> Result<()> {
-    let file = File::open(path).with_context(|| format!("open {}", path.display()))?;
-    let mut seen = 0u64;
-    for message in mcap::io::MessageReader::new(BufReader::new(file)) {
-        match message {
-            Ok(m) => {
-                seen += 1;
-                f(&m.channel, m.data.into_owned())?;
-            }
-            Err(e) if seen > 0 => {
-                tracing::warn!("{}: {e}; read up to there", path.display());
-                break;
-            }
-            Err(e) => bail!("{} is no readable MCAP file: {e}", path.display()),
-        }
-    }
-    Ok(())
 }
 
 /// Today's outputs as they arrive, with a condition to wait on.
@@ -347,13 +322,14 @@ fn replay(bus: &Bus, path: &Path, recorded: &Outputs, inbox: &Inbox, progress: &
     // Keyed by (simulated time, place in the file): time order, the file's order within a step.
     let mut window: BTreeMap<(u64, u64), Pending> = BTreeMap::new();
     let mut index = 0u64;
-    for_each_message(path, |channel, bytes| {
+    each_message(path, |m| {
+        let (channel, bytes) = (m.channel, m.data.into_owned());
         let Ok(kind) = msg::peek_kind(&bytes) else { return Ok(()) };
         if role(kind) == Role::Output {
             return Ok(());
         }
         let Ok((header, _)) = msg::decode_header(&bytes, kind) else { return Ok(()) };
-        window.insert((header.stamp_sim_ns, index), Pending { channel: channel.clone(), kind, seq: header.seq, bytes });
+        window.insert((header.stamp_sim_ns, index), Pending { channel, kind, seq: header.seq, bytes });
         index += 1;
         if window.len() > REORDER_WINDOW {
             if let Some(((stamp, _), p)) = window.pop_first() {

@@ -67,6 +67,28 @@ impl Output {
     }
 }
 
+/// Calls `f` with every message of the recording at `path`, in file order: the one reader of
+/// recordings (`play`, re-simulation). A file cut by a crash is read up to the cut and
+/// `true` returned; a file that is no MCAP at all is an error.
+pub(crate) fn each_message(path: &Path, mut f: impl FnMut(mcap::Message<'static>) -> Result<()>) -> Result<bool> {
+    let file = File::open(path).with_context(|| format!("open {}", path.display()))?;
+    let mut seen = false;
+    for message in mcap::io::MessageReader::new(BufReader::new(file)) {
+        match message {
+            Ok(m) => {
+                seen = true;
+                f(m)?;
+            }
+            Err(e) if seen => {
+                tracing::warn!("{}: {e}; read up to there", path.display());
+                return Ok(true);
+            }
+            Err(e) => return Err(anyhow!("{} is no readable MCAP file: {e}", path.display())),
+        }
+    }
+    Ok(false)
+}
+
 /// Plays `path` onto `bus`; `progress` is called about once a second with the report so far.
 pub fn play(
     bus: &Bus,
@@ -74,23 +96,12 @@ pub fn play(
     options: &PlayOptions,
     mut progress: impl FnMut(&PlayReport),
 ) -> Result<PlayReport> {
-    let file = File::open(path).with_context(|| format!("open {}", path.display()))?;
-    let reader = mcap::io::MessageReader::new(BufReader::new(file));
     let mut outputs: HashMap<u16, Option<Output>> = HashMap::new();
     let mut report = PlayReport::default();
     let started = Instant::now();
     let mut last_progress = Instant::now();
     let mut first: Option<u64> = None;
-    for message in reader {
-        let message = match message {
-            Ok(m) => m,
-            Err(e) if report.messages > 0 || report.skipped > 0 => {
-                tracing::warn!("{}: {e}; played up to there", path.display());
-                report.cut = true;
-                break;
-            }
-            Err(e) => return Err(anyhow!("{} is no readable MCAP file: {e}", path.display())),
-        };
+    report.cut = each_message(path, |message| {
         let t0 = *first.get_or_insert(message.log_time);
         let offset_s = message.log_time.saturating_sub(t0) as f64 / 1e9;
         let output = match outputs.get(&message.channel.id) {
@@ -102,7 +113,7 @@ pub fn play(
         };
         let Some(output) = output.as_ref().filter(|_| offset_s >= options.start_s) else {
             report.skipped += 1;
-            continue;
+            return Ok(());
         };
         if let Pace::Rate(rate) = options.pace {
             let due = started + Duration::from_secs_f64((offset_s - options.start_s).max(0.0) / rate);
@@ -121,7 +132,8 @@ pub fn play(
             progress(&report);
             last_progress = Instant::now();
         }
-    }
+        Ok(())
+    })?;
     report.wall_s = started.elapsed().as_secs_f64();
     Ok(report)
 }

@@ -6,14 +6,12 @@
 
 use foxglove::{Encode, Schema};
 
-use super::scene::{self, Image};
+use super::scene::{self, Image, SceneContext};
 use crate::msg::{
     self, AccStatus, CameraFrameRef, CameraInfo, Detections, GroundTruthObjects, MessageKind, SimEvent, SimEventKind,
     VehicleState,
 };
-use crate::sim::road::Road;
 use crate::sim::Scenario;
-use crate::vehicle::VehicleParams;
 
 /// The copies' topics: the live view's (docs/viewing.md), so one layout shows both.
 use super::live::{TOPIC_ACC, TOPIC_ANNOTATIONS, TOPIC_CALIBRATION, TOPIC_CAMERA, TOPIC_ROAD, TOPIC_TF, TOPIC_VEHICLES};
@@ -45,21 +43,15 @@ pub struct Copies {
     info: Option<CameraInfo>,
     truth: Option<GroundTruthObjects>,
     status: Option<AccStatus>,
-    road: Option<Road>,
-    road_s: Option<f64>,
+    context: SceneContext,
     road_drawn_ns: Option<u64>,
-    ego: Option<VehicleParams>,
 }
 
 impl Copies {
     /// With the road and ego of a known scenario; otherwise they come from the scenario the
     /// simulator announces (a built-in one).
     pub fn new(scenario: Option<&Scenario>) -> Copies {
-        Copies {
-            road: scenario.map(|s| Road::new(s.road.clone())),
-            ego: scenario.map(|s| VehicleParams::of_class(s.ego.class.into())),
-            ..Copies::default()
-        }
+        Copies { context: SceneContext::of(scenario), ..Copies::default() }
     }
 
     /// The viewable copies of one payload (none for what has no view, or a malformed payload).
@@ -105,7 +97,8 @@ impl Copies {
         let Ok(f) = msg::decode::<CameraFrameRef>(payload) else { return Vec::new() };
         let stamp = f.header.stamp_pub_ns;
         // One copy of the pixels, into the protobuf message.
-        let image = scene::frame_image(stamp, &f.msg, foxglove::bytes::Bytes::copy_from_slice(f.msg.data));
+        let pixels = foxglove::bytes::Bytes::copy_from_slice(f.msg.data);
+        let image = scene::frame_image(stamp, f.msg.width, f.msg.height, f.msg.encoding, pixels);
         let mut out: Vec<ViewableCopy> = match &image {
             Image::Raw(i) => copy(TOPIC_CAMERA, i, stamp),
             Image::Compressed(i) => copy(TOPIC_CAMERA, i, stamp),
@@ -129,17 +122,15 @@ impl Copies {
     fn state(&mut self, payload: &[u8]) -> Vec<ViewableCopy> {
         let Ok(s) = msg::decode::<VehicleState>(payload) else { return Vec::new() };
         let (stamp, ego) = (s.header.stamp_pub_ns, &s.msg);
-        let params = self.ego.unwrap_or(VehicleParams::CAR);
+        let params = self.context.ego();
         let truth = self.truth.as_ref();
         let mut out = Vec::new();
         out.extend(copy(TOPIC_VEHICLES, &scene::vehicles(stamp, ego, &params, truth), stamp));
         out.extend(copy(TOPIC_TF, &scene::ego_frame(stamp, ego), stamp));
         let due = self.road_drawn_ns.is_none_or(|t| s.header.stamp_sim_ns >= t + ROAD_EVERY_NS);
-        if let (Some(road), true) = (&self.road, due) {
-            let s_m = scene::road_position(road, ego, self.road_s);
-            self.road_s = Some(s_m);
+        if let Some(road) = due.then(|| self.context.road_around(stamp, ego)).flatten() {
             self.road_drawn_ns = Some(s.header.stamp_sim_ns);
-            out.extend(copy(TOPIC_ROAD, &scene::road(stamp, road, s_m), stamp));
+            out.extend(copy(TOPIC_ROAD, &road, stamp));
         }
         let series = scene::acc_series(ego, s.header.stamp_sim_ns, &params, self.status.as_ref(), truth);
         if let Ok(data) = serde_json::to_vec(&series) {
@@ -155,11 +146,9 @@ impl Copies {
     }
 
     fn event(&mut self, payload: &[u8]) {
-        let Ok(e) = msg::decode::<SimEvent>(payload) else { return };
-        if let (None, SimEventKind::ScenarioStart { name, .. }) = (&self.road, e.msg.kind) {
-            if let Ok(s) = Scenario::find(&name) {
-                self.road = Some(Road::new(s.road.clone()));
-                self.ego = Some(VehicleParams::of_class(s.ego.class.into()));
+        if let Ok(e) = msg::decode::<SimEvent>(payload) {
+            if let SimEventKind::ScenarioStart { name, .. } = e.msg.kind {
+                self.context.announced(&name);
             }
         }
     }

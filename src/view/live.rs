@@ -16,10 +16,9 @@ use foxglove::{Channel, Context, Encode, PartialMetadata, RawChannel, WebSocketS
 use parking_lot::Mutex;
 use serde::Serialize;
 
-use super::scene::{self, Image};
+use super::scene::{self, Image, SceneContext};
 use crate::bus::{Bus, CallbackSubscriber, FrameSample, Received};
-use crate::msg::{AccStatus, CameraInfo, Detections, GroundTruthObjects, ObjectClass, SimEvent, SimEventKind, VehicleState};
-use crate::sim::road::Road;
+use crate::msg::{AccStatus, CameraInfo, Detections, GroundTruthObjects, SimEvent, SimEventKind, VehicleState};
 use crate::sim::Scenario;
 use crate::topics;
 
@@ -48,21 +47,19 @@ pub struct ViewOptions {
     pub host: String,
     pub port: u16,
     pub rate_hz: f64,
-    /// The road to draw; without it the view takes the scenario the simulator announces (a
-    /// built-in one) and draws no road for others.
-    pub road: Option<Road>,
-    pub ego_class: Option<ObjectClass>,
+    /// The road and ego to draw; without a scenario the view takes the one the simulator
+    /// announces (a built-in one) and draws no road for others.
+    pub context: SceneContext,
 }
 
 impl ViewOptions {
     pub fn new(host: &str, port: u16) -> ViewOptions {
-        ViewOptions { host: host.into(), port, rate_hz: DEFAULT_RATE_HZ, road: None, ego_class: None }
+        ViewOptions { host: host.into(), port, rate_hz: DEFAULT_RATE_HZ, context: SceneContext::default() }
     }
 
     /// The road and ego of `scenario`.
     pub fn with_scenario(mut self, scenario: &Scenario) -> ViewOptions {
-        self.road = Some(Road::new(scenario.road.clone()));
-        self.ego_class = Some(scenario.ego.class.into());
+        self.context = SceneContext::of(Some(scenario));
         self
     }
 }
@@ -155,9 +152,7 @@ impl Channels {
 /// The state of the update task between ticks.
 struct Painter {
     channels: Channels,
-    road: Option<Road>,
-    road_s: Option<f64>,
-    ego: crate::vehicle::VehicleParams,
+    context: SceneContext,
     counters: Arc<Counters>,
 }
 
@@ -172,11 +167,8 @@ impl Painter {
             let info = frame.as_ref().and(l.camera_info.clone());
             (frame, info, detections, l.truth.clone(), state, l.status.clone(), l.scenario.take())
         };
-        if let (None, Some(name)) = (&self.road, scenario) {
-            if let Ok(s) = Scenario::find(&name) {
-                self.road = Some(Road::new(s.road.clone()));
-                self.ego = crate::vehicle::VehicleParams::of_class(s.ego.class.into());
-            }
+        if let Some(name) = scenario {
+            self.context.announced(&name);
         }
         let frame_stamp = frame.as_ref().map(|f| f.header().stamp_pub_ns);
         if let Some(f) = frame {
@@ -197,18 +189,17 @@ impl Painter {
 
     fn scene(&mut self, stamp: u64, stamp_sim: u64, ego: &VehicleState, truth: Option<&GroundTruthObjects>, status: Option<&AccStatus>) {
         let c = &self.channels;
-        let vehicles = scene::vehicles(stamp, ego, &self.ego, truth);
+        let params = self.context.ego();
+        let vehicles = scene::vehicles(stamp, ego, &params, truth);
         count(&self.counters.scenes, Channels::log(&c.vehicles, &vehicles, stamp));
         Channels::log(&c.tf, &scene::ego_frame(stamp, ego), stamp);
-        if let Some(road) = &self.road {
-            if c.road.has_sinks() {
-                let s = scene::road_position(road, ego, self.road_s);
-                self.road_s = Some(s);
-                Channels::log(&c.road, &scene::road(stamp, road, s), stamp);
+        if c.road.has_sinks() {
+            if let Some(road) = self.context.road_around(stamp, ego) {
+                Channels::log(&c.road, &road, stamp);
             }
         }
         if c.acc.has_sinks() {
-            let series = scene::acc_series(ego, stamp_sim, &self.ego, status, truth);
+            let series = scene::acc_series(ego, stamp_sim, &params, status, truth);
             if let Ok(json) = serde_json::to_vec(&series) {
                 c.acc.log_with_meta(&json, PartialMetadata { log_time: Some(stamp) });
                 self.counters.series.fetch_add(1, Ordering::Relaxed);
@@ -259,9 +250,7 @@ impl LiveView {
         let counters = Arc::new(Counters::default());
         let mut painter = Painter {
             channels,
-            road: opts.road.clone(),
-            road_s: None,
-            ego: scene::ego_params(opts.ego_class),
+            context: opts.context.clone(),
             counters: counters.clone(),
         };
         let period = Duration::from_secs_f64(1.0 / opts.rate_hz);

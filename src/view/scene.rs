@@ -13,8 +13,9 @@ use nalgebra::Vector2;
 use serde::Serialize;
 
 use crate::bus::FrameSample;
-use crate::msg::{AccMode, AccStatus, CameraFrameRef, CameraInfo, Detections, GroundTruthObjects, ImageEncoding, ObjectClass, VehicleState};
+use crate::msg::{AccMode, AccStatus, CameraInfo, Detections, GroundTruthObjects, ImageEncoding, VehicleState};
 use crate::sim::road::Road;
+use crate::sim::Scenario;
 use crate::vehicle::VehicleParams;
 
 /// The fixed frame of the scene (the simulator's world), and the ego's, which follows it.
@@ -66,18 +67,16 @@ pub fn image(sample: FrameSample) -> Image {
     let frame = sample.frame();
     let (stamp, f) = (frame.header.stamp_pub_ns, frame.msg);
     let offset = f.data.as_ptr() as usize - sample.bytes().as_ptr() as usize;
-    let len = f.data.len();
-    let header = CameraFrameRef { data: &[], ..f };
+    let (width, height, encoding, len) = (f.width, f.height, f.encoding, f.data.len());
     let data = Bytes::from_owner(Payload(sample)).slice(offset..offset + len);
-    frame_image(stamp, &header, data)
+    frame_image(stamp, width, height, encoding, data)
 }
 
-/// A frame (its size and encoding from `frame`, its pixels `data`) as an image message.
-pub fn frame_image(stamp_ns: u64, frame: &CameraFrameRef<'_>, data: Bytes) -> Image {
+/// A frame of `width` x `height` in `encoding`, its pixels `data`, as an image message.
+pub fn frame_image(stamp_ns: u64, width: u32, height: u32, encoding: ImageEncoding, data: Bytes) -> Image {
     let stamp = Some(timestamp(stamp_ns));
-    let (width, height) = (frame.width, frame.height);
     let frame_id = FRAME_CAMERA.to_string();
-    match frame.encoding {
+    match encoding {
         ImageEncoding::Rgb8 => {
             Image::Raw(RawImage { timestamp: stamp, frame_id, width, height, encoding: "rgb8".into(), step: width * 3, data })
         }
@@ -212,7 +211,7 @@ pub fn vehicles(stamp_ns: u64, ego: &VehicleState, ego_params: &VehicleParams, t
 
 /// The road around `s_m` (the ego's distance along it): the lane boundaries as lines, the
 /// road's edges solid white, the lane dividers grey.
-pub fn road(stamp_ns: u64, road: &Road, s_m: f64) -> SceneUpdate {
+pub fn road_update(stamp_ns: u64, road: &Road, s_m: f64) -> SceneUpdate {
     let n = ((ROAD_BEHIND_M + ROAD_AHEAD_M) / ROAD_STEP_M) as usize + 1;
     let lanes = road.lanes();
     let lines = (0..=lanes)
@@ -247,12 +246,52 @@ pub fn road(stamp_ns: u64, road: &Road, s_m: f64) -> SceneUpdate {
     }
 }
 
-/// The ego's distance along the road, searched near `hint` (the last one) when known.
-pub fn road_position(road: &Road, ego: &VehicleState, hint: Option<f64>) -> f64 {
-    let p = Vector2::new(ego.position_in_world_m[0], ego.position_in_world_m[1]);
-    match hint {
-        Some(h) => road.project(p, h).0,
-        None => road.project_anywhere(p).0,
+/// What the drawings know of a run beyond its messages: the road and the ego's vehicle type
+/// (from the scenario), and where along the road the ego was last. One for the live view and
+/// one for a recording's copies.
+#[derive(Debug, Clone, Default)]
+pub struct SceneContext {
+    road: Option<Road>,
+    road_s: Option<f64>,
+    ego: Option<VehicleParams>,
+}
+
+impl SceneContext {
+    /// The road and ego of `scenario`, when it is known.
+    pub fn of(scenario: Option<&Scenario>) -> SceneContext {
+        SceneContext {
+            road: scenario.map(|s| Road::new(s.road.clone())),
+            road_s: None,
+            ego: scenario.map(|s| VehicleParams::of_class(s.ego.class.into())),
+        }
+    }
+
+    /// The scenario the simulator announced (sim/events), taken when none is known yet and
+    /// it is a built-in one.
+    pub fn announced(&mut self, name: &str) {
+        if self.road.is_none() {
+            if let Ok(s) = Scenario::find(name) {
+                *self = SceneContext::of(Some(&s));
+            }
+        }
+    }
+
+    /// The ego's vehicle type: the scenario's, else a car.
+    pub fn ego(&self) -> VehicleParams {
+        self.ego.unwrap_or(VehicleParams::CAR)
+    }
+
+    /// The road around the ego (none without a scenario); the ego's place along it is searched
+    /// near the last one.
+    pub fn road_around(&mut self, stamp_ns: u64, ego: &VehicleState) -> Option<SceneUpdate> {
+        let road = self.road.as_ref()?;
+        let p = Vector2::new(ego.position_in_world_m[0], ego.position_in_world_m[1]);
+        let s_m = match self.road_s {
+            Some(h) => road.project(p, h).0,
+            None => road.project_anywhere(p).0,
+        };
+        self.road_s = Some(s_m);
+        Some(road_update(stamp_ns, road, s_m))
     }
 }
 
@@ -333,15 +372,10 @@ pub fn acc_series_schema() -> Schema {
 /// The name of [`acc_series_schema`].
 pub const ACC_SERIES_SCHEMA: &str = "slipstream.view.AccSeries";
 
-/// The ego's vehicle type: the scenario's when known, else a car.
-pub fn ego_params(class: Option<ObjectClass>) -> VehicleParams {
-    VehicleParams::of_class(class.unwrap_or(ObjectClass::Car))
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::msg::{BoundingBox2d, Detection, GroundTruthObject};
+    use crate::msg::{BoundingBox2d, Detection, GroundTruthObject, ObjectClass};
 
     fn state(x: f64, yaw: f64, lane: i32) -> VehicleState {
         VehicleState {
@@ -422,7 +456,7 @@ mod tests {
     fn the_road_has_one_line_per_lane_boundary_around_the_ego() {
         let spec = crate::sim::road::RoadSpec::default();
         let r = Road::new(spec.clone());
-        let update = road(1, &r, 100.0);
+        let update = road_update(1, &r, 100.0);
         let lines = &update.entities[0].lines;
         assert_eq!(lines.len(), spec.lanes as usize + 1);
         let first = &lines[0].points;
