@@ -28,7 +28,8 @@ pub fn apply_zenoh_runtime_default() {
 /// without the messages Zenoh prints for the loopback rendezvous working as designed
 /// (see config/zenoh.json5).
 pub fn init_tracing() {
-    let env = EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info,zenoh=warn,zenoh_ext=warn,foxglove=warn"));
+    let env = EnvFilter::try_from_default_env()
+        .unwrap_or_else(|_| EnvFilter::new("info,zenoh=warn,zenoh_ext=warn,foxglove=warn"));
     let layer = tracing_subscriber::fmt::layer()
         .with_writer(std::io::stderr)
         // Colours on a terminal only: `slipstream up` writes the nodes' logs to files.

@@ -18,7 +18,8 @@ use serde::Serialize;
 
 use super::controller::{Controller, EgoNow, Output, PerceptionFrame};
 use super::settings::{AccSettings, PerceptionSource};
-use crate::bus::{Bus, BusError, NodeWatch, Received, Subscriber};
+use crate::bus::{Arrivals, Bus, BusError, NodeWatch, Received, StatsSnapshot, Subscriber};
+use crate::config::ConfigError;
 use crate::msg::{
     AccCommand, AccMode, AccStatus, AccWarning, CameraInfo, ControlCommand, Detections, GroundTruthObjects, Speed,
     VehicleState,
@@ -26,7 +27,8 @@ use crate::msg::{
 use crate::topics;
 
 /// What a run did.
-#[derive(Debug, Clone, Default, Serialize)]
+#[derive(Debug, Clone, Default, Serialize, serde::Deserialize)]
+#[serde(default)]
 pub struct AccStats {
     /// vehicle/control messages answering a speed message.
     pub commands: u64,
@@ -41,6 +43,9 @@ pub struct AccStats {
     pub lockstep_waits_timed_out: u64,
     /// Answers given without the vehicle/state of their step (it came too late).
     pub state_waits_timed_out: u64,
+    /// The inputs' statistics at the end: received, lost on the way (sequence gaps), dropped
+    /// or delayed by injected faults (`--faults`).
+    pub inputs: Vec<StatsSnapshot>,
 }
 
 /// The perception input, by source.
@@ -50,6 +55,20 @@ enum PerceptionSub {
 }
 
 impl PerceptionSub {
+    fn arrivals(&self) -> &Arrivals {
+        match self {
+            PerceptionSub::Camera(s) => s.arrivals(),
+            PerceptionSub::GroundTruth(s) => s.arrivals(),
+        }
+    }
+
+    fn stats(&self) -> StatsSnapshot {
+        match self {
+            PerceptionSub::Camera(s) => s.stats().snapshot(),
+            PerceptionSub::GroundTruth(s) => s.stats().snapshot(),
+        }
+    }
+
     /// The next perception message, converted, with its header.stamp_pub_ns.
     fn frame(&self, timeout: Option<Duration>) -> impl Future<Output = Option<(PerceptionFrame, u64)>> + '_ {
         async move {
@@ -168,6 +187,17 @@ impl Inputs {
 
 /// Runs until `shutdown` completes.
 pub async fn run(bus: &Bus, settings: AccSettings, shutdown: impl Future<Output = ()>) -> Result<AccStats, BusError> {
+    if let Some(profile) = bus.faults() {
+        if settings.lockstep && profile.at(topics::VEHICLE_SPEED.topic, bus.node()).is_some() {
+            return Err(ConfigError::new(
+                &profile.name,
+                "topics.vehicle/speed",
+                "faults on vehicle/speed at a lockstep ACC: each lost speed message would leave a simulator step unanswered",
+                "inject the loop's faults on perception/objects, objects, vehicle/state and vehicle/control in lockstep, or run the clock in realtime or fast mode",
+            )
+            .into());
+        }
+    }
     let inputs = Inputs::open(bus, &settings).await?;
     let control_pub = bus.publisher(topics::VEHICLE_CONTROL).await?;
     let status_pub = bus.publisher(topics::ACC_STATUS).await?;
@@ -196,6 +226,12 @@ pub async fn run(bus: &Bus, settings: AccSettings, shutdown: impl Future<Output 
             status_pub.put(answer.stamp_ns, status)?;
         }
     }
+    st.stats.inputs = vec![
+        inputs.speed.stats().snapshot(),
+        inputs.state.stats().snapshot(),
+        inputs.perception.stats(),
+        inputs.command.stats().snapshot(),
+    ];
     Ok(st.stats)
 }
 
@@ -225,8 +261,10 @@ async fn answer_speed(st: &mut State, inputs: &Inputs, settings: &AccSettings, s
     while let Some((frame, pub_ns)) = inputs.perception.frame(None).await {
         take_perception(st, &frame, pub_ns);
     }
-    if settings.lockstep && st.frame_expected_at(t_s) && !st.has_perception_at(t_s) {
-        await_perception(st, &inputs.perception, settings.lockstep_wait_ms, t_s).await;
+    // Something arrived already, even if injected faults hold it back.
+    let seen_any = inputs.perception.arrivals().since(0);
+    if settings.lockstep && st.frame_expected_at(t_s, seen_any) && !st.has_perception_at(t_s) {
+        await_perception(st, &inputs.perception, settings.lockstep_wait_ms, t_ns).await;
     }
     let answer = st.answer(t_ns, answers_step, inputs.detector_alive());
     // Up to date from here: time spent waiting above (lockstep) does not age the speed.
@@ -235,23 +273,32 @@ async fn answer_speed(st: &mut State, inputs: &Inputs, settings: &AccSettings, s
 }
 
 /// The vehicle/state of the step stamped `t_ns` (published right after its speed), waiting
-/// at most `wait` for it; the newest state taken, if any.
-async fn await_state(st: &mut State, sub: &Subscriber<VehicleState>, t_ns: u64, wait: Duration) -> Option<VehicleState> {
-    let mut state = drain_states(sub, st);
-    if st.state.is_some_and(|(stamp, _)| stamp >= t_ns) {
-        return state;
-    }
+/// at most `wait` for it to arrive; the newest state taken, if any. One that arrived but was
+/// dropped or held back by injected faults is not waited for.
+async fn await_state(
+    st: &mut State,
+    sub: &Subscriber<VehicleState>,
+    t_ns: u64,
+    wait: Duration,
+) -> Option<VehicleState> {
     let deadline = Instant::now() + wait;
-    while st.state.is_none_or(|(stamp, _)| stamp < t_ns) {
+    let mut state = None;
+    loop {
+        // Arrival first: a message seen arrived was handed on before, so the drain gets it.
+        let arrived = sub.arrivals().since(t_ns);
+        if let Some(s) = drain_states(sub, st) {
+            state = Some(s);
+        }
+        if arrived || st.state.is_some_and(|(stamp, _)| stamp >= t_ns) {
+            return state;
+        }
         let left = deadline.saturating_duration_since(Instant::now());
-        let Some(r) = sub.recv_timeout(left).await else { break };
-        take_state(st, &r);
-        state = Some(r.msg);
+        if left.is_zero() {
+            st.stats.state_waits_timed_out += 1;
+            return state;
+        }
+        sub.arrivals().wait(left, || sub.arrivals().since(t_ns)).await;
     }
-    if st.state.is_none_or(|(stamp, _)| stamp < t_ns) {
-        st.stats.state_waits_timed_out += 1;
-    }
-    state
 }
 
 /// The camera's rate, from camera/front/info. In lockstep, which steps bring a frame follows
@@ -273,17 +320,24 @@ async fn take_camera_info(st: &mut State, sub: &Subscriber<CameraInfo>, settings
     }
 }
 
-/// Lockstep: waits up to `wait_ms` for the perception of the frame at `t_s`.
-async fn await_perception(st: &mut State, perception: &PerceptionSub, wait_ms: u64, t_s: f64) {
+/// Lockstep: waits up to `wait_ms` for the perception of the frame at `t_ns` to arrive (taken
+/// when delivered; not waited for when injected faults dropped or held it).
+async fn await_perception(st: &mut State, perception: &PerceptionSub, wait_ms: u64, t_ns: u64) {
+    let t_s = t_ns as f64 / 1e9;
     let deadline = Instant::now() + Duration::from_millis(wait_ms);
-    while Instant::now() < deadline {
-        let left = deadline.saturating_duration_since(Instant::now());
-        if let Some((frame, pub_ns)) = perception.frame(Some(left)).await {
+    loop {
+        let arrived = perception.arrivals().since(t_ns);
+        while let Some((frame, pub_ns)) = perception.frame(None).await {
             take_perception(st, &frame, pub_ns);
-            if st.has_perception_at(t_s) {
-                return;
-            }
         }
+        if arrived || st.has_perception_at(t_s) {
+            return;
+        }
+        let left = deadline.saturating_duration_since(Instant::now());
+        if left.is_zero() {
+            break;
+        }
+        perception.arrivals().wait(left, || perception.arrivals().since(t_ns)).await;
     }
     st.stats.lockstep_waits_timed_out += 1;
     if let Some(more) = st.lockstep_log.ready() {
@@ -381,14 +435,14 @@ impl State {
     /// Whether a camera frame (and so a perception message) is due at simulated time `t_s`:
     /// the clock contract's rule (`msg::due`) with the camera rate from camera/front/info
     /// and the physics rate learned from vehicle/state.
-    fn frame_expected_at(&self, t_s: f64) -> bool {
+    fn frame_expected_at(&self, t_s: f64, seen_any: bool) -> bool {
         match (self.camera_rate_hz, self.physics_hz) {
             (Some(rate), Some(hz)) => {
                 let hz = hz.round().max(1.0);
                 crate::msg::due((t_s * hz).round() as u64, rate, hz as u32)
             }
             // Before the rates are known: the first frame comes with step 0.
-            _ => self.perception_stamp_s.is_none(),
+            _ => self.perception_stamp_s.is_none() && !seen_any,
         }
     }
 

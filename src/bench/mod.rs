@@ -164,7 +164,7 @@ fn cases(suites: &[Suite], quick: bool) -> Vec<Case> {
                 lowlatency: false,
                 runtime: None,
                 tcp_buffer: TcpBuffer::Default,
-        unix_socket: false,
+                unix_socket: false,
                 background: None,
             };
             for (phase, rate) in [("throughput", None), ("latency @20 Hz", Some(20.0))] {
@@ -228,7 +228,12 @@ const PYTHON: &str = "python3";
 
 /// Whether the seed's Python peer can run here.
 fn python_available() -> bool {
-    Command::new(PYTHON).arg("--version").stdout(Stdio::null()).stderr(Stdio::null()).status().is_ok_and(|s| s.success())
+    Command::new(PYTHON)
+        .arg("--version")
+        .stdout(Stdio::null())
+        .stderr(Stdio::null())
+        .status()
+        .is_ok_and(|s| s.success())
 }
 
 /// Where the seed peer's script was written (removed at the end of the run).
@@ -438,7 +443,12 @@ fn ratios(rows: &[Row]) -> Vec<Ratio> {
     ratio("speed p50: bus / seed Python UDP".into(), p50("a.", "bus"), p50("a.", "seed: Python UDP"), "< 1");
     ratio("speed p50: bus / raw UDP".into(), p50("a.", "bus"), p50("a.", "raw UDP"), "<= 1.5");
     ratio("speed p50: bus, unix socket / bus".into(), p50("a.", "bus, unix socket"), p50("a.", "bus"), "-");
-    ratio("speed p50: bus, unix socket / seed Python UDP".into(), p50("a.", "bus, unix socket"), p50("a.", "seed: Python UDP"), "< 1");
+    ratio(
+        "speed p50: bus, unix socket / seed Python UDP".into(),
+        p50("a.", "bus, unix socket"),
+        p50("a.", "seed: Python UDP"),
+        "< 1",
+    );
     ratio("speed p50: bus / raw zenoh".into(), p50("a.", "bus"), p50("a.", "raw zenoh"), "<= 1.1");
     ratio("speed p50: bus / raw TCP".into(), p50("a.", "bus"), p50("a.", "raw TCP"), "-");
     ratio("speed p99: bus / raw UDP".into(), p99("a.", "bus"), p99("a.", "raw UDP"), "-");

@@ -229,7 +229,8 @@ fn receive_tcp(col: &Arc<Collector>, stop: &Arc<AtomicBool>, r: &mut Receiving) 
 
 /// Raw Zenoh: a callback subscriber on the case's key.
 async fn receive_zenoh(spec: &CaseSpec, col: &Arc<Collector>, r: &mut Receiving) -> Result<String> {
-    let session = zenoh::open(peer_config(spec, Some(&listen_endpoint(spec)), None)?).await.map_err(anyhow::Error::msg)?;
+    let session =
+        zenoh::open(peer_config(spec, Some(&listen_endpoint(spec)), None)?).await.map_err(anyhow::Error::msg)?;
     let key = if matches!(spec.payload, Payload::Speed) { SPEED_KEY } else { FRAME_KEY };
     let c = col.clone();
     let sub = session
@@ -260,7 +261,8 @@ async fn receive_bus(
     stop: &Arc<AtomicBool>,
     r: &mut Receiving,
 ) -> Result<String> {
-    let session = zenoh::open(peer_config(spec, Some(&listen_endpoint(spec)), None)?).await.map_err(anyhow::Error::msg)?;
+    let session =
+        zenoh::open(peer_config(spec, Some(&listen_endpoint(spec)), None)?).await.map_err(anyhow::Error::msg)?;
     let ep = first_locator(&session).await?;
     let bus = Arc::new(Bus::from_session(session, peer_topics(spec)?, "bench-recv").await?);
     if matches!(spec.payload, Payload::Speed) {
@@ -393,8 +395,12 @@ pub async fn run_sender(spec: CaseSpec, endpoint: String) -> Result<()> {
     let max = Duration::from_secs_f64(spec.max_duration_s);
     let started = Instant::now();
     let mut report = match spec.transport {
-        Transport::Udp => SendReport { sent: send_udp(&spec, &endpoint, Instant::now() + max)?, ..SendReport::default() },
-        Transport::Tcp => SendReport { sent: send_tcp(&spec, &endpoint, Instant::now() + max)?, ..SendReport::default() },
+        Transport::Udp => {
+            SendReport { sent: send_udp(&spec, &endpoint, Instant::now() + max)?, ..SendReport::default() }
+        }
+        Transport::Tcp => {
+            SendReport { sent: send_tcp(&spec, &endpoint, Instant::now() + max)?, ..SendReport::default() }
+        }
         Transport::Zenoh => SendReport { sent: send_zenoh(&spec, &endpoint, max).await?, ..SendReport::default() },
         Transport::Bus => send_bus(&spec, &endpoint, max).await?,
         Transport::SeedPythonUdp => anyhow::bail!("the seed's peers are the Python script, not bench-peer"),

@@ -4,7 +4,7 @@
 use anyhow::{Context, Result};
 use clap::Parser;
 use slipstream::acc::args::AccArgs;
-use slipstream::config::ConnectArgs;
+use slipstream::config::{ConnectArgs, FaultArgs};
 
 /// slipstream-acc: adaptive cruise control, closing the loop through the simulator.
 ///
@@ -27,7 +27,13 @@ struct Cli {
     #[command(flatten)]
     connect: ConnectArgs,
     #[command(flatten)]
+    faults: FaultArgs,
+    #[command(flatten)]
     acc: AccArgs,
+    /// At exit, print the run's statistics as JSON on stdout (commands, modes, and per input
+    /// what arrived, was lost on the way, or was dropped or delayed by --faults)
+    #[arg(long)]
+    json: bool,
 }
 
 fn main() -> Result<()> {
@@ -37,7 +43,7 @@ fn main() -> Result<()> {
     let settings = cli.acc.settings()?;
     let rt = tokio::runtime::Runtime::new()?;
     rt.block_on(async {
-        let bus = slipstream::Bus::open(cli.connect.zenoh_config()?, cli.connect.topic_map()?, &cli.acc.name)
+        let bus = slipstream::Bus::open_node(&cli.connect, &cli.faults, &cli.acc.name)
             .await
             .context("acc: join the bus")?;
         let shutdown = async {
@@ -54,6 +60,20 @@ fn main() -> Result<()> {
             stats.lockstep_waits_timed_out,
             stats.state_waits_timed_out
         );
+        for input in stats.inputs.iter().filter(|i| i.injected_dropped + i.injected_delayed + i.injected_duplicated > 0) {
+            tracing::info!(
+                "{}: {} arrived, {} lost on the way; injected: {} dropped, {} delayed, {} duplicated",
+                input.topic,
+                input.received,
+                input.lost,
+                input.injected_dropped,
+                input.injected_delayed,
+                input.injected_duplicated
+            );
+        }
+        if cli.json {
+            println!("{}", serde_json::to_string_pretty(&stats)?);
+        }
         bus.close().await.context("acc: leave the bus")?;
         anyhow::Ok(())
     })

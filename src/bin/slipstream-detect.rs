@@ -3,7 +3,7 @@
 
 use anyhow::{Context, Result};
 use clap::Parser;
-use slipstream::config::ConnectArgs;
+use slipstream::config::{ConnectArgs, FaultArgs};
 use slipstream::perception::DetectorParams;
 
 /// slipstream-detect: finds vehicles in camera/front frames and publishes perception/objects.
@@ -17,6 +17,8 @@ use slipstream::perception::DetectorParams;
 struct Cli {
     #[command(flatten)]
     connect: ConnectArgs,
+    #[command(flatten)]
+    faults: FaultArgs,
     /// This node's name on the bus
     #[arg(long, default_value = "detect")]
     name: String,
@@ -28,9 +30,8 @@ fn main() -> Result<()> {
     slipstream::cli::init_tracing();
     let rt = tokio::runtime::Runtime::new()?;
     rt.block_on(async {
-        let bus = slipstream::Bus::open(cli.connect.zenoh_config()?, cli.connect.topic_map()?, &cli.name)
-            .await
-            .context("detect: join the bus")?;
+        let bus =
+            slipstream::Bus::open_node(&cli.connect, &cli.faults, &cli.name).await.context("detect: join the bus")?;
         let shutdown = async {
             let _ = tokio::signal::ctrl_c().await;
         };

@@ -3,7 +3,7 @@
 
 use anyhow::{Context, Result};
 use clap::Parser;
-use slipstream::config::ConnectArgs;
+use slipstream::config::{ConnectArgs, FaultArgs};
 use slipstream::sim::args::SimArgs;
 
 /// slipstream-sim: a deterministic driving simulator on the bus.
@@ -25,6 +25,8 @@ use slipstream::sim::args::SimArgs;
 struct Cli {
     #[command(flatten)]
     connect: ConnectArgs,
+    #[command(flatten)]
+    faults: FaultArgs,
     #[command(flatten)]
     sim: SimArgs,
 }
@@ -52,9 +54,8 @@ fn main() -> Result<()> {
     }
     let rt = tokio::runtime::Runtime::new()?;
     let report = rt.block_on(async {
-        let bus = slipstream::Bus::open(cli.connect.zenoh_config()?, cli.connect.topic_map()?, &cli.sim.name)
-            .await
-            .context("sim: join the bus")?;
+        let bus =
+            slipstream::Bus::open_node(&cli.connect, &cli.faults, &cli.sim.name).await.context("sim: join the bus")?;
         let shutdown = async {
             let _ = tokio::signal::ctrl_c().await;
         };

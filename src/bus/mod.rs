@@ -5,17 +5,21 @@
 //! QoS the topic map gives, declares the node's liveliness token, and keeps statistics for
 //! every subscription.
 
+pub mod faults;
 mod publisher;
 mod stats;
 mod subscriber;
 
 use std::sync::Arc;
 
+pub use faults::NodeClock;
 pub use publisher::{FramePublisher, FrameSent, Publisher};
 pub use stats::{StatsSnapshot, TopicStats};
-pub use subscriber::{CallbackSubscriber, Declared, FrameSample, FrameSubscriber, Received, Subscriber, Subscription};
+pub use subscriber::{
+    Arrivals, CallbackSubscriber, Declared, FrameSample, FrameSubscriber, Received, Subscriber, Subscription,
+};
 
-use crate::config::{ConfigError, TopicMap};
+use crate::config::{ConfigError, FaultProfile, TopicMap};
 use crate::msg::Message;
 use crate::topics::TopicDef;
 
@@ -43,6 +47,10 @@ pub struct Bus {
     session: zenoh::Session,
     topics: Arc<TopicMap>,
     node: String,
+    /// Faults injected into what this node receives (`--faults`); None: none, at no cost.
+    faults: Option<Arc<FaultProfile>>,
+    /// The node's simulated now: releases messages the faults hold back.
+    clock: Arc<NodeClock>,
     _token: zenoh::liveliness::LivelinessToken,
 }
 
@@ -51,6 +59,21 @@ impl Bus {
     pub async fn open(config: zenoh::Config, topics: TopicMap, node: &str) -> Result<Bus, BusError> {
         let session = zenoh::open(config).await.map_err(zerr("open session"))?;
         Bus::from_session(session, topics, node).await
+    }
+
+    /// A node process's bus: the connection and topic flags, and the faults `--faults` names
+    /// injected into the node's inputs.
+    pub async fn open_node(
+        connect: &crate::config::ConnectArgs,
+        faults: &crate::config::FaultArgs,
+        node: &str,
+    ) -> Result<Bus, BusError> {
+        let profile = faults.profile()?;
+        let mut bus = Bus::open(connect.zenoh_config()?, connect.topic_map()?, node).await?;
+        if let Some(p) = profile {
+            bus.inject_faults(p);
+        }
+        Ok(bus)
     }
 
     /// Joins with an already-open session (tests hand in a loopback session).
@@ -62,7 +85,43 @@ impl Bus {
             .await
             .map_err(zerr(format!("declare liveliness token {token_key}")))?;
         tracing::info!(node, zid = %session.zid(), namespace = topics.namespace(), "joined the bus");
-        Ok(Bus { session, topics: Arc::new(topics), node: node.to_string(), _token: token })
+        Ok(Bus {
+            session,
+            topics: Arc::new(topics),
+            node: node.to_string(),
+            faults: None,
+            clock: Arc::new(NodeClock::default()),
+            _token: token,
+        })
+    }
+
+    /// Injects `profile`'s faults into every subscription declared from now on (a node's
+    /// inputs; tools and observers never call this). Logged, so a run with faults says so.
+    pub fn inject_faults(&mut self, profile: FaultProfile) {
+        let here: Vec<&str> =
+            profile.topics.keys().filter(|t| profile.at(**t, &self.node).is_some()).map(|t| t.name()).collect();
+        tracing::warn!(node = %self.node, on = ?here, "injecting faults: {}", profile.summary());
+        self.faults = Some(Arc::new(profile));
+    }
+
+    /// The fault profile in force, if any.
+    pub fn faults(&self) -> Option<&FaultProfile> {
+        self.faults.as_deref()
+    }
+
+    /// The node's simulated now as its faults see it. A node that keeps time itself (the
+    /// simulator) advances it; for the others it follows the stamps they receive.
+    pub fn clock(&self) -> &Arc<NodeClock> {
+        &self.clock
+    }
+
+    /// QoS and faults for a subscription to `topic` at this node.
+    fn inlet(&self, topic: crate::topics::Topic) -> subscriber::Inlet {
+        let faults = self.faults.as_ref().and_then(|p| {
+            p.at(topic, &self.node)
+                .map(|f| (faults::Model::new(f.clone(), p.seed, topic.name(), &self.node), self.clock.clone()))
+        });
+        subscriber::Inlet { qos: self.topics.qos(topic), faults }
     }
 
     pub fn session(&self) -> &zenoh::Session {
@@ -91,30 +150,29 @@ impl Bus {
     /// For camera frames prefer [`Bus::frame_subscriber`], which does not copy the pixels.
     pub async fn subscriber<M>(&self, def: TopicDef<M>) -> Result<Subscriber<M>, BusError>
     where
-        M: Message + serde::de::DeserializeOwned + Send + 'static,
+        M: Message + serde::de::DeserializeOwned + Clone + Send + 'static,
     {
-        Subscriber::declare(&self.session, self.topics.key(def.topic), def.topic.name(), self.topics.qos(def.topic))
-            .await
+        Subscriber::declare(&self.session, self.topics.key(def.topic), def.topic.name(), self.inlet(def.topic)).await
     }
 
     /// The camera/front subscriber: frames are read in place (shared memory on one host).
     pub async fn frame_subscriber(&self) -> Result<FrameSubscriber, BusError> {
         let topic = crate::topics::CAMERA_FRONT.topic;
-        FrameSubscriber::declare(&self.session, self.topics.key(topic), topic.name(), self.topics.qos(topic)).await
+        FrameSubscriber::declare(&self.session, self.topics.key(topic), topic.name(), self.inlet(topic)).await
     }
 
     /// Calls `handler` with every well-formed message of `def`, on Zenoh's receive thread
     /// (lowest latency; keep the handler short).
     pub async fn subscribe_with<M, F>(&self, def: TopicDef<M>, handler: F) -> Result<CallbackSubscriber, BusError>
     where
-        M: Message + serde::de::DeserializeOwned + 'static,
+        M: Message + serde::de::DeserializeOwned + Clone + Send + 'static,
         F: Fn(Received<M>) + Send + Sync + 'static,
     {
         CallbackSubscriber::declare(
             &self.session,
             self.topics.key(def.topic),
             def.topic.name(),
-            self.topics.qos(def.topic),
+            self.inlet(def.topic),
             handler,
         )
         .await
@@ -131,7 +189,7 @@ impl Bus {
             &self.session,
             self.topics.key(topic),
             topic.name(),
-            self.topics.qos(topic),
+            self.inlet(topic),
             handler,
         )
         .await

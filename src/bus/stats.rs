@@ -31,6 +31,9 @@ struct Inner {
     lost: u64,
     skipped: u64,
     restarts: u64,
+    injected_dropped: u64,
+    injected_delayed: u64,
+    injected_duplicated: u64,
     last_seq: Option<u64>,
     last_arrival: Option<Instant>,
     latencies_ns: VecDeque<i64>,
@@ -40,7 +43,8 @@ struct Inner {
 }
 
 /// A point-in-time view of a subscription's statistics.
-#[derive(Debug, Clone, Default, Serialize, PartialEq)]
+#[derive(Debug, Clone, Default, Serialize, serde::Deserialize, PartialEq)]
+#[serde(default)]
 pub struct StatsSnapshot {
     pub topic: String,
     pub received: u64,
@@ -56,6 +60,13 @@ pub struct StatsSnapshot {
     pub decode_errors: u64,
     /// Times the publisher's sequence went backwards (a publisher restarted).
     pub restarts: u64,
+    /// Messages a fault profile (`--faults`) dropped on arrival: not in `lost`, which counts
+    /// only what the network lost.
+    pub injected_dropped: u64,
+    /// Messages a fault profile held back (delay, jitter, a bandwidth queue).
+    pub injected_delayed: u64,
+    /// Messages a fault profile delivered twice.
+    pub injected_duplicated: u64,
     /// Seconds since the last message, None before the first.
     pub age_s: Option<f64>,
 }
@@ -101,6 +112,18 @@ impl TopicStats {
         }
     }
 
+    pub(crate) fn on_injected_drop(&self) {
+        self.inner.lock().injected_dropped += 1;
+    }
+
+    pub(crate) fn on_injected_delay(&self) {
+        self.inner.lock().injected_delayed += 1;
+    }
+
+    pub(crate) fn on_injected_duplicate(&self) {
+        self.inner.lock().injected_duplicated += 1;
+    }
+
     /// A message that arrived but was dropped by the subscriber's queue.
     pub fn on_skipped(&self) {
         self.inner.lock().skipped += 1;
@@ -139,6 +162,9 @@ impl TopicStats {
             skipped: s.skipped,
             decode_errors: s.decode_errors,
             restarts: s.restarts,
+            injected_dropped: s.injected_dropped,
+            injected_delayed: s.injected_delayed,
+            injected_duplicated: s.injected_duplicated,
             age_s: s.last_arrival.map(|t| now.duration_since(t).as_secs_f64()),
         }
     }

@@ -21,6 +21,7 @@ use serde::de::DeserializeOwned;
 use zenoh::key_expr::OwnedKeyExpr;
 use zenoh::sample::Sample;
 
+use super::faults::{Gate, Model, NodeClock};
 use super::{zerr, BusError, TopicStats};
 use crate::msg::{self, CameraFrameRef, DecodeError, Header, Message, Stamped};
 use crate::qos::{Delivery, TopicQos};
@@ -102,28 +103,114 @@ where
     Ok(declared)
 }
 
+/// The newest simulated time that arrived on a subscription (before any injected fault), per
+/// publishing node when faults are on: what a lockstep node waits for. Noted after the message
+/// was handed on, so whoever sees it arrived also finds it delivered (unless a fault held it).
+pub struct Arrivals {
+    /// Newest stamp + 1 (0: nothing yet).
+    newest: std::sync::atomic::AtomicU64,
+    by_source: Option<Mutex<std::collections::BTreeMap<String, u64>>>,
+    notify: tokio::sync::Notify,
+}
+
+impl Arrivals {
+    fn new(per_source: bool) -> Self {
+        Arrivals {
+            newest: std::sync::atomic::AtomicU64::new(0),
+            by_source: per_source.then(Default::default),
+            notify: tokio::sync::Notify::new(),
+        }
+    }
+
+    fn note(&self, stamp_ns: u64, source: Option<String>) {
+        self.newest.fetch_max(stamp_ns.saturating_add(1), std::sync::atomic::Ordering::AcqRel);
+        if let (Some(map), Some(source)) = (&self.by_source, source) {
+            let mut m = map.lock();
+            let e = m.entry(source).or_insert(stamp_ns);
+            *e = (*e).max(stamp_ns);
+        }
+        self.notify.notify_waiters();
+    }
+
+    /// Whether a message stamped `stamp_ns` or later has arrived.
+    pub fn since(&self, stamp_ns: u64) -> bool {
+        self.newest.load(std::sync::atomic::Ordering::Acquire) > stamp_ns
+    }
+
+    /// Whether a message stamped `stamp_ns` or later has arrived from `source` (known only with
+    /// faults on; without them, whether one arrived from anyone).
+    pub fn since_from(&self, source: &str, stamp_ns: u64) -> bool {
+        match &self.by_source {
+            Some(map) => map.lock().get(source).is_some_and(|t| *t >= stamp_ns),
+            None => self.since(stamp_ns),
+        }
+    }
+
+    /// Waits for the next arrival, or `timeout`; returns at once when `done()` already holds.
+    pub async fn wait(&self, timeout: Duration, done: impl Fn() -> bool) {
+        let notified = self.notify.notified();
+        tokio::pin!(notified);
+        notified.as_mut().enable();
+        if done() {
+            return;
+        }
+        let _ = tokio::time::timeout(timeout, notified).await;
+    }
+}
+
+/// Where a subscription's samples enter the node: the topic's QoS and, with a fault profile,
+/// the faults to inject and the node's clock.
+pub(crate) struct Inlet {
+    pub qos: TopicQos,
+    pub faults: Option<(Model, Arc<NodeClock>)>,
+}
+
 /// Declares a subscriber that validates every sample with `accept`, records the good ones in
-/// `stats` (and counts the bad ones there), and hands each accepted item to `deliver`.
+/// `stats` (and counts the bad ones there), and hands each accepted item to `deliver`, through
+/// the inlet's faults when it has some.
 async fn declare_accepting<T, A, D>(
     session: &zenoh::Session,
     key: &OwnedKeyExpr,
-    latched: bool,
+    inlet: Inlet,
     stats: Arc<TopicStats>,
+    arrivals: Arc<Arrivals>,
     accept: A,
     deliver: D,
 ) -> Result<Declared, BusError>
 where
+    T: Clone + Send + 'static,
     A: Fn(Sample) -> Result<(Header, usize, T), DecodeError> + Send + Sync + 'static,
     D: Fn(T) + Send + Sync + 'static,
 {
-    declare_callback(session, key, latched, move |sample: Sample| match accept(sample) {
-        Ok((header, len, item)) => {
-            stats.on_message(&header, len, msg::wall_clock_ns());
-            deliver(item);
+    let latched = inlet.qos.latched;
+    match inlet.faults {
+        None => {
+            declare_callback(session, key, latched, move |sample: Sample| match accept(sample) {
+                Ok((header, len, item)) => {
+                    stats.on_message(&header, len, msg::wall_clock_ns());
+                    deliver(item);
+                    arrivals.note(header.stamp_sim_ns, None);
+                }
+                Err(e) => stats.on_decode_error(&e),
+            })
+            .await
         }
-        Err(e) => stats.on_decode_error(&e),
-    })
-    .await
+        Some((model, clock)) => {
+            let gate = Gate::new(model, clock, stats.clone(), deliver);
+            declare_callback(session, key, latched, move |sample: Sample| {
+                let source = sample.attachment().and_then(|a| a.try_to_string().ok()).map(|s| s.into_owned());
+                match accept(sample) {
+                    Ok((header, len, item)) => {
+                        stats.on_message(&header, len, msg::wall_clock_ns());
+                        gate.arrive(&header, len, item);
+                        arrivals.note(header.stamp_sim_ns, source);
+                    }
+                    Err(e) => stats.on_decode_error(&e),
+                }
+            })
+            .await
+        }
+    }
 }
 
 /// Decodes a payload into an owned message.
@@ -136,6 +223,7 @@ fn accept_decoded<M: Message + DeserializeOwned>(sample: Sample) -> Result<(Head
 }
 
 /// A received camera payload, validated; [`FrameSample::frame`] borrows the pixels from it.
+#[derive(Clone)]
 pub struct FrameSample {
     sample: Sample,
     header: Header,
@@ -196,6 +284,7 @@ pub struct Subscription<T> {
     _inner: Declared,
     inbox: Arc<Inbox<T>>,
     stats: Arc<TopicStats>,
+    arrivals: Arc<Arrivals>,
     key: String,
 }
 
@@ -205,26 +294,31 @@ pub type Subscriber<M> = Subscription<Received<M>>;
 /// Camera frames, validated on arrival and read in place (zero-copy).
 pub type FrameSubscriber = Subscription<FrameSample>;
 
-impl<T: Send + 'static> Subscription<T> {
+impl<T: Clone + Send + 'static> Subscription<T> {
     async fn declare_with<F>(
         session: &zenoh::Session,
         key: OwnedKeyExpr,
         name: &str,
-        qos: TopicQos,
+        inlet: Inlet,
         accept: F,
     ) -> Result<Self, BusError>
     where
         F: Fn(Sample) -> Result<(Header, usize, T), DecodeError> + Send + Sync + 'static,
     {
         let stats = Arc::new(TopicStats::new(name));
-        let inbox = Arc::new(Inbox::new(qos.delivery));
+        let delivery = inlet.qos.delivery;
+        let inbox = Arc::new(Inbox::new(delivery));
+        let arrivals = Arc::new(Arrivals::new(inlet.faults.is_some()));
         let (into, counted) = (inbox.clone(), stats.clone());
         let deliver = move |item| into.push(item, &counted);
-        let inner = declare_accepting(session, &key, qos.latched, stats.clone(), accept, deliver).await?;
-        tracing::debug!(topic = name, %key, delivery = ?qos.delivery, "subscriber declared");
-        Ok(Subscription { _inner: inner, inbox, stats, key: key.to_string() })
+        let faulted = inlet.faults.is_some();
+        let inner = declare_accepting(session, &key, inlet, stats.clone(), arrivals.clone(), accept, deliver).await?;
+        tracing::debug!(topic = name, %key, ?delivery, faulted, "subscriber declared");
+        Ok(Subscription { _inner: inner, inbox, stats, arrivals, key: key.to_string() })
     }
+}
 
+impl<T> Subscription<T> {
     /// The next message; waits for one.
     pub async fn recv(&self) -> T {
         self.inbox.pop().await
@@ -244,19 +338,25 @@ impl<T: Send + 'static> Subscription<T> {
         &self.stats
     }
 
+    /// What has arrived, before injected faults: a lockstep reader waits for its step's
+    /// message to arrive, then takes what was delivered.
+    pub fn arrivals(&self) -> &Arrivals {
+        &self.arrivals
+    }
+
     pub fn key(&self) -> &str {
         &self.key
     }
 }
 
-impl<M: Message + DeserializeOwned + Send + 'static> Subscription<Received<M>> {
+impl<M: Message + DeserializeOwned + Clone + Send + 'static> Subscription<Received<M>> {
     pub(crate) async fn declare(
         session: &zenoh::Session,
         key: OwnedKeyExpr,
         name: &str,
-        qos: TopicQos,
+        inlet: Inlet,
     ) -> Result<Self, BusError> {
-        Self::declare_with(session, key, name, qos, accept_decoded::<M>).await
+        Self::declare_with(session, key, name, inlet, accept_decoded::<M>).await
     }
 }
 
@@ -265,9 +365,9 @@ impl Subscription<FrameSample> {
         session: &zenoh::Session,
         key: OwnedKeyExpr,
         name: &str,
-        qos: TopicQos,
+        inlet: Inlet,
     ) -> Result<Self, BusError> {
-        Self::declare_with(session, key, name, qos, accept_frame).await
+        Self::declare_with(session, key, name, inlet, accept_frame).await
     }
 }
 
@@ -277,6 +377,7 @@ impl Subscription<FrameSample> {
 pub struct CallbackSubscriber {
     _inner: Declared,
     stats: Arc<TopicStats>,
+    arrivals: Arc<Arrivals>,
 }
 
 impl CallbackSubscriber {
@@ -284,47 +385,54 @@ impl CallbackSubscriber {
         session: &zenoh::Session,
         key: OwnedKeyExpr,
         name: &str,
-        qos: TopicQos,
+        inlet: Inlet,
         accept: A,
         handler: F,
     ) -> Result<Self, BusError>
     where
+        T: Clone + Send + 'static,
         A: Fn(Sample) -> Result<(Header, usize, T), DecodeError> + Send + Sync + 'static,
         F: Fn(T) + Send + Sync + 'static,
     {
         let stats = Arc::new(TopicStats::new(name));
-        let inner = declare_accepting(session, &key, qos.latched, stats.clone(), accept, handler).await?;
-        Ok(CallbackSubscriber { _inner: inner, stats })
+        let arrivals = Arc::new(Arrivals::new(inlet.faults.is_some()));
+        let inner = declare_accepting(session, &key, inlet, stats.clone(), arrivals.clone(), accept, handler).await?;
+        Ok(CallbackSubscriber { _inner: inner, stats, arrivals })
     }
 
     pub(crate) async fn declare<M, F>(
         session: &zenoh::Session,
         key: OwnedKeyExpr,
         name: &str,
-        qos: TopicQos,
+        inlet: Inlet,
         handler: F,
     ) -> Result<Self, BusError>
     where
-        M: Message + DeserializeOwned + 'static,
+        M: Message + DeserializeOwned + Clone + Send + 'static,
         F: Fn(Received<M>) + Send + Sync + 'static,
     {
-        Self::declare_with(session, key, name, qos, accept_decoded::<M>, handler).await
+        Self::declare_with(session, key, name, inlet, accept_decoded::<M>, handler).await
     }
 
     pub(crate) async fn declare_frames<F>(
         session: &zenoh::Session,
         key: OwnedKeyExpr,
         name: &str,
-        qos: TopicQos,
+        inlet: Inlet,
         handler: F,
     ) -> Result<Self, BusError>
     where
         F: Fn(FrameSample) + Send + Sync + 'static,
     {
-        Self::declare_with(session, key, name, qos, accept_frame, handler).await
+        Self::declare_with(session, key, name, inlet, accept_frame, handler).await
     }
 
     pub fn stats(&self) -> &Arc<TopicStats> {
         &self.stats
+    }
+
+    /// What has arrived, before injected faults (see [`Subscription::arrivals`]).
+    pub fn arrivals(&self) -> &Arrivals {
+        &self.arrivals
     }
 }

@@ -18,7 +18,8 @@ use super::metrics::{aims, Metrics};
 use super::plot;
 use super::trace::{judge, Recorder};
 use crate::acc::PerceptionSource;
-use crate::launch::{ClockMode, LoopRun, LoopSpec, Network, NODE_POLL};
+use crate::config::{FaultArgs, FaultProfile};
+use crate::launch::{ClockMode, LoopRun, LoopSpec, Network, NodeInput, NODE_POLL};
 use crate::sim::Scenario;
 
 #[derive(Debug, Clone, clap::Args)]
@@ -46,6 +47,8 @@ pub struct EvalAccArgs {
     /// removed when every scenario passes]
     #[arg(long, value_name = "DIR")]
     pub logs: Option<PathBuf>,
+    #[command(flatten)]
+    pub faults: FaultArgs,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -59,6 +62,10 @@ pub struct ScenarioResult {
     pub end: String,
     pub wall_time_s: f64,
     pub plot: Option<PathBuf>,
+    /// The fault profile the nodes injected, if any.
+    pub faults: Option<String>,
+    /// The ACC's and the simulator's inputs: lost on the way vs dropped by injected faults.
+    pub inputs: Vec<NodeInput>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -72,8 +79,9 @@ pub struct AccReport {
 /// of `connect` (-t, SLIPSTREAM_CONFIG or ./config/slipstream.json5) under a namespace of the
 /// run's own; the connection flags do not apply (each run has its own loopback ports).
 pub fn run(args: &EvalAccArgs, connect: &crate::config::ConnectArgs) -> Result<AccReport> {
-    // The topic config is checked here, once, before any process starts.
+    // The topic config and the fault profile are checked here, once, before any process starts.
     connect.topic_map()?;
+    let faults = args.faults.profile()?;
     let names: Vec<String> = if args.scenarios.is_empty() {
         crate::sim::scenario::BUILT_IN.iter().map(|(n, _)| n.to_string()).collect()
     } else {
@@ -95,7 +103,7 @@ pub fn run(args: &EvalAccArgs, connect: &crate::config::ConnectArgs) -> Result<A
         eprint!("[{}/{}] {name} ({:?} perception) ... ", i + 1, names.len(), args.perception);
         let started = Instant::now();
         let result = rt
-            .block_on(run_one(arg, scenario, args, connect.topics.as_deref(), &logs.join(&name)))
+            .block_on(run_one(arg, scenario, args, faults.clone(), connect.topics.as_deref(), &logs.join(&name)))
             .with_context(|| format!("scenario {name} (node logs in {})", logs.join(&name).display()))?;
         eprintln!(
             "{} in {:.1} s{}",
@@ -114,10 +122,12 @@ pub fn run(args: &EvalAccArgs, connect: &crate::config::ConnectArgs) -> Result<A
     Ok(AccReport { command: std::env::args().collect::<Vec<_>>().join(" "), results, pass })
 }
 
-async fn run_one(
+/// One scenario through the launch layer, judged; `faults` injected by every node.
+pub(crate) async fn run_one(
     scenario_arg: &str,
     mut scenario: Scenario,
     args: &EvalAccArgs,
+    faults: Option<FaultProfile>,
     topics_file: Option<&Path>,
     logs: &Path,
 ) -> Result<ScenarioResult> {
@@ -133,7 +143,10 @@ async fn run_one(
         clock: ClockMode::Lockstep,
         perception: args.perception,
         set_speed_mps: set_speed,
+        faults,
     };
+    spec.check_faults()?;
+    let faults = spec.faults.as_ref().map(|p| p.summary());
     // A namespace and ports of this run's own: nothing else on the machine is disturbed.
     let namespace =
         format!("eval-acc-{}-{}", std::process::id(), name.replace(|c: char| !c.is_ascii_alphanumeric(), "-"));
@@ -155,6 +168,7 @@ async fn run_one(
     let rec = recorder.take();
     drop(recorder);
     let sim = lp.sim_report();
+    let inputs = lp.inputs();
     lp.close().await;
     if progress.sim_ended.is_none() && progress.died.is_empty() {
         bail!("slipstream-sim did not finish within {} s (--timeout)", args.timeout);
@@ -186,6 +200,8 @@ async fn run_one(
         end: trace.end.clone(),
         wall_time_s: wall,
         plot,
+        faults,
+        inputs,
     })
 }
 

@@ -285,7 +285,8 @@ impl Replayer<'_> {
     fn finish_step(&mut self) -> Result<()> {
         let Some(stamp) = self.step.stamp_sim_ns else { return Ok(()) };
         let recorded = self.recorded;
-        let frames: Vec<u64> = self.step.frames.iter().copied().filter(|f| recorded.detections.contains_key(f)).collect();
+        let frames: Vec<u64> =
+            self.step.frames.iter().copied().filter(|f| recorded.detections.contains_key(f)).collect();
         let command = recorded.commands.contains_key(&stamp).then_some(stamp);
         self.stats.steps += 1;
         if self.inbox.wait(&frames, command, OUTPUT_WAIT) {
@@ -307,7 +308,13 @@ impl Replayer<'_> {
 
 /// Plays the recording's inputs step by step, in simulated-time order, waiting after each
 /// step for the outputs the recording has for it.
-fn replay(bus: &Bus, path: &Path, recorded: &Outputs, inbox: &Inbox, progress: &mut dyn FnMut(f64)) -> Result<ReplayStats> {
+fn replay(
+    bus: &Bus,
+    path: &Path,
+    recorded: &Outputs,
+    inbox: &Inbox,
+    progress: &mut dyn FnMut(f64),
+) -> Result<ReplayStats> {
     let started = Instant::now();
     let mut r = Replayer {
         bus,
@@ -399,7 +406,11 @@ fn compare(
             continue;
         }
         c.differing += 1;
-        c.first_difference.get_or_insert_with(|| Difference { answers: answers(*key), recorded: describe(r), replayed: describe(n) });
+        c.first_difference.get_or_insert_with(|| Difference {
+            answers: answers(*key),
+            recorded: describe(r),
+            replayed: describe(n),
+        });
     }
     c.extra = replayed.keys().filter(|k| !recorded.contains_key(k)).count() as u64;
     c
@@ -465,6 +476,7 @@ pub async fn run(path: &Path, connect: &ConnectArgs, dir: &Path, progress: &mut 
         set_speed_mps: recorded.set_speed_mps.ok_or_else(|| {
             anyhow!("{} has no acc/status: the ACC's set speed is unknown (record every key)", path.display())
         })?,
+        faults: None,
     };
     let mut lp = LoopRun::open(spec.clone(), Network::User(connect), &dir.join("logs"), "resim").await?;
     let (inbox, subs) = Inbox::start(lp.bus()).await?;
@@ -472,7 +484,10 @@ pub async fn run(path: &Path, connect: &ConnectArgs, dir: &Path, progress: &mut 
     let replayed = tokio::task::block_in_place(|| replay(lp.bus(), path, &recorded.outputs, &inbox, progress));
     tokio::time::sleep(crate::launch::SETTLE).await;
     for node in lp.check().died {
-        tracing::warn!("{node} ended during the replay; see {}", crate::launch::nodes::log_of(lp.logs(), &node).display());
+        tracing::warn!(
+            "{node} ended during the replay; see {}",
+            crate::launch::nodes::log_of(lp.logs(), &node).display()
+        );
     }
     let nodes = lp.stop().await;
     drop(subs);
@@ -526,11 +541,17 @@ pub fn summary(r: &ResimReport) -> String {
             c.max_abs_difference.map_or(String::new(), |d| format!("  max |diff| {d:.4}"))
         ));
         if let Some(d) = &c.first_difference {
-            s.push_str(&format!("    first difference, {}:\n      recorded {}\n      today    {}\n", d.answers, d.recorded, d.replayed));
+            s.push_str(&format!(
+                "    first difference, {}:\n      recorded {}\n      today    {}\n",
+                d.answers, d.recorded, d.replayed
+            ));
         }
     }
     if r.replay.steps_timed_out > 0 {
-        s.push_str(&format!("  {} steps waited {:?} in vain for today's outputs\n", r.replay.steps_timed_out, OUTPUT_WAIT));
+        s.push_str(&format!(
+            "  {} steps waited {:?} in vain for today's outputs\n",
+            r.replay.steps_timed_out, OUTPUT_WAIT
+        ));
     }
     let verdict = match (r.detections.same() && r.commands.same(), r.complete()) {
         (true, true) => "today's nodes answer exactly as recorded",
@@ -574,7 +595,13 @@ mod tests {
         today.take(payload(20, &command(0.25, Some(222), Some(2))));
         today.take(payload(40, &command(0.5, None, Some(4))));
         assert_eq!(recorded.unpaired_commands, 1, "the watchdog's command answers no step");
-        let c = compare(&recorded.commands, &today.commands, describe_command, |ns| format!("{ns}"), Some(command_difference));
+        let c = compare(
+            &recorded.commands,
+            &today.commands,
+            describe_command,
+            |ns| format!("{ns}"),
+            Some(command_difference),
+        );
         assert_eq!((c.recorded, c.replayed, c.identical, c.differing, c.missing, c.extra), (3, 3, 1, 1, 1, 1));
         assert_eq!(c.max_abs_difference, Some(0.25));
         assert!(!c.same());

@@ -33,10 +33,10 @@ pub struct TruthLead {
 
 pub fn truth_lead(gt: &GroundTruthObjects, ego_lane: i32, ego_front_m: f64) -> Option<TruthLead> {
     gt.nearest_ahead_in_lane(ego_lane).map(|o| TruthLead {
-            id: o.id,
-            gap_m: o.position_in_ego_m[0] - ego_front_m,
-            relative_speed_mps: o.velocity_in_ego_mps[0],
-        })
+        id: o.id,
+        gap_m: o.position_in_ego_m[0] - ego_front_m,
+        relative_speed_mps: o.velocity_in_ego_mps[0],
+    })
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize)]

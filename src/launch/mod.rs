@@ -25,7 +25,7 @@ pub mod child;
 pub mod nodes;
 
 pub use child::{free_ports, sibling_binary, Child};
-pub use nodes::{ClockMode, LoopRun, LoopSpec, Network, NodeEnd};
+pub use nodes::{ClockMode, LoopRun, LoopSpec, Network, NodeEnd, NodeInput};
 
 /// How long the controllers may take to appear on the bus.
 pub const NODE_START_TIMEOUT: Duration = Duration::from_secs(30);

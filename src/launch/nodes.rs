@@ -24,8 +24,9 @@ use serde::Serialize;
 
 use super::child::{free_ports, sibling_binary, Child};
 use super::{CLOSE_TIMEOUT, DEFAULT_RUST_LOG, NODE_POLL, NODE_START_TIMEOUT, SETTLE, STOP_GRACE};
+use crate::acc::node::AccStats;
 use crate::acc::PerceptionSource;
-use crate::config::{ConnectArgs, DEFAULT_ZENOH_CONFIG};
+use crate::config::{ConnectArgs, FaultProfile, DEFAULT_ZENOH_CONFIG};
 use crate::sim::SimReport;
 use crate::Bus;
 
@@ -60,6 +61,32 @@ pub struct LoopSpec {
     pub clock: ClockMode,
     pub perception: PerceptionSource,
     pub set_speed_mps: f64,
+    /// Faults every node injects into what it receives (`--faults`); None: none.
+    pub faults: Option<FaultProfile>,
+}
+
+impl LoopSpec {
+    /// Faults a node of this loop cannot take: in lockstep, every step waits for the ACC's
+    /// answer to its speed message and for the detections of its frame, so speed and camera
+    /// frames must arrive; their faults belong on what follows them.
+    pub fn check_faults(&self) -> Result<()> {
+        let Some(p) = &self.faults else { return Ok(()) };
+        if self.clock != ClockMode::Lockstep {
+            return Ok(());
+        }
+        for (topic, instead) in [
+            (crate::topics::VEHICLE_SPEED.topic, "vehicle/state and vehicle/control"),
+            (crate::topics::CAMERA_FRONT.topic, "perception/objects (ground truth: objects)"),
+        ] {
+            if p.topics.contains_key(&topic) {
+                bail!(
+                    "{}: key `topics.{topic}`: faults on {topic} cannot run in lockstep (each step waits for what follows from it) (fix: put them on {instead}, or use --clock realtime or fast)",
+                    p.name
+                );
+            }
+        }
+        Ok(())
+    }
 }
 
 /// How the loop's processes find each other.
@@ -81,6 +108,26 @@ pub struct NodeEnd {
     /// Ended on its own before the run was over.
     pub died: bool,
     pub log: PathBuf,
+}
+
+/// One input of one node as it ended: what arrived, what the network lost (sequence gaps) and
+/// what injected faults dropped, delayed or duplicated.
+#[derive(Debug, Clone, Serialize)]
+pub struct NodeInput {
+    pub node: String,
+    #[serde(flatten)]
+    pub stats: crate::bus::StatsSnapshot,
+}
+
+impl NodeInput {
+    /// "perception/objects at acc: 1,200 arrived, 0 lost on the way, injected 240 dropped, ..."
+    pub fn line(&self) -> String {
+        let s = &self.stats;
+        format!(
+            "{} at {}: {} arrived, {} lost on the way; injected: {} dropped, {} delayed, {} duplicated",
+            s.topic, self.node, s.received, s.lost, s.injected_dropped, s.injected_delayed, s.injected_duplicated
+        )
+    }
 }
 
 /// What [`LoopRun::check`] saw.
@@ -105,6 +152,10 @@ const DETECT: &str = "slipstream-detect";
 const SIM: &str = "slipstream-sim";
 /// The file slipstream-sim --json writes its report to, in the logs directory.
 const SIM_REPORT: &str = "slipstream-sim.json";
+/// The file slipstream-acc --json writes its statistics to, in the logs directory.
+const ACC_REPORT: &str = "slipstream-acc.json";
+/// The fault profile handed to the nodes, in the logs directory.
+const FAULTS_FILE: &str = "faults.json5";
 
 /// Loopback ports: the observer's and each node's.
 #[derive(Debug, Clone, Copy)]
@@ -221,8 +272,15 @@ impl LoopRun {
     /// what a replay drives in place of the simulator ([`crate::eval::resim`]).
     pub async fn start_controllers(&mut self) -> Result<()> {
         let spec = self.spec.clone();
+        spec.check_faults()?;
+        if let Some(p) = &spec.faults {
+            let path = self.logs.join(FAULTS_FILE);
+            std::fs::write(&path, p.to_json5()).with_context(|| format!("write {}", path.display()))?;
+            self.base_flags.extend(["--faults".into(), path.display().to_string()]);
+        }
         let mut acc_args = vec![
-            "--set-speed".to_string(),
+            "--json".to_string(),
+            "--set-speed".into(),
             spec.set_speed_mps.to_string(),
             "--perception".into(),
             spec.perception.name().into(),
@@ -300,13 +358,19 @@ impl LoopRun {
 
     fn spawn(&mut self, bin: &str, args: Vec<String>, own: u16, earlier: &[u16]) -> Result<()> {
         let stderr = create(&log_of(&self.logs, bin))?;
-        let stdout_name = if bin == SIM { SIM_REPORT.to_string() } else { format!("{bin}.out") };
+        let stdout_name = match bin {
+            SIM => SIM_REPORT.to_string(),
+            ACC => ACC_REPORT.to_string(),
+            _ => format!("{bin}.out"),
+        };
         let stdout = create(&self.logs.join(stdout_name))?;
         let mut cmd = Command::new(sibling_binary(bin)?);
         cmd.args(self.flags(own, earlier)).args(args).stdin(Stdio::null()).stdout(stdout).stderr(stderr);
         if std::env::var_os("RUST_LOG").is_none() {
             cmd.env("RUST_LOG", DEFAULT_RUST_LOG);
         }
+        // Faults are the spec's, passed as a flag, never inherited.
+        cmd.env_remove("SLIPSTREAM_FAULTS");
         self.nodes.push(Child::spawn(bin, &mut cmd)?);
         Ok(())
     }
@@ -358,6 +422,27 @@ impl LoopRun {
         let path = self.logs.join(SIM_REPORT);
         let bytes = std::fs::read(&path).with_context(|| format!("read {}", path.display()))?;
         serde_json::from_slice(&bytes).with_context(|| format!("{} is no simulator report", path.display()))
+    }
+
+    /// The ACC's statistics (its --json output), once it has been stopped.
+    pub fn acc_report(&self) -> Result<AccStats> {
+        let path = self.logs.join(ACC_REPORT);
+        let bytes = std::fs::read(&path).with_context(|| format!("read {}", path.display()))?;
+        serde_json::from_slice(&bytes).with_context(|| format!("{} holds no ACC statistics", path.display()))
+    }
+
+    /// The inputs of the ACC and the simulator as they ended (after [`LoopRun::stop`]): what
+    /// was lost on the way and what the faults injected. Empty for a node whose report is
+    /// missing.
+    pub fn inputs(&self) -> Vec<NodeInput> {
+        let mut v: Vec<NodeInput> = self
+            .acc_report()
+            .map(|a| a.inputs.into_iter().map(|stats| NodeInput { node: "acc".into(), stats }).collect())
+            .unwrap_or_default();
+        if let Ok(sim) = self.sim_report() {
+            v.push(NodeInput { node: "sim".into(), stats: sim.control_input });
+        }
+        v
     }
 
     /// Leaves the bus, waiting at most [`CLOSE_TIMEOUT`]: other sessions still attached (a

@@ -120,7 +120,10 @@ impl RecordingSummary {
             ));
         }
         if self.viewable_copies > 0 || self.viewable_skipped > 0 {
-            s.push_str(&format!("  and {} Foxglove-viewable copies (camera, boxes, scene, series)", self.viewable_copies));
+            s.push_str(&format!(
+                "  and {} Foxglove-viewable copies (camera, boxes, scene, series)",
+                self.viewable_copies
+            ));
             if self.viewable_skipped > 0 {
                 s.push_str(&format!("; {} not made while the writer was behind", self.viewable_skipped));
             }
@@ -439,7 +442,8 @@ fn write_copy(
             id
         }
     };
-    let header = mcap::records::MessageHeader { channel_id: id, sequence: 0, log_time: c.log_time, publish_time: c.log_time };
+    let header =
+        mcap::records::MessageHeader { channel_id: id, sequence: 0, log_time: c.log_time, publish_time: c.log_time };
     writer.write_to_known_channel(&header, &c.data)
 }
 

@@ -23,7 +23,9 @@ use super::render::{ObjectVisibility, Renderer};
 use super::rng::SimRng;
 use super::settings::{BeforeFirst, ControlPolicy, Mode, OnTimeout, SimSettings};
 use super::world::{End, StepEvents, World, EGO_ID};
-use crate::bus::{Bus, BusError, CallbackSubscriber, FramePublisher, Publisher, Received};
+use crate::bus::{
+    Arrivals, Bus, BusError, CallbackSubscriber, FramePublisher, NodeClock, Publisher, Received, StatsSnapshot,
+};
 use crate::msg::{
     due, CameraInfo, ControlCommand, ControlTiming, GroundTruthObjects, ImageEncoding, SimClock, SimEvent,
     SimEventKind, Speed, VehicleState,
@@ -61,6 +63,10 @@ pub struct SimReport {
     pub control_rejected: u64,
     /// Commands older than control.max_age_ms of simulated time when they came (not applied).
     pub control_stale: u64,
+    /// vehicle/control as it reached the simulator: arrived, lost on the way (sequence gaps),
+    /// and dropped, delayed or duplicated by injected faults (`--faults`).
+    #[serde(default)]
+    pub control_input: StatsSnapshot,
     /// None when stopped before the scenario ended.
     pub end: Option<End>,
 }
@@ -290,6 +296,9 @@ struct Node<'a> {
     scratch: Vec<u8>,
     inbox: Arc<ControlInbox>,
     control_sub: CallbackSubscriber,
+    /// Faults are injected into vehicle/control here (`--faults`).
+    faulted: bool,
+    node_clock: Arc<NodeClock>,
     policy: Policy,
     frames_sent: u64,
     lockstep_timeouts: u64,
@@ -328,6 +337,8 @@ impl<'a> Node<'a> {
             brightness: noise.brightness,
             inbox,
             control_sub,
+            faulted: bus.faults().is_some_and(|p| p.at(topics::VEHICLE_CONTROL.topic, bus.node()).is_some()),
+            node_clock: bus.clock().clone(),
             policy: Policy::new(settings.control.clone()),
             frames_sent: 0,
             lockstep_timeouts: 0,
@@ -411,14 +422,22 @@ impl<'a> Node<'a> {
         stop: &AtomicBool,
     ) -> Result<Option<End>, SimError> {
         let lockstep = &self.settings.lockstep;
+        // The simulator's own time releases the commands injected faults held back.
+        self.node_clock.advance(t_ns);
         if self.settings.mode != Mode::Lockstep || !(published.speed || published.state) {
             for r in self.inbox.drain() {
                 self.policy.on_command(&r, t_ns);
             }
             return Ok(None);
         }
-        let Answers { command, late, strangers } =
-            await_answers(&self.inbox, &lockstep.wait_for, k, lockstep.step_timeout_ms, stop).await;
+        let faulted = self.faulted;
+        let arrivals = self.control_sub.arrivals();
+        let Answers { command, earlier, late, strangers } =
+            await_answers(&self.inbox, arrivals, faulted, &lockstep.wait_for, k, t_ns, lockstep.step_timeout_ms, stop)
+                .await;
+        for cmd in &earlier {
+            self.policy.on_command(cmd, t_ns);
+        }
         if let Some(cmd) = &command {
             self.policy.on_command(cmd, t_ns);
         }
@@ -483,6 +502,7 @@ impl<'a> Node<'a> {
             control_timeouts: self.policy.timeouts,
             control_stale: self.policy.stale,
             control_rejected: self.control_sub.stats().snapshot().decode_errors,
+            control_input: self.control_sub.stats().snapshot(),
             end,
         })
     }
@@ -546,6 +566,9 @@ async fn wait_for_nodes(bus: &Bus, names: &[String], timeout_ms: u64, stop: &Ato
 struct Answers {
     /// The command of the first awaited node that answered.
     command: Option<Received<ControlCommand>>,
+    /// With injected faults: answers to earlier steps that faults held back until now (applied
+    /// before `command`, in their order).
+    earlier: Vec<Received<ControlCommand>>,
     /// Awaited nodes that did not answer in time.
     late: Vec<String>,
     /// Senders of answers to this step that lockstep does not wait for ("(unnamed)": no
@@ -553,24 +576,35 @@ struct Answers {
     strangers: BTreeSet<String>,
 }
 
-/// Collects the answers to step `k` until every awaited node answered or the timeout passed.
+/// Collects the answers to step `k` (stamped `t_ns`) until every awaited node answered or the
+/// timeout passed. With injected faults (`faulted`) an answer counts once it arrived, even if
+/// the faults dropped or held it: the step goes on with what was delivered.
+#[allow(clippy::too_many_arguments)]
 async fn await_answers(
     inbox: &ControlInbox,
+    arrivals: &Arrivals,
+    faulted: bool,
     wait_for: &[String],
     k: u64,
+    t_ns: u64,
     timeout_ms: u64,
     stop: &AtomicBool,
 ) -> Answers {
     let deadline = tokio::time::Instant::now() + Duration::from_millis(timeout_ms);
     let mut answers: BTreeMap<&str, Received<ControlCommand>> = BTreeMap::new();
+    let mut earlier = Vec::new();
     let mut strangers = BTreeSet::new();
+    let arrived = |n: &String| faulted && arrivals.since_from(n, t_ns);
     loop {
+        // Arrivals first: an answer seen arrived was handed on before, so the drain gets it.
+        let all_arrived = wait_for.iter().all(arrived);
         for r in inbox.drain() {
             let from = r.source.as_deref().and_then(|s| wait_for.iter().find(|n| n.as_str() == s));
             match (from, r.msg.answers_step) {
                 (Some(name), Some(step)) if step == k => {
                     answers.insert(name.as_str(), r);
                 }
+                (Some(_), Some(step)) if faulted && step < k => earlier.push(r),
                 (None, Some(step)) if step == k => {
                     strangers.insert(r.source.clone().unwrap_or_else(|| "(unnamed)".into()));
                 }
@@ -580,14 +614,20 @@ async fn await_answers(
             }
         }
         let now = tokio::time::Instant::now();
-        if answers.len() == wait_for.len() || stop.load(Ordering::SeqCst) || now >= deadline {
+        let answered = |n: &String| answers.contains_key(n.as_str()) || arrived(n);
+        if all_arrived || wait_for.iter().all(answered) || stop.load(Ordering::SeqCst) || now >= deadline {
             break;
         }
         // Wake at least every 100 ms to notice a stop request.
-        let _ = tokio::time::timeout_at(deadline.min(now + Duration::from_millis(100)), inbox.notify.notified()).await;
+        let wake = deadline.min(now + Duration::from_millis(100)) - now;
+        tokio::select! {
+            _ = tokio::time::timeout(wake, inbox.notify.notified()) => {}
+            _ = arrivals.wait(wake, || wait_for.iter().all(arrived)) => {}
+        }
     }
-    let late = wait_for.iter().filter(|n| !answers.contains_key(n.as_str())).cloned().collect();
-    Answers { command: wait_for.iter().find_map(|n| answers.remove(n.as_str())), late, strangers }
+    let answered = |n: &&String| answers.contains_key(n.as_str()) || arrived(n);
+    let late = wait_for.iter().filter(|n| !answered(n)).cloned().collect();
+    Answers { command: wait_for.iter().find_map(|n| answers.remove(n.as_str())), earlier, late, strangers }
 }
 
 #[cfg(test)]

@@ -206,7 +206,8 @@ pub fn run(count: u64, parser_count: u64, seed: u64) -> Vec<TargetReport> {
 
 /// The table people read.
 pub fn markdown(reports: &[TargetReport]) -> String {
-    let mut s = String::from("| target | inputs | accepted | rejected | panics | inputs/s |\n|---|---|---|---|---|---|\n");
+    let mut s =
+        String::from("| target | inputs | accepted | rejected | panics | inputs/s |\n|---|---|---|---|---|---|\n");
     for r in reports {
         s.push_str(&format!(
             "| {} | {} | {} | {} | {} | {:.0} |\n",

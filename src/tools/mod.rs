@@ -14,7 +14,11 @@ pub mod view;
 
 /// Waits for Ctrl-C or `duration_s`, printing `status()` on stderr every `every`: one line
 /// redrawn in place on a terminal, a line each otherwise (`record`, `view`).
-pub(crate) async fn until_stopped(duration_s: Option<f64>, every: std::time::Duration, mut status: impl FnMut() -> String) {
+pub(crate) async fn until_stopped(
+    duration_s: Option<f64>,
+    every: std::time::Duration,
+    mut status: impl FnMut() -> String,
+) {
     use std::io::{IsTerminal, Write};
     use std::time::{Duration, Instant};
     let tty = std::io::stderr().is_terminal();

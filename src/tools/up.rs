@@ -22,11 +22,11 @@ use serde::Serialize;
 use super::top::{KeyRow, Watcher};
 use crate::acc::PerceptionSource;
 use crate::bus::{CallbackSubscriber, Received};
-use crate::config::ConnectArgs;
+use crate::config::{ConnectArgs, FaultArgs};
 use crate::eval::latency::{self, HopStats, LoopLatency, HOPS_SHORT, WHOLE_LOOP};
 use crate::eval::trace::{judge, Recorder};
 use crate::eval::{fmt_opt, plot, Metrics};
-use crate::launch::{ClockMode, LoopRun, LoopSpec, Network, NodeEnd, NODE_POLL};
+use crate::launch::{ClockMode, LoopRun, LoopSpec, Network, NodeEnd, NodeInput, NODE_POLL};
 use crate::msg::{AccStatus, SimClock, SimEvent, SimEventKind};
 use crate::record::{Recording, RecordingSummary};
 use crate::sim::Scenario;
@@ -82,11 +82,13 @@ pub struct UpArgs {
     /// The live view's port (0: any free port, printed)
     #[arg(long, default_value_t = crate::view::live::DEFAULT_PORT, requires = "view")]
     pub view_port: u16,
+    #[command(flatten)]
+    pub faults: FaultArgs,
     /// Re-simulate: a recording (`up --record`, `slipstream record`) drives today's detector
     /// and ACC in place of the simulator, step by step, and the report compares their outputs
     /// with the recorded ones (docs/recording.md). Scenario, clock, perception and set speed
     /// come from the recording.
-    #[arg(long, value_name = "FILE.mcap", conflicts_with_all = ["record", "viewable", "view", "mode", "duration", "perception"])]
+    #[arg(long, value_name = "FILE.mcap", conflicts_with_all = ["record", "viewable", "view", "mode", "duration", "perception", "faults"])]
     pub from: Option<PathBuf>,
 }
 
@@ -121,6 +123,10 @@ pub struct UpReport {
     pub metrics: Option<Metrics>,
     /// Every key seen during the run (as `slipstream top` shows it), at the end.
     pub topics: Vec<KeyRow>,
+    /// The fault profile the nodes injected (`--faults`), if any.
+    pub faults: Option<String>,
+    /// The ACC's and the simulator's inputs: lost on the way vs dropped by injected faults.
+    pub inputs: Vec<NodeInput>,
     pub plots: Vec<PathBuf>,
     /// With --record: the recording and what it lost.
     pub recording: Option<RecordingSummary>,
@@ -154,7 +160,11 @@ impl Outcome {
 /// report. Exit code 0 when every recorded output was answered (the same or not: differences
 /// are in the report), 1 when a node died or stopped answering.
 pub fn run_from(path: &Path, args: &UpArgs, connect: &ConnectArgs) -> Result<u8> {
-    anyhow::ensure!(path.is_file(), "{} is no file (a recording made with `up --record` or `slipstream record`)", path.display());
+    anyhow::ensure!(
+        path.is_file(),
+        "{} is no file (a recording made with `up --record` or `slipstream record`)",
+        path.display()
+    );
     let stem = path.file_stem().map_or("recording".into(), |s| s.to_string_lossy().into_owned());
     let dir = match &args.report {
         Some(d) => d.clone(),
@@ -162,7 +172,11 @@ pub fn run_from(path: &Path, args: &UpArgs, connect: &ConnectArgs) -> Result<u8>
     };
     // The directory comes with the nodes' logs, once the recording has been read.
     let plain = args.plain || !std::io::stderr().is_terminal();
-    eprintln!("slipstream up --from {}: today's detector and ACC answer the recording; report in {}", path.display(), dir.display());
+    eprintln!(
+        "slipstream up --from {}: today's detector and ACC answer the recording; report in {}",
+        path.display(),
+        dir.display()
+    );
     let mut progress = |t_s: f64| {
         let mut err = std::io::stderr().lock();
         let _ = if plain { writeln!(err, "replayed {t_s:.1} s") } else { write!(err, "\r\x1b[2Kreplayed {t_s:.1} s") };
@@ -174,7 +188,8 @@ pub fn run_from(path: &Path, args: &UpArgs, connect: &ConnectArgs) -> Result<u8>
         eprintln!();
     }
     let file = dir.join("report.json");
-    std::fs::write(&file, serde_json::to_string_pretty(&report)?).with_context(|| format!("write {}", file.display()))?;
+    std::fs::write(&file, serde_json::to_string_pretty(&report)?)
+        .with_context(|| format!("write {}", file.display()))?;
     println!("{}", crate::eval::resim::summary(&report));
     Ok(if report.complete() { 0 } else { 1 })
 }
@@ -354,7 +369,10 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
         clock: args.mode,
         perception: args.perception,
         set_speed_mps: scenario.ego.set_speed_mps.unwrap_or(scenario.ego.speed_mps),
+        faults: args.faults.profile()?,
     };
+    spec.check_faults()?;
+    let faults = spec.faults.as_ref().map(|p| p.summary());
     let mut lp = LoopRun::open(spec, Network::User(connect), &dir.join("logs"), "up").await.context("up")?;
     let watch = Watch::start(lp.bus(), args.perception == PerceptionSource::Camera).await?;
     let recording = match args.record {
@@ -402,6 +420,7 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
         None => None,
     };
     let sim = lp.sim_report().ok();
+    let inputs = lp.inputs();
     let topics_seen = watch.keys.view(lp.bus()).keys;
     let rec = watch.recorder.take();
     let latency = std::mem::take(&mut *watch.latency.lock());
@@ -428,6 +447,8 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
         latency: latency_report(&latency, args, rec.statuses.last().map(|s| s.msg.time_gap_s)),
         metrics: judged.metrics,
         topics: topics_seen,
+        faults,
+        inputs,
         plots,
         recording,
         view,
@@ -436,7 +457,8 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
     // The report is on disk before the session closes: sessions still attached (top, echo, a
     // Python client) can hold the close up, bounded as it is.
     let path = dir.join("report.json");
-    std::fs::write(&path, serde_json::to_string_pretty(&report)?).with_context(|| format!("write {}", path.display()))?;
+    std::fs::write(&path, serde_json::to_string_pretty(&report)?)
+        .with_context(|| format!("write {}", path.display()))?;
     lp.close().await;
     Ok(report)
 }
@@ -520,6 +542,15 @@ pub fn summary(r: &UpReport) -> String {
             f(r.latency.time_gap_s, 2),
             r.latency.note
         ));
+    }
+    if let Some(faults) = &r.faults {
+        s.push_str(&format!("  faults injected: {faults}\n"));
+    }
+    for i in &r.inputs {
+        let st = &i.stats;
+        if r.faults.is_some() || st.lost > 0 {
+            s.push_str(&format!("    {}\n", i.line()));
+        }
     }
     for n in &r.nodes {
         s.push_str(&format!(

@@ -14,7 +14,9 @@ use crate::msg::{
 use crate::sim::Scenario;
 
 /// The copies' topics: the live view's (docs/viewing.md), so one layout shows both.
-use super::live::{TOPIC_ACC, TOPIC_ANNOTATIONS, TOPIC_CALIBRATION, TOPIC_CAMERA, TOPIC_ROAD, TOPIC_TF, TOPIC_VEHICLES};
+use super::live::{
+    TOPIC_ACC, TOPIC_ANNOTATIONS, TOPIC_CALIBRATION, TOPIC_CAMERA, TOPIC_ROAD, TOPIC_TF, TOPIC_VEHICLES,
+};
 
 /// The road is drawn again after this much simulated time (it follows the ego).
 const ROAD_EVERY_NS: u64 = 1_000_000_000;

@@ -112,7 +112,8 @@ struct Channels {
 
 impl Channels {
     fn new(ctx: &Arc<Context>) -> Result<Channels> {
-        let acc = ctx.channel_builder(TOPIC_ACC).message_encoding("json").schema(scene::acc_series_schema()).build_raw()?;
+        let acc =
+            ctx.channel_builder(TOPIC_ACC).message_encoding("json").schema(scene::acc_series_schema()).build_raw()?;
         Ok(Channels {
             ctx: ctx.clone(),
             raw: None,
@@ -141,7 +142,9 @@ impl Channels {
         let stamp = sample.header().stamp_pub_ns;
         let ctx = &self.ctx;
         match scene::image(sample) {
-            Image::Raw(img) => Self::log(self.raw.get_or_insert_with(|| ctx.channel_builder(TOPIC_CAMERA).build()), &img, stamp),
+            Image::Raw(img) => {
+                Self::log(self.raw.get_or_insert_with(|| ctx.channel_builder(TOPIC_CAMERA).build()), &img, stamp)
+            }
             Image::Compressed(img) => {
                 Self::log(self.compressed.get_or_insert_with(|| ctx.channel_builder(TOPIC_CAMERA).build()), &img, stamp)
             }
@@ -187,7 +190,14 @@ impl Painter {
         }
     }
 
-    fn scene(&mut self, stamp: u64, stamp_sim: u64, ego: &VehicleState, truth: Option<&GroundTruthObjects>, status: Option<&AccStatus>) {
+    fn scene(
+        &mut self,
+        stamp: u64,
+        stamp_sim: u64,
+        ego: &VehicleState,
+        truth: Option<&GroundTruthObjects>,
+        status: Option<&AccStatus>,
+    ) {
         let c = &self.channels;
         let params = self.context.ego();
         let vehicles = scene::vehicles(stamp, ego, &params, truth);
@@ -248,11 +258,7 @@ impl LiveView {
                 )
             })?;
         let counters = Arc::new(Counters::default());
-        let mut painter = Painter {
-            channels,
-            context: opts.context.clone(),
-            counters: counters.clone(),
-        };
+        let mut painter = Painter { channels, context: opts.context.clone(), counters: counters.clone() };
         let period = Duration::from_secs_f64(1.0 / opts.rate_hz);
         let task = tokio::spawn(async move {
             let mut every = tokio::time::interval(period);
@@ -306,7 +312,9 @@ async fn subscribe(bus: &Bus, latest: &Arc<Mutex<Latest>>) -> Result<Vec<Callbac
     let l = latest.clone();
     let frames = bus.subscribe_frames_with(move |f| l.lock().frame = Some(f)).await?;
     let l = latest.clone();
-    let info = bus.subscribe_with(topics::CAMERA_FRONT_INFO, move |i: Received<CameraInfo>| l.lock().camera_info = Some(i.msg)).await?;
+    let info = bus
+        .subscribe_with(topics::CAMERA_FRONT_INFO, move |i: Received<CameraInfo>| l.lock().camera_info = Some(i.msg))
+        .await?;
     let l = latest.clone();
     let detections = bus
         .subscribe_with(topics::PERCEPTION_OBJECTS, move |d: Received<Detections>| {
@@ -316,7 +324,9 @@ async fn subscribe(bus: &Bus, latest: &Arc<Mutex<Latest>>) -> Result<Vec<Callbac
         })
         .await?;
     let l = latest.clone();
-    let truth = bus.subscribe_with(topics::OBJECTS, move |o: Received<GroundTruthObjects>| l.lock().truth = Some(o.msg)).await?;
+    let truth = bus
+        .subscribe_with(topics::OBJECTS, move |o: Received<GroundTruthObjects>| l.lock().truth = Some(o.msg))
+        .await?;
     let l = latest.clone();
     let state = bus
         .subscribe_with(topics::VEHICLE_STATE, move |s: Received<VehicleState>| {
@@ -326,7 +336,8 @@ async fn subscribe(bus: &Bus, latest: &Arc<Mutex<Latest>>) -> Result<Vec<Callbac
         })
         .await?;
     let l = latest.clone();
-    let status = bus.subscribe_with(topics::ACC_STATUS, move |s: Received<AccStatus>| l.lock().status = Some(s.msg)).await?;
+    let status =
+        bus.subscribe_with(topics::ACC_STATUS, move |s: Received<AccStatus>| l.lock().status = Some(s.msg)).await?;
     let l = latest.clone();
     let events = bus
         .subscribe_with(topics::SIM_EVENTS, move |e: Received<SimEvent>| {

@@ -3,12 +3,12 @@
 //! ego's frame) and the ACC's series. Pure functions: the live view calls them at its own pace.
 
 use foxglove::bytes::Bytes;
-use foxglove::Schema;
 use foxglove::schemas::{
-    line_primitive, points_annotation, scene_entity_deletion, CameraCalibration, Color, CompressedImage, CubePrimitive, FrameTransform,
-    FrameTransforms, ImageAnnotations, LinePrimitive, Point2, Point3, PointsAnnotation, Pose, Quaternion, RawImage,
-    SceneEntity, SceneEntityDeletion, SceneUpdate, TextAnnotation, Timestamp, Vector3,
+    line_primitive, points_annotation, scene_entity_deletion, CameraCalibration, Color, CompressedImage, CubePrimitive,
+    FrameTransform, FrameTransforms, ImageAnnotations, LinePrimitive, Point2, Point3, PointsAnnotation, Pose,
+    Quaternion, RawImage, SceneEntity, SceneEntityDeletion, SceneUpdate, TextAnnotation, Timestamp, Vector3,
 };
+use foxglove::Schema;
 use nalgebra::Vector2;
 use serde::Serialize;
 
@@ -77,11 +77,21 @@ pub fn frame_image(stamp_ns: u64, width: u32, height: u32, encoding: ImageEncodi
     let stamp = Some(timestamp(stamp_ns));
     let frame_id = FRAME_CAMERA.to_string();
     match encoding {
-        ImageEncoding::Rgb8 => {
-            Image::Raw(RawImage { timestamp: stamp, frame_id, width, height, encoding: "rgb8".into(), step: width * 3, data })
+        ImageEncoding::Rgb8 => Image::Raw(RawImage {
+            timestamp: stamp,
+            frame_id,
+            width,
+            height,
+            encoding: "rgb8".into(),
+            step: width * 3,
+            data,
+        }),
+        ImageEncoding::Jpeg => {
+            Image::Compressed(CompressedImage { timestamp: stamp, frame_id, data, format: "jpeg".into() })
         }
-        ImageEncoding::Jpeg => Image::Compressed(CompressedImage { timestamp: stamp, frame_id, data, format: "jpeg".into() }),
-        ImageEncoding::Png => Image::Compressed(CompressedImage { timestamp: stamp, frame_id, data, format: "png".into() }),
+        ImageEncoding::Png => {
+            Image::Compressed(CompressedImage { timestamp: stamp, frame_id, data, format: "png".into() })
+        }
     }
 }
 
@@ -183,12 +193,14 @@ fn entity(stamp_ns: u64, id: String, cube: CubePrimitive) -> SceneEntity {
 
 /// The vehicles: the ego blue, the true lead (nearest ahead in the ego's lane) orange, the
 /// others grey. Replaces the previous update whole, so vehicles that left are gone.
-pub fn vehicles(stamp_ns: u64, ego: &VehicleState, ego_params: &VehicleParams, truth: Option<&GroundTruthObjects>) -> SceneUpdate {
-    let mut entities = vec![entity(
-        stamp_ns,
-        "ego".into(),
-        body(ego.position_in_world_m, ego.yaw_in_world_rad, ego_params, EGO_BLUE),
-    )];
+pub fn vehicles(
+    stamp_ns: u64,
+    ego: &VehicleState,
+    ego_params: &VehicleParams,
+    truth: Option<&GroundTruthObjects>,
+) -> SceneUpdate {
+    let mut entities =
+        vec![entity(stamp_ns, "ego".into(), body(ego.position_in_world_m, ego.yaw_in_world_rad, ego_params, EGO_BLUE))];
     let lead = truth.and_then(|t| t.nearest_ahead_in_lane(ego.lane)).map(|l| l.id);
     for o in truth.iter().flat_map(|t| &t.objects) {
         let color = if lead == Some(o.id) { ORANGE } else { GREY };
@@ -378,12 +390,7 @@ mod tests {
     use crate::msg::{BoundingBox2d, Detection, GroundTruthObject, ObjectClass};
 
     fn state(x: f64, yaw: f64, lane: i32) -> VehicleState {
-        VehicleState {
-            position_in_world_m: [x, 0.0, 0.0],
-            yaw_in_world_rad: yaw,
-            lane,
-            ..crate::msg::example_state()
-        }
+        VehicleState { position_in_world_m: [x, 0.0, 0.0], yaw_in_world_rad: yaw, lane, ..crate::msg::example_state() }
     }
 
     fn object(id: u32, x_world: f64, x_ego: f64, lane: i32, bbox: Option<BoundingBox2d>) -> GroundTruthObject {
@@ -416,8 +423,12 @@ mod tests {
             lateral_offset_m: 0.0,
             relative_speed_mps: -1.0,
         };
-        let detections = Detections { frame_seq: 3, frame_stamp_pub_ns: 5_250_000_000, detections: vec![det(1), det(2)] };
-        let truth = GroundTruthObjects { step: 9, objects: vec![object(7, 60.0, 30.0, 1, Some(BOX)), object(8, 90.0, 60.0, 0, None)] };
+        let detections =
+            Detections { frame_seq: 3, frame_stamp_pub_ns: 5_250_000_000, detections: vec![det(1), det(2)] };
+        let truth = GroundTruthObjects {
+            step: 9,
+            objects: vec![object(7, 60.0, 30.0, 1, Some(BOX)), object(8, 90.0, 60.0, 0, None)],
+        };
         let a = annotations(5_250_000_000, Some(&detections), Some(&truth), Some(2));
         assert_eq!(a.timestamp, Some(Timestamp::new(5, 250_000_000)));
         // One ground-truth box (the other has no box in the image), two detections.
@@ -434,7 +445,10 @@ mod tests {
     #[test]
     fn cubes_sit_on_the_road_around_the_body_centre_and_the_lead_is_orange() {
         let ego = state(10.0, 0.0, 1);
-        let truth = GroundTruthObjects { step: 1, objects: vec![object(7, 60.0, 45.0, 1, None), object(8, 30.0, 15.0, 0, None)] };
+        let truth = GroundTruthObjects {
+            step: 1,
+            objects: vec![object(7, 60.0, 45.0, 1, None), object(8, 30.0, 15.0, 0, None)],
+        };
         let update = vehicles(1, &ego, &VehicleParams::CAR, Some(&truth));
         assert_eq!(update.deletions.len(), 1, "each update replaces the last: vehicles that left disappear");
         let ids: Vec<&str> = update.entities.iter().map(|e| e.id.as_str()).collect();
@@ -474,7 +488,13 @@ mod tests {
             mode: AccMode::Follow,
             set_speed_mps: 30.0,
             time_gap_s: 1.8,
-            lead: Some(crate::msg::LeadInfo { id: 2, gap_m: 40.5, desired_gap_m: 38.0, relative_speed_mps: -2.0, ttc_s: Some(20.0) }),
+            lead: Some(crate::msg::LeadInfo {
+                id: 2,
+                gap_m: 40.5,
+                desired_gap_m: 38.0,
+                relative_speed_mps: -2.0,
+                ttc_s: Some(20.0),
+            }),
             ..crate::msg::example_status()
         };
         let truth = GroundTruthObjects { step: 1, objects: vec![object(7, 60.0, 45.0, 1, None)] };

@@ -403,11 +403,18 @@ fn mutated_inputs_are_accepted_or_rejected_never_a_panic() {
     assert!(reports.len() >= 15, "{} targets", reports.len());
     for r in &reports {
         assert_eq!(r.panics, 0, "{}: {:?}", r.target, r.first_panic);
-        assert!(r.accepted > 0 && r.rejected > r.accepted, "{}: {} accepted, {} rejected", r.target, r.accepted, r.rejected);
+        assert!(
+            r.accepted > 0 && r.rejected > r.accepted,
+            "{}: {} accepted, {} rejected",
+            r.target,
+            r.accepted,
+            r.rejected
+        );
     }
     // Seeded: the same seed gives the same inputs, so the same verdicts.
     let again = slipstream::tools::fuzz::run(1_000, 100, 7);
     let first = slipstream::tools::fuzz::run(1_000, 100, 7);
-    let verdicts = |v: &[slipstream::tools::fuzz::TargetReport]| v.iter().map(|r| (r.accepted, r.rejected)).collect::<Vec<_>>();
+    let verdicts =
+        |v: &[slipstream::tools::fuzz::TargetReport]| v.iter().map(|r| (r.accepted, r.rejected)).collect::<Vec<_>>();
     assert_eq!(verdicts(&again), verdicts(&first));
 }
