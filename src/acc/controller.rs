@@ -409,8 +409,10 @@ impl Controller {
             (AccMode::Off, 0.0)
         } else if stale {
             self.emergency = false;
-            // Throttle off at once, then down to the stale deceleration within the jerk limit.
-            let from = self.accel_cmd.min(0.0);
+            // From the last command down to the stale deceleration within the jerk limit: never
+            // more acceleration than before, and no jolt when perception drops out for a
+            // moment (a burst of lost frames) while the car was accelerating.
+            let from = self.accel_cmd;
             (AccMode::Stale, (-self.s.stale.decel_mps2).max(from - self.s.limits.jerk_mps3 * dt))
         } else {
             self.update_emergency(threat.as_ref(), v, ego.t_s);
@@ -537,7 +539,6 @@ impl Controller {
         if v < STANDSTILL_MPS && accel <= 0.0 {
             return (0.0, (brake as f32).max(HOLD_BRAKE));
         }
-        let throttle = if mode == AccMode::Stale { 0.0 } else { throttle };
         (throttle as f32, brake as f32)
     }
 }

@@ -133,6 +133,16 @@ enum EvalCommand {
     ///   slipstream eval acc --perception ground-truth --plots plots/
     #[command(verbatim_doc_comment)]
     Acc(slipstream::eval::acc::EvalAccArgs),
+    /// The ACC's safety envelope under network faults: for each scenario a fault-free run,
+    /// then perception delay, perception loss (independent, then bursty) and control-command
+    /// loss in rising steps, injected where samples enter the ACC and the simulator
+    /// (lockstep: the same seed gives the same run). Prints, per scenario and axis, the largest
+    /// fault with no collision, no emergency braking the fault-free run does not need and
+    /// comfort kept, and what failed first (docs/faults.md). Example:
+    ///
+    ///   slipstream eval faults --scenario cut-in --plot envelope.png
+    #[command(verbatim_doc_comment)]
+    Faults(slipstream::eval::faults::EvalFaultsArgs),
 }
 
 /// Opens a bus as `node`, runs `f` with it, closes it.
@@ -239,6 +249,12 @@ fn run(cli: Cli) -> Result<ExitCode> {
             if failed > 0 {
                 anyhow::bail!("{failed} of {} scenarios missed an aim", report.results.len());
             }
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Eval(EvalCommand::Faults(args)) => {
+            use slipstream::eval::faults;
+            let report = faults::run(&args, connect)?;
+            print_report(args.json, &report, faults::markdown)?;
             Ok(ExitCode::SUCCESS)
         }
         Command::WireExamples => {

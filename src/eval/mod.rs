@@ -15,6 +15,8 @@
 //! - [`plot`]: PNG plots of a trace and of the loop latency.
 //! - [`acc`]: `slipstream eval acc`, the scenario suite over separate processes (through
 //!   [`crate::launch`]).
+//! - [`faults`]: `slipstream eval faults`, the ACC's safety envelope under injected network
+//!   faults (runs of [`acc`] with fault profiles).
 //! - [`detect`]: `slipstream eval detect`, the detector scored against ground truth, in process.
 //! - [`offline`]: the closed loop in one process without the bus (tests and tuning).
 //! - [`resim`]: a recording in place of the simulator: today's detector and ACC answer the
@@ -22,6 +24,7 @@
 
 pub mod acc;
 pub mod detect;
+pub mod faults;
 pub mod latency;
 pub mod metrics;
 pub mod offline;

@@ -107,7 +107,7 @@ struct Collect<M> {
     got: std::sync::Arc<std::sync::Mutex<Vec<slipstream::bus::Received<M>>>>,
 }
 
-impl<M: slipstream::msg::Message + serde::de::DeserializeOwned + Send + 'static> Collect<M> {
+impl<M: slipstream::msg::Message + serde::de::DeserializeOwned + Clone + Send + 'static> Collect<M> {
     async fn new(bus: &Bus, topic: topics::TopicDef<M>) -> Self {
         let got = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
         let into = got.clone();

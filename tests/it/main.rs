@@ -15,6 +15,7 @@ mod cli;
 mod config;
 mod detect_node;
 mod discovery;
+mod faults;
 mod layering;
 mod record;
 mod sim_node;
