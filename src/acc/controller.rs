@@ -195,6 +195,8 @@ pub struct Controller {
     /// The target acceleration of the last step (jerk-limited outside emergencies).
     accel_cmd: f64,
     integral: f64,
+    /// The throttle of the last step: while stale, never more than this.
+    last_throttle: f64,
     emergency: bool,
 }
 
@@ -262,6 +264,7 @@ impl Controller {
             last_t_s: None,
             accel_cmd: 0.0,
             integral: 0.0,
+            last_throttle: 0.0,
             emergency: false,
         }
     }
@@ -409,11 +412,11 @@ impl Controller {
             (AccMode::Off, 0.0)
         } else if stale {
             self.emergency = false;
-            // From the last command down to the stale deceleration within the jerk limit: never
-            // more acceleration than before, and no jolt when perception drops out for a
-            // moment (a burst of lost frames) while the car was accelerating.
-            let from = self.accel_cmd;
-            (AccMode::Stale, (-self.s.stale.decel_mps2).max(from - self.s.limits.jerk_mps3 * dt))
+            // From the last command to the stale deceleration within the jerk limit, from either
+            // side: no jolt when perception drops out for a moment (a burst of lost frames),
+            // whether the car was accelerating or braking harder than the stale deceleration.
+            let (from, step) = (self.accel_cmd, self.s.limits.jerk_mps3 * dt);
+            (AccMode::Stale, (-self.s.stale.decel_mps2).clamp(from - step, from + step))
         } else {
             self.update_emergency(threat.as_ref(), v, ego.t_s);
             match threat.filter(|_| self.emergency) {
@@ -520,11 +523,13 @@ impl Controller {
         match mode {
             AccMode::Off => {
                 self.integral = 0.0;
+                self.last_throttle = 0.0;
                 return (0.0, 0.0);
             }
             AccMode::Emergency => {
                 self.integral = 0.0;
                 if accel <= -self.params.max_brake_decel_mps2 {
+                    self.last_throttle = 0.0;
                     return (0.0, 1.0);
                 }
             }
@@ -535,8 +540,14 @@ impl Controller {
                 }
             }
         }
-        let (throttle, brake) = actuate_acceleration(&self.params, v, accel + self.integral);
+        let (mut throttle, brake) = actuate_acceleration(&self.params, v, accel + self.integral);
+        if mode == AccMode::Stale {
+            // Inputs too old: the throttle only goes down (it follows the eased target).
+            throttle = throttle.min(self.last_throttle);
+        }
+        self.last_throttle = throttle;
         if v < STANDSTILL_MPS && accel <= 0.0 {
+            self.last_throttle = 0.0;
             return (0.0, (brake as f32).max(HOLD_BRAKE));
         }
         (throttle as f32, brake as f32)

@@ -453,7 +453,7 @@ impl State {
         match mode {
             AccMode::Stale => {
                 self.stats.stale_episodes += 1;
-                tracing::warn!(?warnings, "inputs stale: throttle released, braking smoothly");
+                tracing::warn!(?warnings, "inputs stale: easing to the stale deceleration within the jerk limit");
             }
             AccMode::Emergency => self.stats.emergencies += 1,
             _ => {

@@ -82,6 +82,14 @@ enum Command {
     /// Feed every message decoder and config parser mutated valid inputs (seeded) and count
     /// what is accepted, rejected, or panics; exits with 1 on any panic
     Fuzz(slipstream::tools::fuzz::FuzzArgs),
+    /// The loop for a long while (lockstep, camera, by default 30 minutes) on loopback ports
+    /// and a namespace of its own, with every process's resident memory, threads and open
+    /// files sampled: after the warm-up nothing may grow (aim: RSS drift < 5 %) and every
+    /// control step must be answered. Writes soak.json, soak.csv and soak.png. Example:
+    ///
+    ///   slipstream soak --minutes 30 --report reports/soak
+    #[command(verbatim_doc_comment)]
+    Soak(slipstream::tools::soak::SoakArgs),
     /// Show the key of every topic after namespace and remapping, its QoS, and the Zenoh
     /// mode and endpoints in use
     Info {
@@ -222,6 +230,16 @@ fn run(cli: Cli) -> Result<ExitCode> {
             Ok(bus)
         })),
         Command::Fuzz(args) => done(slipstream::tools::fuzz::command(&args)),
+        Command::Soak(args) => {
+            use slipstream::tools::soak;
+            let report = soak::run(&args, connect)?;
+            if args.json {
+                println!("{}", serde_json::to_string_pretty(&report)?);
+            } else {
+                println!("{}", soak::summary(&report));
+            }
+            Ok(if report.pass { ExitCode::SUCCESS } else { ExitCode::from(1) })
+        }
         Command::Router => done(slipstream::tools::router::run(connect)),
         Command::Demo(args) => done(slipstream::tools::demo::run(connect, &args)),
         Command::Bench(args) => done(bench_command(&args)),

@@ -436,3 +436,63 @@ impl CallbackSubscriber {
         &self.arrivals
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::bus::faults::{Gate, Model, NodeClock};
+    use crate::config::{Loss, TopicFaults};
+
+    #[test]
+    fn arrivals_say_what_arrived_from_whom() {
+        let a = Arrivals::new(true);
+        assert!(!a.since(0), "nothing yet");
+        a.note(0, Some("acc".into()));
+        assert!(a.since(0) && !a.since(1));
+        a.note(50, Some("acc".into()));
+        a.note(20, Some("other".into()));
+        assert!(a.since(50) && !a.since(51));
+        assert!(a.since_from("acc", 50) && !a.since_from("other", 21) && !a.since_from("nobody", 0));
+        let plain = Arrivals::new(false);
+        plain.note(7, None);
+        assert!(plain.since_from("anyone", 7), "without faults: from anyone");
+    }
+
+    /// What the fault layer adds per message, off (an arrival noted) and on (a gate with delay
+    /// and loss). A measurement, not a check: run with
+    /// `cargo test --release --lib fault_layer_cost -- --ignored --nocapture` (docs/faults.md).
+    #[test]
+    #[ignore]
+    fn fault_layer_cost_per_message() {
+        const N: u64 = 5_000_000;
+        let arrivals = Arrivals::new(false);
+        let t = std::time::Instant::now();
+        for i in 0..N {
+            arrivals.note(std::hint::black_box(i), None);
+        }
+        let off_ns = t.elapsed().as_nanos() as f64 / N as f64;
+        let clock = Arc::new(NodeClock::default());
+        let stats = Arc::new(TopicStats::new("t"));
+        let faults = TopicFaults {
+            at: Vec::new(),
+            delay_ms: 20.0,
+            jitter: None,
+            reorder: false,
+            loss: Some(Loss::Independent(0.1)),
+            duplicate: 0.0,
+            bandwidth_mbps: None,
+            queue_ms: 500.0,
+            outages: Vec::new(),
+        };
+        let gate = Gate::new(Model::new(faults, 1, "t", "n"), clock, stats, |x: u64| {
+            std::hint::black_box(x);
+        });
+        let t = std::time::Instant::now();
+        for i in 0..N {
+            let h = Header { seq: i, stamp_sim_ns: i * 10_000_000, stamp_pub_ns: 0 };
+            gate.arrive(&h, 64, i);
+        }
+        let on_ns = t.elapsed().as_nanos() as f64 / N as f64;
+        println!("fault layer per message: off {off_ns:.1} ns (an arrival noted), on {on_ns:.1} ns (gate: 20 ms delay, 10 % loss)");
+    }
+}

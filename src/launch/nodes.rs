@@ -417,6 +417,11 @@ impl LoopRun {
             .collect()
     }
 
+    /// The node processes started so far: (binary name, pid).
+    pub fn node_pids(&self) -> Vec<(String, u32)> {
+        self.nodes.iter().map(|n| (n.name.clone(), n.pid())).collect()
+    }
+
     /// The simulator's report (its --json output), once it has ended.
     pub fn sim_report(&self) -> Result<SimReport> {
         let path = self.logs.join(SIM_REPORT);

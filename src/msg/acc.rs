@@ -12,7 +12,7 @@ pub enum AccMode {
     Speed,
     /// Following a lead vehicle at the time gap.
     Follow,
-    /// Inputs too old: throttle released, braking smoothly.
+    /// Inputs too old: easing to a soft deceleration within the jerk limit.
     Stale,
     /// Time to collision below threshold: braking at the vehicle's limit.
     Emergency,

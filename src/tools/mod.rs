@@ -1,5 +1,5 @@
 //! The `slipstream` command's tools that are not benchmarks: `up` (the whole loop, through the
-//! launch and eval layers), `record`, `play`, `view`, `top`, `echo`, `info`, `demo`, `router`.
+//! launch and eval layers), `record`, `play`, `view`, `top`, `echo`, `info`, `demo`, `router`, `soak`.
 
 pub mod demo;
 pub mod echo;
@@ -8,6 +8,7 @@ pub mod info;
 pub mod play;
 pub mod record;
 pub mod router;
+pub mod soak;
 pub mod top;
 pub mod up;
 pub mod view;

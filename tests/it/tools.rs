@@ -364,3 +364,42 @@ fn nodes_in_client_mode_meet_through_slipstream_router() {
     assert!(hz > 0.0 && speed["received"].as_u64().unwrap() > 0, "speed flows through the router: {speed}");
     assert!(last["nodes"].as_array().unwrap().iter().any(|n| n == "sim"), "{}", last["nodes"]);
 }
+
+#[test]
+fn soak_samples_every_process_and_judges_growth_after_the_warm_up() {
+    let _serial = common::serial();
+    let dir = temp_dir("soak");
+    let mut cmd = bin("slipstream");
+    cmd.args(["soak", "--minutes", "0.25", "--sample-s", "2", "--warmup-minutes", "0.1", "--perception"]);
+    cmd.args(["ground-truth", "--json", "--report"]).arg(&dir);
+    let out = common::run_with_limit(cmd, Duration::from_secs(120));
+    let r: serde_json::Value =
+        serde_json::from_slice(&out.stdout).unwrap_or_else(|e| panic!("{e}: {}", String::from_utf8_lossy(&out.stderr)));
+    let processes: Vec<&str> = r["processes"].as_array().unwrap().iter().map(|p| p.as_str().unwrap()).collect();
+    assert_eq!(processes, ["slipstream (launcher)", "slipstream-acc", "slipstream-sim"]);
+    let samples = r["samples"].as_array().unwrap();
+    assert!(samples.len() >= 4, "a sample every 2 s of 15 s: {}", samples.len());
+    let t: Vec<f64> = samples.iter().map(|s| s["t_min"].as_f64().unwrap()).collect();
+    assert!(t.windows(2).all(|w| w[1] >= w[0]), "{t:?}");
+    // (A process just spawned may still be an exec in progress: judged after the warm-up.)
+    for s in samples.iter().filter(|s| s["t_min"].as_f64().unwrap() >= 0.1) {
+        for u in s["usage"].as_array().unwrap() {
+            assert!(u["rss_kib"].as_u64().unwrap() > 1000 && u["threads"].as_u64().unwrap() >= 1, "{u}");
+        }
+    }
+    // Every step answered in lockstep; the verdict follows from the figures it shows.
+    assert_eq!(r["lockstep_timeouts"], 0);
+    assert!(r["steps"].as_u64().unwrap() > 100);
+    for v in r["verdicts"].as_array().unwrap() {
+        let (w, e) = (&v["warm"], &v["end"]);
+        let grows = v["rss_drift"].as_f64().unwrap() >= 0.05
+            || e["threads"].as_u64() > w["threads"].as_u64()
+            || e["fds"].as_u64() > w["fds"].as_u64();
+        assert_eq!(v["pass"], !grows, "{v}");
+    }
+    assert_eq!(out.status.success(), r["pass"].as_bool().unwrap());
+    for f in ["soak.json", "soak.csv"] {
+        assert!(dir.join(f).is_file(), "{f}");
+    }
+    assert!(is_png(&dir.join("soak.png")));
+}
