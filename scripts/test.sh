@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Runs every slipstream test, installing what the tests need first:
-#   - system packages: iproute2 (network-namespace tests), openssl (the security tests make
-#     their certificates), python3 venv support;
+#   - system packages: iproute2 (network-namespace tests, tc for rate caps), iptables (random
+#     drop on the namespace links), openssl (the security tests make their certificates),
+#     python3 venv support;
 #   - a Python venv in .venv with eclipse-zenoh 1.10, numpy and pytest (the Python client and
 #     its examples run against the Rust nodes), mcap (an independent reader of recordings),
 #     websockets (an independent Foxglove WebSocket client of the live view);
@@ -19,6 +20,8 @@ step "system packages"
 missing=()
 command -v ip >/dev/null 2>&1 || missing+=(iproute2)
 command -v openssl >/dev/null 2>&1 || missing+=(openssl)
+command -v tc >/dev/null 2>&1 || missing+=(iproute2)
+command -v iptables >/dev/null 2>&1 || missing+=(iptables)
 python3 -c 'import venv, ensurepip' >/dev/null 2>&1 || missing+=(python3-venv)
 if ((${#missing[@]})); then
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then

@@ -386,20 +386,24 @@ pub fn markdown(r: &FaultsReport) -> String {
 }
 
 /// One panel per axis, a bar per scenario: the envelope (green: held at every value tried, so
-/// at least this; orange: the limit found).
+/// at least this; orange: the limit found) and, in red, the first value that failed.
 pub fn plot(r: &FaultsReport, path: &Path) -> Result<()> {
     use plotters::prelude::*;
     super::plot::register_font()?;
-    let (w, h) = (1200u32, 900u32);
+    let (w, h) = (1200u32, 1000u32);
     let mut buf = vec![0u8; (w * h * 3) as usize];
     {
         let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
         root.fill(&WHITE)?;
-        let title =
-            format!("ACC safety envelope under injected faults ({} perception, seed {})", r.perception.name(), r.seed);
-        let root = root.titled(&title, ("sans-serif", 22))?;
+        let title = format!(
+            "ACC safety envelope under injected faults ({} perception, seed {}): green held throughout, orange the limit, red first failure",
+            r.perception.name(),
+            r.seed
+        );
+        let root = root.titled(&title, ("sans-serif", 17))?;
         let panels = root.split_evenly((2, 2));
-        let n = r.scenarios.len().max(1);
+        let n = r.scenarios.len().max(1) as i32;
+        let names: Vec<String> = r.scenarios.iter().map(|s| s.scenario.clone()).collect();
         for (i, axis) in Axis::ALL.iter().enumerate() {
             let scale = if *axis == Axis::PerceptionDelay { 1.0 } else { 100.0 };
             let top = r
@@ -412,30 +416,36 @@ pub fn plot(r: &FaultsReport, path: &Path) -> Result<()> {
             let mut chart = ChartBuilder::on(&panels[i])
                 .caption(axis.title(r.burst_len), ("sans-serif", 18))
                 .margin(10)
-                .x_label_area_size(90)
+                .x_label_area_size(120)
                 .y_label_area_size(60)
-                .build_cartesian_2d(0.0..n as f64, 0.0..top.max(1.0))?;
-            let names: Vec<String> = r.scenarios.iter().map(|s| s.scenario.clone()).collect();
+                .build_cartesian_2d((0..n).into_segmented(), 0.0..top.max(1.0))?;
             chart
                 .configure_mesh()
                 .disable_x_mesh()
-                .x_labels(n)
-                .x_label_formatter(&|x| {
-                    let i = x.floor() as usize;
-                    names.get(i).filter(|_| (x - x.floor() - 0.5).abs() < 0.26).cloned().unwrap_or_default()
+                .x_labels(n as usize)
+                .x_label_formatter(&|x| match x {
+                    SegmentValue::CenterOf(i) => names.get(*i as usize).cloned().unwrap_or_default(),
+                    _ => String::new(),
                 })
-                .x_label_style(("sans-serif", 11).into_font().transform(FontTransform::Rotate90))
+                .x_label_style(("sans-serif", 12).into_font().transform(FontTransform::Rotate90))
                 .y_desc(if *axis == Axis::PerceptionDelay { "held up to (ms)" } else { "held up to (%)" })
                 .label_style(("sans-serif", 13))
                 .draw()?;
             for (j, s) in r.scenarios.iter().enumerate() {
                 let Some(a) = s.axes.iter().find(|a| a.axis == *axis) else { continue };
                 let color = if a.held_throughout { RGBColor(44, 160, 44) } else { RGBColor(255, 127, 14) };
-                let x = j as f64;
+                let j = j as i32;
                 chart.draw_series(std::iter::once(Rectangle::new(
-                    [(x + 0.2, 0.0), (x + 0.8, a.envelope * scale)],
+                    [(SegmentValue::Exact(j), 0.0), (SegmentValue::Exact(j + 1), a.envelope * scale)],
                     color.filled(),
                 )))?;
+                if let Some(t) = a.trials.iter().find(|t| t.failure.is_some()) {
+                    let y = t.value * scale;
+                    chart.draw_series(std::iter::once(PathElement::new(
+                        vec![(SegmentValue::Exact(j), y), (SegmentValue::Exact(j + 1), y)],
+                        RGBColor(214, 39, 40).stroke_width(4),
+                    )))?;
+                }
             }
         }
         root.present()?;

@@ -5,7 +5,7 @@
 //!
 //! Targets: the wire decoder of every message type (the example payloads of
 //! docs/wire-format.md mutated, through the same dispatch `echo` and the recorder use), the
-//! zero-copy camera frame decoder, the topic config, a scenario and the ACC settings (their
+//! zero-copy camera frame decoder, the topic config, a scenario, the ACC settings and a fault profile (their
 //! shipped files mutated). The parsers read whole files, thousands a second: they get a count
 //! of their own.
 
@@ -21,6 +21,7 @@ use crate::sim::rng::SimRng;
 const TOPIC_CONFIG: &str = include_str!("../../config/slipstream.json5");
 const ACC_SETTINGS: &str = include_str!("../../config/acc.json5");
 const SCENARIO: &str = include_str!("../../scenarios/cut-in.json5");
+const FAULT_PROFILE: &str = include_str!("../../config/faults/wifi-busy.json5");
 
 /// Values that break naive parsers, spliced into text inputs.
 const EXTREMES: &[&str] =
@@ -200,6 +201,9 @@ pub fn run(count: u64, parser_count: u64, seed: u64) -> Vec<TargetReport> {
     }));
     reports.push(fuzz("config: ACC settings", &[text(ACC_SETTINGS)], &[text(ACC_SETTINGS)], true, n, seed, |b| {
         crate::acc::AccSettings::parse(&as_str(b), "fuzz").is_ok()
+    }));
+    reports.push(fuzz("config: fault profile", &[text(FAULT_PROFILE)], &[text(FAULT_PROFILE)], true, n, seed, |b| {
+        crate::config::FaultProfile::parse(&as_str(b), "fuzz", "fuzz").is_ok()
     }));
     reports
 }
