@@ -18,7 +18,7 @@ use serde::Serialize;
 
 use super::controller::{Controller, EgoNow, Output, PerceptionFrame};
 use super::settings::{AccSettings, PerceptionSource};
-use crate::bus::{Arrivals, Bus, BusError, NodeWatch, Received, StatsSnapshot, Subscriber};
+use crate::bus::{Arrivals, Bus, BusError, Following, NodeWatch, Received, StatsSnapshot, Subscriber};
 use crate::config::ConfigError;
 use crate::msg::{
     AccCommand, AccMode, AccStatus, AccWarning, CameraInfo, ControlCommand, Detections, GroundTruthObjects, Speed,
@@ -43,6 +43,9 @@ pub struct AccStats {
     pub lockstep_waits_timed_out: u64,
     /// Answers given without the vehicle/state of their step (it came too late).
     pub state_waits_timed_out: u64,
+    /// Speed, state and perception messages from another publisher than the one followed
+    /// (see `Following`): not used.
+    pub foreign_inputs: u64,
     /// The inputs' statistics at the end: received, lost on the way (sequence gaps), dropped
     /// or delayed by injected faults (`--faults`).
     pub inputs: Vec<StatsSnapshot>,
@@ -69,21 +72,20 @@ impl PerceptionSub {
         }
     }
 
-    /// The next perception message, converted, with its header.stamp_pub_ns.
-    fn frame(&self, timeout: Option<Duration>) -> impl Future<Output = Option<(PerceptionFrame, u64)>> + '_ {
-        async move {
-            let convert_d = |r: Received<Detections>| {
-                (PerceptionFrame::from_detections(r.header.stamp_sim_ns as f64 / 1e9, &r.msg), r.header.stamp_pub_ns)
-            };
-            let convert_g = |r: Received<GroundTruthObjects>| {
-                (PerceptionFrame::from_ground_truth(r.header.stamp_sim_ns as f64 / 1e9, &r.msg), r.header.stamp_pub_ns)
-            };
-            match (self, timeout) {
-                (PerceptionSub::Camera(s), None) => s.try_recv().map(convert_d),
-                (PerceptionSub::Camera(s), Some(t)) => s.recv_timeout(t).await.map(convert_d),
-                (PerceptionSub::GroundTruth(s), None) => s.try_recv().map(convert_g),
-                (PerceptionSub::GroundTruth(s), Some(t)) => s.recv_timeout(t).await.map(convert_g),
-            }
+    /// The next waiting perception message, converted, with its header.stamp_pub_ns and its
+    /// publisher.
+    fn frame(&self) -> Option<(PerceptionFrame, u64, Option<String>)> {
+        let convert_d = |r: Received<Detections>| {
+            let f = PerceptionFrame::from_detections(r.header.stamp_sim_ns as f64 / 1e9, &r.msg);
+            (f, r.header.stamp_pub_ns, r.source)
+        };
+        let convert_g = |r: Received<GroundTruthObjects>| {
+            let f = PerceptionFrame::from_ground_truth(r.header.stamp_sim_ns as f64 / 1e9, &r.msg);
+            (f, r.header.stamp_pub_ns, r.source)
+        };
+        match self {
+            PerceptionSub::Camera(s) => s.try_recv().map(convert_d),
+            PerceptionSub::GroundTruth(s) => s.try_recv().map(convert_g),
         }
     }
 }
@@ -132,6 +134,9 @@ struct State {
     status_tick: Option<i64>,
     stats: AccStats,
     lockstep_log: Every,
+    speed_from: Following,
+    state_from: Following,
+    perception_from: Following,
 }
 
 /// A command to publish, with the status when one is due.
@@ -215,7 +220,12 @@ pub async fn run(bus: &Bus, settings: AccSettings, shutdown: impl Future<Output 
     loop {
         let answer = tokio::select! {
             _ = &mut shutdown => break,
-            speed = inputs.speed.recv() => answer_speed(&mut st, &inputs, &settings, speed).await,
+            speed = inputs.speed.recv() => {
+                if !st.speed_from.accept(speed.source.as_deref(), Instant::now()) {
+                    continue;
+                }
+                answer_speed(&mut st, &inputs, &settings, speed).await
+            }
             _ = watchdog.tick() => match st.watchdog(Instant::now(), inputs.detector_alive()) {
                 Some(a) => a,
                 None => continue,
@@ -226,6 +236,7 @@ pub async fn run(bus: &Bus, settings: AccSettings, shutdown: impl Future<Output 
             status_pub.put(answer.stamp_ns, status)?;
         }
     }
+    st.stats.foreign_inputs = st.speed_from.rejected() + st.state_from.rejected() + st.perception_from.rejected();
     st.stats.inputs = vec![
         inputs.speed.stats().snapshot(),
         inputs.state.stats().snapshot(),
@@ -258,8 +269,10 @@ async fn answer_speed(st: &mut State, inputs: &Inputs, settings: &AccSettings, s
         }
     }
     take_camera_info(st, &inputs.info, settings).await;
-    while let Some((frame, pub_ns)) = inputs.perception.frame(None).await {
-        take_perception(st, &frame, pub_ns);
+    while let Some((frame, pub_ns, source)) = inputs.perception.frame() {
+        if st.perception_from.accept(source.as_deref(), Instant::now()) {
+            take_perception(st, &frame, pub_ns);
+        }
     }
     // Something arrived already, even if injected faults hold it back.
     let seen_any = inputs.perception.arrivals().since(0);
@@ -327,8 +340,10 @@ async fn await_perception(st: &mut State, perception: &PerceptionSub, wait_ms: u
     let deadline = Instant::now() + Duration::from_millis(wait_ms);
     loop {
         let arrived = perception.arrivals().since(t_ns);
-        while let Some((frame, pub_ns)) = perception.frame(None).await {
-            take_perception(st, &frame, pub_ns);
+        while let Some((frame, pub_ns, source)) = perception.frame() {
+            if st.perception_from.accept(source.as_deref(), Instant::now()) {
+                take_perception(st, &frame, pub_ns);
+            }
         }
         if arrived || st.has_perception_at(t_s) {
             return;
@@ -367,6 +382,9 @@ impl State {
             status_tick: None,
             stats: AccStats::default(),
             lockstep_log: Every::new(LOCKSTEP_LOG_EVERY),
+            speed_from: Following::new("vehicle/speed"),
+            state_from: Following::new("vehicle/state"),
+            perception_from: Following::new("perception"),
         }
     }
 
@@ -479,8 +497,10 @@ fn take_state(st: &mut State, r: &Received<VehicleState>) {
 fn drain_states(sub: &Subscriber<VehicleState>, st: &mut State) -> Option<VehicleState> {
     let mut newest = None;
     while let Some(r) = sub.try_recv() {
-        take_state(st, &r);
-        newest = Some(r.msg);
+        if st.state_from.accept(r.source.as_deref(), Instant::now()) {
+            take_state(st, &r);
+            newest = Some(r.msg);
+        }
     }
     newest
 }

@@ -6,6 +6,7 @@
 //! every subscription.
 
 pub mod faults;
+mod follow;
 mod publisher;
 mod stats;
 mod subscriber;
@@ -13,6 +14,7 @@ mod subscriber;
 use std::sync::Arc;
 
 pub use faults::NodeClock;
+pub use follow::{Following, FOLLOW_SWITCH_AFTER};
 pub use publisher::{FramePublisher, FrameSent, Publisher};
 pub use stats::{StatsSnapshot, TopicStats};
 pub use subscriber::{

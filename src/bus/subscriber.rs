@@ -260,6 +260,11 @@ impl FrameSample {
         self.sample.payload().as_shm().is_some()
     }
 
+    /// The publishing node's name (the sample's attachment), when it sent one.
+    pub fn source(&self) -> Option<String> {
+        self.sample.attachment().and_then(|a| a.try_to_string().ok()).map(|s| s.into_owned())
+    }
+
     /// Whether the payload had to be joined from fragments (one copy).
     pub fn was_joined(&self) -> bool {
         self.joined.is_some()

@@ -396,7 +396,7 @@ pub fn plot(r: &FaultsReport, path: &Path) -> Result<()> {
         let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
         root.fill(&WHITE)?;
         let title = format!(
-            "ACC safety envelope under injected faults ({} perception, seed {}): green held throughout, orange the limit, red first failure",
+            "ACC safety envelope under injected faults ({} perception, seed {}): bars held (green: at every value tried), red x: first failure",
             r.perception.name(),
             r.seed
         );
@@ -416,33 +416,34 @@ pub fn plot(r: &FaultsReport, path: &Path) -> Result<()> {
             let mut chart = ChartBuilder::on(&panels[i])
                 .caption(axis.title(r.burst_len), ("sans-serif", 18))
                 .margin(10)
-                .x_label_area_size(120)
-                .y_label_area_size(60)
-                .build_cartesian_2d((0..n).into_segmented(), 0.0..top.max(1.0))?;
+                .x_label_area_size(40)
+                .y_label_area_size(230)
+                .build_cartesian_2d(0.0..top.max(1.0), (0..n).into_segmented())?;
             chart
                 .configure_mesh()
-                .disable_x_mesh()
-                .x_labels(n as usize)
-                .x_label_formatter(&|x| match x {
+                .disable_y_mesh()
+                .y_labels(n as usize)
+                .y_label_formatter(&|y| match y {
                     SegmentValue::CenterOf(i) => names.get(*i as usize).cloned().unwrap_or_default(),
                     _ => String::new(),
                 })
-                .x_label_style(("sans-serif", 12).into_font().transform(FontTransform::Rotate90))
-                .y_desc(if *axis == Axis::PerceptionDelay { "held up to (ms)" } else { "held up to (%)" })
+                .x_desc(if *axis == Axis::PerceptionDelay { "held up to (ms)" } else { "held up to (%)" })
                 .label_style(("sans-serif", 13))
                 .draw()?;
             for (j, s) in r.scenarios.iter().enumerate() {
                 let Some(a) = s.axes.iter().find(|a| a.axis == *axis) else { continue };
                 let color = if a.held_throughout { RGBColor(44, 160, 44) } else { RGBColor(255, 127, 14) };
-                let j = j as i32;
-                chart.draw_series(std::iter::once(Rectangle::new(
-                    [(SegmentValue::Exact(j), 0.0), (SegmentValue::Exact(j + 1), a.envelope * scale)],
-                    color.filled(),
-                )))?;
-                if let Some(t) = a.trials.iter().find(|t| t.failure.is_some()) {
-                    let y = t.value * scale;
+                let row = SegmentValue::CenterOf(j as i32);
+                if a.envelope > 0.0 {
                     chart.draw_series(std::iter::once(PathElement::new(
-                        vec![(SegmentValue::Exact(j), y), (SegmentValue::Exact(j + 1), y)],
+                        vec![(0.0, row.clone()), (a.envelope * scale, row.clone())],
+                        color.stroke_width(18),
+                    )))?;
+                }
+                if let Some(t) = a.trials.iter().find(|t| t.failure.is_some()) {
+                    chart.draw_series(std::iter::once(Cross::new(
+                        (t.value * scale, row),
+                        8,
                         RGBColor(214, 39, 40).stroke_width(4),
                     )))?;
                 }

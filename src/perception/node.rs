@@ -3,13 +3,13 @@
 //! time and naming the frame's sequence number and publish time.
 
 use std::future::Future;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use serde::Serialize;
 
 use super::detector::{Detector, DetectorParams};
 use super::tracker::Tracker;
-use crate::bus::{Bus, BusError};
+use crate::bus::{Bus, BusError, Following};
 use crate::msg::{CameraInfo, Detections};
 use crate::topics;
 
@@ -22,6 +22,8 @@ pub struct DetectStats {
     /// Frames that could not be used (undecodable JPEG, size unlike camera info).
     pub unusable: u64,
     pub detections: u64,
+    /// Frames and camera infos from another publisher than the camera followed: not used.
+    pub foreign_inputs: u64,
 }
 
 /// Runs until `shutdown` completes.
@@ -37,13 +39,22 @@ pub async fn run(
     let mut camera: Option<(CameraInfo, Detector)> = None;
     let mut tracker = Tracker::new();
     let mut waiting_logged = false;
+    // One camera: frames and info from the publisher that named itself first.
+    let mut frames_from = Following::new("camera/front");
+    let mut info_from = Following::new("camera/front/info");
     tokio::pin!(shutdown);
     loop {
         let sample = tokio::select! {
             _ = &mut shutdown => break,
             s = frames.recv() => s,
         };
+        if !frames_from.accept(sample.source().as_deref(), Instant::now()) {
+            continue;
+        }
         while let Some(info) = infos.try_recv() {
+            if !info_from.accept(info.source.as_deref(), Instant::now()) {
+                continue;
+            }
             if camera.as_ref().is_none_or(|(known, _)| *known != info.msg) {
                 tracing::info!(width = info.msg.width, height = info.msg.height, "camera info");
                 camera = Some((info.msg.clone(), Detector::new(&info.msg, params)));
@@ -58,8 +69,10 @@ pub async fn run(
             // The info is latched: it comes soon after start. The frame in hand is used then
             // (a lockstep controller waits for its detections).
             match infos.recv_timeout(Duration::from_millis(500)).await {
-                Some(info) => camera = Some((info.msg.clone(), Detector::new(&info.msg, params))),
-                None => continue,
+                Some(info) if info_from.accept(info.source.as_deref(), Instant::now()) => {
+                    camera = Some((info.msg.clone(), Detector::new(&info.msg, params)))
+                }
+                _ => continue,
             }
         }
         let (info, detector) = camera.as_mut().expect("camera info is known here");
@@ -88,5 +101,6 @@ pub async fn run(
         )?;
     }
     stats.skipped = frames.stats().snapshot().skipped;
+    stats.foreign_inputs = frames_from.rejected() + info_from.rejected();
     Ok(stats)
 }

@@ -24,7 +24,8 @@ use super::rng::SimRng;
 use super::settings::{BeforeFirst, ControlPolicy, Mode, OnTimeout, SimSettings};
 use super::world::{End, StepEvents, World, EGO_ID};
 use crate::bus::{
-    Arrivals, Bus, BusError, CallbackSubscriber, FramePublisher, NodeClock, Publisher, Received, StatsSnapshot,
+    Arrivals, Bus, BusError, CallbackSubscriber, Following, FramePublisher, NodeClock, Publisher, Received,
+    StatsSnapshot,
 };
 use crate::msg::{
     due, CameraInfo, ControlCommand, ControlTiming, GroundTruthObjects, ImageEncoding, SimClock, SimEvent,
@@ -63,6 +64,9 @@ pub struct SimReport {
     pub control_rejected: u64,
     /// Commands older than control.max_age_ms of simulated time when they came (not applied).
     pub control_stale: u64,
+    /// Commands from another controller than the one followed (not applied).
+    #[serde(default)]
+    pub control_foreign: u64,
     /// vehicle/control as it reached the simulator: arrived, lost on the way (sequence gaps),
     /// and dropped, delayed or duplicated by injected faults (`--faults`).
     #[serde(default)]
@@ -298,6 +302,7 @@ struct Node<'a> {
     control_sub: CallbackSubscriber,
     /// Faults are injected into vehicle/control here (`--faults`).
     faulted: bool,
+    control_from: Following,
     node_clock: Arc<NodeClock>,
     policy: Policy,
     frames_sent: u64,
@@ -339,6 +344,7 @@ impl<'a> Node<'a> {
             control_sub,
             faulted: bus.faults().is_some_and(|p| p.at(topics::VEHICLE_CONTROL.topic, bus.node()).is_some()),
             node_clock: bus.clock().clone(),
+            control_from: Following::new("vehicle/control"),
             policy: Policy::new(settings.control.clone()),
             frames_sent: 0,
             lockstep_timeouts: 0,
@@ -426,7 +432,11 @@ impl<'a> Node<'a> {
         self.node_clock.advance(t_ns);
         if self.settings.mode != Mode::Lockstep || !(published.speed || published.state) {
             for r in self.inbox.drain() {
-                self.policy.on_command(&r, t_ns);
+                // One controller at a time: the first that named itself (lockstep goes by
+                // lockstep.wait_for instead).
+                if self.control_from.accept(r.source.as_deref(), Instant::now()) {
+                    self.policy.on_command(&r, t_ns);
+                }
             }
             return Ok(None);
         }
@@ -503,6 +513,7 @@ impl<'a> Node<'a> {
             control_stale: self.policy.stale,
             control_rejected: self.control_sub.stats().snapshot().decode_errors,
             control_input: self.control_sub.stats().snapshot(),
+            control_foreign: self.control_from.rejected(),
             end,
         })
     }

@@ -60,7 +60,7 @@ pub struct TargetReport {
 }
 
 /// One mutation of `base` (other valid inputs in `others` for splices).
-fn mutate(rng: &mut SimRng, base: &[u8], others: &[&[u8]], text: bool) -> Vec<u8> {
+pub(crate) fn mutate(rng: &mut SimRng, base: &[u8], others: &[&[u8]], text: bool) -> Vec<u8> {
     let mut v = base.to_vec();
     let edits = 1 + rng.below(4);
     for _ in 0..edits {

@@ -15,6 +15,9 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, Result};
 use serde::Serialize;
 
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+
 use crate::acc::PerceptionSource;
 use crate::launch::{ClockMode, LoopRun, LoopSpec, Network, NODE_POLL};
 
@@ -47,6 +50,11 @@ pub struct SoakArgs {
     /// Where soak.json, soak.csv, soak.png and the nodes' logs go [default: reports/soak-<UTC time>]
     #[arg(long, value_name = "DIR")]
     pub report: Option<PathBuf>,
+    /// Meanwhile publish this many malformed payloads a second, spread over every key of the
+    /// loop (valid messages mutated, and random bytes): the nodes must count and drop them and
+    /// keep running, their memory flat. Bounded by --minutes
+    #[arg(long, value_name = "MSGS_PER_S", default_value_t = 0)]
+    pub garbage_rate: u32,
     /// Print the report as JSON
     #[arg(long)]
     pub json: bool,
@@ -102,8 +110,55 @@ pub struct SoakReport {
     pub lockstep_timeouts: u64,
     pub control_timeouts: u64,
     pub died: Vec<String>,
+    /// Malformed payloads published (--garbage-rate), and the ones the ACC and the simulator
+    /// counted as undecodable on their inputs.
+    pub garbage_sent: u64,
+    pub garbage_rejected: u64,
     pub pass: bool,
     pub report_dir: PathBuf,
+}
+
+/// Every key of the loop's topics in this namespace.
+fn keys(bus: &crate::Bus) -> Vec<zenoh::key_expr::OwnedKeyExpr> {
+    crate::topics::Topic::ALL.iter().map(|t| bus.topics().key(*t)).collect()
+}
+
+/// Publishes `rate` malformed payloads a second, round-robin over `keys`, until `stop`: the
+/// wire examples of every message type mutated (a tenth of them still decode) and random
+/// bytes. Returns how many were sent.
+async fn flood(
+    session: zenoh::Session,
+    keys: Vec<zenoh::key_expr::OwnedKeyExpr>,
+    rate: u32,
+    stop: Arc<AtomicBool>,
+) -> u64 {
+    let examples: Vec<Vec<u8>> = crate::msg::examples().into_iter().map(|(_, b)| b).collect();
+    let others: Vec<&[u8]> = examples.iter().map(Vec::as_slice).collect();
+    let mut rng = crate::sim::rng::SimRng::new(15);
+    let tick = Duration::from_millis(10);
+    let per_tick = (rate as f64 * tick.as_secs_f64()).ceil() as u64;
+    let mut interval = tokio::time::interval(tick);
+    interval.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+    let started = Instant::now();
+    let mut sent = 0u64;
+    while !stop.load(Ordering::SeqCst) {
+        interval.tick().await;
+        // Never ahead of the rate, even after a stall.
+        let due = (started.elapsed().as_secs_f64() * rate as f64) as u64;
+        for _ in 0..per_tick.min(due.saturating_sub(sent)) {
+            let key = &keys[(sent % keys.len() as u64) as usize];
+            let payload = if rng.below(4) == 0 {
+                (0..rng.below(256)).map(|_| rng.next_u64() as u8).collect()
+            } else {
+                let base = &examples[rng.below(examples.len() as u64) as usize];
+                super::fuzz::mutate(&mut rng, base, &others, false)
+            };
+            use zenoh::Wait;
+            let _ = session.put(key, payload).wait();
+            sent += 1;
+        }
+    }
+    sent
 }
 
 /// The scenario of a soak: long road, a crawl, three vehicles in view.
@@ -170,6 +225,11 @@ pub fn run(args: &SoakArgs, connect: &crate::config::ConnectArgs) -> Result<Soak
         let mut lp = LoopRun::open(spec, network, &dir.join("logs"), "soak").await?;
         let clock = lp.bus().subscriber(crate::topics::SIM_CLOCK).await?;
         lp.start().await?;
+        let stop_garbage = Arc::new(AtomicBool::new(false));
+        let garbage = match args.garbage_rate {
+            0 => None,
+            rate => Some(tokio::spawn(flood(lp.bus().session().clone(), keys(lp.bus()), rate, stop_garbage.clone()))),
+        };
         let mut processes = vec![("slipstream (launcher)".to_string(), std::process::id())];
         processes.extend(lp.node_pids());
         eprintln!(
@@ -211,8 +271,14 @@ pub fn run(args: &SoakArgs, connect: &crate::config::ConnectArgs) -> Result<Soak
         // The last sample before anything stops.
         let t_min = started.elapsed().as_secs_f64() / 60.0;
         samples.push(Sample { t_min, sim_time_s, usage: processes.iter().map(|(_, pid)| usage(*pid)).collect() });
+        stop_garbage.store(true, Ordering::SeqCst);
+        let garbage_sent = match garbage {
+            Some(task) => task.await.unwrap_or(0),
+            None => 0,
+        };
         lp.stop().await;
         let sim = lp.sim_report().ok();
+        let garbage_rejected: u64 = lp.inputs().iter().map(|i| i.stats.decode_errors).sum();
         lp.close().await;
         let verdicts: Vec<ProcessVerdict> =
             processes.iter().enumerate().map(|(i, (n, _))| verdict(n, i, &samples, warmup_min)).collect();
@@ -236,6 +302,8 @@ pub fn run(args: &SoakArgs, connect: &crate::config::ConnectArgs) -> Result<Soak
             lockstep_timeouts,
             control_timeouts,
             died: progress.died,
+            garbage_sent,
+            garbage_rejected,
             pass,
             report_dir: dir.clone(),
         })
@@ -361,6 +429,12 @@ pub fn summary(r: &SoakReport) -> String {
             pair(|u| u.threads),
             pair(|u| u.fds),
             if v.pass { "ok" } else { "GROWS" }
+        ));
+    }
+    if r.garbage_sent > 0 {
+        s.push_str(&format!(
+            "  malformed payloads: {} published, {} counted and dropped by the ACC's and the simulator's inputs (the rest went to keys they do not read, or decoded)\n",
+            r.garbage_sent, r.garbage_rejected
         ));
     }
     s.push_str(&format!(

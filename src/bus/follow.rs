@@ -1,0 +1,105 @@
+//! Which publisher an input follows.
+//!
+//! Every slipstream node names itself in its samples' attachment. A node's input follows the
+//! first named publisher it hears: samples from any other publisher, or unnamed ones (a tool,
+//! a flood of malformed payloads that happen to decode), are counted and not used: one input,
+//! one source of truth. This is no security (anyone can put a name in an attachment: that is
+//! what access control is for, docs/deployment.md); it keeps stray traffic on a key from
+//! steering the loop.
+
+use std::time::{Duration, Instant};
+
+/// How long the followed publisher may be silent before the next named one is followed (a
+/// simulator restarted under another name).
+pub const FOLLOW_SWITCH_AFTER: Duration = Duration::from_secs(2);
+/// At most one log line per input per this period.
+const LOG_EVERY: Duration = Duration::from_secs(5);
+
+/// The publisher one input follows. Until a named publisher is heard, every sample is used (a
+/// client that names nobody).
+#[derive(Debug)]
+pub struct Following {
+    input: &'static str,
+    name: Option<String>,
+    last_seen: Option<Instant>,
+    rejected: u64,
+    last_log: Option<Instant>,
+}
+
+impl Following {
+    pub fn new(input: &'static str) -> Self {
+        Following { input, name: None, last_seen: None, rejected: 0, last_log: None }
+    }
+
+    /// Whether a sample from `source` (its attachment), arriving at `now`, is used.
+    pub fn accept(&mut self, source: Option<&str>, now: Instant) -> bool {
+        let silent = self.last_seen.is_none_or(|t| now.duration_since(t) > FOLLOW_SWITCH_AFTER);
+        let ok = match (&self.name, source) {
+            (Some(n), Some(s)) if n == s => true,
+            (None, None) => true,
+            (None, Some(s)) => {
+                tracing::info!(input = self.input, publisher = s, "following this publisher");
+                self.name = Some(s.to_string());
+                true
+            }
+            (Some(_), Some(s)) if silent => {
+                tracing::warn!(
+                    input = self.input,
+                    publisher = s,
+                    "the followed publisher went silent: following this one"
+                );
+                self.name = Some(s.to_string());
+                true
+            }
+            _ => false,
+        };
+        if ok {
+            self.last_seen = Some(now);
+            return true;
+        }
+        self.rejected += 1;
+        if self.last_log.is_none_or(|t| now.duration_since(t) >= LOG_EVERY) {
+            self.last_log = Some(now);
+            tracing::warn!(
+                input = self.input,
+                from = source.unwrap_or("(unnamed)"),
+                following = self.name.as_deref().unwrap_or("-"),
+                not_used = self.rejected,
+                "samples from another publisher than the one followed: not used"
+            );
+        }
+        false
+    }
+
+    /// Samples not used so far.
+    pub fn rejected(&self) -> u64 {
+        self.rejected
+    }
+
+    /// The publisher followed, once one named itself.
+    pub fn name(&self) -> Option<&str> {
+        self.name.as_deref()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn an_input_follows_its_first_named_publisher_and_counts_the_others() {
+        let mut f = Following::new("vehicle/speed");
+        let t0 = Instant::now();
+        assert!(f.accept(None, t0), "nobody named yet: used");
+        assert!(f.accept(Some("sim"), t0), "the first named publisher is followed");
+        assert_eq!(f.name(), Some("sim"));
+        assert!(!f.accept(None, t0), "unnamed (a malformed payload from a tool): not used");
+        assert!(!f.accept(Some("intruder"), t0 + Duration::from_millis(500)));
+        assert!(f.accept(Some("sim"), t0 + Duration::from_secs(1)));
+        assert_eq!(f.rejected(), 2);
+        // Silent for longer than FOLLOW_SWITCH_AFTER: the next named one takes over.
+        let later = t0 + Duration::from_secs(1) + FOLLOW_SWITCH_AFTER + Duration::from_millis(1);
+        assert!(f.accept(Some("sim-2"), later));
+        assert!(!f.accept(Some("sim"), later));
+    }
+}
