@@ -69,3 +69,54 @@ class Lan:
         for ns in reversed(self.created):
             ip("netns", "del", ns, check=False)
         self.created = []
+
+
+class Subnets:
+    """Several LANs on one machine: one bridge namespace per subnet (10.214.0.0/24, 10.215.0.0/24,
+    ...), hosts that may sit on several of them (a router with a leg in each). Every address
+    exists only inside these namespaces; `close` deletes them."""
+
+    def __init__(self, layout):
+        """layout: subnet name -> the roles on it, in address order (role i at .i+1)."""
+        tag = f"sn{os.getpid() % 100000}"
+        self.ns, self.addr, self.created = {}, {}, []
+        try:
+            for k, (subnet, roles) in enumerate(layout.items()):
+                switch = f"{tag}-s{k}"
+                ip("netns", "add", switch)
+                self.created.append(switch)
+                ip("-n", switch, "link", "add", "br0", "type", "bridge")
+                ip("-n", switch, "link", "set", "br0", "up")
+                for i, role in enumerate(roles):
+                    ns = self.ns.get(role)
+                    if ns is None:
+                        ns = self.ns[role] = f"{tag}-{role}"
+                        ip("netns", "add", ns)
+                        self.created.append(ns)
+                        ip("-n", ns, "link", "set", "lo", "up")
+                    dev = f"eth{k}"
+                    ip("-n", switch, "link", "add", f"p{i}", "type", "veth", "peer", "name", dev, "netns", ns)
+                    ip("-n", switch, "link", "set", f"p{i}", "master", "br0", "up")
+                    address = f"10.{214 + k}.0.{i + 1}"
+                    ip("-n", ns, "addr", "add", f"{address}/24", "dev", dev)
+                    ip("-n", ns, "link", "set", dev, "up")
+                    self.addr[(role, subnet)] = address
+        except BaseException:
+            self.close()
+            raise
+
+    def popen(self, role, argv, **kw):
+        return subprocess.Popen(["ip", "netns", "exec", self.ns[role], *argv], **kw)
+
+    def close(self):
+        for ns in reversed(self.created):
+            ip("netns", "del", ns, check=False)
+        self.created = []
+
+    def links(self, role, up):
+        """Takes every leg of a host down (a router PC losing power, seen from the wire) or up."""
+        out = ip("-n", self.ns[role], "-o", "link", "show").stdout
+        for line in out.splitlines():
+            dev = line.split(":")[1].strip().split("@")[0]
+            if dev.startswith("eth"):
+                ip("-n", self.ns[role], "link", "set", dev, "up" if up else "down")
