@@ -53,6 +53,8 @@ pub struct Bus {
     faults: Option<Arc<FaultProfile>>,
     /// The node's simulated now: releases messages the faults hold back.
     clock: Arc<NodeClock>,
+    /// The statistics of every subscription declared here (reported with faults on).
+    inputs: Arc<parking_lot::Mutex<Vec<std::sync::Weak<TopicStats>>>>,
     _token: zenoh::liveliness::LivelinessToken,
 }
 
@@ -93,6 +95,7 @@ impl Bus {
             node: node.to_string(),
             faults: None,
             clock: Arc::new(NodeClock::default()),
+            inputs: Arc::default(),
             _token: token,
         })
     }
@@ -104,6 +107,35 @@ impl Bus {
             profile.topics.keys().filter(|t| profile.at(**t, &self.node).is_some()).map(|t| t.name()).collect();
         tracing::warn!(node = %self.node, on = ?here, "injecting faults: {}", profile.summary());
         self.faults = Some(Arc::new(profile));
+        self.report_inputs();
+    }
+
+    /// Publishes the statistics of this node's subscriptions once a second (JSON on
+    /// `nodes/<name>/inputs`), so `slipstream top` shows injected and real losses apart.
+    /// Only with faults on: without them nothing is published.
+    fn report_inputs(&self) {
+        let Ok(handle) = tokio::runtime::Handle::try_current() else { return };
+        let Ok(key) = self.topics.node_inputs_key(&self.node) else { return };
+        let (session, registry, node) = (self.session.clone(), Arc::downgrade(&self.inputs), self.node.clone());
+        handle.spawn(async move {
+            let mut tick = tokio::time::interval(std::time::Duration::from_secs(1));
+            loop {
+                tick.tick().await;
+                let Some(registry) = registry.upgrade() else { break };
+                let inputs: Vec<StatsSnapshot> =
+                    registry.lock().iter().filter_map(std::sync::Weak::upgrade).map(|s| s.snapshot()).collect();
+                let body = serde_json::json!({ "node": node, "inputs": inputs }).to_string();
+                let put =
+                    session.put(&key, body).encoding(zenoh::bytes::Encoding::APPLICATION_JSON).attachment(node.clone());
+                if put.await.is_err() {
+                    break;
+                }
+            }
+        });
+    }
+
+    fn register(&self, stats: &Arc<TopicStats>) {
+        self.inputs.lock().push(Arc::downgrade(stats));
     }
 
     /// The fault profile in force, if any.
@@ -154,13 +186,20 @@ impl Bus {
     where
         M: Message + serde::de::DeserializeOwned + Clone + Send + 'static,
     {
-        Subscriber::declare(&self.session, self.topics.key(def.topic), def.topic.name(), self.inlet(def.topic)).await
+        let sub =
+            Subscriber::declare(&self.session, self.topics.key(def.topic), def.topic.name(), self.inlet(def.topic))
+                .await?;
+        self.register(sub.stats());
+        Ok(sub)
     }
 
     /// The camera/front subscriber: frames are read in place (shared memory on one host).
     pub async fn frame_subscriber(&self) -> Result<FrameSubscriber, BusError> {
         let topic = crate::topics::CAMERA_FRONT.topic;
-        FrameSubscriber::declare(&self.session, self.topics.key(topic), topic.name(), self.inlet(topic)).await
+        let sub =
+            FrameSubscriber::declare(&self.session, self.topics.key(topic), topic.name(), self.inlet(topic)).await?;
+        self.register(sub.stats());
+        Ok(sub)
     }
 
     /// Calls `handler` with every well-formed message of `def`, on Zenoh's receive thread
@@ -170,14 +209,16 @@ impl Bus {
         M: Message + serde::de::DeserializeOwned + Clone + Send + 'static,
         F: Fn(Received<M>) + Send + Sync + 'static,
     {
-        CallbackSubscriber::declare(
+        let sub = CallbackSubscriber::declare(
             &self.session,
             self.topics.key(def.topic),
             def.topic.name(),
             self.inlet(def.topic),
             handler,
         )
-        .await
+        .await?;
+        self.register(sub.stats());
+        Ok(sub)
     }
 
     /// Calls `handler` with every valid camera frame on Zenoh's receive thread (zero-copy,
@@ -187,14 +228,16 @@ impl Bus {
         F: Fn(FrameSample) + Send + Sync + 'static,
     {
         let topic = crate::topics::CAMERA_FRONT.topic;
-        CallbackSubscriber::declare_frames(
+        let sub = CallbackSubscriber::declare_frames(
             &self.session,
             self.topics.key(topic),
             topic.name(),
             self.inlet(topic),
             handler,
         )
-        .await
+        .await?;
+        self.register(sub.stats());
+        Ok(sub)
     }
 
     /// Names of the nodes alive in this namespace (their liveliness tokens).

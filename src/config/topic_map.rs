@@ -10,6 +10,9 @@ use super::{parse_json5, ConfigError};
 use crate::qos::{Congestion, Delivery, Priority, Reliability, TopicQos};
 use crate::topics::{Topic, NODES_PREFIX};
 
+/// The last chunk of a node's inputs report key (`nodes/<name>/inputs`).
+const INPUTS_SUFFIX: &str = "inputs";
+
 /// Where nodes look for the topic config when no flag names one.
 pub const DEFAULT_SLIPSTREAM_CONFIG_PATH: &str = "config/slipstream.json5";
 
@@ -275,6 +278,20 @@ impl TopicMap {
         let rel =
             key_expr(&format!("{NODES_PREFIX}/{node}")).map_err(|(p, f)| ConfigError::new("node name", "", p, f))?;
         Ok(self.full_key(&rel))
+    }
+
+    /// Where a node that injects faults reports its inputs' statistics (JSON, once a second).
+    pub fn node_inputs_key(&self, node: &str) -> Result<OwnedKeyExpr, ConfigError> {
+        let rel = key_expr(&format!("{NODES_PREFIX}/{node}/{INPUTS_SUFFIX}"))
+            .map_err(|(p, f)| ConfigError::new("node name", "", p, f))?;
+        Ok(self.full_key(&rel))
+    }
+
+    /// The node whose inputs report `key` is, if it is one.
+    pub fn node_of_inputs_key(&self, key: &str) -> Option<String> {
+        let prefix = self.nodes_selector().as_str().trim_end_matches("**").to_string();
+        let rest = key.strip_prefix(&prefix)?.strip_suffix(&format!("/{INPUTS_SUFFIX}"))?;
+        (!rest.is_empty() && !rest.contains('/')).then(|| rest.to_string())
     }
 
     /// All node tokens under this namespace.

@@ -68,12 +68,24 @@ pub struct TopView {
     pub nodes: Vec<String>,
     pub sim: Option<SimView>,
     pub keys: Vec<KeyRow>,
+    /// The inputs of nodes that inject faults (`--faults`), as they report them: injected
+    /// drops, delays and duplicates apart from what the network lost.
+    pub node_inputs: Vec<NodeInputRow>,
+}
+
+/// One input of one node, from its report on `nodes/<name>/inputs`.
+#[derive(Debug, Clone, Serialize)]
+pub struct NodeInputRow {
+    pub node: String,
+    #[serde(flatten)]
+    pub stats: StatsSnapshot,
 }
 
 #[derive(Default)]
 struct Seen {
     keys: BTreeMap<(String, Option<String>), (Arc<TopicStats>, Option<MessageKind>)>,
     sim: Option<SimView>,
+    node_inputs: BTreeMap<String, Vec<StatsSnapshot>>,
 }
 
 /// Records every sample of the namespace.
@@ -120,12 +132,28 @@ impl Watcher {
             nodes: self.nodes.names(),
             sim: seen.sim.clone(),
             keys,
+            node_inputs: seen
+                .node_inputs
+                .iter()
+                .flat_map(|(node, v)| v.iter().map(|stats| NodeInputRow { node: node.clone(), stats: stats.clone() }))
+                .collect(),
         }
     }
 }
 
 fn record(seen: &Mutex<Seen>, topics: &crate::TopicMap, sample: &zenoh::sample::Sample) {
     let key = sample.key_expr().as_str().to_string();
+    if let Some(node) = topics.node_of_inputs_key(&key) {
+        // A node's inputs report (JSON), not a message of the loop.
+        #[derive(serde::Deserialize)]
+        struct Report {
+            inputs: Vec<StatsSnapshot>,
+        }
+        if let Ok(r) = serde_json::from_slice::<Report>(&sample.payload().to_bytes()) {
+            seen.lock().node_inputs.insert(node, r.inputs);
+        }
+        return;
+    }
     let from = sample.attachment().and_then(|a| a.try_to_string().ok()).map(|s| s.into_owned());
     let payload = sample.payload().to_bytes();
     // On a topic's key, a message of another type is as wrong as bytes that do not decode.
@@ -189,6 +217,25 @@ pub fn render(view: &TopView) -> String {
             st.decode_errors,
             fmt_opt(st.age_s, 1),
         ));
+    }
+    if !view.node_inputs.is_empty() {
+        s.push_str(&format!(
+            "\ninjected faults at the nodes' inputs (--faults)\n{:<14} {:<20} {:>8} {:>13} {:>9} {:>9} {:>10}\n",
+            "NODE", "INPUT", "ARRIVED", "LOST ON WAY", "DROPPED", "DELAYED", "DUPLICATED"
+        ));
+        for r in &view.node_inputs {
+            let st = &r.stats;
+            s.push_str(&format!(
+                "{:<14} {:<20} {:>8} {:>13} {:>9} {:>9} {:>10}\n",
+                r.node,
+                st.topic,
+                st.received,
+                st.lost,
+                st.injected_dropped,
+                st.injected_delayed,
+                st.injected_duplicated
+            ));
+        }
     }
     if view.keys.is_empty() {
         s.push_str("(nothing seen yet: is anything running in this namespace, and connected? see `slipstream info`)\n");

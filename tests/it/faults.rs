@@ -197,3 +197,46 @@ fn eval_faults_tries_each_axis_in_rising_steps_and_reports_the_envelope() {
     let png = std::fs::read(dir.join("envelope.png")).unwrap();
     assert!(png.starts_with(b"\x89PNG"));
 }
+
+/// A node with faults reports its inputs once a second on `nodes/<name>/inputs` (what `top`
+/// shows); a node without faults publishes nothing there.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_node_with_faults_reports_its_inputs_for_top() {
+    let map = slipstream::TopicMap::default();
+    let (tool, mut node) = common::bus_pair(map.clone(), map.clone()).await;
+    let profile =
+        slipstream::config::FaultProfile::parse(r#"{ topics: { "objects": { loss: 1.0 } } }"#, "test", "all-lost")
+            .unwrap();
+    node.inject_faults(profile);
+    let objects = node.subscriber(slipstream::topics::OBJECTS).await.unwrap();
+    let key = map.node_inputs_key(node.node()).unwrap();
+    assert_eq!(map.node_of_inputs_key(key.as_str()).as_deref(), Some(node.node()));
+    let reports = std::sync::Arc::new(std::sync::Mutex::new(Vec::new()));
+    let into = reports.clone();
+    let _sub = tool
+        .subscribe_samples(key.clone(), false, move |s| into.lock().unwrap().push(s.payload().to_bytes().into_owned()))
+        .await
+        .unwrap();
+    let publisher = tool.publisher(slipstream::topics::OBJECTS).await.unwrap();
+    assert!(publisher.wait_for_subscriber(Duration::from_secs(10)).await);
+    let truth = slipstream::msg::GroundTruthObjects { step: 1, objects: Vec::new() };
+    for i in 0..5u64 {
+        publisher.put(i * 50_000_000, &truth).unwrap();
+    }
+    let deadline = std::time::Instant::now() + Duration::from_secs(20);
+    let report = loop {
+        let last = reports.lock().unwrap().last().cloned();
+        if let Some(r) = last {
+            let v: serde_json::Value = serde_json::from_slice(&r).unwrap();
+            let objects_row = v["inputs"].as_array().unwrap().iter().find(|i| i["topic"] == "objects").cloned();
+            if objects_row.as_ref().is_some_and(|o| o["received"] == 5) {
+                break objects_row.unwrap();
+            }
+        }
+        assert!(std::time::Instant::now() < deadline, "no inputs report with the 5 messages");
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    };
+    assert_eq!(report["injected_dropped"], 5, "every one dropped by the profile: {report}");
+    assert_eq!(report["lost"], 0);
+    assert!(objects.try_recv().is_none(), "nothing delivered");
+}
