@@ -311,17 +311,7 @@ mod tests {
     use crate::config::{GilbertElliott, Jitter, Outage};
 
     fn faults() -> TopicFaults {
-        TopicFaults {
-            at: Vec::new(),
-            delay_ms: 0.0,
-            jitter: None,
-            reorder: false,
-            loss: None,
-            duplicate: 0.0,
-            bandwidth_mbps: None,
-            queue_ms: 500.0,
-            outages: Vec::new(),
-        }
+        TopicFaults::default()
     }
 
     fn h(seq: u64) -> Header {

@@ -478,17 +478,7 @@ mod tests {
         let off_ns = t.elapsed().as_nanos() as f64 / N as f64;
         let clock = Arc::new(NodeClock::default());
         let stats = Arc::new(TopicStats::new("t"));
-        let faults = TopicFaults {
-            at: Vec::new(),
-            delay_ms: 20.0,
-            jitter: None,
-            reorder: false,
-            loss: Some(Loss::Independent(0.1)),
-            duplicate: 0.0,
-            bandwidth_mbps: None,
-            queue_ms: 500.0,
-            outages: Vec::new(),
-        };
+        let faults = TopicFaults { delay_ms: 20.0, loss: Some(Loss::Independent(0.1)), ..TopicFaults::default() };
         let gate = Gate::new(Model::new(faults, 1, "t", "n"), clock, stats, |x: u64| {
             std::hint::black_box(x);
         });

@@ -26,6 +26,8 @@ use super::{from_value, parse_json5_value, read_config, ConfigError};
 use crate::topics::Topic;
 
 const FIX: &str = "see docs/faults.md for every key of a fault profile and its allowed values";
+/// The longest wait behind a bandwidth cap before a message is dropped, unless a profile says.
+const DEFAULT_QUEUE_MS: f64 = 500.0;
 
 /// The profiles that ship, by name (config/faults/<name>.json5).
 pub const BUILT_IN: &[(&str, &str)] = &[
@@ -159,6 +161,23 @@ pub struct TopicFaults {
     /// A message that would wait longer than this in the bandwidth queue is dropped.
     pub queue_ms: f64,
     pub outages: Vec<Outage>,
+}
+
+impl Default for TopicFaults {
+    /// No fault at all, at every node (what a profile's topic entry starts from).
+    fn default() -> Self {
+        TopicFaults {
+            at: Vec::new(),
+            delay_ms: 0.0,
+            jitter: None,
+            reorder: false,
+            loss: None,
+            duplicate: 0.0,
+            bandwidth_mbps: None,
+            queue_ms: DEFAULT_QUEUE_MS,
+            outages: Vec::new(),
+        }
+    }
 }
 
 impl TopicFaults {
@@ -358,7 +377,7 @@ fn check(t: RawTopicFaults, key: &str, origin: &str) -> Result<TopicFaults, Conf
             return Err(bad("bandwidth_mbps", format!("{b} must be a rate > 0 (Mbit/s)")));
         }
     }
-    let queue_ms = non_negative("queue_ms", t.queue_ms.unwrap_or(500.0))?;
+    let queue_ms = non_negative("queue_ms", t.queue_ms.unwrap_or(DEFAULT_QUEUE_MS))?;
     for (i, o) in t.outages.iter().enumerate() {
         if !(o.from_s.is_finite() && o.to_s.is_finite() && 0.0 <= o.from_s && o.from_s < o.to_s) {
             return Err(bad(

@@ -126,17 +126,7 @@ impl Axis {
             PerceptionSource::Camera => topics::PERCEPTION_OBJECTS.topic,
             PerceptionSource::GroundTruth => topics::OBJECTS.topic,
         };
-        let none = TopicFaults {
-            at: Vec::new(),
-            delay_ms: 0.0,
-            jitter: None,
-            reorder: false,
-            loss: None,
-            duplicate: 0.0,
-            bandwidth_mbps: None,
-            queue_ms: 500.0,
-            outages: Vec::new(),
-        };
+        let none = TopicFaults::default();
         let (topic, node, faults) = match self {
             Axis::PerceptionDelay => (perception, "acc", TopicFaults { delay_ms: value, ..none }),
             Axis::PerceptionLoss => (perception, "acc", TopicFaults { loss: Some(Loss::Independent(value)), ..none }),
