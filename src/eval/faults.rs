@@ -379,12 +379,8 @@ pub fn markdown(r: &FaultsReport) -> String {
 /// at least this; orange: the limit found) and, in red, the first value that failed.
 pub fn plot(r: &FaultsReport, path: &Path) -> Result<()> {
     use plotters::prelude::*;
-    super::plot::register_font()?;
     let (w, h) = (1200u32, 1000u32);
-    let mut buf = vec![0u8; (w * h * 3) as usize];
-    {
-        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
-        root.fill(&WHITE)?;
+    super::plot::png(path, (w, h), |root| {
         let title = format!(
             "ACC safety envelope under injected faults ({} perception, seed {}): bars held (green: at every value tried), red x: first failure",
             r.perception.name(),
@@ -439,9 +435,6 @@ pub fn plot(r: &FaultsReport, path: &Path) -> Result<()> {
                 }
             }
         }
-        root.present()?;
-    }
-    let img = image::RgbImage::from_raw(w, h, buf).context("plot buffer size")?;
-    img.save(path).with_context(|| format!("write {}", path.display()))?;
-    Ok(())
+        Ok(())
+    })
 }

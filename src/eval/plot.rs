@@ -63,15 +63,35 @@ pub(crate) fn draw_legend<'a, 'b: 'a>(chart: &mut Chart<'a, 'b>) -> anyhow::Resu
     Ok(())
 }
 
-/// Draws speeds, gaps and accelerations over time into a PNG.
-pub fn plot(trace: &Trace, title: &str, path: &Path) -> anyhow::Result<()> {
+/// A white canvas of the plots here.
+pub(crate) type Canvas<'a> =
+    plotters::drawing::DrawingArea<plotters::backend::BitMapBackend<'a>, plotters::coord::Shift>;
+
+/// The frame of every plot: the font, a white `(w, h)` canvas for `draw`, the PNG at `path`.
+pub(crate) fn png(
+    path: &Path,
+    (w, h): (u32, u32),
+    draw: impl FnOnce(&Canvas<'_>) -> anyhow::Result<()>,
+) -> anyhow::Result<()> {
     use plotters::prelude::*;
     register_font()?;
-    let (w, h) = (1100u32, 900u32);
     let mut buf = vec![0u8; (w * h * 3) as usize];
     {
         let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
         root.fill(&WHITE)?;
+        draw(&root)?;
+        root.present()?;
+    }
+    let img = image::RgbImage::from_raw(w, h, buf).context("plot buffer size")?;
+    img.save(path).with_context(|| format!("write {}", path.display()))?;
+    Ok(())
+}
+
+/// Draws speeds, gaps and accelerations over time into a PNG.
+pub fn plot(trace: &Trace, title: &str, path: &Path) -> anyhow::Result<()> {
+    use plotters::prelude::*;
+    let (w, h) = (1100u32, 900u32);
+    png(path, (w, h), |root| {
         let root = root.titled(title, ("sans-serif", 22))?;
         let panels = root.split_evenly((3, 1));
         let s = &trace.samples;
@@ -155,25 +175,18 @@ pub fn plot(trace: &Trace, title: &str, path: &Path) -> anyhow::Result<()> {
                 ("emergency", red, series(&|x| (x.mode == AccMode::Emergency).then_some(x.target_accel_mps2))),
             ],
         )?;
-        root.present()?;
-    }
-    let img = image::RgbImage::from_raw(w, h, buf).ok_or_else(|| anyhow::anyhow!("plot buffer size"))?;
-    img.save(path).map_err(|e| anyhow::anyhow!("write {}: {e}", path.display()))?;
-    Ok(())
+        Ok(())
+    })
 }
 
 /// Loop latency per hop over the run.
 pub fn plot_latency(lat: &LoopLatency, t0_ns: u64, title: &str, path: &Path) -> anyhow::Result<()> {
     use plotters::prelude::*;
-    register_font()?;
     let (w, h) = (1100u32, 500u32);
-    let mut buf = vec![0u8; (w * h * 3) as usize];
     let series: Vec<Vec<(f64, f64)>> = (0..HOPS.len()).map(|i| lat.series(i, t0_ns)).collect();
     let t_end = series.iter().flatten().map(|p| p.0).fold(1.0f64, f64::max);
     let hi = series.iter().flatten().map(|p| p.1).fold(1.0f64, f64::max) * 1.1;
-    {
-        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
-        root.fill(&WHITE)?;
+    png(path, (w, h), |root| {
         let mut chart = ChartBuilder::on(&root)
             .caption(title, ("sans-serif", 20))
             .margin(10)
@@ -189,9 +202,6 @@ pub fn plot_latency(lat: &LoopLatency, t0_ns: u64, title: &str, path: &Path) -> 
                 .legend(move |(x, y)| Circle::new((x + 9, y), 4, color.filled()));
         }
         draw_legend(&mut chart)?;
-        root.present()?;
-    }
-    let img = image::RgbImage::from_raw(w, h, buf).context("plot buffer size")?;
-    img.save(path).with_context(|| format!("write {}", path.display()))?;
-    Ok(())
+        Ok(())
+    })
 }

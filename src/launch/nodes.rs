@@ -69,7 +69,7 @@ impl LoopSpec {
     /// Faults a node of this loop cannot take: in lockstep, every step waits for the ACC's
     /// answer to its speed message and for the detections of its frame, so speed and camera
     /// frames must arrive; their faults belong on what follows them.
-    pub fn check_faults(&self) -> Result<()> {
+    fn check_faults(&self) -> Result<()> {
         let Some(p) = &self.faults else { return Ok(()) };
         if self.clock != ClockMode::Lockstep {
             return Ok(());

@@ -351,12 +351,8 @@ fn write_outputs(r: &SoakReport, dir: &Path) -> Result<()> {
 
 fn plot(r: &SoakReport, path: &Path) -> Result<()> {
     use plotters::prelude::*;
-    crate::eval::plot::register_font()?;
     let (w, h) = (1100u32, 800u32);
-    let mut buf = vec![0u8; (w * h * 3) as usize];
-    {
-        let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
-        root.fill(&WHITE)?;
+    crate::eval::plot::png(path, (w, h), |root| {
         let title = format!(
             "slipstream soak: {:.0} min, {} clock, {} perception",
             r.minutes,
@@ -390,11 +386,8 @@ fn plot(r: &SoakReport, path: &Path) -> Result<()> {
             }
             crate::eval::plot::draw_legend(&mut chart)?;
         }
-        root.present()?;
-    }
-    let img = image::RgbImage::from_raw(w, h, buf).context("plot buffer size")?;
-    img.save(path).with_context(|| format!("write {}", path.display()))?;
-    Ok(())
+        Ok(())
+    })
 }
 
 /// The report for people.

@@ -14,6 +14,7 @@ use serde::Serialize;
 
 use crate::bus::{Bus, StatsSnapshot, TopicStats};
 use crate::eval::fmt_opt;
+use crate::launch::NodeInput;
 use crate::msg::{self, MessageKind};
 
 #[derive(Debug, Clone, clap::Args)]
@@ -70,15 +71,7 @@ pub struct TopView {
     pub keys: Vec<KeyRow>,
     /// The inputs of nodes that inject faults (`--faults`), as they report them: injected
     /// drops, delays and duplicates apart from what the network lost.
-    pub node_inputs: Vec<NodeInputRow>,
-}
-
-/// One input of one node, from its report on `nodes/<name>/inputs`.
-#[derive(Debug, Clone, Serialize)]
-pub struct NodeInputRow {
-    pub node: String,
-    #[serde(flatten)]
-    pub stats: StatsSnapshot,
+    pub node_inputs: Vec<NodeInput>,
 }
 
 #[derive(Default)]
@@ -135,7 +128,7 @@ impl Watcher {
             node_inputs: seen
                 .node_inputs
                 .iter()
-                .flat_map(|(node, v)| v.iter().map(|stats| NodeInputRow { node: node.clone(), stats: stats.clone() }))
+                .flat_map(|(node, v)| v.iter().map(|stats| NodeInput { node: node.clone(), stats: stats.clone() }))
                 .collect(),
         }
     }

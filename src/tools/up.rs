@@ -371,7 +371,6 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
         set_speed_mps: scenario.ego.set_speed_mps.unwrap_or(scenario.ego.speed_mps),
         faults: args.faults.profile()?,
     };
-    spec.check_faults()?;
     let faults = spec.faults.as_ref().map(|p| p.summary());
     let mut lp = LoopRun::open(spec, Network::User(connect), &dir.join("logs"), "up").await.context("up")?;
     let watch = Watch::start(lp.bus(), args.perception == PerceptionSource::Camera).await?;
