@@ -338,6 +338,28 @@ mod rendered {
         }
     }
 
+    /// The contact edge lies between pixel rows (anti-aliased shadows, located to a fraction
+    /// of a row): the distance follows a gap growing by less than a row's worth at a time
+    /// instead of stepping by whole rows (one row is ~2.4 m at 40 m, ~5 m at 60 m).
+    #[test]
+    fn range_follows_the_gap_between_pixel_rows() {
+        let mut errors = Vec::new();
+        let mut gap = 20.0;
+        while gap < 70.0 {
+            let (dets, truth) =
+                detect_in(&format!("{{ lane: 1, gap_m: {gap}, speed_mps: 0, color: [200, 30, 35] }}"), 0.0, FrameLook::PLAIN);
+            let x = truth.objects[0].position_in_ego_m[0];
+            let d = dets.first().unwrap_or_else(|| panic!("gap {gap}: no detection")).distance_m;
+            errors.push((x, (d - x) / x));
+            gap += 0.61;
+        }
+        let worst = |lo: f64, hi: f64| {
+            errors.iter().filter(|e| e.0 >= lo && e.0 < hi).map(|e| e.1.abs()).fold(0.0, f64::max)
+        };
+        assert!(worst(20.0, 58.0) < 0.012, "to 58 m: {errors:?}");
+        assert!(worst(58.0, 75.0) < 0.04, "58-75 m: {errors:?}");
+    }
+
     #[test]
     fn colours_brightness_and_noise_do_not_break_it() {
         let colours = [[25, 25, 28], [140, 142, 148], [235, 235, 235], [20, 110, 60], [84, 84, 88], [230, 170, 30]];

@@ -5,7 +5,8 @@
 //! 2. The dark band where a vehicle meets the road (its shadow, tyres and underbody) is much
 //!    darker than the road in any colour, brightness or noise: pixels below `dark_ratio` of
 //!    the road's brightness, below the horizon, grouped into connected components.
-//! 3. A component's lowest row is the contact line: its ground distance comes from the ray
+//! 3. A component's lowest row is the contact line, located to a fraction of a row from how
+//!    much of the band the pixels on its edge hold: its ground distance comes from the ray
 //!    through it (flat road), which gives the metres-per-pixel scale there.
 //! 4. Above the contact line, the rows whose pixels differ from the background on both sides
 //!    (road or sky, sampled just outside the component) give the vehicle's height; a band too
@@ -33,18 +34,22 @@ pub struct DetectorParams {
     pub contrast: i32,
     /// Farthest distance reported.
     pub max_distance_m: f64,
+    /// The contact band's luminance as a share of the road's until a vehicle near enough to
+    /// measure it is seen (a daylight contact shadow is about half as bright as the road).
+    pub band_ratio: f32,
 }
 
 impl Default for DetectorParams {
     fn default() -> Self {
         DetectorParams {
-            dark_ratio: 0.66,
+            dark_ratio: 0.78,
             min_width_m: 0.6,
             max_width_m: 3.6,
             min_height_m: 0.7,
             max_height_m: 4.5,
             contrast: 24,
             max_distance_m: 80.0,
+            band_ratio: 0.5,
         }
     }
 }
@@ -97,13 +102,27 @@ pub struct Detector {
     luma: Vec<u8>,
     runs: Vec<Run>,
     parent: Vec<u32>,
+    /// This frame's contact-dark threshold.
+    dark: u8,
+    /// The contact band's luminance as a share of the road's: measured on every vehicle near
+    /// enough for its band to hold whole pixels, kept for frames without one.
+    band_ratio: f32,
 }
 
 impl Detector {
     pub fn new(info: &CameraInfo, params: DetectorParams) -> Detector {
         let camera = CameraModel::new(info);
         let horizon_v = camera.horizon_v();
-        Detector { camera, params, horizon_v, luma: Vec::new(), runs: Vec::new(), parent: Vec::new() }
+        Detector {
+            camera,
+            params,
+            horizon_v,
+            luma: Vec::new(),
+            runs: Vec::new(),
+            parent: Vec::new(),
+            dark: 0,
+            band_ratio: params.band_ratio,
+        }
     }
 
     pub fn camera(&self) -> &CameraModel {
@@ -126,6 +145,7 @@ impl Detector {
         );
         let road = road_luma(&self.luma, w, h, first_ground_row);
         let dark = (road as f32 * self.params.dark_ratio) as u8;
+        self.dark = dark;
         let components = self.dark_components(w, h, first_ground_row, dark);
         if tracing::enabled!(tracing::Level::TRACE) {
             tracing::trace!(road, dark, first_ground_row, runs = self.runs.len(), "frame");
@@ -134,19 +154,36 @@ impl Detector {
             }
         }
 
-        let mut candidates: Vec<FrameDetection> =
-            components.iter().filter_map(|c| self.candidate(rgb, w, h, c).ok()).collect();
-        // Nearest first; a candidate inside a nearer one's box is part of it.
-        candidates.sort_by(|a, b| b.bbox.v_max_px.total_cmp(&a.bbox.v_max_px));
-        let mut kept: Vec<FrameDetection> = Vec::new();
-        for c in candidates {
-            let inside = kept.iter().any(|k| {
+        let mut kept = self.vehicles(rgb, w, h, &components);
+        // The band's brightness, measured on the vehicles found where their band is thick
+        // enough; when it moved, their distances are measured again with it.
+        let mut ratios: Vec<f32> = kept.iter().filter_map(|(i, _)| self.band_ratio_of(w, h, &components[*i])).collect();
+        if !ratios.is_empty() {
+            ratios.sort_by(f32::total_cmp);
+            let ratio = ratios[ratios.len() / 2].clamp(0.05, self.params.dark_ratio);
+            if ratio != self.band_ratio {
+                self.band_ratio = ratio;
+                kept = self.vehicles(rgb, w, h, &components);
+            }
+        }
+        kept.into_iter().map(|(_, d)| d).collect()
+    }
+
+    /// The components that pass as vehicles (with their index), nearest first, those inside a
+    /// nearer one's box left out (a dark window, a black car's body).
+    fn vehicles(&self, rgb: &[u8], w: usize, h: usize, components: &[Component]) -> Vec<(usize, FrameDetection)> {
+        let mut candidates: Vec<(usize, FrameDetection)> =
+            components.iter().enumerate().filter_map(|(i, c)| Some((i, self.candidate(rgb, w, h, c).ok()?))).collect();
+        candidates.sort_by(|a, b| b.1.bbox.v_max_px.total_cmp(&a.1.bbox.v_max_px));
+        let mut kept: Vec<(usize, FrameDetection)> = Vec::new();
+        for (i, c) in candidates {
+            let inside = kept.iter().any(|(_, k)| {
                 let overlap = c.bbox.u_max_px.min(k.bbox.u_max_px) - c.bbox.u_min_px.max(k.bbox.u_min_px);
                 let width = c.bbox.u_max_px - c.bbox.u_min_px;
                 overlap > 0.5 * width && c.bbox.v_max_px <= k.bbox.v_max_px && c.bbox.v_max_px >= k.bbox.v_min_px
             });
             if !inside {
-                kept.push(c);
+                kept.push((i, c));
             }
         }
         kept
@@ -253,7 +290,8 @@ impl Detector {
         }
         let (bu0, bu1) = (c.flat_u0, c.flat_u1);
         let centre_u = (bu0 + bu1 + 1) as f64 / 2.0;
-        let contact = self.camera.ground_point(centre_u, contact_v).ok_or("contact above the horizon")?;
+        let edge_v = self.contact_edge(w, h, c).unwrap_or(contact_v);
+        let contact = self.camera.ground_point(centre_u, edge_v).ok_or("contact above the horizon")?;
         if contact.x < 1.0 || contact.x > p.max_distance_m {
             return Err(format!("contact at {:.1} m", contact.x));
         }
@@ -304,6 +342,67 @@ impl Detector {
         })
     }
 
+    /// The rear edge's columns (its end columns left out: they hold background too) with the
+    /// lowest dark row of each.
+    fn edge_columns(&self, w: usize, h: usize, c: &Component) -> Vec<(usize, usize)> {
+        let luma = |u: usize, v: usize| self.luma[v * w + u];
+        let (u0, u1) = if c.flat_u1 >= c.flat_u0 + 3 { (c.flat_u0 + 1, c.flat_u1 - 1) } else { (c.flat_u0, c.flat_u1) };
+        let top = (c.v1 as usize).saturating_sub(FLAT_PX as usize + 1);
+        (u0 as usize..=u1 as usize)
+            .filter_map(|u| (top..=(c.v1 as usize).min(h - 1)).rev().find(|&v| luma(u, v) < self.dark).map(|lo| (u, lo)))
+            .filter(|&(_, lo)| lo + 3 < h)
+            .collect()
+    }
+
+    /// The road's luminance just below a contact edge (the median of the two rows under it).
+    fn road_below(&self, w: usize, columns: &[(usize, usize)]) -> Option<f32> {
+        median(columns.iter().flat_map(|&(u, lo)| [self.luma[(lo + 2) * w + u], self.luma[(lo + 3) * w + u]]).collect())
+    }
+
+    /// The band's luminance as a share of the road's, where the band is thick enough to hold
+    /// whole pixels (four dark rows up from the edge): the median of the third.
+    fn band_ratio_of(&self, w: usize, h: usize, c: &Component) -> Option<f32> {
+        let columns = self.edge_columns(w, h, c);
+        let dark = |u: usize, v: usize| self.luma[v * w + u] < self.dark;
+        let inside: Vec<u8> = columns
+            .iter()
+            .filter(|&&(u, lo)| lo >= 3 && dark(u, lo - 1) && dark(u, lo - 2) && dark(u, lo - 3))
+            .map(|&(u, lo)| self.luma[(lo - 2) * w + u])
+            .collect();
+        if inside.len() < 5 || inside.len() * 2 < columns.len() {
+            return None;
+        }
+        Some(median(inside)? / self.road_below(w, &columns)?.max(1.0))
+    }
+
+    /// Where the contact band's lower edge lies, to a fraction of a row (None when it cannot
+    /// be measured). A camera's pixel on that edge holds band and road by the share of it each
+    /// covers, share = (road - luma) / (road - band) within 0..1, so in each column of the rear
+    /// edge the edge lies that share into the lowest row holding band: the road's luminance
+    /// measured just below, the band's from the frame's band ratio
+    /// (a band a pixel or two thick at 50 m holds no whole pixel to measure it by). Averaged
+    /// over the columns, pixel noise mostly cancels.
+    fn contact_edge(&self, w: usize, h: usize, c: &Component) -> Option<f64> {
+        let columns = self.edge_columns(w, h, c);
+        let road = self.road_below(w, &columns)?;
+        let band = road * self.band_ratio;
+        if road - band < 8.0 {
+            return None;
+        }
+        let luma = |u: usize, v: usize| self.luma[v * w + u];
+        let share = |l: u8| ((road - l as f32) / (road - band)).clamp(0.0, 1.0) as f64;
+        let edge = |u: usize, lo: usize| {
+            let (inner, below) = (share(luma(u, lo)), share(luma(u, lo + 1)));
+            // With band in the row below, the edge is in that row, whatever the band's top does
+            // in row `lo` (at 50 m the band is hardly more than a row thick); with none there,
+            // in row `lo`. Blended across a quarter of a row so that noise makes no step.
+            let weight = (below / 0.25).min(1.0);
+            weight * (lo as f64 + 1.0 + below) + (1.0 - weight) * (lo as f64 + inner + below)
+        };
+        let sum: f64 = columns.iter().map(|&(u, lo)| edge(u, lo)).sum();
+        Some(sum / columns.len() as f64)
+    }
+
     /// The highest row above `bottom` where the columns u0..=u1 still differ from the
     /// background just left and right of them; None when nothing rises above the contact.
     fn top_row(&self, rgb: &[u8], w: usize, u0: usize, u1: usize, bottom: usize, max_rows: usize) -> Option<usize> {
@@ -346,6 +445,11 @@ impl Detector {
         }
         top
     }
+}
+
+fn median(mut xs: Vec<u8>) -> Option<f32> {
+    xs.sort_unstable();
+    xs.get(xs.len() / 2).map(|&x| x as f32)
 }
 
 /// The road's luminance: the mode of the lower middle of the image.

@@ -43,8 +43,9 @@ impl Track {
     }
 
     fn update(&mut self, d: &FrameDetection, t_s: f64) {
-        // Measurement noise grows with distance (a pixel of contact row covers more ground).
-        let sigma = 0.05 + 0.012 * d.distance_m;
+        // Measurement noise grows with distance (a pixel of contact row covers more ground; the
+        // edge is located to a fraction of one: 0.2-1% errors to 60 m, docs/perception.md).
+        let sigma = 0.05 + 0.004 * d.distance_m;
         let r = sigma * sigma;
         let innovation = d.distance_m - self.x[0];
         let s = self.p[(0, 0)] + r;

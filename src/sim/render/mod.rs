@@ -1,7 +1,8 @@
 //! The front camera, rendered in software.
 //!
 //! A frame is drawn in layers: a sky gradient, then the ground (grass, the road surface, lane
-//! markings and each vehicle's shadow) painted back to front, then the vehicles as shaded
+//! markings and each vehicle's shadow; markings and shadows with anti-aliased edges, so that
+//! where they begin can be measured to a fraction of a pixel) painted back to front, then the vehicles as shaded
 //! boxes (body, cabin with glass, wheels, tail lights) with a depth buffer between them. The
 //! ground is flat and every vehicle stands on it, so a vehicle's pixel is always in front of
 //! the ground: only vehicles need depth testing. While drawing, the renderer records which
@@ -13,7 +14,7 @@ mod scene;
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
-use self::raster::{fill_polygon, Layer, Projection, Target};
+use self::raster::{fill_polygon, fill_polygon_smooth, Layer, Projection, Target};
 use super::rng::SimRng;
 use super::road::Road;
 use super::world::VehicleView;
@@ -172,19 +173,24 @@ impl Renderer {
         let projection = self.projection;
 
         // Ground layer, back to front: grass, road, markings, shadows.
-        let mut draw_ground = |quad: &[nalgebra::Point3<f64>; 4], color: [u8; 3]| {
+        let mut draw_ground = |quad: &[nalgebra::Point3<f64>; 4], color: [u8; 3], smooth: bool| {
             let camera_quad = quad.map(|p| camera_from_world * p);
-            fill_polygon(&mut target, &projection, &camera_quad, color, &mut Layer::Ground);
+            if smooth {
+                fill_polygon_smooth(&mut target, &projection, &camera_quad, color);
+            } else {
+                fill_polygon(&mut target, &projection, &camera_quad, color, &mut Layer::Ground);
+            }
         };
-        for (quad, color) in scene::ground(road, ego) {
-            draw_ground(&quad, color);
+        for quad in scene::ground(road, ego) {
+            draw_ground(&quad.corners, quad.color, quad.smooth);
         }
         let in_range: Vec<&VehicleView> = vehicles
             .iter()
             .filter(|v| v.id != ego.id && (v.rear_axle - ego.rear_axle).norm() < self.draw_distance_m)
             .collect();
         for v in &in_range {
-            draw_ground(&scene::shadow(v), scene::SHADOW);
+            // Smooth: where a vehicle meets the road lies between pixel rows, as in a real camera.
+            draw_ground(&scene::shadow(v), scene::SHADOW, true);
         }
 
         // Objects, depth-tested.

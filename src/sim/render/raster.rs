@@ -110,6 +110,116 @@ pub fn fill_polygon(
     Some(bounds)
 }
 
+/// Keeps the part of a convex polygon (screen coordinates) on one side of an axis-aligned
+/// line: `axis` 0 is u, 1 is v; `keep_above` keeps coordinates >= `at`.
+fn clip_axis(poly: &[(f64, f64)], axis: usize, at: f64, keep_above: bool, out: &mut Vec<(f64, f64)>) {
+    out.clear();
+    let coord = |p: (f64, f64)| if axis == 0 { p.0 } else { p.1 };
+    let inside = |p: (f64, f64)| (coord(p) >= at) == keep_above;
+    for i in 0..poly.len() {
+        let (a, b) = (poly[i], poly[(i + 1) % poly.len()]);
+        if inside(a) {
+            out.push(a);
+        }
+        if inside(a) != inside(b) {
+            let t = (at - coord(a)) / (coord(b) - coord(a));
+            out.push((a.0 + (b.0 - a.0) * t, a.1 + (b.1 - a.1) * t));
+        }
+    }
+}
+
+/// Area of a simple polygon (shoelace).
+fn area(poly: &[(f64, f64)]) -> f64 {
+    let mut twice = 0.0;
+    for i in 0..poly.len() {
+        let (a, b) = (poly[i], poly[(i + 1) % poly.len()]);
+        twice += a.0 * b.1 - b.0 * a.1;
+    }
+    twice.abs() / 2.0
+}
+
+/// Where a convex polygon crosses the line v = `at`: its span (u_min, u_max), if any.
+fn span_at(poly: &[(f64, f64)], at: f64) -> Option<(f64, f64)> {
+    let (mut l, mut r) = (f64::MAX, f64::MIN);
+    for i in 0..poly.len() {
+        let (a, b) = (poly[i], poly[(i + 1) % poly.len()]);
+        if (a.1 <= at) != (b.1 <= at) || (a.1 == at && b.1 == at) {
+            let u = if b.1 == a.1 { a.0.min(b.0) } else { a.0 + (b.0 - a.0) * (at - a.1) / (b.1 - a.1) };
+            let u2 = if b.1 == a.1 { a.0.max(b.0) } else { u };
+            l = l.min(u);
+            r = r.max(u2);
+        }
+    }
+    (l <= r).then_some((l, r))
+}
+
+/// Paints a convex polygon given in the camera frame over what is drawn, with anti-aliased
+/// edges: each pixel is blended with `color` by the exact share of its area the polygon
+/// covers. No depth, no owner: for ground detail (shadows, markings), whose edges then fall
+/// between pixel rows as a real camera's do, so a consumer can locate them to a fraction of
+/// a pixel. Returns the projected bounding box like `fill_polygon`.
+pub fn fill_polygon_smooth(
+    target: &mut Target<'_>,
+    projection: &Projection,
+    polygon: &[Point3<f64>],
+    color: [u8; 3],
+) -> Option<[f32; 4]> {
+    let mut clipped = [Point3::origin(); 8];
+    let n = clip_near(polygon, &mut clipped);
+    if n < 3 {
+        return None;
+    }
+    let mut screen: Vec<(f64, f64)> = Vec::with_capacity(n);
+    let mut bounds = [f32::MAX, f32::MAX, f32::MIN, f32::MIN];
+    for p in &clipped[..n] {
+        let s = projection.project(p);
+        bounds = [bounds[0].min(s.u), bounds[1].min(s.v), bounds[2].max(s.u), bounds[3].max(s.v)];
+        // Projected again in f64: edges are located to far less than the f32 of ScreenVertex.
+        screen.push((projection.cx - projection.fx * p.y / p.x, projection.cy - projection.fy * p.z / p.x));
+    }
+    let (w, h) = (target.width as i64, target.height as i64);
+    let y0 = (bounds[1].floor() as i64).clamp(0, h);
+    let y1 = (bounds[3].ceil() as i64).clamp(0, h);
+    if bounds[2] < 0.0 || bounds[0] > w as f32 || y0 >= y1 {
+        return Some(bounds);
+    }
+    let (mut upper, mut strip, mut left, mut cell) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    for y in y0..y1 {
+        let (top, bottom) = (y as f64, y as f64 + 1.0);
+        clip_axis(&screen, 1, top, true, &mut upper);
+        clip_axis(&upper, 1, bottom, false, &mut strip);
+        if strip.len() < 3 {
+            continue;
+        }
+        let u_min = strip.iter().map(|p| p.0).fold(f64::MAX, f64::min);
+        let u_max = strip.iter().map(|p| p.0).fold(f64::MIN, f64::max);
+        // Pixels inside the polygon's span on both the row's top and bottom lines are covered
+        // whole (its left boundary is convex, its right concave): painted, the rest blended.
+        let (solid0, solid1) = match (span_at(&screen, top), span_at(&screen, bottom)) {
+            (Some(a), Some(b)) => (a.0.max(b.0).ceil() as i64, a.1.min(b.1).floor() as i64),
+            _ => (0, 0),
+        };
+        let x0 = (u_min.floor() as i64).clamp(0, w);
+        let x1 = (u_max.ceil() as i64).clamp(0, w);
+        let row = y as usize * target.width;
+        for x in x0..x1 {
+            let i = (row + x as usize) * 3;
+            let px = &mut target.rgb[i..i + 3];
+            if x >= solid0 && x < solid1 {
+                px.copy_from_slice(&color);
+                continue;
+            }
+            clip_axis(&strip, 0, x as f64, true, &mut left);
+            clip_axis(&left, 0, x as f64 + 1.0, false, &mut cell);
+            let share = if cell.len() < 3 { 0.0 } else { area(&cell).min(1.0) as f32 };
+            for (p, c) in px.iter_mut().zip(color) {
+                *p = (*p as f32 + (c as f32 - *p as f32) * share).round() as u8;
+            }
+        }
+    }
+    Some(bounds)
+}
+
 fn edge_u(a: &ScreenVertex, b: &ScreenVertex, v: f32) -> f32 {
     let dv = b.v - a.v;
     if dv.abs() < 1e-12 {
@@ -232,6 +342,25 @@ mod tests {
         fill_triangle(&mut t, full(0.1), [2, 2, 2], &mut Layer::Object { owner: 1, stamp: 1, covered_px: &mut far_px });
         assert!(b.owner.iter().all(|o| *o == 2));
         assert_eq!((near_px, far_px), (16, 16));
+    }
+
+    #[test]
+    fn a_smooth_edge_blends_the_pixel_it_crosses_by_the_share_it_covers() {
+        let (w, h) = (8, 8);
+        let mut b = Buffers::new(w, h);
+        let projection = Projection { fx: 1.0, fy: 1.0, cx: 0.0, cy: 0.0 };
+        // A square at depth 1 spanning u 1.0..6.0 and v 2.0..5.3: its lower edge covers 30% of
+        // row 5, its sides fall on pixel boundaries.
+        let at = |u: f64, v: f64| Point3::new(1.0, -u, -v);
+        let square = [at(1.0, 2.0), at(6.0, 2.0), at(6.0, 5.3), at(1.0, 5.3)];
+        fill_polygon_smooth(&mut b.target(w, h), &projection, &square, [200, 100, 0]);
+        let px = |x: usize, y: usize| &b.rgb[(y * w + x) * 3..(y * w + x) * 3 + 3];
+        assert_eq!(px(3, 3), [200, 100, 0], "inside");
+        assert_eq!(px(0, 3), [0, 0, 0], "left of it");
+        assert_eq!(px(3, 6), [0, 0, 0], "below it");
+        let share = px(3, 5)[0] as f32 / 200.0;
+        assert!((share - 0.3).abs() <= 0.5 / 200.0, "row 5 holds {share} of the colour");
+        assert_eq!(px(3, 5)[1] as f32, (100.0 * share).round(), "every channel by the same share");
     }
 
     #[test]

@@ -24,20 +24,31 @@ const DASH_PERIOD_M: f64 = 12.0;
 const MARKING_WIDTH_M: f64 = 0.15;
 const SHOULDER_M: f64 = 0.6;
 
+/// A polygon on the ground, in the world frame.
+pub struct GroundQuad {
+    pub corners: [Point3<f64>; 4],
+    pub color: [u8; 3],
+    /// Drawn with anti-aliased edges (detail a consumer locates to a fraction of a pixel:
+    /// markings); large surfaces that tile the ground are drawn without, so that no seam
+    /// shows where two of them meet.
+    pub smooth: bool,
+}
+
 /// Ground polygons in the world frame, in drawing order (back to front within each kind).
-pub fn ground(road: &Road, ego: &VehicleView) -> Vec<([Point3<f64>; 4], [u8; 3])> {
+pub fn ground(road: &Road, ego: &VehicleView) -> Vec<GroundQuad> {
     let mut quads = Vec::with_capacity(256);
     let (ex, ey) = (ego.rear_axle.x, ego.rear_axle.y);
     let g = 2000.0;
-    quads.push((
-        [
+    quads.push(GroundQuad {
+        corners: [
             Point3::new(ex - g, ey - g, 0.0),
             Point3::new(ex + g, ey - g, 0.0),
             Point3::new(ex + g, ey + g, 0.0),
             Point3::new(ex - g, ey + g, 0.0),
         ],
-        GRASS,
-    ));
+        color: GRASS,
+        smooth: false,
+    });
     let at = |s: f64, d: f64| {
         let p = road.to_world(s, d);
         Point3::new(p.x, p.y, 0.0)
@@ -52,11 +63,15 @@ pub fn ground(road: &Road, ego: &VehicleView) -> Vec<([Point3<f64>; 4], [u8; 3])
     let edge = road.half_width_m() + SHOULDER_M;
     for pair in sections.windows(2).rev() {
         let (a, b) = (pair[0], pair[1]);
-        quads.push(([at(a, -edge), at(b, -edge), at(b, edge), at(a, edge)], ASPHALT));
+        quads.push(GroundQuad {
+            corners: [at(a, -edge), at(b, -edge), at(b, edge), at(a, edge)],
+            color: ASPHALT,
+            smooth: false,
+        });
     }
     let line = |s0: f64, s1: f64, d: f64| {
         let h = MARKING_WIDTH_M / 2.0;
-        ([at(s0, d - h), at(s1, d - h), at(s1, d + h), at(s0, d + h)], MARKING)
+        GroundQuad { corners: [at(s0, d - h), at(s1, d - h), at(s1, d + h), at(s0, d + h)], color: MARKING, smooth: true }
     };
     let hw = road.half_width_m();
     // Solid edge lines.
