@@ -7,7 +7,10 @@
 //! Longitudinally, per vehicle:
 //! - drive force = throttle * min(max_drive_force, max_power / speed), along the heading;
 //! - resisting force = brake * mass * max_brake_decel + rolling_coeff * mass * g
-//!   + 0.5 * air_density * drag_area * v^2, against the motion.
+//!   + 0.5 * air_density * drag_area * v^2, against the motion;
+//! - throttle and brake act through a first-order lag of `actuator_lag_s` (engine torque
+//!   build-up, brake pressure): the applied value moves toward the commanded one by
+//!   1 - exp(-dt / lag) a step, so a step in the command reaches 63% after the lag.
 
 use serde::{Deserialize, Serialize};
 
@@ -36,6 +39,9 @@ pub struct VehicleParams {
     /// Front wheel angle at steer = 1.
     pub max_steer_rad: f64,
     pub tyre_mu: f64,
+    /// Time constant of the first-order lag between the commanded and the applied throttle
+    /// and brake, seconds (powertrains and brakes: 0.2-0.5 s).
+    pub actuator_lag_s: f64,
 }
 
 impl VehicleParams {
@@ -52,6 +58,7 @@ impl VehicleParams {
         rolling_coeff: 0.012,
         max_steer_rad: 0.55,
         tyre_mu: 1.0,
+        actuator_lag_s: 0.3,
     };
     pub const VAN: VehicleParams = VehicleParams {
         mass_kg: 2400.0,
@@ -65,6 +72,7 @@ impl VehicleParams {
         rolling_coeff: 0.013,
         max_steer_rad: 0.5,
         tyre_mu: 0.95,
+        actuator_lag_s: 0.35,
     };
     pub const TRUCK: VehicleParams = VehicleParams {
         mass_kg: 12_000.0,
@@ -78,6 +86,8 @@ impl VehicleParams {
         rolling_coeff: 0.008,
         max_steer_rad: 0.45,
         tyre_mu: 0.8,
+        // Air brakes and a heavier driveline.
+        actuator_lag_s: 0.5,
     };
 
     pub fn of_class(class: ObjectClass) -> VehicleParams {
@@ -102,6 +112,16 @@ impl VehicleParams {
     pub fn resistance_n(&self, speed_mps: f64) -> f64 {
         self.rolling_coeff * self.mass_kg * GRAVITY_MPS2
             + 0.5 * AIR_DENSITY_KGPM3 * self.drag_area_m2 * speed_mps * speed_mps
+    }
+}
+
+/// The share of the way from the applied toward the commanded throttle or brake that a lag of
+/// `lag_s` covers in `dt_s` (1 without lag).
+pub fn lag_step(lag_s: f64, dt_s: f64) -> f64 {
+    if lag_s <= 0.0 {
+        1.0
+    } else {
+        1.0 - (-dt_s / lag_s).exp()
     }
 }
 

@@ -424,9 +424,15 @@ impl Controller {
                 None => self.comfort_target(v, lead, threat.as_ref(), desired_gap, dt),
             }
         };
+        // The actuators lag: ask for the target plus lag x its rate of change, so the applied
+        // acceleration follows a ramping target instead of trailing it (a jump, as into an
+        // emergency, is not anticipated beyond twice the jerk limit).
+        let rate_limit = 2.0 * self.s.limits.jerk_mps3;
+        let rate = if dt > 0.0 { ((accel - self.accel_cmd) / dt).clamp(-rate_limit, rate_limit) } else { 0.0 };
+        let lead_accel = self.params.actuator_lag_s * rate;
         self.accel_cmd = accel;
 
-        let (throttle, brake) = self.actuate(mode, accel, v, ego.accel_mps2, dt);
+        let (throttle, brake) = self.actuate(mode, accel, lead_accel, v, ego.accel_mps2, dt);
         let status = AccStatus {
             mode,
             set_speed_mps: self.set_speed_mps,
@@ -517,9 +523,10 @@ impl Controller {
         (mode, target.clamp(self.accel_cmd - step, self.accel_cmd + step))
     }
 
-    /// The low-level loop: the vehicle model's throttle/brake for the target, plus an
-    /// integrator on the acceleration error for what the model does not know.
-    fn actuate(&mut self, mode: AccMode, accel: f64, v: f64, measured: f64, dt: f64) -> (f32, f32) {
+    /// The low-level loop: the vehicle model's throttle/brake for the target (plus `lead`, the
+    /// actuator lag's compensation), plus an integrator on the acceleration error for what the
+    /// model does not know.
+    fn actuate(&mut self, mode: AccMode, accel: f64, lead: f64, v: f64, measured: f64, dt: f64) -> (f32, f32) {
         match mode {
             AccMode::Off => {
                 self.integral = 0.0;
@@ -540,7 +547,7 @@ impl Controller {
                 }
             }
         }
-        let (mut throttle, brake) = actuate_acceleration(&self.params, v, accel + self.integral);
+        let (mut throttle, brake) = actuate_acceleration(&self.params, v, accel + lead + self.integral);
         if mode == AccMode::Stale {
             // Inputs too old: the throttle only goes down (it follows the eased target).
             throttle = throttle.min(self.last_throttle);

@@ -114,6 +114,9 @@ pub struct Vehicle {
     pub max_brake_decel_mps2: f64,
     pub drag_area_m2: f64,
     pub rolling_coeff: f64,
+    /// First-order lag of throttle and brake, seconds: compensated by asking for the target
+    /// plus lag x its rate of change.
+    pub actuator_lag_s: f64,
     pub front_overhang_from_origin_m: f64,
 }
 
@@ -127,6 +130,7 @@ impl Vehicle {
             max_brake_decel_mps2: self.max_brake_decel_mps2,
             drag_area_m2: self.drag_area_m2,
             rolling_coeff: self.rolling_coeff,
+            actuator_lag_s: self.actuator_lag_s,
             ..VehicleParams::CAR
         }
     }

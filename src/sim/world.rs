@@ -10,7 +10,7 @@ use super::rng::SimRng;
 use super::road::Road;
 use super::scenario::{ClassSpec, RandomTraffic, Scenario};
 use crate::msg::{ControlCommand, ObjectClass, VehicleState};
-use crate::vehicle::VehicleParams;
+use crate::vehicle::{actuate_acceleration, lag_step, VehicleParams};
 
 /// The ego's id in ground truth and collisions; traffic is numbered from 1.
 pub const EGO_ID: u32 = 0;
@@ -129,6 +129,8 @@ struct Body {
     color: [u8; 3],
     body: BodyId,
     driver: Option<TrafficDriver>,
+    /// Throttle and brake as applied: the commanded ones through the actuator lag.
+    applied: Actuation,
 }
 
 /// The world and its clock.
@@ -181,7 +183,10 @@ impl Placing<'_> {
         let at = self.road.to_world(s, self.road.lane_center_d(lane));
         let body = self.physics.add_vehicle(id, &params, at, heading, speed);
         self.starts.push((lane, s));
-        self.bodies.push(Body { id, class, params, color, body, driver });
+        // Starting at speed: the throttle that holds it is already applied.
+        let (throttle, brake) = actuate_acceleration(&params, speed, 0.0);
+        let applied = Actuation { throttle, brake, steer: 0.0 };
+        self.bodies.push(Body { id, class, params, color, body, driver, applied });
     }
 
     /// The scenario's scripted traffic: start gaps and speeds vary a little with the seed.
@@ -423,9 +428,13 @@ impl World {
             ));
         }
 
-        for (b, act) in self.bodies.iter().zip(&actuations) {
+        for (b, act) in self.bodies.iter_mut().zip(&actuations) {
+            let k = lag_step(b.params.actuator_lag_s, dt);
+            b.applied.throttle += (act.throttle.clamp(0.0, 1.0) - b.applied.throttle) * k;
+            b.applied.brake += (act.brake.clamp(0.0, 1.0) - b.applied.brake) * k;
+            b.applied.steer = act.steer;
             let state = self.physics.state(b.body);
-            let wrench = forces(&b.params, &state, act, dt);
+            let wrench = forces(&b.params, &state, &b.applied, dt);
             self.physics.apply(b.body, &wrench, dt);
         }
         let started = self.physics.step();

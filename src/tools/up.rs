@@ -30,6 +30,7 @@ use crate::launch::{ClockMode, LoopRun, LoopSpec, Network, NodeEnd, NodeInput, N
 use crate::msg::{AccStatus, SimClock, SimEvent, SimEventKind};
 use crate::record::{Recording, RecordingSummary};
 use crate::sim::Scenario;
+use crate::vehicle::VehicleParams;
 use crate::view::{LiveView, ViewOptions, ViewStats};
 use crate::{topics, Bus};
 
@@ -60,10 +61,10 @@ pub struct UpArgs {
     /// End after this many simulated seconds instead of the scenario's own duration
     #[arg(long, value_parser = super::top::positive)]
     pub duration: Option<f64>,
-    /// Actuator lag of the vehicle you have in mind, seconds, for the string-stability bound
-    /// (the simulated car has none: a command acts at the next physics step)
-    #[arg(long, default_value_t = 0.0)]
-    pub actuator_lag: f64,
+    /// Actuator lag for the string-stability bound, seconds [default: the simulated car's,
+    /// 0.3 s: its throttle and brake follow a command through a first-order lag]
+    #[arg(long)]
+    pub actuator_lag: Option<f64>,
     /// Print plain progress lines instead of the live view (the default when stderr is not a
     /// terminal)
     #[arg(long)]
@@ -201,7 +202,7 @@ pub fn run(args: &UpArgs, connect: &ConnectArgs) -> Result<Outcome> {
         scenario.duration_s = d;
     }
     anyhow::ensure!(
-        args.actuator_lag.is_finite() && args.actuator_lag >= 0.0,
+        args.actuator_lag.is_none_or(|l| l.is_finite() && l >= 0.0),
         "--actuator-lag must be a number of seconds >= 0"
     );
     let dir = match &args.report {
@@ -491,10 +492,11 @@ fn judged_outputs(
 fn latency_report(lat: &LoopLatency, args: &UpArgs, time_gap_s: Option<f64>) -> LatencyReport {
     let hops = lat.stats(false);
     let delay = hops[WHOLE_LOOP].p99_ms.map(|ms| ms / 1e3);
+    let lag = args.actuator_lag.unwrap_or(VehicleParams::CAR.actuator_lag_s);
     LatencyReport {
         loop_delay_p99_s: delay,
-        actuator_lag_s: args.actuator_lag,
-        min_stable_time_gap_s: delay.map(|d| latency::min_stable_time_gap_s(d, args.actuator_lag)),
+        actuator_lag_s: lag,
+        min_stable_time_gap_s: delay.map(|d| latency::min_stable_time_gap_s(d, lag)),
         time_gap_s,
         hops,
         note: match args.mode {
