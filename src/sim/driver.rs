@@ -13,12 +13,12 @@ use super::dynamics::Actuation;
 use super::rng::SimRng;
 use super::road::Road;
 use super::scenario::Action;
-use crate::vehicle::actuate_acceleration;
-use crate::vehicle::VehicleParams;
+use crate::vehicle::{actuate_acceleration, lag_step, VehicleParams};
 
 /// Where a vehicle is and how it moves, as a driver sees it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Observation {
+    pub id: u32,
     /// Rear axle along the road and across it.
     pub s_m: f64,
     pub d_m: f64,
@@ -39,9 +39,27 @@ pub struct Lead {
 const FOLLOW_TIME_GAP_S: f64 = 1.4;
 const FOLLOW_STANDSTILL_M: f64 = 4.0;
 
+/// The gap acceptance of a random lane change (a MOBIL-like safety criterion): after it,
+/// neither the new follower in the target lane nor the changer itself behind its new leader
+/// may need to brake harder than this, by the traffic's own following law.
+pub const LANE_CHANGE_SAFE_DECEL_MPS2: f64 = 2.0;
+/// ... and no bumper comes closer than this.
+const LANE_CHANGE_MIN_GAP_M: f64 = 3.0;
+
+/// The acceleration traffic asks for behind a lead `gap_m` ahead (bumper to bumper).
+fn follow_accel(speed_mps: f64, lead_gap_m: f64, lead_speed_mps: f64) -> f64 {
+    let desired = FOLLOW_STANDSTILL_M + FOLLOW_TIME_GAP_S * speed_mps;
+    0.3 * (lead_gap_m - desired) + 0.9 * (lead_speed_mps - speed_mps)
+}
+
+/// How far ahead on the road `pursue` aims.
+fn lookahead_m(speed_mps: f64) -> f64 {
+    speed_mps.max(8.0)
+}
+
 /// Steering that pursues the point `lookahead` ahead on the road at lateral offset `d_target`.
 pub fn pursue(params: &VehicleParams, road: &Road, me: &Observation, d_target: f64) -> f64 {
-    let lookahead = (me.speed_mps * 1.0).max(8.0);
+    let lookahead = lookahead_m(me.speed_mps);
     let target = road.to_world(me.s_m + lookahead, d_target) - me.rear_axle;
     let (sin, cos) = me.yaw_rad.sin_cos();
     let x = target.x * cos + target.y * sin;
@@ -59,11 +77,13 @@ pub struct Cruise {
     pub ramp_mps2: f64,
     /// The reference speed, moving toward the target at the ramp rate.
     pub reference_mps: f64,
+    /// The reference's acceleration (the ramp rate through the actuator lag).
+    pub reference_accel: f64,
 }
 
 impl Cruise {
     pub fn new(speed_mps: f64) -> Self {
-        Cruise { target_mps: speed_mps, ramp_mps2: 2.0, reference_mps: speed_mps }
+        Cruise { target_mps: speed_mps, ramp_mps2: 2.0, reference_mps: speed_mps, reference_accel: 0.0 }
     }
 
     /// Throttle and brake for this step.
@@ -74,15 +94,22 @@ impl Cruise {
         lead: Option<Lead>,
         dt_s: f64,
     ) -> (f64, f64) {
-        let step = self.ramp_mps2 * dt_s;
+        // The reference speed ramps toward the target as the vehicle can: its acceleration
+        // builds up through the actuator lag, so the speed error stays small and no catch-up
+        // overshoots the scripted rate.
         let diff = self.target_mps - self.reference_mps;
-        let ramp_accel = if diff.abs() <= step { 0.0 } else { self.ramp_mps2.copysign(diff) };
-        self.reference_mps += diff.clamp(-step, step);
-        let mut accel = ramp_accel + 1.0 * (self.reference_mps - speed_mps);
+        let wanted = if diff.abs() <= self.ramp_mps2 * dt_s { 0.0 } else { self.ramp_mps2.copysign(diff) };
+        let change = (wanted - self.reference_accel) * lag_step(params.actuator_lag_s, dt_s);
+        self.reference_accel += change;
+        let dv = self.reference_accel * dt_s;
+        // Never past the target.
+        self.reference_mps += if dv * diff > 0.0 { dv.abs().min(diff.abs()).copysign(diff) } else { dv };
+        // Asking for the reference's acceleration plus lag x its rate makes the wheels give it
+        // (the lag inverted for a smooth signal).
+        let lag_lead = params.actuator_lag_s * change / dt_s;
+        let mut accel = self.reference_accel + lag_lead + 1.0 * (self.reference_mps - speed_mps);
         if let Some(lead) = lead {
-            let desired = FOLLOW_STANDSTILL_M + FOLLOW_TIME_GAP_S * speed_mps;
-            let follow = 0.3 * (lead.gap_m - desired) + 0.9 * (lead.speed_mps - speed_mps);
-            accel = accel.min(follow);
+            accel = accel.min(follow_accel(speed_mps, lead.gap_m, lead.speed_mps));
         }
         let accel = accel.clamp(-params.max_brake_decel_mps2, 3.0);
         if self.reference_mps < 0.05 && speed_mps < 0.5 && accel <= 0.0 {
@@ -122,8 +149,34 @@ pub struct Wander {
 /// What a traffic driver sees of the others when it considers a lane change.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Neighbour {
-    pub s_m: f64,
+    pub id: u32,
+    /// Along-road positions of the rear and front bumpers.
+    pub rear_m: f64,
+    pub front_m: f64,
     pub lane: i32,
+    /// The lane it is changing to (its lane when it keeps it): a vehicle changing lanes
+    /// claims both.
+    pub target_lane: i32,
+    pub speed_mps: f64,
+}
+
+/// Whether moving into `lane` is safe for everyone: the nearest vehicle behind in that lane
+/// (the new follower) and the changer behind the nearest one ahead (its new leader) each need
+/// at most LANE_CHANGE_SAFE_DECEL_MPS2 by the following law, with LANE_CHANGE_MIN_GAP_M
+/// between bumpers. `me` is the changer as a neighbour.
+pub fn safe_to_enter(me: &Neighbour, lane: u32, others: &[Neighbour]) -> bool {
+    let in_lane = others.iter().filter(|o| (o.lane == lane as i32 || o.target_lane == lane as i32) && o.id != me.id);
+    let follower = in_lane.clone().filter(|o| o.front_m <= me.front_m).max_by(|a, b| a.front_m.total_cmp(&b.front_m));
+    let leader = in_lane.filter(|o| o.front_m > me.front_m).min_by(|a, b| a.rear_m.total_cmp(&b.rear_m));
+    let follower_ok = follower.is_none_or(|f| {
+        let gap = me.rear_m - f.front_m;
+        gap >= LANE_CHANGE_MIN_GAP_M && follow_accel(f.speed_mps, gap, me.speed_mps) >= -LANE_CHANGE_SAFE_DECEL_MPS2
+    });
+    let leader_ok = leader.is_none_or(|l| {
+        let gap = l.rear_m - me.front_m;
+        gap >= LANE_CHANGE_MIN_GAP_M && follow_accel(me.speed_mps, gap, l.speed_mps) >= -LANE_CHANGE_SAFE_DECEL_MPS2
+    });
+    follower_ok && leader_ok
 }
 
 /// A scripted traffic driver.
@@ -175,8 +228,8 @@ impl TrafficDriver {
         self.lane_change = Some(LaneChange { from_d, to_d: road.lane_center_d(lane), start_s: t_s, duration_s });
     }
 
-    /// Considers a random lane change: to a neighbouring allowed lane with room around.
-    fn wander(&mut self, road: &Road, me: &Observation, t_s: f64, others: &[Neighbour]) {
+    /// Considers a random lane change: to a neighbouring allowed lane where the gap is safe.
+    fn wander(&mut self, road: &Road, me: &Observation, myself: &Neighbour, t_s: f64, others: &[Neighbour]) {
         let Some(w) = &mut self.wander else { return };
         if t_s < w.next_s || self.lane_change.is_some_and(|c| t_s < c.start_s + c.duration_s) {
             return;
@@ -187,10 +240,7 @@ impl TrafficDriver {
             .filter(|l| w.lanes.contains(l))
             .collect();
         let target = options.get(w.rng.below(options.len() as u64) as usize).copied();
-        let room = |lane: u32| {
-            others.iter().all(|o| o.lane != lane as i32 || !(me.s_m - 20.0..me.s_m + 30.0).contains(&o.s_m))
-        };
-        match target.filter(|l| room(*l)) {
+        match target.filter(|l| safe_to_enter(myself, *l, others)) {
             Some(lane) => {
                 w.next_s = t_s + w.mean_interval_s * (0.5 + w.rng.unit());
                 self.change_lane(road, me, lane, t_s, 4.0);
@@ -214,10 +264,22 @@ impl TrafficDriver {
         dt_s: f64,
     ) -> Actuation {
         self.start_actions(road, me, t_s, gap_to_ego_m);
-        self.wander(road, me, t_s, others);
+        let myself = Neighbour {
+            id: me.id,
+            rear_m: me.s_m - params.rear_overhang_m,
+            front_m: me.s_m - params.rear_overhang_m + params.size_m[0],
+            lane: self.lane as i32,
+            target_lane: self.lane as i32,
+            speed_mps: me.speed_mps,
+        };
+        self.wander(road, me, &myself, t_s, others);
         let lead = if self.follow { lead } else { None };
         let (throttle, brake) = self.cruise.longitudinal(params, me.speed_mps, lead, dt_s);
-        let d_target = self.lane_change.map_or(road.lane_center_d(self.lane), |c| c.d_at(t_s));
+        // During a lane change the pursued point is where the change should have the vehicle
+        // once it gets there (the lookahead's time ahead): so the move takes its duration_s,
+        // where aiming at today's offset lagged it by about as much again.
+        let preview_s = lookahead_m(me.speed_mps) / me.speed_mps.max(1.0);
+        let d_target = self.lane_change.map_or(road.lane_center_d(self.lane), |c| c.d_at(t_s + preview_s));
         Actuation { throttle, brake, steer: pursue(params, road, me, d_target) }
     }
 }
@@ -225,6 +287,29 @@ impl TrafficDriver {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn car(id: u32, front_m: f64, lane: i32, speed_mps: f64) -> Neighbour {
+        Neighbour { id, rear_m: front_m - 4.6, front_m, lane, target_lane: lane, speed_mps }
+    }
+
+    #[test]
+    fn a_gap_is_taken_only_when_nobody_must_brake_hard_for_it() {
+        let me = car(0, 100.0, 1, 25.0);
+        // A faster car 15 m behind in the target lane would have to brake hard; 90 m back it
+        // has time; a slower one 25 m behind is no problem.
+        assert!(!safe_to_enter(&me, 2, &[me, car(1, 80.4, 2, 32.0)]));
+        assert!(safe_to_enter(&me, 2, &[me, car(1, 5.4, 2, 32.0)]));
+        assert!(safe_to_enter(&me, 2, &[me, car(1, 70.4, 2, 20.0)]));
+        // A slow car just ahead in the target lane: the changer would have to brake hard.
+        assert!(!safe_to_enter(&me, 2, &[me, car(1, 112.0, 2, 15.0)]));
+        // Side by side: no gap at all.
+        assert!(!safe_to_enter(&me, 2, &[me, car(1, 101.0, 2, 25.0)]));
+        // A car changing from lane 3 into lane 2 beside us claims lane 2 too.
+        let merging = Neighbour { target_lane: 2, ..car(1, 101.0, 3, 25.0) };
+        assert!(!safe_to_enter(&me, 2, &[me, merging]));
+        // Another lane is nobody's concern.
+        assert!(safe_to_enter(&me, 0, &[me, car(1, 101.0, 2, 25.0)]));
+    }
 
     #[test]
     fn lane_change_moves_smoothly_from_one_lane_to_the_other() {

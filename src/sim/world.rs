@@ -63,6 +63,7 @@ impl VehicleView {
 
     fn observation(&self) -> Observation {
         Observation {
+            id: self.id,
             s_m: self.s_m,
             d_m: self.d_m,
             rear_axle: self.rear_axle,
@@ -352,6 +353,13 @@ impl World {
         self.ego_collisions
     }
 
+    /// The ego's throttle and brake as they act on the wheels now: the commanded ones through
+    /// the actuator lag (vehicle/state's `applied` is the command taken).
+    pub fn ego_actuation(&self) -> (f64, f64) {
+        let a = self.bodies[0].applied;
+        (a.throttle, a.brake)
+    }
+
     pub fn traffic_collisions(&self) -> u64 {
         self.traffic_collisions
     }
@@ -376,7 +384,19 @@ impl World {
     pub fn step(&mut self, input: EgoInput) -> StepEvents {
         let dt = 1.0 / self.physics_hz as f64;
         let t_s = self.step as f64 * dt;
-        let neighbours: Vec<Neighbour> = self.views.iter().map(|v| Neighbour { s_m: v.s_m, lane: v.lane }).collect();
+        let neighbours: Vec<Neighbour> = self
+            .views
+            .iter()
+            .zip(&self.bodies)
+            .map(|(v, b)| Neighbour {
+                id: v.id,
+                rear_m: v.s_rear_m(),
+                front_m: v.s_front_m(),
+                lane: v.lane,
+                target_lane: b.driver.as_ref().map_or(v.lane, |d| d.lane() as i32),
+                speed_mps: v.forward_speed_mps(),
+            })
+            .collect();
 
         // Each driver decides from the same snapshot, so the order of vehicles does not matter.
         let mut actuations = Vec::with_capacity(self.bodies.len());
