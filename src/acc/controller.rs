@@ -165,6 +165,8 @@ const RATE_FILTER: f64 = 0.3;
 const THREAT_MARGIN_M: f64 = 2.0;
 /// Lead deceleration below which the threat assessment assumes it brakes to a stop.
 const LEAD_BRAKING_MPS2: f64 = -0.5;
+/// The collision-avoidance guard on the follow law takes over above this needed deceleration.
+const NEEDED_GUARD_MPS2: f64 = 1.0;
 /// Below this speed the ego counts as standing.
 const STANDSTILL_MPS: f64 = 0.2;
 /// Brake held at standstill.
@@ -505,9 +507,11 @@ impl Controller {
         let cruise = (g.cruise_per_s * (self.set_speed_mps - v)).clamp(-lim.decel_mps2, lim.accel_mps2);
         let follow = lead.map(|l| {
             let law = g.gap_per_s2 * (l.gap_m - desired_gap) + g.speed_per_s * (l.speed_mps - v);
-            // Never less braking than avoiding a collision needs (once it matters).
+            // Never less braking than avoiding a collision needs, once it matters: a lead easing
+            // off a little (or the noise in its estimated deceleration) is the law's to answer;
+            // below NEEDED_GUARD_MPS2 the guard made the car dip for nothing.
             let needed = threat.map_or(0.0, |t| t.needed_decel_mps2);
-            let mut a = if needed > 0.1 { law.min(-needed) } else { law };
+            let mut a = if needed > NEEDED_GUARD_MPS2 { law.min(-needed) } else { law };
             // At standstill: stay until the lead has moved off.
             if v < STANDSTILL_MPS && !(l.gap_m > self.s.standstill_m + 1.0 && l.speed_mps > 0.5) {
                 a = a.min(-0.5);

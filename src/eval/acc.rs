@@ -15,8 +15,8 @@ use anyhow::{bail, Context, Result};
 use serde::Serialize;
 
 use super::metrics::{aims, Metrics};
-use super::plot;
 use super::trace::{judge, Recorder};
+use super::{fmt_opt, plot};
 use crate::acc::PerceptionSource;
 use crate::config::{FaultArgs, FaultProfile};
 use crate::launch::{ClockMode, LoopRun, LoopSpec, Network, NodeInput, NODE_POLL};
@@ -102,9 +102,12 @@ pub fn run(args: &EvalAccArgs, connect: &crate::config::ConnectArgs) -> Result<A
         let name = scenario.name.clone();
         eprint!("[{}/{}] {name} ({:?} perception) ... ", i + 1, names.len(), args.perception);
         let started = Instant::now();
+        // Named by perception too: runs with camera and ground truth into one directory keep
+        // both.
+        let run_logs = logs.join(format!("{name}-{}", args.perception.name()));
         let result = rt
-            .block_on(run_one(arg, scenario, args, faults.clone(), connect.topics.as_deref(), &logs.join(&name)))
-            .with_context(|| format!("scenario {name} (node logs in {})", logs.join(&name).display()))?;
+            .block_on(run_one(arg, scenario, args, faults.clone(), connect.topics.as_deref(), &run_logs))
+            .with_context(|| format!("scenario {name} (node logs in {})", run_logs.display()))?;
         eprintln!(
             "{} in {:.1} s{}",
             if result.metrics.pass { "pass" } else { "FAIL" },
@@ -143,6 +146,7 @@ pub(crate) async fn run_one(
         clock: ClockMode::Lockstep,
         perception: args.perception,
         set_speed_mps: set_speed,
+        time_gap_s: scenario.ego.time_gap_s,
         faults,
     };
     let faults = spec.faults.as_ref().map(|p| p.summary());
@@ -182,7 +186,7 @@ pub(crate) async fn run_one(
         .with_context(|| format!("recorded only {} states (did the nodes connect?)", trace.samples.len()))?;
     let plot = match &args.plots {
         Some(dir) => {
-            let path = dir.join(format!("{name}.png"));
+            let path = dir.join(format!("{name}-{}.png", args.perception.name()));
             let title =
                 format!("{name} ({:?} perception): {}", args.perception, if metrics.pass { "pass" } else { "FAIL" });
             plot::plot(&trace, &title, &path)?;
@@ -207,8 +211,8 @@ pub(crate) async fn run_one(
 /// The report as a markdown table.
 pub fn markdown(report: &AccReport) -> String {
     let mut out = String::new();
-    out.push_str("| scenario | perception | collisions | min gap m | min TTC s | time-gap RMS s | speed RMSE m/s | max accel | max decel | max jerk | emergency s | result |\n");
-    out.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    out.push_str("| scenario | perception | collisions (traffic) | min gap m | min TTC s | time-gap RMS s | speed RMSE m/s | max accel | max decel | max jerk | accel swing | emergency s (unwarranted) | phantom braking s | stopped for nothing s | result |\n");
+    out.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for r in &report.results {
         let m = &r.metrics;
         let failed: Vec<&str> = m.checks.iter().filter(|c| !c.pass).map(|c| c.name.as_str()).collect();
@@ -221,17 +225,27 @@ pub fn markdown(report: &AccReport) -> String {
         };
         let [gap, ttc, time_gap, speed, accel, decel, jerk] = m.headline();
         out.push_str(&format!(
-            "| {} | {:?} | {} | {gap} | {ttc} | {time_gap} | {speed} | {accel} | {decel} | {jerk} | {:.1} | {} |\n",
-            r.scenario, r.perception, m.collisions, m.emergency_s, verdict
+            "| {} | {:?} | {} ({}) | {gap} | {ttc} | {time_gap} | {speed} | {accel} | {decel} | {jerk} | {} | {:.1} ({}) | {:.1} | {:.1} | {} |\n",
+            r.scenario,
+            r.perception,
+            m.collisions,
+            m.traffic_collisions,
+            fmt_opt(m.max_accel_swing_mps2, 2),
+            m.emergency_s,
+            m.unwarranted_emergencies,
+            m.phantom_braking_s,
+            m.standstill_for_nothing_s,
+            verdict
         ));
     }
     out.push_str(&format!(
-        "\nAims: no collision; time-gap RMS error <= {} s in steady following; accel <= {}, decel <= {} m/s2 and jerk <= {} m/s3 outside emergencies, at speed (+{:.0}% tolerance).\n",
+        "\nAims: no collision; in steady following time-gap RMS error <= {} s and acceleration within {} m/s2 of the lead's; accel <= {}, decel <= {} m/s2 (+{:.0}% tolerance) and jerk <= {} m/s3 outside emergencies, at speed; no unwarranted emergency, no phantom braking (beyond 1 m/s2 with nothing in the lane within twice the time gap), no standstill with nothing ahead. Traffic collisions are counted, not judged.\n",
         aims::TIME_GAP_RMS_S,
+        aims::MAX_ACCEL_SWING_MPS2,
         aims::MAX_ACCEL_MPS2,
         aims::MAX_DECEL_MPS2,
+        aims::COMFORT_TOLERANCE * 100.0,
         aims::MAX_JERK_MPS3,
-        aims::COMFORT_TOLERANCE * 100.0
     ));
     out
 }

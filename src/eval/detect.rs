@@ -346,16 +346,18 @@ mod rendered {
         let mut errors = Vec::new();
         let mut gap = 20.0;
         while gap < 70.0 {
-            let (dets, truth) =
-                detect_in(&format!("{{ lane: 1, gap_m: {gap}, speed_mps: 0, color: [200, 30, 35] }}"), 0.0, FrameLook::PLAIN);
+            let (dets, truth) = detect_in(
+                &format!("{{ lane: 1, gap_m: {gap}, speed_mps: 0, color: [200, 30, 35] }}"),
+                0.0,
+                FrameLook::PLAIN,
+            );
             let x = truth.objects[0].position_in_ego_m[0];
             let d = dets.first().unwrap_or_else(|| panic!("gap {gap}: no detection")).distance_m;
             errors.push((x, (d - x) / x));
             gap += 0.61;
         }
-        let worst = |lo: f64, hi: f64| {
-            errors.iter().filter(|e| e.0 >= lo && e.0 < hi).map(|e| e.1.abs()).fold(0.0, f64::max)
-        };
+        let worst =
+            |lo: f64, hi: f64| errors.iter().filter(|e| e.0 >= lo && e.0 < hi).map(|e| e.1.abs()).fold(0.0, f64::max);
         assert!(worst(20.0, 58.0) < 0.012, "to 58 m: {errors:?}");
         assert!(worst(58.0, 75.0) < 0.04, "58-75 m: {errors:?}");
     }

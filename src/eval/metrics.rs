@@ -9,7 +9,10 @@ use crate::msg::AccMode;
 
 /// The aims of issue 5 (docs/control.md).
 pub mod aims {
-    pub const TIME_GAP_RMS_S: f64 = 0.1;
+    pub const TIME_GAP_RMS_S: f64 = 0.05;
+    /// Settled behind a lead that holds its speed, the ego's acceleration stays this close to
+    /// the lead's.
+    pub const MAX_ACCEL_SWING_MPS2: f64 = 0.3;
     pub const MAX_ACCEL_MPS2: f64 = 2.0;
     pub const MAX_DECEL_MPS2: f64 = 3.5;
     pub const MAX_JERK_MPS3: f64 = 2.5;
@@ -23,6 +26,28 @@ pub mod aims {
 const STEADY_S: f64 = 10.0;
 /// Samples this close (before, after) to an emergency belong to it.
 const EMERGENCY_MARGIN_S: (f64, f64) = (0.1, 1.5);
+/// Braking harder than this with nothing in the lane within twice the time gap (nor closing
+/// fast on something farther) is phantom braking (issue 16), unless a vehicle was there
+/// within PHANTOM_GRACE_S before.
+const PHANTOM_DECEL_MPS2: f64 = 1.0;
+const PHANTOM_GRACE_S: f64 = 1.0;
+/// A vehicle farther than that still warrants braking when matching its speed short of it
+/// needs this much.
+const WARRANTED_BRAKING_MPS2: f64 = 0.5;
+/// An emergency is warranted by a vehicle in the lane closing with a TTC below this, or
+/// nearer than half the time gap, from EMERGENCY_LOOKBACK_S before it starts to its end.
+const WARRANTED_TTC_S: f64 = 5.0;
+const EMERGENCY_LOOKBACK_S: f64 = 0.5;
+/// Standing still with nothing in the lane within the standstill distance plus this, for
+/// longer than STANDSTILL_GRACE_S, is stopping for nothing.
+const STANDSTILL_CLEAR_M: f64 = 15.0;
+const STANDSTILL_GRACE_S: f64 = 3.0;
+/// Settled: the lead has held its speed within this band for this long.
+const SETTLED_S: f64 = 10.0;
+const SETTLED_SPEED_BAND_MPS: f64 = 0.3;
+const SETTLED_AHEAD_S: f64 = 1.0;
+/// The lead's acceleration is taken over this window of its speed.
+const LEAD_ACCEL_WINDOW_S: f64 = 0.5;
 /// Jerk is taken over this window of measured acceleration.
 const JERK_WINDOW_S: f64 = 0.1;
 /// Below this speed comfort is not judged: a car stopping on its brakes has a jerk spike at the
@@ -58,6 +83,17 @@ pub struct Metrics {
     pub max_jerk_mps3: f64,
     pub emergency_s: f64,
     pub max_decel_in_emergency_mps2: f64,
+    /// Emergencies with no vehicle in the ego's lane (ground truth) that needed one.
+    pub unwarranted_emergencies: u64,
+    /// Seconds of braking beyond 1 m/s2 with nothing in the lane within twice the time gap.
+    pub phantom_braking_s: f64,
+    /// Seconds standing still with nothing ahead to wait for.
+    pub standstill_for_nothing_s: f64,
+    /// Settled behind a lead that holds its speed (within 0.3 m/s for 10 s): the largest
+    /// difference between the ego's and the lead's acceleration.
+    pub max_accel_swing_mps2: Option<f64>,
+    /// Collisions among traffic vehicles (not the ego's; from the simulator's report).
+    pub traffic_collisions: u64,
     pub checks: Vec<Check>,
     pub pass: bool,
 }
@@ -82,6 +118,24 @@ struct Tally {
     /// speed mode at the same set speed: (lead id or set speed, sample index).
     lead_since: Option<(u32, usize)>,
     speed_since: Option<(f64, usize)>,
+    /// What a driver feels (issue 16).
+    feel: Feel,
+}
+
+/// Braking and stopping without cause, emergencies without need, swings while following.
+#[derive(Default)]
+struct Feel {
+    unwarranted_emergencies: u64,
+    /// The emergency under way: whether a vehicle has warranted it yet.
+    emergency: Option<bool>,
+    /// When a vehicle last needed an emergency, and was last near enough to brake for.
+    last_needed_t: Option<f64>,
+    last_near_t: Option<f64>,
+    last_ahead_t: Option<f64>,
+    phantom_s: f64,
+    standstill_s: f64,
+    /// Behind a lead that has held its speed for SETTLED_S: |ego's - lead's acceleration|.
+    max_swing: Option<f64>,
 }
 
 /// Steady following: the same lead for 2 x STEADY_S (time to settle), its speed within 1 m/s
@@ -119,6 +173,77 @@ impl Tally {
         let from = self.lead_since.map_or(i, |(_, from)| from);
         if x.mode == AccMode::Follow && x.speed_mps > 3.0 && steady_lead(&s[from..=i], x) {
             self.gap_errors.push((tl.gap_m - standstill_m) / x.speed_mps - x.time_gap_s);
+            // The lead's acceleration over the last LEAD_ACCEL_WINDOW_S, against the ego's.
+            let lead_speed = |w: &Sample| w.speed_mps + w.truth.map_or(0.0, |t| t.relative_speed_mps);
+            // Settled behind a lead holding its speed: the ego's acceleration stays with the
+            // lead's (a limit cycle shows here; following a lead's speed changes does not).
+            // (The trace is judged whole: the lead must also hold its speed a little beyond now,
+            // so the onset of its next change, which the ego answers at once, is not counted.)
+            let ahead = s[i..]
+                .iter()
+                .take_while(|w| w.t_s <= x.t_s + SETTLED_AHEAD_S && w.truth.is_some_and(|t| t.id == tl.id));
+            let window = s[from..=i].iter().filter(|w| w.t_s >= x.t_s - SETTLED_S).chain(ahead);
+            let (lo, hi) = window.map(lead_speed).fold((f64::MAX, f64::MIN), |(lo, hi), v| (lo.min(v), hi.max(v)));
+            let settled = x.t_s - s[from].t_s >= SETTLED_S + STEADY_S && hi - lo <= SETTLED_SPEED_BAND_MPS;
+            if let Some(p) = s[from..i].iter().rev().find(|p| x.t_s - p.t_s >= LEAD_ACCEL_WINDOW_S).filter(|_| settled)
+            {
+                let lead_accel = (lead_speed(x) - lead_speed(p)) / (x.t_s - p.t_s);
+                let swing = (x.accel_mps2 - lead_accel).abs();
+                self.feel.max_swing = Some(self.feel.max_swing.map_or(swing, |m: f64| m.max(swing)));
+            }
+        }
+    }
+
+    /// What a driver would feel at sample `i` (`dt` apart): emergencies nothing in the lane
+    /// warranted, braking beyond PHANTOM_DECEL_MPS2 with nothing within twice the time gap,
+    /// standing still with nothing ahead.
+    fn feel(&mut self, s: &[Sample], i: usize, dt: f64, standstill_m: f64) {
+        let x = &s[i];
+        let f = &mut self.feel;
+        if let Some(tl) = x.truth {
+            let closing = -tl.relative_speed_mps;
+            let ttc = if closing > 0.1 { tl.gap_m.max(0.0) / closing } else { f64::INFINITY };
+            if ttc < WARRANTED_TTC_S || tl.gap_m < standstill_m + 0.5 * x.time_gap_s * x.speed_mps {
+                f.last_needed_t = Some(x.t_s);
+            }
+            // Near enough to brake for: within twice the time gap, or closing so fast that
+            // matching its speed short of the standstill distance needs real braking (a
+            // stopped car far ahead at motorway speed).
+            let room = (tl.gap_m - standstill_m).max(0.1);
+            let needed = if closing > 0.0 { closing * closing / (2.0 * room) } else { 0.0 };
+            if tl.gap_m <= standstill_m + 2.0 * x.time_gap_s * x.speed_mps || needed >= WARRANTED_BRAKING_MPS2 {
+                f.last_near_t = Some(x.t_s);
+            }
+            if tl.gap_m <= standstill_m + STANDSTILL_CLEAR_M {
+                f.last_ahead_t = Some(x.t_s);
+            }
+        }
+        let since = |t: Option<f64>| t.map_or(f64::INFINITY, |t| x.t_s - t);
+        // Emergencies: judged at their end, warranted by need from just before their start.
+        if x.mode == AccMode::Emergency {
+            let needed = since(f.last_needed_t) <= EMERGENCY_LOOKBACK_S;
+            f.emergency = Some(f.emergency.unwrap_or(false) || needed);
+        } else if let Some(warranted) = f.emergency.take() {
+            f.unwarranted_emergencies += u64::from(!warranted);
+        }
+        // Braking for nothing: not while slowing to a lower set speed or on stale inputs (a
+        // fault, said by a warning), nor just after a vehicle left the lane.
+        let slowing_to_set = x.mode == AccMode::Speed && x.speed_mps > x.set_speed_mps + 0.5;
+        let deliberate = matches!(x.mode, AccMode::Off | AccMode::Stale) || slowing_to_set;
+        if x.accel_mps2 < -PHANTOM_DECEL_MPS2
+            && x.speed_mps > COMFORT_MIN_SPEED_MPS
+            && !deliberate
+            && since(f.last_near_t) > PHANTOM_GRACE_S
+        {
+            f.phantom_s += dt;
+        }
+        if x.speed_mps < 0.5
+            && x.mode != AccMode::Off
+            && x.set_speed_mps > 1.0
+            && since(f.last_ahead_t) > STANDSTILL_GRACE_S
+            && x.t_s - s[0].t_s > STANDSTILL_GRACE_S
+        {
+            f.standstill_s += dt;
         }
     }
 
@@ -195,6 +320,25 @@ impl Tally {
             aim: format!("<= {}", aims::MAX_JERK_MPS3),
             pass: self.max_jerk <= aims::MAX_JERK_MPS3,
         });
+        // What a driver feels (issue 16): each must be zero.
+        let f = &self.feel;
+        let none = |name: &str, value: f64| Check {
+            name: name.into(),
+            value: Some(value),
+            aim: "0".into(),
+            pass: value == 0.0,
+        };
+        checks.push(none("unwarranted emergencies", f.unwarranted_emergencies as f64));
+        checks.push(none("phantom braking (s)", f.phantom_s));
+        checks.push(none("standstill with nothing ahead (s)", f.standstill_s));
+        if let Some(swing) = f.max_swing {
+            checks.push(Check {
+                name: "acceleration swing in steady following (m/s2)".into(),
+                value: Some(swing),
+                aim: format!("<= {}", aims::MAX_ACCEL_SWING_MPS2),
+                pass: swing <= aims::MAX_ACCEL_SWING_MPS2,
+            });
+        }
         checks
     }
 }
@@ -228,6 +372,10 @@ impl Metrics {
             tally.lead(s, i, trace.standstill_m);
             tally.speed_mode(s, i);
             tally.comfort(s, i, jerk_lag, near_emergency(s[i].t_s));
+            tally.feel(s, i, dt, trace.standstill_m);
+        }
+        if let Some(warranted) = tally.feel.emergency.take() {
+            tally.feel.unwarranted_emergencies += u64::from(!warranted);
         }
         let time_gap_rms = rms(&tally.gap_errors);
         let checks = tally.checks(trace.collisions, time_gap_rms);
@@ -245,6 +393,11 @@ impl Metrics {
             max_jerk_mps3: tally.max_jerk,
             emergency_s: emergency_times.len() as f64 * dt,
             max_decel_in_emergency_mps2: tally.max_em_decel,
+            unwarranted_emergencies: tally.feel.unwarranted_emergencies,
+            phantom_braking_s: tally.feel.phantom_s,
+            standstill_for_nothing_s: tally.feel.standstill_s,
+            max_accel_swing_mps2: tally.feel.max_swing,
+            traffic_collisions: trace.traffic_collisions,
             pass: checks.iter().all(|c| c.pass),
             checks,
         }

@@ -44,7 +44,10 @@ impl Camera {
         self.renderer.render(world.road(), world.ego(), world.vehicles(), look, &mut self.rgb);
         let found = self.detector.detect(&self.rgb);
         let detections = self.tracker.update(&found, t_s);
-        PerceptionFrame::from_detections(t_s, &crate::msg::Detections { frame_seq: 0, frame_stamp_pub_ns: 0, detections })
+        PerceptionFrame::from_detections(
+            t_s,
+            &crate::msg::Detections { frame_seq: 0, frame_stamp_pub_ns: 0, detections },
+        )
     }
 }
 
@@ -56,7 +59,8 @@ pub fn run(scenario: Scenario, settings: AccSettings, physics_hz: u32, camera_hz
     let mut world = World::new(scenario, seed, physics_hz);
     let mut camera = (settings.perception == PerceptionSource::Camera).then(|| Camera::new(&world));
     let mut ctl = Controller::new(settings);
-    let mut trace = Trace { standstill_m, samples: Vec::new(), collisions: 0, end: String::new() };
+    let mut trace =
+        Trace { standstill_m, samples: Vec::new(), collisions: 0, traffic_collisions: 0, end: String::new() };
     let mut truth = None;
     loop {
         let k = world.step_count();
@@ -88,6 +92,7 @@ pub fn run(scenario: Scenario, settings: AccSettings, physics_hz: u32, camera_hz
         };
         let events = world.step(EgoInput::Command(cmd));
         trace.collisions += events.collisions.iter().filter(|c| c.involves_ego()).count() as u64;
+        trace.traffic_collisions += events.collisions.iter().filter(|c| !c.involves_ego()).count() as u64;
         if let Some(end) = events.ended {
             trace.end = end.reason;
             return trace;
@@ -111,6 +116,7 @@ mod tests {
             let settings = AccSettings {
                 perception: PerceptionSource::Camera,
                 set_speed_mps: scenario.ego.set_speed_mps.unwrap_or(scenario.ego.speed_mps),
+                time_gap_s: scenario.ego.time_gap_s.unwrap_or(AccSettings::default().time_gap_s),
                 ..AccSettings::default()
             };
             let trace = super::run(scenario, settings, 100, 20.0);
@@ -130,6 +136,7 @@ mod tests {
             let settings = AccSettings {
                 perception: PerceptionSource::GroundTruth,
                 set_speed_mps: scenario.ego.set_speed_mps.unwrap_or(scenario.ego.speed_mps),
+                time_gap_s: scenario.ego.time_gap_s.unwrap_or(AccSettings::default().time_gap_s),
                 ..AccSettings::default()
             };
             let trace = super::run(scenario, settings, 100, 20.0);
@@ -140,4 +147,3 @@ mod tests {
         }
     }
 }
-

@@ -105,6 +105,7 @@ struct Recorded {
     scenario: Option<String>,
     clock: Option<SimMode>,
     set_speed_mps: Option<f64>,
+    time_gap_s: Option<f64>,
     outputs: Outputs,
     inputs: u64,
 }
@@ -131,6 +132,7 @@ impl Recorded {
                 MessageKind::AccStatus => {
                     if let Ok(s) = msg::decode::<AccStatus>(&bytes) {
                         rec.set_speed_mps.get_or_insert(s.msg.set_speed_mps);
+                        rec.time_gap_s.get_or_insert(s.msg.time_gap_s);
                     }
                 }
                 _ => {}
@@ -476,6 +478,7 @@ pub async fn run(path: &Path, connect: &ConnectArgs, dir: &Path, progress: &mut 
         set_speed_mps: recorded.set_speed_mps.ok_or_else(|| {
             anyhow!("{} has no acc/status: the ACC's set speed is unknown (record every key)", path.display())
         })?,
+        time_gap_s: recorded.time_gap_s,
         faults: None,
     };
     let mut lp = LoopRun::open(spec.clone(), Network::User(connect), &dir.join("logs"), "resim").await?;

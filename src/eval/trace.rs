@@ -74,7 +74,10 @@ impl Sample {
 pub struct Trace {
     pub standstill_m: f64,
     pub samples: Vec<Sample>,
+    /// The ego's collisions.
     pub collisions: u64,
+    /// Collisions among traffic vehicles.
+    pub traffic_collisions: u64,
     /// Why the scenario ended.
     pub end: String,
 }
@@ -149,7 +152,7 @@ pub fn build_trace(rec: &Recorded, ego_front: f64, standstill_m: f64) -> Trace {
         });
         samples.push(Sample::new(t as f64 / 1e9, &st.msg, &status.msg, truth));
     }
-    Trace { standstill_m, samples, collisions: 0, end: String::new() }
+    Trace { standstill_m, samples, collisions: 0, traffic_collisions: 0, end: String::new() }
 }
 
 impl Trace {
@@ -199,6 +202,7 @@ pub fn judge(rec: &Recorded, scenario: &Scenario, sim: Option<&SimReport>, end_i
     let front_m = ego.size_m[0] - ego.rear_overhang_m;
     let mut trace = build_trace(rec, front_m, AccSettings::default().standstill_m);
     trace.collisions = sim.map_or(0, |s| s.ego_collisions).max(rec.collisions);
+    trace.traffic_collisions = sim.map_or(0, |s| s.traffic_collisions);
     trace.end = sim.and_then(|s| s.end.as_ref()).map_or_else(|| end_if_unknown.to_string(), |e| e.reason.clone());
     let metrics = (trace.samples.len() > MIN_SAMPLES).then(|| Metrics::of(&trace));
     Judged { trace, metrics }

@@ -61,6 +61,8 @@ pub struct LoopSpec {
     pub clock: ClockMode,
     pub perception: PerceptionSource,
     pub set_speed_mps: f64,
+    /// The ACC's time gap; None: its own setting.
+    pub time_gap_s: Option<f64>,
     /// Faults every node injects into what it receives (`--faults`); None: none.
     pub faults: Option<FaultProfile>,
 }
@@ -285,6 +287,9 @@ impl LoopRun {
             "--perception".into(),
             spec.perception.name().into(),
         ];
+        if let Some(h) = spec.time_gap_s {
+            acc_args.extend(["--time-gap".into(), h.to_string()]);
+        }
         if spec.clock == ClockMode::Lockstep {
             acc_args.push("--lockstep".into());
         }

@@ -71,6 +71,13 @@ pub struct FrameDetection {
 /// Largest step of the contact row between neighbouring columns of one vehicle, pixels.
 const JUMP_PX: i64 = 3;
 
+/// A contact shadow is lit by the sky: never darker than this share of the sunlit road
+/// (anything darker measured in the band is a tyre or a black body, not ground).
+const MIN_BAND_RATIO: f32 = 0.3;
+
+/// How far one frame's measurement of the band's brightness moves the detector's estimate.
+const BAND_RATIO_GAIN: f32 = 0.05;
+
 /// Rows within which a contact profile counts as flat.
 const FLAT_PX: u32 = 2;
 
@@ -160,7 +167,10 @@ impl Detector {
         let mut ratios: Vec<f32> = kept.iter().filter_map(|(i, _)| self.band_ratio_of(w, h, &components[*i])).collect();
         if !ratios.is_empty() {
             ratios.sort_by(f32::total_cmp);
-            let ratio = ratios[ratios.len() / 2].clamp(0.05, self.params.dark_ratio);
+            // Lighting changes slowly; one frame's measurement (a tyre or a partly covered
+            // pixel in it) must not move every other vehicle's range: a slow average.
+            let measured = ratios[ratios.len() / 2].clamp(MIN_BAND_RATIO, self.params.dark_ratio);
+            let ratio = self.band_ratio + BAND_RATIO_GAIN * (measured - self.band_ratio);
             if ratio != self.band_ratio {
                 self.band_ratio = ratio;
                 kept = self.vehicles(rgb, w, h, &components);
@@ -349,7 +359,9 @@ impl Detector {
         let (u0, u1) = if c.flat_u1 >= c.flat_u0 + 3 { (c.flat_u0 + 1, c.flat_u1 - 1) } else { (c.flat_u0, c.flat_u1) };
         let top = (c.v1 as usize).saturating_sub(FLAT_PX as usize + 1);
         (u0 as usize..=u1 as usize)
-            .filter_map(|u| (top..=(c.v1 as usize).min(h - 1)).rev().find(|&v| luma(u, v) < self.dark).map(|lo| (u, lo)))
+            .filter_map(|u| {
+                (top..=(c.v1 as usize).min(h - 1)).rev().find(|&v| luma(u, v) < self.dark).map(|lo| (u, lo))
+            })
             .filter(|&(_, lo)| lo + 3 < h)
             .collect()
     }
@@ -364,12 +376,15 @@ impl Detector {
     fn band_ratio_of(&self, w: usize, h: usize, c: &Component) -> Option<f32> {
         let columns = self.edge_columns(w, h, c);
         let dark = |u: usize, v: usize| self.luma[v * w + u] < self.dark;
-        let inside: Vec<u8> = columns
+        // The middle half of the rear edge: the tyres, darker than any shadow, stand at its
+        // sides (seen from behind or, for a vehicle in the next lane, a little from the side).
+        let quarter = columns.len() / 4;
+        let inside: Vec<u8> = columns[quarter..columns.len() - quarter]
             .iter()
             .filter(|&&(u, lo)| lo >= 3 && dark(u, lo - 1) && dark(u, lo - 2) && dark(u, lo - 3))
             .map(|&(u, lo)| self.luma[(lo - 2) * w + u])
             .collect();
-        if inside.len() < 5 || inside.len() * 2 < columns.len() {
+        if inside.len() < 5 || inside.len() * 4 < columns.len() {
             return None;
         }
         Some(median(inside)? / self.road_below(w, &columns)?.max(1.0))

@@ -91,6 +91,10 @@ pub struct EgoSpec {
     /// default: the start speed.
     #[serde(default)]
     pub set_speed_mps: Option<f64>,
+    /// The time gap a controller keeps to the lead (`slipstream up` and `eval acc` set the ACC
+    /// to it), 0.8 to 3.0 s; default: the ACC's own setting.
+    #[serde(default)]
+    pub time_gap_s: Option<f64>,
     #[serde(default)]
     pub class: ClassSpec,
     /// The simulator steers the ego along its lane; vehicle/control's steer adds to it.
@@ -317,6 +321,9 @@ impl Scenario {
         }
         if !speed_ok(self.ego.speed_mps) {
             return err("ego.speed_mps", format!("{} m/s", self.ego.speed_mps), "use 0 to 70 m/s");
+        }
+        if let Some(h) = self.ego.time_gap_s.filter(|h| !(0.8..=3.0).contains(h)) {
+            return err("ego.time_gap_s", format!("{h} s"), "use 0.8 to 3.0 s (ISO 15622 asks at least 0.8 s)");
         }
         Ok(())
     }

@@ -216,6 +216,7 @@ pub fn run(args: &SoakArgs, connect: &crate::config::ConnectArgs) -> Result<Soak
         clock: args.mode,
         perception: args.perception,
         set_speed_mps: 30.0,
+        time_gap_s: None,
         faults: None,
     };
     let namespace = format!("soak-{}", std::process::id());

@@ -116,6 +116,8 @@ pub struct UpReport {
     pub ended: String,
     pub interrupted: bool,
     pub collisions: u64,
+    /// Collisions among traffic vehicles.
+    pub traffic_collisions: u64,
     pub sim_time_s: f64,
     pub wall_time_s: f64,
     pub real_time_factor: f64,
@@ -370,6 +372,7 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
         clock: args.mode,
         perception: args.perception,
         set_speed_mps: scenario.ego.set_speed_mps.unwrap_or(scenario.ego.speed_mps),
+        time_gap_s: scenario.ego.time_gap_s,
         faults: args.faults.profile()?,
     };
     let faults = spec.faults.as_ref().map(|p| p.summary());
@@ -440,6 +443,7 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
         ended: trace.end.clone(),
         interrupted,
         collisions: trace.collisions,
+        traffic_collisions: trace.traffic_collisions,
         sim_time_s,
         wall_time_s: wall,
         real_time_factor: sim_time_s / wall.max(1e-9),
@@ -511,10 +515,16 @@ pub fn summary(r: &UpReport) -> String {
     let f = fmt_opt;
     let mut s =
         format!(
-        "\n{} ({} clock, {} perception): {}\n  {:.1} s simulated in {:.1} s (real-time factor {:.2}); collisions {}\n",
+        "\n{} ({} clock, {} perception): {}\n  {:.1} s simulated in {:.1} s (real-time factor {:.2}); collisions {} (traffic among itself: {})\n",
         r.scenario,
         r.mode.name(),
-        r.perception.name(), r.ended, r.sim_time_s, r.wall_time_s, r.real_time_factor, r.collisions
+        r.perception.name(),
+        r.ended,
+        r.sim_time_s,
+        r.wall_time_s,
+        r.real_time_factor,
+        r.collisions,
+        r.traffic_collisions
     );
     if let Some(m) = &r.metrics {
         let [gap, ttc, time_gap, speed, accel, decel, jerk] = m.headline();

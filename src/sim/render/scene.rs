@@ -71,7 +71,11 @@ pub fn ground(road: &Road, ego: &VehicleView) -> Vec<GroundQuad> {
     }
     let line = |s0: f64, s1: f64, d: f64| {
         let h = MARKING_WIDTH_M / 2.0;
-        GroundQuad { corners: [at(s0, d - h), at(s1, d - h), at(s1, d + h), at(s0, d + h)], color: MARKING, smooth: true }
+        GroundQuad {
+            corners: [at(s0, d - h), at(s1, d - h), at(s1, d + h), at(s0, d + h)],
+            color: MARKING,
+            smooth: true,
+        }
     };
     let hw = road.half_width_m();
     // Solid edge lines.
