@@ -105,7 +105,6 @@ struct Recorded {
     scenario: Option<String>,
     clock: Option<SimMode>,
     set_speed_mps: Option<f64>,
-    time_gap_s: Option<f64>,
     outputs: Outputs,
     inputs: u64,
 }
@@ -132,7 +131,6 @@ impl Recorded {
                 MessageKind::AccStatus => {
                     if let Ok(s) = msg::decode::<AccStatus>(&bytes) {
                         rec.set_speed_mps.get_or_insert(s.msg.set_speed_mps);
-                        rec.time_gap_s.get_or_insert(s.msg.time_gap_s);
                     }
                 }
                 _ => {}
@@ -478,7 +476,13 @@ pub async fn run(path: &Path, connect: &ConnectArgs, dir: &Path, progress: &mut 
         set_speed_mps: recorded.set_speed_mps.ok_or_else(|| {
             anyhow!("{} has no acc/status: the ACC's set speed is unknown (record every key)", path.display())
         })?,
-        time_gap_s: recorded.time_gap_s,
+        // The scenario's own time gap, as `up` gave it; otherwise today's ACC settings decide
+        // (a changed settings file is what a re-simulation compares).
+        time_gap_s: recorded
+            .scenario
+            .as_deref()
+            .and_then(|name| crate::sim::Scenario::find(name).ok())
+            .and_then(|s| s.ego.time_gap_s),
         faults: None,
     };
     let mut lp = LoopRun::open(spec.clone(), Network::User(connect), &dir.join("logs"), "resim").await?;
