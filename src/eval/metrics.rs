@@ -403,3 +403,91 @@ impl Metrics {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::eval::trace::TruthLead;
+
+    const DT: f64 = 0.01;
+
+    /// A trace at 100 Hz from `f(t)` = (speed, accel, mode, truth lead as (gap, relative speed)).
+    fn trace(seconds: f64, f: impl Fn(f64) -> (f64, f64, AccMode, Option<(f64, f64)>)) -> Trace {
+        let samples = (0..(seconds / DT) as usize)
+            .map(|i| {
+                let t_s = i as f64 * DT;
+                let (speed_mps, accel_mps2, mode, truth) = f(t_s);
+                Sample {
+                    t_s,
+                    speed_mps,
+                    accel_mps2,
+                    mode,
+                    target_accel_mps2: accel_mps2,
+                    set_speed_mps: 30.0,
+                    time_gap_s: 1.8,
+                    acc_gap_m: truth.map(|t| t.0),
+                    truth: truth.map(|(gap_m, relative_speed_mps)| TruthLead { id: 1, gap_m, relative_speed_mps }),
+                }
+            })
+            .collect();
+        Trace { standstill_m: 5.0, samples, collisions: 0, traffic_collisions: 0, end: String::new() }
+    }
+
+    fn failed(m: &Metrics) -> Vec<&str> {
+        m.checks.iter().filter(|c| !c.pass).map(|c| c.name.as_str()).collect()
+    }
+
+    #[test]
+    fn braking_with_nothing_in_the_lane_is_phantom_braking() {
+        let braking = |t: f64| if (10.0..12.0).contains(&t) { -2.0 } else { 0.0 };
+        let empty = Metrics::of(&trace(30.0, |t| (25.0, braking(t), AccMode::Follow, None)));
+        assert!((empty.phantom_braking_s - 2.0).abs() < 0.05, "{}", empty.phantom_braking_s);
+        assert!(failed(&empty).contains(&"phantom braking (s)"));
+        // The same braking for a car 40 m ahead, or for a stopped car 150 m ahead at 25 m/s
+        // (stopping short of it needs 2.2 m/s2), is warranted.
+        let near = Metrics::of(&trace(30.0, |t| (25.0, braking(t), AccMode::Follow, Some((40.0, 0.0)))));
+        let stopped = Metrics::of(&trace(30.0, |t| (25.0, braking(t), AccMode::Follow, Some((150.0, -25.0)))));
+        assert_eq!((near.phantom_braking_s, stopped.phantom_braking_s), (0.0, 0.0));
+        // Slowing to a lower set speed is not phantom braking.
+        let slowing = Metrics::of(&trace(30.0, |t| (35.0, braking(t), AccMode::Speed, None)));
+        assert_eq!(slowing.phantom_braking_s, 0.0);
+    }
+
+    #[test]
+    fn an_emergency_nothing_in_the_lane_needed_is_unwarranted() {
+        let mode = |t: f64| if (10.0..11.0).contains(&t) { AccMode::Emergency } else { AccMode::Follow };
+        let far = Metrics::of(&trace(20.0, |t| (25.0, 0.0, mode(t), Some((80.0, 0.0)))));
+        assert_eq!(far.unwarranted_emergencies, 1);
+        assert!(failed(&far).contains(&"unwarranted emergencies"));
+        let closing = Metrics::of(&trace(20.0, |t| (25.0, 0.0, mode(t), Some((30.0, -15.0)))));
+        assert_eq!(closing.unwarranted_emergencies, 0);
+    }
+
+    #[test]
+    fn standing_still_with_nothing_ahead_is_stopping_for_nothing() {
+        let empty = Metrics::of(&trace(20.0, |_| (0.0, 0.0, AccMode::Follow, None)));
+        assert!(empty.standstill_for_nothing_s > 15.0, "{}", empty.standstill_for_nothing_s);
+        assert!(failed(&empty).contains(&"standstill with nothing ahead (s)"));
+        let queue = Metrics::of(&trace(20.0, |_| (0.0, 0.0, AccMode::Follow, Some((6.0, 0.0)))));
+        assert_eq!(queue.standstill_for_nothing_s, 0.0);
+    }
+
+    #[test]
+    fn a_limit_cycle_behind_a_steady_lead_is_an_acceleration_swing() {
+        // The ego's speed swings around the lead's 25 m/s every 5 s; the lead holds its speed.
+        let cycling = |amplitude: f64| {
+            move |t: f64| {
+                let w = std::f64::consts::TAU / 5.0;
+                let accel = amplitude * (w * t).sin();
+                let speed = 25.0 - amplitude / w * (w * t).cos();
+                (speed, accel, AccMode::Follow, Some((50.0, 25.0 - speed)))
+            }
+        };
+        let cycle = Metrics::of(&trace(60.0, cycling(1.0)));
+        assert!(cycle.max_accel_swing_mps2.is_some_and(|s| s > 0.9), "{:?}", cycle.max_accel_swing_mps2);
+        assert!(failed(&cycle).contains(&"acceleration swing in steady following (m/s2)"));
+        let calm = Metrics::of(&trace(60.0, cycling(0.05)));
+        assert!(calm.max_accel_swing_mps2.is_some_and(|s| s < 0.1), "{:?}", calm.max_accel_swing_mps2);
+        assert!(!failed(&calm).contains(&"acceleration swing in steady following (m/s2)"));
+    }
+}
