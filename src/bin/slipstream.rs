@@ -134,7 +134,9 @@ enum EvalCommand {
     /// Adaptive cruise control: runs slipstream-sim (lockstep, fast), slipstream-detect and
     /// slipstream-acc as separate processes over Zenoh through each scenario and reports
     /// collisions, minimum gap and TTC, time-gap and speed errors, and comfort (accel, decel,
-    /// jerk outside emergencies) against the aims; exits with 1 when a scenario misses one.
+    /// jerk outside emergencies) and what a driver feels (unwarranted emergencies, phantom
+    /// braking, stopping for nothing, acceleration swings behind a steady lead) against the
+    /// aims, with traffic collisions counted; exits with 1 when a scenario misses one.
     /// The nodes use loopback ports and a namespace of their own (the topic config, -t, is
     /// passed on; connection flags are not). Example:
     ///

@@ -5,7 +5,7 @@
 //! vehicle/state, acc/status, objects and sim/events from a session of its own, and judges the
 //! run against the ground truth ([`super::trace::judge`], [`super::Metrics`]).
 //!
-//! The nodes' logs go to a directory per scenario under `--logs` (default: a temporary
+//! The nodes' logs go to a directory per scenario and perception under `--logs` (default: a temporary
 //! directory, removed when every scenario passed and kept, with its path printed, when not).
 
 use std::path::{Path, PathBuf};
@@ -31,7 +31,8 @@ pub struct EvalAccArgs {
     /// frames) or ground-truth (the simulator's objects)
     #[arg(long, value_enum, default_value = "camera")]
     pub perception: PerceptionSource,
-    /// Write a PNG per scenario here (ego speed, lead speed, gap, desired gap, acceleration)
+    /// Write a PNG per scenario here, <scenario>-<perception>.png (ego speed, lead speed, gap,
+    /// desired gap, acceleration)
     #[arg(long, value_name = "DIR")]
     pub plots: Option<PathBuf>,
     /// Print JSON instead of the table
@@ -43,8 +44,8 @@ pub struct EvalAccArgs {
     /// Wall-clock limit per scenario, seconds
     #[arg(long, default_value_t = 600.0)]
     pub timeout: f64,
-    /// Keep the nodes' logs here, one directory per scenario [default: a temporary directory,
-    /// removed when every scenario passes]
+    /// Keep the nodes' logs here, one directory per scenario and perception [default: a
+    /// temporary directory, removed when every scenario passes]
     #[arg(long, value_name = "DIR")]
     pub logs: Option<PathBuf>,
     #[command(flatten)]
