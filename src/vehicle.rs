@@ -115,14 +115,12 @@ impl VehicleParams {
     }
 }
 
-/// The share of the way from the applied toward the commanded throttle or brake that a lag of
-/// `lag_s` covers in `dt_s` (1 without lag).
-pub fn lag_step(lag_s: f64, dt_s: f64) -> f64 {
-    if lag_s <= 0.0 {
-        1.0
-    } else {
-        1.0 - (-dt_s / lag_s).exp()
-    }
+/// `applied` one step of `dt_s` later when `commanded` acts through a first-order lag of
+/// `lag_s` (at once without lag): the one place the actuator lag is computed, for the
+/// simulator's vehicles and for whoever models them.
+pub fn lag_toward(applied: f64, commanded: f64, lag_s: f64, dt_s: f64) -> f64 {
+    let share = if lag_s <= 0.0 { 1.0 } else { 1.0 - (-dt_s / lag_s).exp() };
+    applied + (commanded - applied) * share
 }
 
 /// The inverse longitudinal model: throttle and brake (each 0..1, one of them 0) that give

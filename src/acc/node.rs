@@ -561,11 +561,11 @@ mod tests {
         assert!(brakes[19] > 0.0, "brakes: {brakes:?}");
         // The commands lead the target by the actuator lag's compensation; the brake the car
         // applies (the commands through that lag) only grows.
-        let k = crate::vehicle::lag_step(st.ctl.settings().vehicle.actuator_lag_s, WATCHDOG_PERIOD.as_secs_f64());
+        let (lag, dt) = (st.ctl.settings().vehicle.actuator_lag_s, WATCHDOG_PERIOD.as_secs_f64());
         let applied: Vec<f64> = brakes
             .iter()
             .scan(0.0, |b, &c| {
-                *b += (c as f64 - *b) * k;
+                *b = crate::vehicle::lag_toward(*b, c as f64, lag, dt);
                 Some(*b)
             })
             .collect();

@@ -140,7 +140,7 @@ pub(crate) async fn run_one(
         scenario.duration_s = d;
     }
     let name = scenario.name.clone();
-    let set_speed = scenario.ego.set_speed_mps.unwrap_or(scenario.ego.speed_mps);
+    let set_speed = scenario.ego.controller_set_speed_mps();
     let spec = LoopSpec {
         scenario: scenario_arg.to_string(),
         duration_s: scenario.duration_s,

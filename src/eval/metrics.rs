@@ -4,7 +4,7 @@
 use serde::Serialize;
 
 use super::fmt_opt;
-use super::trace::{Sample, Trace};
+use super::trace::{Sample, Trace, TruthLead};
 use crate::msg::AccMode;
 
 /// The aims of issue 5 (docs/control.md).
@@ -138,6 +138,12 @@ struct Feel {
     max_swing: Option<f64>,
 }
 
+/// Time to collision with the true lead, when it closes in (faster than 0.1 m/s).
+fn ttc(tl: &TruthLead) -> Option<f64> {
+    let closing = -tl.relative_speed_mps;
+    (closing > 0.1).then(|| tl.gap_m.max(0.0) / closing)
+}
+
 /// Steady following: the same lead for 2 x STEADY_S (time to settle), its speed within 1 m/s
 /// over the last STEADY_S of `stretch`, which ends at `now`.
 fn steady_lead(stretch: &[Sample], now: &Sample) -> bool {
@@ -163,8 +169,7 @@ impl Tally {
             return;
         };
         self.min_gap = Some(self.min_gap.map_or(tl.gap_m, |m| m.min(tl.gap_m)));
-        if -tl.relative_speed_mps > 0.1 {
-            let ttc = tl.gap_m.max(0.0) / -tl.relative_speed_mps;
+        if let Some(ttc) = ttc(&tl) {
             self.min_ttc = Some(self.min_ttc.map_or(ttc, |m| m.min(ttc)));
         }
         if self.lead_since.is_none_or(|(id, _)| id != tl.id) {
@@ -202,8 +207,9 @@ impl Tally {
         let f = &mut self.feel;
         if let Some(tl) = x.truth {
             let closing = -tl.relative_speed_mps;
-            let ttc = if closing > 0.1 { tl.gap_m.max(0.0) / closing } else { f64::INFINITY };
-            if ttc < WARRANTED_TTC_S || tl.gap_m < standstill_m + 0.5 * x.time_gap_s * x.speed_mps {
+            if ttc(&tl).is_some_and(|t| t < WARRANTED_TTC_S)
+                || tl.gap_m < standstill_m + 0.5 * x.time_gap_s * x.speed_mps
+            {
                 f.last_needed_t = Some(x.t_s);
             }
             // Near enough to brake for: within twice the time gap, or closing so fast that
@@ -407,7 +413,6 @@ impl Metrics {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::eval::trace::TruthLead;
 
     const DT: f64 = 0.01;
 

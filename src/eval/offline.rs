@@ -106,6 +106,17 @@ mod tests {
     use crate::eval::Metrics;
     use crate::sim::scenario::{Scenario, BUILT_IN};
 
+    /// The ACC as `eval acc` sets it up for `scenario`.
+    fn settings_for(scenario: &Scenario, perception: PerceptionSource) -> AccSettings {
+        let default = AccSettings::default();
+        AccSettings {
+            perception,
+            set_speed_mps: scenario.ego.controller_set_speed_mps(),
+            time_gap_s: scenario.ego.time_gap_s.unwrap_or(default.time_gap_s),
+            ..default
+        }
+    }
+
     /// Behind a lead at constant speed the camera ACC settles and stays settled: range from
     /// the contact edge located to a fraction of a row leaves no limit cycle (with whole rows,
     /// 3.5 m apart at 50 m, the acceleration swung between -2.4 and +2 m/s2).
@@ -113,12 +124,7 @@ mod tests {
     fn camera_following_settles_without_a_limit_cycle() {
         for name in ["steady-follow", "curve-follow"] {
             let scenario = Scenario::find(name).unwrap();
-            let settings = AccSettings {
-                perception: PerceptionSource::Camera,
-                set_speed_mps: scenario.ego.set_speed_mps.unwrap_or(scenario.ego.speed_mps),
-                time_gap_s: scenario.ego.time_gap_s.unwrap_or(AccSettings::default().time_gap_s),
-                ..AccSettings::default()
-            };
+            let settings = settings_for(&scenario, PerceptionSource::Camera);
             let trace = super::run(scenario, settings, 100, 20.0);
             let settled: Vec<_> = trace.samples.iter().filter(|s| s.t_s > 20.0).collect();
             assert!(settled.len() > 3000, "{name}: {} samples", settled.len());
@@ -133,12 +139,7 @@ mod tests {
     fn every_built_in_scenario_passes_on_ground_truth_in_one_process() {
         for (name, _) in BUILT_IN {
             let scenario = Scenario::find(name).unwrap();
-            let settings = AccSettings {
-                perception: PerceptionSource::GroundTruth,
-                set_speed_mps: scenario.ego.set_speed_mps.unwrap_or(scenario.ego.speed_mps),
-                time_gap_s: scenario.ego.time_gap_s.unwrap_or(AccSettings::default().time_gap_s),
-                ..AccSettings::default()
-            };
+            let settings = settings_for(&scenario, PerceptionSource::GroundTruth);
             let trace = super::run(scenario, settings, 100, 20.0);
             let m = Metrics::of(&trace);
             let failed: Vec<_> = m.checks.iter().filter(|c| !c.pass).collect();

@@ -13,7 +13,7 @@ use super::dynamics::Actuation;
 use super::rng::SimRng;
 use super::road::Road;
 use super::scenario::Action;
-use crate::vehicle::{actuate_acceleration, lag_step, VehicleParams};
+use crate::vehicle::{actuate_acceleration, lag_toward, VehicleParams};
 
 /// Where a vehicle is and how it moves, as a driver sees it.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -99,8 +99,9 @@ impl Cruise {
         // overshoots the scripted rate.
         let diff = self.target_mps - self.reference_mps;
         let wanted = if diff.abs() <= self.ramp_mps2 * dt_s { 0.0 } else { self.ramp_mps2.copysign(diff) };
-        let change = (wanted - self.reference_accel) * lag_step(params.actuator_lag_s, dt_s);
-        self.reference_accel += change;
+        let lagged = lag_toward(self.reference_accel, wanted, params.actuator_lag_s, dt_s);
+        let change = lagged - self.reference_accel;
+        self.reference_accel = lagged;
         let dv = self.reference_accel * dt_s;
         // Never past the target.
         self.reference_mps += if dv * diff > 0.0 { dv.abs().min(diff.abs()).copysign(diff) } else { dv };
@@ -229,7 +230,8 @@ impl TrafficDriver {
     }
 
     /// Considers a random lane change: to a neighbouring allowed lane where the gap is safe.
-    fn wander(&mut self, road: &Road, me: &Observation, myself: &Neighbour, t_s: f64, others: &[Neighbour]) {
+    /// `others` holds this vehicle too (by its id).
+    fn wander(&mut self, road: &Road, me: &Observation, t_s: f64, others: &[Neighbour]) {
         let Some(w) = &mut self.wander else { return };
         if t_s < w.next_s || self.lane_change.is_some_and(|c| t_s < c.start_s + c.duration_s) {
             return;
@@ -240,7 +242,8 @@ impl TrafficDriver {
             .filter(|l| w.lanes.contains(l))
             .collect();
         let target = options.get(w.rng.below(options.len() as u64) as usize).copied();
-        match target.filter(|l| safe_to_enter(myself, *l, others)) {
+        let myself = others.iter().find(|o| o.id == me.id);
+        match target.filter(|l| myself.is_some_and(|m| safe_to_enter(m, *l, others))) {
             Some(lane) => {
                 w.next_s = t_s + w.mean_interval_s * (0.5 + w.rng.unit());
                 self.change_lane(road, me, lane, t_s, 4.0);
@@ -264,15 +267,7 @@ impl TrafficDriver {
         dt_s: f64,
     ) -> Actuation {
         self.start_actions(road, me, t_s, gap_to_ego_m);
-        let myself = Neighbour {
-            id: me.id,
-            rear_m: me.s_m - params.rear_overhang_m,
-            front_m: me.s_m - params.rear_overhang_m + params.size_m[0],
-            lane: self.lane as i32,
-            target_lane: self.lane as i32,
-            speed_mps: me.speed_mps,
-        };
-        self.wander(road, me, &myself, t_s, others);
+        self.wander(road, me, t_s, others);
         let lead = if self.follow { lead } else { None };
         let (throttle, brake) = self.cruise.longitudinal(params, me.speed_mps, lead, dt_s);
         // During a lane change the pursued point is where the change should have the vehicle

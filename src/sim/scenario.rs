@@ -108,6 +108,11 @@ impl EgoSpec {
     fn default_s() -> f64 {
         50.0
     }
+
+    /// The cruise speed a controller is set to: `set_speed_mps`, else the start speed.
+    pub fn controller_set_speed_mps(&self) -> f64 {
+        self.set_speed_mps.unwrap_or(self.speed_mps)
+    }
 }
 
 /// One scripted traffic vehicle.

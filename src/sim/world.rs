@@ -10,7 +10,7 @@ use super::rng::SimRng;
 use super::road::Road;
 use super::scenario::{ClassSpec, RandomTraffic, Scenario};
 use crate::msg::{ControlCommand, ObjectClass, VehicleState};
-use crate::vehicle::{actuate_acceleration, lag_step, VehicleParams};
+use crate::vehicle::{actuate_acceleration, lag_toward, VehicleParams};
 
 /// The ego's id in ground truth and collisions; traffic is numbered from 1.
 pub const EGO_ID: u32 = 0;
@@ -449,9 +449,9 @@ impl World {
         }
 
         for (b, act) in self.bodies.iter_mut().zip(&actuations) {
-            let k = lag_step(b.params.actuator_lag_s, dt);
-            b.applied.throttle += (act.throttle.clamp(0.0, 1.0) - b.applied.throttle) * k;
-            b.applied.brake += (act.brake.clamp(0.0, 1.0) - b.applied.brake) * k;
+            let lag = b.params.actuator_lag_s;
+            b.applied.throttle = lag_toward(b.applied.throttle, act.throttle.clamp(0.0, 1.0), lag, dt);
+            b.applied.brake = lag_toward(b.applied.brake, act.brake.clamp(0.0, 1.0), lag, dt);
             b.applied.steer = act.steer;
             let state = self.physics.state(b.body);
             let wrench = forces(&b.params, &state, &b.applied, dt);

@@ -371,7 +371,7 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
         duration_s: scenario.duration_s,
         clock: args.mode,
         perception: args.perception,
-        set_speed_mps: scenario.ego.set_speed_mps.unwrap_or(scenario.ego.speed_mps),
+        set_speed_mps: scenario.ego.controller_set_speed_mps(),
         time_gap_s: scenario.ego.time_gap_s,
         faults: args.faults.profile()?,
     };

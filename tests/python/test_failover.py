@@ -12,7 +12,7 @@ import time
 
 import pytest
 from netns import Subnets, can_create_namespaces
-from test_netns import NO_SHM, Hosts, bins, record, start_observer
+from test_netns import NO_SHM, bins, record, running_on, start_observer
 
 why = can_create_namespaces()
 pytestmark = pytest.mark.skipif(why is not None, reason=f"namespace test: {why}")
@@ -30,12 +30,8 @@ def connections(nets, role):
 @pytest.fixture
 def subnets(tmp_path):
     nets = Subnets(LAYOUT)
-    hosts = Hosts(nets, tmp_path / "logs")
-    try:
+    with running_on(nets, tmp_path / "logs") as hosts:
         yield nets, hosts
-    finally:
-        hosts.stop_all()
-        nets.close()
 
 
 def test_killing_one_of_two_meshed_routers_keeps_the_loop_running(subnets, slipstream_bin):

@@ -11,6 +11,7 @@ scouting on inside the namespaces, the nodes find each other with no address con
 after the event and carries a camera frame's detections published after the event. Times are
 written to target/test-reports/netns.json (scripts/test.sh prints them)."""
 
+import contextlib
 import json
 import pathlib
 import signal
@@ -139,15 +140,23 @@ class Hosts:
         return "\n".join(f"--- {f.name}\n{f.read_text(errors='replace')[-1500:]}" for f in sorted(self.logs.iterdir()))
 
 
+@contextlib.contextmanager
+def running_on(net, logs):
+    """Hosts on `net` (a Lan or Subnets); on leaving, every process stopped and the namespaces
+    removed."""
+    hosts = Hosts(net, logs)
+    try:
+        yield hosts
+    finally:
+        hosts.stop_all()
+        net.close()
+
+
 @pytest.fixture
 def lan(tmp_path):
     lan = Lan(["router", "sim", "detect", "acc", "tools"])
-    hosts = Hosts(lan, tmp_path / "logs")
-    try:
+    with running_on(lan, tmp_path / "logs") as hosts:
         yield lan, hosts
-    finally:
-        hosts.stop_all()
-        lan.close()
 
 
 def bins(slipstream_bin):

@@ -49,12 +49,14 @@ pub struct Projection {
 }
 
 impl Projection {
+    /// Pixel coordinates (u, v) of a point in front of the camera.
+    pub fn uv(&self, p: &Point3<f64>) -> (f64, f64) {
+        (self.cx - self.fx * p.y / p.x, self.cy - self.fy * p.z / p.x)
+    }
+
     pub fn project(&self, p: &Point3<f64>) -> ScreenVertex {
-        ScreenVertex {
-            u: (self.cx - self.fx * p.y / p.x) as f32,
-            v: (self.cy - self.fy * p.z / p.x) as f32,
-            inv_depth: (1.0 / p.x) as f32,
-        }
+        let (u, v) = self.uv(p);
+        ScreenVertex { u: u as f32, v: v as f32, inv_depth: (1.0 / p.x) as f32 }
     }
 }
 
@@ -169,13 +171,12 @@ pub fn fill_polygon_smooth(
     if n < 3 {
         return None;
     }
-    let mut screen: Vec<(f64, f64)> = Vec::with_capacity(n);
+    // In f64: edges are located to far less than the f32 of ScreenVertex.
+    let screen: Vec<(f64, f64)> = clipped[..n].iter().map(|p| projection.uv(p)).collect();
     let mut bounds = [f32::MAX, f32::MAX, f32::MIN, f32::MIN];
-    for p in &clipped[..n] {
-        let s = projection.project(p);
-        bounds = [bounds[0].min(s.u), bounds[1].min(s.v), bounds[2].max(s.u), bounds[3].max(s.v)];
-        // Projected again in f64: edges are located to far less than the f32 of ScreenVertex.
-        screen.push((projection.cx - projection.fx * p.y / p.x, projection.cy - projection.fy * p.z / p.x));
+    for &(u, v) in &screen {
+        let (u, v) = (u as f32, v as f32);
+        bounds = [bounds[0].min(u), bounds[1].min(v), bounds[2].max(u), bounds[3].max(v)];
     }
     let (w, h) = (target.width as i64, target.height as i64);
     let y0 = (bounds[1].floor() as i64).clamp(0, h);
