@@ -104,12 +104,44 @@ struct LeadFilter {
     /// Gap (bumper to bumper), lead speed, lead acceleration.
     x: Vector3<f64>,
     p: Matrix3<f64>,
+    /// Fading average of the normalised speed innovations: noise has both signs, a lead that
+    /// starts (or stops) braking pushes it one way.
+    drift: f64,
+    /// When this lead was first taken: a new track's speed still converges (the tracker starts
+    /// it at the ego's), so manoeuvres count only after SETTLE_S.
+    since_s: f64,
+    /// Until then the lead counts as manoeuvring: its speed is followed closely.
+    manoeuvre_until_s: f64,
 }
 
 impl LeadFilter {
     fn new(id: u32, t_s: f64, gap_m: f64, lead_speed_mps: f64, n: &Noise) -> Self {
-        let p = Matrix3::from_diagonal(&Vector3::new(n.gap_sigma(gap_m).powi(2), n.speed_sigma_mps.powi(2), 4.0));
-        LeadFilter { id, t_s, x: Vector3::new(gap_m, lead_speed_mps, 0.0), p }
+        let p = Matrix3::from_diagonal(&Vector3::new(n.gap_sigma(gap_m).powi(2), n.speed_sigma(gap_m).max(n.speed_steady_mps).powi(2), 4.0));
+        LeadFilter { id, t_s, x: Vector3::new(gap_m, lead_speed_mps, 0.0), p, drift: 0.0, since_s: t_s, manoeuvre_until_s: t_s }
+    }
+
+    /// A measurement of the lead's speed. The filter assumes a slowly changing acceleration
+    /// (smooth following behind a noisy camera range); when the speed innovations drift one
+    /// way, the lead has changed what it does (a hard brake, say) and the acceleration's
+    /// uncertainty is opened up, so the next frames measure it anew within a few frames
+    /// instead of the seconds the slow model would take.
+    ///
+    /// `sigma` is the measurement's noise, used to detect a manoeuvre and while one lasts;
+    /// otherwise the filter smooths with at least `steady_sigma`.
+    fn update_speed(&mut self, z: f64, sigma: f64, steady_sigma: f64) {
+        // Against the measurement's own noise: the estimate's spread, wide while smoothing,
+        // would hide the lead's first braking.
+        let nu = (z - self.x[1]) / sigma;
+        self.drift += MANOEUVRE_DRIFT_GAIN * (nu - self.drift);
+        if self.settled() && self.drift.abs() > MANOEUVRE_DRIFT {
+            tracing::debug!(id = self.id, t_s = self.t_s, drift = self.drift, "lead manoeuvre");
+            self.p[(2, 2)] += MANOEUVRE_ACCEL_SIGMA_MPS2 * MANOEUVRE_ACCEL_SIGMA_MPS2;
+            self.p[(1, 1)] += (MANOEUVRE_ACCEL_SIGMA_MPS2 * MANOEUVRE_WINDOW_S).powi(2);
+            self.drift = 0.0;
+            self.manoeuvre_until_s = self.t_s + MANOEUVRE_HOLD_S;
+        }
+        let sigma = if self.t_s < self.manoeuvre_until_s { sigma } else { sigma.max(steady_sigma) };
+        self.update(1, z, sigma);
     }
 
     /// Moves the estimate to `t_s` with the ego at `ego_speed_mps`.
@@ -133,6 +165,11 @@ impl LeadFilter {
         self.p = f * self.p * f.transpose() + q;
     }
 
+    /// Followed long enough for its speed and acceleration to mean something.
+    fn settled(&self) -> bool {
+        self.t_s - self.since_s >= SETTLE_S
+    }
+
     /// A scalar measurement of state component `i`.
     fn update(&mut self, i: usize, z: f64, sigma: f64) {
         let s = self.p[(i, i)] + sigma * sigma;
@@ -149,13 +186,20 @@ impl LeadFilter {
 struct Noise {
     gap_base_m: f64,
     gap_per_m2: f64,
-    speed_sigma_mps: f64,
+    speed_base_mps: f64,
+    speed_per_m2: f64,
+    /// Outside manoeuvres the speed is smoothed as if this noisy.
+    speed_steady_mps: f64,
     jerk_sigma_mps3: f64,
 }
 
 impl Noise {
     fn gap_sigma(&self, gap_m: f64) -> f64 {
         self.gap_base_m + self.gap_per_m2 * gap_m.max(0.0).powi(2)
+    }
+
+    fn speed_sigma(&self, gap_m: f64) -> f64 {
+        self.speed_base_mps + self.speed_per_m2 * gap_m.max(0.0).powi(2)
     }
 }
 
@@ -167,6 +211,23 @@ const THREAT_MARGIN_M: f64 = 2.0;
 const LEAD_BRAKING_MPS2: f64 = -0.5;
 /// The collision-avoidance guard on the follow law takes over above this needed deceleration.
 const NEEDED_GUARD_MPS2: f64 = 1.0;
+/// Manoeuvre detection on the lead's speed: the fading average's gain per frame, the level
+/// that says the lead changed its acceleration, and the acceleration uncertainty (and the
+/// speed uncertainty that builds over a window of it) opened up then.
+const MANOEUVRE_DRIFT_GAIN: f64 = 0.5;
+const MANOEUVRE_DRIFT: f64 = 2.0;
+const MANOEUVRE_ACCEL_SIGMA_MPS2: f64 = 6.0;
+const MANOEUVRE_WINDOW_S: f64 = 0.1;
+/// How long after a manoeuvre the lead's speed is followed closely.
+const MANOEUVRE_HOLD_S: f64 = 1.0;
+/// A lead is judged on its acceleration (manoeuvres, braking hard) once followed this long.
+const SETTLE_S: f64 = 1.0;
+/// A lead counts as braking beyond comfort when its estimated deceleration exceeds the
+/// comfort limit by this much: the estimate overshoots a little when it re-learns a lead that
+/// brakes at just under the limit.
+const HARD_BRAKING_MARGIN_MPS2: f64 = 1.0;
+/// A lead slower than this is stopping or stopped, not braking hard from speed.
+const HARD_BRAKING_MIN_SPEED_MPS: f64 = 2.0;
 /// Below this speed the ego counts as standing.
 const STANDSTILL_MPS: f64 = 0.2;
 /// Brake held at standstill.
@@ -182,6 +243,7 @@ struct LeadNow {
     gap_m: f64,
     speed_mps: f64,
     accel_mps2: f64,
+    settled: bool,
 }
 
 pub struct Controller {
@@ -243,14 +305,18 @@ impl Controller {
             PerceptionSource::Camera => Noise {
                 gap_base_m: settings.estimator.gap_sigma_m,
                 gap_per_m2: settings.estimator.gap_sigma_per_m2,
-                speed_sigma_mps: settings.estimator.speed_sigma_mps,
+                speed_base_mps: settings.estimator.speed_sigma_mps,
+                speed_per_m2: settings.estimator.speed_sigma_per_m2,
+                speed_steady_mps: settings.estimator.steady_speed_sigma_mps,
                 jerk_sigma_mps3: settings.estimator.lead_jerk_sigma_mps3,
             },
             // Exact measurements: the filter follows them.
             PerceptionSource::GroundTruth => Noise {
                 gap_base_m: 0.05,
                 gap_per_m2: 0.0,
-                speed_sigma_mps: 0.05,
+                speed_base_mps: 0.05,
+                speed_per_m2: 0.0,
+                speed_steady_mps: 0.05,
                 jerk_sigma_mps3: settings.estimator.lead_jerk_sigma_mps3,
             },
         };
@@ -373,7 +439,7 @@ impl Controller {
             Some(f) if f.id == id => {
                 f.predict(t, ego.speed_mps, n.jerk_sigma_mps3);
                 f.update(0, gap, n.gap_sigma(gap));
-                f.update(1, ego.speed_mps + rel, n.speed_sigma_mps);
+                f.update_speed(ego.speed_mps + rel, n.speed_sigma(gap), n.speed_steady_mps);
             }
             _ => {
                 tracing::debug!(from = ?current, to = id, "lead changed");
@@ -402,6 +468,7 @@ impl Controller {
             gap_m: f.x[0],
             speed_mps: f.x[1].max(0.0),
             accel_mps2: f.x[2],
+            settled: f.settled(),
         });
         let desired_gap = self.s.standstill_m + self.time_gap_s * v;
         let threat = lead.map(|l| threat(l.gap_m, v, l.speed_mps, l.accel_mps2));
@@ -420,9 +487,15 @@ impl Controller {
             let (from, step) = (self.accel_cmd, self.s.limits.jerk_mps3 * dt);
             (AccMode::Stale, (-self.s.stale.decel_mps2).clamp(from - step, from + step))
         } else {
-            self.update_emergency(threat.as_ref(), v, ego.t_s);
+            // A lead braking harder than comfort allows is answered at once, at what it takes.
+            let hard = lead.is_some_and(|l| {
+                l.settled
+                    && l.speed_mps > HARD_BRAKING_MIN_SPEED_MPS
+                    && l.accel_mps2 < -self.s.limits.decel_mps2 - HARD_BRAKING_MARGIN_MPS2
+            });
+            self.update_emergency(threat.as_ref(), hard, v, ego.t_s);
             match threat.filter(|_| self.emergency) {
-                Some(t) => (AccMode::Emergency, -self.emergency_decel(&t)),
+                Some(t) => (AccMode::Emergency, -self.emergency_decel(&t, hard)),
                 None => self.comfort_target(v, lead, threat.as_ref(), desired_gap, dt),
             }
         };
@@ -461,9 +534,11 @@ impl Controller {
     }
 
     /// Enters emergency braking when a collision is imminent (TTC below the threshold, or
-    /// closing within release_ttc_s with more braking needed than comfort allows); leaves it
-    /// at standstill or once the threat is comfortably over.
-    fn update_emergency(&mut self, threat: Option<&Threat>, v: f64, t_s: f64) {
+    /// closing within release_ttc_s with more braking needed than comfort allows) or when the
+    /// lead brakes harder than comfort allows (`hard_lead`) and stopping behind it needs real
+    /// braking; leaves it at standstill or once the threat is comfortably over and the lead no
+    /// longer brakes hard.
+    fn update_emergency(&mut self, threat: Option<&Threat>, hard_lead: bool, v: f64, t_s: f64) {
         let Some(t) = threat else {
             self.emergency = false;
             return;
@@ -471,11 +546,13 @@ impl Controller {
         let (e, lim) = (&self.s.emergency, &self.s.limits);
         let ttc = t.ttc_s.unwrap_or(f64::INFINITY);
         let beyond_comfort = t.needed_decel_mps2 > lim.decel_mps2 && ttc < e.release_ttc_s;
-        if !self.emergency && (ttc < e.brake_ttc_s || beyond_comfort) {
-            tracing::warn!(t_s, ttc_s = ttc, needed_decel_mps2 = t.needed_decel_mps2, "emergency braking");
+        let hard_and_needed = hard_lead && t.needed_decel_mps2 > NEEDED_GUARD_MPS2;
+        if !self.emergency && (ttc < e.brake_ttc_s || beyond_comfort || hard_and_needed) {
+            tracing::warn!(t_s, ttc_s = ttc, needed_decel_mps2 = t.needed_decel_mps2, hard_lead, "emergency braking");
             self.emergency = true;
         } else if self.emergency
-            && (v < STANDSTILL_MPS || (ttc > e.release_ttc_s && t.needed_decel_mps2 < 0.8 * lim.decel_mps2))
+            && (v < STANDSTILL_MPS
+                || (!hard_lead && ttc > e.release_ttc_s && t.needed_decel_mps2 < 0.8 * lim.decel_mps2))
         {
             tracing::info!(t_s, ttc_s = ttc, "emergency over");
             self.emergency = false;
@@ -483,14 +560,17 @@ impl Controller {
     }
 
     /// Emergency deceleration: the vehicle's maximum when TTC is below full_brake_ttc_s, else
-    /// 1.5 times what the threat needs, at least the comfort limit.
-    fn emergency_decel(&self, t: &Threat) -> f64 {
+    /// 1.5 times what the threat needs, at least the comfort limit once the gap closes fast
+    /// (TTC below brake_ttc_s; behind a hard-braking lead still far enough, 1.5 times the need
+    /// is enough).
+    fn emergency_decel(&self, t: &Threat, hard_lead: bool) -> f64 {
         let vehicle_max = self.params.max_brake_decel_mps2;
-        if t.ttc_s.is_some_and(|x| x < self.s.emergency.full_brake_ttc_s) {
-            vehicle_max
-        } else {
-            (1.5 * t.needed_decel_mps2).clamp(self.s.limits.decel_mps2, vehicle_max)
+        let ttc = t.ttc_s.unwrap_or(f64::INFINITY);
+        if ttc < self.s.emergency.full_brake_ttc_s {
+            return vehicle_max;
         }
+        let floor = if hard_lead && ttc >= self.s.emergency.brake_ttc_s { 0.0 } else { self.s.limits.decel_mps2 };
+        (1.5 * t.needed_decel_mps2).clamp(floor, vehicle_max)
     }
 
     /// Speed or Follow mode within the comfort limits: the lower of the cruise law and the

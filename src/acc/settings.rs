@@ -102,6 +102,14 @@ pub struct Estimator {
     pub gap_sigma_m: f64,
     pub gap_sigma_per_m2: f64,
     pub speed_sigma_mps: f64,
+    /// The relative speed's noise grows with range like the range's: speed_sigma_mps +
+    /// speed_sigma_per_m2 * gap^2 (0 when left out).
+    #[serde(default)]
+    pub speed_sigma_per_m2: f64,
+    /// Outside a manoeuvre the relative speed is smoothed as if this noisy (a lead holding its
+    /// speed is followed calmly); default: no extra smoothing.
+    #[serde(default)]
+    pub steady_speed_sigma_mps: f64,
     pub lead_jerk_sigma_mps3: f64,
 }
 
@@ -260,8 +268,16 @@ impl AccSettings {
                 return err(key, format!("{x}"), "give a value > 0");
             }
         }
-        if !(e.gap_sigma_per_m2.is_finite() && e.gap_sigma_per_m2 >= 0.0) {
-            return err("estimator.gap_sigma_per_m2", format!("{}", e.gap_sigma_per_m2), "give a value >= 0");
+        for (key, x) in
+            [
+                ("estimator.gap_sigma_per_m2", e.gap_sigma_per_m2),
+                ("estimator.speed_sigma_per_m2", e.speed_sigma_per_m2),
+                ("estimator.steady_speed_sigma_mps", e.steady_speed_sigma_mps),
+            ]
+        {
+            if !(x.is_finite() && x >= 0.0) {
+                return err(key, format!("{x}"), "give a value >= 0");
+            }
         }
         let v = &self.vehicle;
         for (key, x) in [

@@ -309,3 +309,40 @@ fn the_lead_estimate_smooths_a_camera_range_quantised_to_image_rows() {
     assert!(worst.0 < 1.2, "gap error up to {:.2} m with 3 m steps", worst.0);
     assert!(worst.1 < 0.8, "relative speed error up to {:.2} m/s", worst.1);
 }
+
+/// A lead 59 m ahead at 30 m/s (the 1.8 s gap) that brakes at 7 m/s2: braking beyond comfort
+/// follows within a few frames of its speed drifting away, at what stopping behind it needs;
+/// the same lead holding its speed never does.
+#[test]
+fn a_lead_braking_beyond_comfort_is_answered_at_once_and_a_steady_one_never() {
+    for brakes in [true, false] {
+        let mut c = Controller::new(AccSettings { set_speed_mps: 32.0, ..truth() });
+        let (t_brake, a_lead) = (10.0, -7.0);
+        let lead_speed = |t: f64| if brakes && t > t_brake { (30.0 + a_lead * (t - t_brake)).max(0.0) } else { 30.0 };
+        let (mut t, mut v, mut gap) = (0.0, 30.0, 59.0);
+        let mut first_emergency = None;
+        while t < 16.0 {
+            if ((t / DT).round() as i64) % 5 == 0 {
+                c.perceive(&frame(t, vec![obj(1, gap, 0.0, lead_speed(t) - v)]), &ego(t, v));
+            }
+            let o = c.step(&ego(t, v), &[]);
+            if o.status.mode == AccMode::Emergency && first_emergency.is_none() {
+                first_emergency = Some((t, o.status.target_accel_mps2));
+            }
+            v = (v + o.status.target_accel_mps2 * DT).max(0.0);
+            gap += (lead_speed(t) - v) * DT;
+            t += DT;
+        }
+        match (brakes, first_emergency) {
+            (true, Some((t_em, a))) => {
+                assert!(t_em - t_brake <= 0.3, "answered {:.2} s after the lead braked", t_em - t_brake);
+                // Stopping 2 m behind where the lead stops needs 900 / (2 (57 + 64)) = 3.7 m/s2.
+                assert!(a <= -3.7, "asked for {a} m/s2");
+                assert!(gap > 2.0, "gap {gap}");
+            }
+            (true, None) => panic!("no answer to a lead braking at 7 m/s2"),
+            (false, Some(e)) => panic!("an emergency behind a steady lead: {e:?}"),
+            (false, None) => {}
+        }
+    }
+}

@@ -212,8 +212,8 @@ pub(crate) async fn run_one(
 /// The report as a markdown table.
 pub fn markdown(report: &AccReport) -> String {
     let mut out = String::new();
-    out.push_str("| scenario | perception | collisions (traffic) | min gap m | min TTC s | time-gap RMS s | speed RMSE m/s | max accel | max decel | max jerk | accel swing | emergency s (unwarranted) | phantom braking s | stopped for nothing s | result |\n");
-    out.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    out.push_str("| scenario | perception | collisions (traffic) | min gap m | min TTC s | time-gap RMS s | speed RMSE m/s | max accel | max decel | max jerk | accel swing | hard-braking answer s | emergency s (unwarranted) | phantom braking s | stopped for nothing s | result |\n");
+    out.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for r in &report.results {
         let m = &r.metrics;
         let failed: Vec<&str> = m.checks.iter().filter(|c| !c.pass).map(|c| c.name.as_str()).collect();
@@ -226,12 +226,13 @@ pub fn markdown(report: &AccReport) -> String {
         };
         let [gap, ttc, time_gap, speed, accel, decel, jerk] = m.headline();
         out.push_str(&format!(
-            "| {} | {:?} | {} ({}) | {gap} | {ttc} | {time_gap} | {speed} | {accel} | {decel} | {jerk} | {} | {:.1} ({}) | {:.1} | {:.1} | {} |\n",
+            "| {} | {:?} | {} ({}) | {gap} | {ttc} | {time_gap} | {speed} | {accel} | {decel} | {jerk} | {} | {} | {:.1} ({}) | {:.1} | {:.1} | {} |\n",
             r.scenario,
             r.perception,
             m.collisions,
             m.traffic_collisions,
             fmt_opt(m.max_accel_swing_mps2, 2),
+            fmt_opt(m.hard_braking_response_s, 2),
             m.emergency_s,
             m.unwarranted_emergencies,
             m.phantom_braking_s,
@@ -240,13 +241,14 @@ pub fn markdown(report: &AccReport) -> String {
         ));
     }
     out.push_str(&format!(
-        "\nAims: no collision; in steady following time-gap RMS error <= {} s and acceleration within {} m/s2 of the lead's; accel <= {}, decel <= {} m/s2 (+{:.0}% tolerance) and jerk <= {} m/s3 outside emergencies, at speed; no unwarranted emergency, no phantom braking (beyond 1 m/s2 with nothing in the lane within twice the time gap), no standstill with nothing ahead. Traffic collisions are counted, not judged.\n",
+        "\nAims: no collision; in steady following time-gap RMS error <= {} s and acceleration within {} m/s2 of the lead's; a scenario's own minimum gap (expect.min_gap_m); accel <= {}, decel <= {} m/s2 (+{:.0}% tolerance) and jerk <= {} m/s3 outside emergencies, at speed; no unwarranted emergency, no phantom braking (beyond 1 m/s2 with nothing in the lane within twice the time gap), no standstill with nothing ahead. Traffic collisions and the answer to a lead braking beyond the comfort limit (until the ACC asks for 90% of what stopping behind it needs; aim {} s) are reported, not judged.\n",
         aims::TIME_GAP_RMS_S,
         aims::MAX_ACCEL_SWING_MPS2,
         aims::MAX_ACCEL_MPS2,
         aims::MAX_DECEL_MPS2,
         aims::COMFORT_TOLERANCE * 100.0,
         aims::MAX_JERK_MPS3,
+        aims::HARD_BRAKING_RESPONSE_S,
     ));
     out
 }

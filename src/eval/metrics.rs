@@ -16,6 +16,9 @@ pub mod aims {
     pub const MAX_ACCEL_MPS2: f64 = 2.0;
     pub const MAX_DECEL_MPS2: f64 = 3.5;
     pub const MAX_JERK_MPS3: f64 = 2.5;
+    /// A lead braking beyond the comfort limit is answered within this long (issue 16). Reported
+    /// in every run, not yet judged: the camera ACC answers in about 0.9 s (docs/control.md).
+    pub const HARD_BRAKING_RESPONSE_S: f64 = 0.5;
     /// Tolerance on the measured acceleration and deceleration: the vehicle's response to a
     /// limited target overshoots a little (tyre and suspension dynamics of the physics
     /// engine). Jerk has none (issue 16): the controller limits it to 2.2 m/s3.
@@ -35,7 +38,8 @@ const PHANTOM_GRACE_S: f64 = 1.0;
 /// needs this much.
 const WARRANTED_BRAKING_MPS2: f64 = 0.5;
 /// An emergency is warranted by a vehicle in the lane closing with a TTC below this, or
-/// nearer than half the time gap, from EMERGENCY_LOOKBACK_S before it starts to its end.
+/// nearer than half the time gap, or braking beyond the comfort limit when stopping behind it
+/// needs more than PHANTOM_DECEL_MPS2, from EMERGENCY_LOOKBACK_S before it starts to its end.
 const WARRANTED_TTC_S: f64 = 5.0;
 const EMERGENCY_LOOKBACK_S: f64 = 0.5;
 /// Standing still with nothing in the lane within the standstill distance plus this, for
@@ -48,6 +52,14 @@ const SETTLED_SPEED_BAND_MPS: f64 = 0.3;
 const SETTLED_AHEAD_S: f64 = 1.0;
 /// The lead's acceleration is taken over this window of its speed.
 const LEAD_ACCEL_WINDOW_S: f64 = 0.5;
+/// A lead braking harder than this (the comfort limit) is braking hard: the ACC must ask for
+/// the deceleration stopping behind it needs (NEED_SHARE of it, counted from the truth) within
+/// HARD_BRAKING_RESPONSE_S (issue 16). The lead's acceleration is taken over
+/// HARD_BRAKING_WINDOW_S; stopping behind it keeps HARD_BRAKING_MARGIN_M; an episode ends when
+/// it brakes less than PHANTOM_DECEL_MPS2, and counts only if it needed more than that.
+const HARD_BRAKING_WINDOW_S: f64 = 0.1;
+const HARD_BRAKING_MARGIN_M: f64 = 2.0;
+const NEED_SHARE: f64 = 0.9;
 /// Jerk is taken over this window of measured acceleration.
 const JERK_WINDOW_S: f64 = 0.1;
 /// Below this speed comfort is not judged: a car stopping on its brakes has a jerk spike at the
@@ -94,6 +106,9 @@ pub struct Metrics {
     pub max_accel_swing_mps2: Option<f64>,
     /// Collisions among traffic vehicles (not the ego's; from the simulator's report).
     pub traffic_collisions: u64,
+    /// The slowest answer to a lead braking beyond the comfort limit: from the moment it did
+    /// to the ACC asking for the deceleration stopping behind it needs; None without one.
+    pub hard_braking_response_s: Option<f64>,
     pub checks: Vec<Check>,
     pub pass: bool,
 }
@@ -120,6 +135,58 @@ struct Tally {
     speed_since: Option<(f64, usize)>,
     /// What a driver feels (issue 16).
     feel: Feel,
+    hard: HardBraking,
+}
+
+/// A lead braking beyond the comfort limit (issue 16), and how soon the ACC answered.
+#[derive(Default)]
+struct HardBraking {
+    /// The episode under way: the lead's id, its start, the most it needed of the ego, whether
+    /// the ACC has answered.
+    episode: Option<(u32, f64, f64, bool)>,
+    worst_s: Option<f64>,
+}
+
+impl HardBraking {
+    fn record(&mut self, response_s: f64) {
+        self.worst_s = Some(self.worst_s.map_or(response_s, |w: f64| w.max(response_s)));
+    }
+
+    /// Ends the episode at `t_s`: one never answered counts its whole length, if it needed
+    /// real braking.
+    fn end(&mut self, t_s: f64) {
+        if let Some((_, from, needed, false)) = self.episode.take() {
+            if needed > PHANTOM_DECEL_MPS2 {
+                self.record(t_s - from);
+            }
+        }
+    }
+}
+
+/// The true lead's acceleration at each sample, over `lag` samples of the same lead.
+fn lead_accelerations(s: &[Sample], lag: usize) -> Vec<Option<f64>> {
+    let lead_speed = |w: &Sample, tl: &TruthLead| w.speed_mps + tl.relative_speed_mps;
+    (0..s.len())
+        .map(|i| {
+            let (x, p) = (&s[i], &s[i.checked_sub(lag)?]);
+            let (tl, pl) = (x.truth?, p.truth?);
+            (tl.id == pl.id).then(|| (lead_speed(x, &tl) - lead_speed(p, &pl)) / (x.t_s - p.t_s).max(1e-6))
+        })
+        .collect()
+}
+
+/// The deceleration (positive) that stops the ego HARD_BRAKING_MARGIN_M behind where a lead
+/// braking at `lead_accel_mps2` stops, or matches its speed short of it (the truth's view).
+fn needed_behind(tl: &TruthLead, ego_speed_mps: f64, lead_accel_mps2: f64) -> f64 {
+    let room = (tl.gap_m - HARD_BRAKING_MARGIN_M).max(0.1);
+    let lead_speed = (ego_speed_mps + tl.relative_speed_mps).max(0.0);
+    if lead_accel_mps2 < -0.1 {
+        let lead_stop = lead_speed * lead_speed / (2.0 * -lead_accel_mps2);
+        ego_speed_mps * ego_speed_mps / (2.0 * (room + lead_stop))
+    } else {
+        let closing = (-tl.relative_speed_mps).max(0.0);
+        closing * closing / (2.0 * room)
+    }
 }
 
 /// Braking and stopping without cause, emergencies without need, swings while following.
@@ -202,12 +269,18 @@ impl Tally {
     /// What a driver would feel at sample `i` (`dt` apart): emergencies nothing in the lane
     /// warranted, braking beyond PHANTOM_DECEL_MPS2 with nothing within twice the time gap,
     /// standing still with nothing ahead.
-    fn feel(&mut self, s: &[Sample], i: usize, dt: f64, standstill_m: f64) {
+    fn feel(&mut self, s: &[Sample], i: usize, dt: f64, standstill_m: f64, lead_accel: Option<f64>) {
         let x = &s[i];
         let f = &mut self.feel;
         if let Some(tl) = x.truth {
             let closing = -tl.relative_speed_mps;
-            if ttc(&tl).is_some_and(|t| t < WARRANTED_TTC_S)
+            // A lead braking beyond the comfort limit warrants an emergency when stopping behind
+            // it needs real braking.
+            let hard = lead_accel.is_some_and(|a| {
+                a < -aims::MAX_DECEL_MPS2 && needed_behind(&tl, x.speed_mps, a) > PHANTOM_DECEL_MPS2
+            });
+            if hard
+                || ttc(&tl).is_some_and(|t| t < WARRANTED_TTC_S)
                 || tl.gap_m < standstill_m + 0.5 * x.time_gap_s * x.speed_mps
             {
                 f.last_needed_t = Some(x.t_s);
@@ -253,6 +326,30 @@ impl Tally {
         }
     }
 
+    /// A lead braking beyond the comfort limit at sample `x` (its acceleration `lead_accel`):
+    /// when it starts, and when the ACC's target first asks for what stopping behind it needs.
+    fn hard_braking(&mut self, x: &Sample, lead_accel: Option<f64>) {
+        let h = &mut self.hard;
+        let Some((tl, a)) = x.truth.zip(lead_accel).filter(|(tl, _)| h.episode.is_none_or(|e| e.0 == tl.id)) else {
+            h.end(x.t_s);
+            return;
+        };
+        if h.episode.is_none() && a < -aims::MAX_DECEL_MPS2 {
+            h.episode = Some((tl.id, x.t_s, 0.0, false));
+        }
+        let Some((id, from, most, answered)) = h.episode else { return };
+        if a > -PHANTOM_DECEL_MPS2 {
+            h.end(x.t_s);
+            return;
+        }
+        let needed = needed_behind(&tl, x.speed_mps, a);
+        let now_answered = !answered && x.target_accel_mps2 <= -NEED_SHARE * needed;
+        if now_answered {
+            h.record(x.t_s - from);
+        }
+        h.episode = Some((id, from, most.max(needed), answered || now_answered));
+    }
+
     /// Speed mode at sample `i`: the speed error once at the same set speed for STEADY_S.
     fn speed_mode(&mut self, s: &[Sample], i: usize) {
         let x = &s[i];
@@ -291,7 +388,7 @@ impl Tally {
     }
 
     /// Pass or fail against the aims.
-    fn checks(&self, collisions: u64, time_gap_rms: Option<f64>) -> Vec<Check> {
+    fn checks(&self, collisions: u64, time_gap_rms: Option<f64>, min_gap_aim_m: Option<f64>) -> Vec<Check> {
         let tol = 1.0 + aims::COMFORT_TOLERANCE;
         let comfort = |name: &str, value: f64, aim: f64| Check {
             name: name.into(),
@@ -301,11 +398,19 @@ impl Tally {
         };
         let mut checks = vec![
             Check { name: "collisions".into(), value: Some(collisions as f64), aim: "0".into(), pass: collisions == 0 },
-            Check {
-                name: "min gap (m)".into(),
-                value: self.min_gap,
-                aim: "> 0".into(),
-                pass: self.min_gap.is_none_or(|g| g > 0.0),
+            match min_gap_aim_m {
+                Some(aim) => Check {
+                    name: "min gap (m)".into(),
+                    value: self.min_gap,
+                    aim: format!(">= {aim} (the scenario's)"),
+                    pass: self.min_gap.is_none_or(|g| g >= aim),
+                },
+                None => Check {
+                    name: "min gap (m)".into(),
+                    value: self.min_gap,
+                    aim: "> 0".into(),
+                    pass: self.min_gap.is_none_or(|g| g > 0.0),
+                },
             },
         ];
         if let Some(e) = time_gap_rms {
@@ -372,19 +477,23 @@ impl Metrics {
         // From a little before an emergency to a while after it (the release).
         let near_emergency =
             |t: f64| emergency_times.iter().any(|&e| e >= t - EMERGENCY_MARGIN_S.1 && e <= t + EMERGENCY_MARGIN_S.0);
-        let jerk_lag = (JERK_WINDOW_S / dt.max(1e-6)).round().max(1.0) as usize;
+        let samples_in = |window_s: f64| (window_s / dt.max(1e-6)).round().max(1.0) as usize;
+        let jerk_lag = samples_in(JERK_WINDOW_S);
+        let lead_accel = lead_accelerations(s, samples_in(HARD_BRAKING_WINDOW_S));
         let mut tally = Tally::default();
         for i in 0..s.len() {
             tally.lead(s, i, trace.standstill_m);
             tally.speed_mode(s, i);
             tally.comfort(s, i, jerk_lag, near_emergency(s[i].t_s));
-            tally.feel(s, i, dt, trace.standstill_m);
+            tally.feel(s, i, dt, trace.standstill_m, lead_accel[i]);
+            tally.hard_braking(&s[i], lead_accel[i]);
         }
+        tally.hard.end(s.last().map_or(0.0, |x| x.t_s));
         if let Some(warranted) = tally.feel.emergency.take() {
             tally.feel.unwarranted_emergencies += u64::from(!warranted);
         }
         let time_gap_rms = rms(&tally.gap_errors);
-        let checks = tally.checks(trace.collisions, time_gap_rms);
+        let checks = tally.checks(trace.collisions, time_gap_rms, trace.min_gap_aim_m);
         Metrics {
             duration_s: s.last().map_or(0.0, |x| x.t_s),
             collisions: trace.collisions,
@@ -404,6 +513,7 @@ impl Metrics {
             standstill_for_nothing_s: tally.feel.standstill_s,
             max_accel_swing_mps2: tally.feel.max_swing,
             traffic_collisions: trace.traffic_collisions,
+            hard_braking_response_s: tally.hard.worst_s,
             pass: checks.iter().all(|c| c.pass),
             checks,
         }
@@ -435,7 +545,7 @@ mod tests {
                 }
             })
             .collect();
-        Trace { standstill_m: 5.0, samples, collisions: 0, traffic_collisions: 0, end: String::new() }
+        Trace { standstill_m: 5.0, samples, ..Default::default() }
     }
 
     fn failed(m: &Metrics) -> Vec<&str> {
@@ -494,5 +604,43 @@ mod tests {
         let calm = Metrics::of(&trace(60.0, cycling(0.05)));
         assert!(calm.max_accel_swing_mps2.is_some_and(|s| s < 0.1), "{:?}", calm.max_accel_swing_mps2);
         assert!(!failed(&calm).contains(&"acceleration swing in steady following (m/s2)"));
+    }
+
+    /// A lead at 30 m/s, 59 m ahead of an ego holding 30 m/s, braking at 7 m/s2 from t = 10 s;
+    /// the ego's target from `answer(t)`, its mode from `mode(t)`.
+    fn hard_braking_trace(answer: impl Fn(f64) -> f64, mode: impl Fn(f64) -> AccMode) -> Trace {
+        let lead_speed = |t: f64| if t > 10.0 { (30.0 - 7.0 * (t - 10.0)).max(0.0) } else { 30.0 };
+        // The ego keeps 30 m/s: the gap shrinks by what the lead's braking costs it (the trace
+        // ends before the lead stops).
+        let gap = |t: f64| {
+            let dt = (t - 10.0).max(0.0);
+            59.0 - 3.5 * dt * dt
+        };
+        trace(14.0, |t| (30.0, answer(t), mode(t), Some((gap(t), lead_speed(t) - 30.0))))
+    }
+
+    #[test]
+    fn the_answer_to_a_hard_braking_lead_is_timed_from_its_braking_to_the_need_met() {
+        let follow = |_: f64| AccMode::Follow;
+        // Asking for 6 m/s2 from t = 10.3 s: the lead braked beyond 3.5 m/s2 at about 10.05 s.
+        let prompt = Metrics::of(&hard_braking_trace(|t| if t >= 10.3 { -6.0 } else { 0.0 }, follow));
+        let r = prompt.hard_braking_response_s.expect("an episode");
+        assert!((0.2..=0.3).contains(&r), "{r}");
+        // Asking for 1 m/s2 only: never what stopping behind it needs, so the whole episode.
+        let timid = Metrics::of(&hard_braking_trace(|t| if t >= 10.3 { -1.0 } else { 0.0 }, follow));
+        assert!(timid.hard_braking_response_s.is_some_and(|r| r > 3.5), "{:?}", timid.hard_braking_response_s);
+        // A lead holding its speed is no episode.
+        let steady = Metrics::of(&trace(14.0, |_| (30.0, 0.0, AccMode::Follow, Some((59.0, 0.0)))));
+        assert_eq!(steady.hard_braking_response_s, None);
+    }
+
+    #[test]
+    fn an_emergency_for_a_lead_braking_beyond_comfort_is_warranted() {
+        let emergency = |t: f64| if (10.2..12.0).contains(&t) { AccMode::Emergency } else { AccMode::Follow };
+        let m = Metrics::of(&hard_braking_trace(|t| if t >= 10.2 { -6.0 } else { 0.0 }, emergency));
+        assert_eq!(m.unwarranted_emergencies, 0);
+        // The same emergency behind the same lead holding its speed is not.
+        let steady = Metrics::of(&trace(14.0, |t| (30.0, 0.0, emergency(t), Some((59.0, 0.0)))));
+        assert_eq!(steady.unwarranted_emergencies, 1);
     }
 }

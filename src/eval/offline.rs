@@ -55,12 +55,11 @@ impl Camera {
 /// `physics_hz`, perception at `camera_hz`.
 pub fn run(scenario: Scenario, settings: AccSettings, physics_hz: u32, camera_hz: f64) -> Trace {
     let seed = scenario.seed;
-    let standstill_m = settings.standstill_m;
+    let (standstill_m, min_gap_aim_m) = (settings.standstill_m, scenario.expect.min_gap_m);
     let mut world = World::new(scenario, seed, physics_hz);
     let mut camera = (settings.perception == PerceptionSource::Camera).then(|| Camera::new(&world));
     let mut ctl = Controller::new(settings);
-    let mut trace =
-        Trace { standstill_m, samples: Vec::new(), collisions: 0, traffic_collisions: 0, end: String::new() };
+    let mut trace = Trace { standstill_m, min_gap_aim_m, ..Default::default() };
     let mut truth = None;
     loop {
         let k = world.step_count();
@@ -132,6 +131,24 @@ mod tests {
             assert!(worst <= 0.3, "{name}: acceleration reaches {worst:.2} m/s2 behind a steady lead");
             let m = Metrics::of(&trace);
             assert!(m.pass, "{name}: {:?}", m.checks.iter().filter(|c| !c.pass).collect::<Vec<_>>());
+        }
+    }
+
+    /// A lead braking at 7 m/s2 from 30 m/s at the 1.8 s gap, in the loop with the simulator:
+    /// no collision and at least 5 m left with the camera and with ground truth; ground truth
+    /// asks for what stopping behind it needs within 0.5 s. The camera's answer (0.9 s today,
+    /// 2.7 s before the ACC answered hard braking on its own; aim 0.5 s, docs/control.md) is
+    /// held below 1.2 s here so it does not slip back.
+    #[test]
+    fn a_hard_braking_lead_is_answered_and_5_m_kept() {
+        for (perception, within) in [(PerceptionSource::GroundTruth, 0.5), (PerceptionSource::Camera, 1.2)] {
+            let scenario = Scenario::find("lead-brakes-hard").unwrap();
+            let settings = settings_for(&scenario, perception);
+            let m = Metrics::of(&super::run(scenario, settings, 100, 20.0));
+            let answer = m.hard_braking_response_s.expect("the lead brakes beyond comfort");
+            assert!(answer <= within, "{perception:?}: answered after {answer:.2} s");
+            assert!(m.min_gap_m.is_some_and(|g| g >= 5.0), "{perception:?}: min gap {:?}", m.min_gap_m);
+            assert!(m.pass, "{perception:?}: {:?}", m.checks.iter().filter(|c| !c.pass).collect::<Vec<_>>());
         }
     }
 

@@ -80,6 +80,8 @@ pub struct Trace {
     pub traffic_collisions: u64,
     /// Why the scenario ended.
     pub end: String,
+    /// The smallest gap the scenario asks to keep (its `expect.min_gap_m`); None: any gap > 0.
+    pub min_gap_aim_m: Option<f64>,
 }
 
 /// What the recorder keeps, in arrival order.
@@ -152,7 +154,7 @@ pub fn build_trace(rec: &Recorded, ego_front: f64, standstill_m: f64) -> Trace {
         });
         samples.push(Sample::new(t as f64 / 1e9, &st.msg, &status.msg, truth));
     }
-    Trace { standstill_m, samples, collisions: 0, traffic_collisions: 0, end: String::new() }
+    Trace { standstill_m, samples, ..Default::default() }
 }
 
 impl Trace {
@@ -203,6 +205,7 @@ pub fn judge(rec: &Recorded, scenario: &Scenario, sim: Option<&SimReport>, end_i
     let mut trace = build_trace(rec, front_m, AccSettings::default().standstill_m);
     trace.collisions = sim.map_or(0, |s| s.ego_collisions).max(rec.collisions);
     trace.traffic_collisions = sim.map_or(0, |s| s.traffic_collisions);
+    trace.min_gap_aim_m = scenario.expect.min_gap_m;
     trace.end = sim.and_then(|s| s.end.as_ref()).map_or_else(|| end_if_unknown.to_string(), |e| e.reason.clone());
     let metrics = (trace.samples.len() > MIN_SAMPLES).then(|| Metrics::of(&trace));
     Judged { trace, metrics }

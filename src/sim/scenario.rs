@@ -15,6 +15,7 @@ pub const BUILT_IN: &[(&str, &str)] = &[
     ("steady-follow", include_str!("../../scenarios/steady-follow.json5")),
     ("approach-slower-lead", include_str!("../../scenarios/approach-slower-lead.json5")),
     ("lead-brakes-to-stop", include_str!("../../scenarios/lead-brakes-to-stop.json5")),
+    ("lead-brakes-hard", include_str!("../../scenarios/lead-brakes-hard.json5")),
     ("stop-and-go", include_str!("../../scenarios/stop-and-go.json5")),
     ("cut-in", include_str!("../../scenarios/cut-in.json5")),
     ("cut-out-revealing-stopped-car", include_str!("../../scenarios/cut-out-revealing-stopped-car.json5")),
@@ -77,6 +78,19 @@ pub struct Scenario {
     pub variation: Variation,
     #[serde(default)]
     pub noise: NoiseSpec,
+    /// What a controller must achieve here beyond the standard aims (`slipstream eval acc`
+    /// judges it).
+    #[serde(default)]
+    pub expect: Expect,
+}
+
+/// A scenario's own aims for the controller under test.
+#[derive(Debug, Clone, PartialEq, Default, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Expect {
+    /// The smallest bumper-to-bumper gap to the lead the controller keeps, metres (the
+    /// standard aim: any gap above 0).
+    pub min_gap_m: Option<f64>,
 }
 
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -289,7 +303,15 @@ impl Scenario {
         if let Some(r) = &self.random_traffic {
             self.check_random_traffic(r)?;
         }
-        self.check_variation_and_noise()
+        self.check_variation_and_noise()?;
+        match self.expect.min_gap_m {
+            Some(g) if !(g.is_finite() && (0.0..=100.0).contains(&g)) => Err((
+                "expect.min_gap_m".into(),
+                format!("{g} m"),
+                "give a gap of 0 to 100 m, or leave it out (any gap above 0)".into(),
+            )),
+            _ => Ok(()),
+        }
     }
 
     fn check_road_and_ego(&self) -> Result<(), Invalid> {
@@ -453,6 +475,13 @@ mod tests {
         let e = Scenario::parse(&no_trigger, "my.json5").unwrap_err();
         assert_eq!(e.key, "traffic[0].actions[0]");
         assert!(e.fix.contains("at_s or when_gap_m"));
+
+        let fine = base.replace("lane: 5", "lane: 2");
+        let expect = fine.replacen("ego:", "expect: { min_gap_m: -1 }, ego:", 1);
+        let e = Scenario::parse(&expect, "my.json5").unwrap_err();
+        assert_eq!(e.key, "expect.min_gap_m", "{e}");
+        let expect = fine.replacen("ego:", "expect: { min_gap_m: 5 }, ego:", 1);
+        assert_eq!(Scenario::parse(&expect, "my.json5").unwrap().expect.min_gap_m, Some(5.0));
 
         let e = Scenario::parse("{ name: ", "my.json5").unwrap_err();
         assert!(e.problem.starts_with("not valid JSON5"), "{e}");
