@@ -116,8 +116,20 @@ struct LeadFilter {
 
 impl LeadFilter {
     fn new(id: u32, t_s: f64, gap_m: f64, lead_speed_mps: f64, n: &Noise) -> Self {
-        let p = Matrix3::from_diagonal(&Vector3::new(n.gap_sigma(gap_m).powi(2), n.speed_sigma(gap_m).max(n.speed_steady_mps).powi(2), 4.0));
-        LeadFilter { id, t_s, x: Vector3::new(gap_m, lead_speed_mps, 0.0), p, drift: 0.0, since_s: t_s, manoeuvre_until_s: t_s }
+        let p = Matrix3::from_diagonal(&Vector3::new(
+            n.gap_sigma(gap_m).powi(2),
+            n.speed_sigma(gap_m).max(n.speed_steady_mps).powi(2),
+            4.0,
+        ));
+        LeadFilter {
+            id,
+            t_s,
+            x: Vector3::new(gap_m, lead_speed_mps, 0.0),
+            p,
+            drift: 0.0,
+            since_s: t_s,
+            manoeuvre_until_s: t_s,
+        }
     }
 
     /// A measurement of the lead's speed. The filter assumes a slowly changing acceleration

@@ -268,13 +268,11 @@ impl AccSettings {
                 return err(key, format!("{x}"), "give a value > 0");
             }
         }
-        for (key, x) in
-            [
-                ("estimator.gap_sigma_per_m2", e.gap_sigma_per_m2),
-                ("estimator.speed_sigma_per_m2", e.speed_sigma_per_m2),
-                ("estimator.steady_speed_sigma_mps", e.steady_speed_sigma_mps),
-            ]
-        {
+        for (key, x) in [
+            ("estimator.gap_sigma_per_m2", e.gap_sigma_per_m2),
+            ("estimator.speed_sigma_per_m2", e.speed_sigma_per_m2),
+            ("estimator.steady_speed_sigma_mps", e.steady_speed_sigma_mps),
+        ] {
             if !(x.is_finite() && x >= 0.0) {
                 return err(key, format!("{x}"), "give a value >= 0");
             }

@@ -276,9 +276,8 @@ impl Tally {
             let closing = -tl.relative_speed_mps;
             // A lead braking beyond the comfort limit warrants an emergency when stopping behind
             // it needs real braking.
-            let hard = lead_accel.is_some_and(|a| {
-                a < -aims::MAX_DECEL_MPS2 && needed_behind(&tl, x.speed_mps, a) > PHANTOM_DECEL_MPS2
-            });
+            let hard = lead_accel
+                .is_some_and(|a| a < -aims::MAX_DECEL_MPS2 && needed_behind(&tl, x.speed_mps, a) > PHANTOM_DECEL_MPS2);
             if hard
                 || ttc(&tl).is_some_and(|t| t < WARRANTED_TTC_S)
                 || tl.gap_m < standstill_m + 0.5 * x.time_gap_s * x.speed_mps
