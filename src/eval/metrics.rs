@@ -141,10 +141,18 @@ struct Tally {
 /// A lead braking beyond the comfort limit (issue 16), and how soon the ACC answered.
 #[derive(Default)]
 struct HardBraking {
-    /// The episode under way: the lead's id, its start, the most it needed of the ego, whether
-    /// the ACC has answered.
-    episode: Option<(u32, f64, f64, bool)>,
+    episode: Option<Episode>,
     worst_s: Option<f64>,
+}
+
+/// One lead braking beyond the comfort limit, under way.
+#[derive(Clone, Copy)]
+struct Episode {
+    lead_id: u32,
+    from_s: f64,
+    /// The most it has needed of the ego so far (m/s2).
+    most_needed_mps2: f64,
+    answered: bool,
 }
 
 impl HardBraking {
@@ -155,22 +163,21 @@ impl HardBraking {
     /// Ends the episode at `t_s`: one never answered counts its whole length, if it needed
     /// real braking.
     fn end(&mut self, t_s: f64) {
-        if let Some((_, from, needed, false)) = self.episode.take() {
-            if needed > PHANTOM_DECEL_MPS2 {
-                self.record(t_s - from);
-            }
+        if let Some(e) = self.episode.take().filter(|e| !e.answered && e.most_needed_mps2 > PHANTOM_DECEL_MPS2) {
+            self.record(t_s - e.from_s);
         }
     }
 }
 
 /// The true lead's acceleration at each sample, over `lag` samples of the same lead.
 fn lead_accelerations(s: &[Sample], lag: usize) -> Vec<Option<f64>> {
-    let lead_speed = |w: &Sample, tl: &TruthLead| w.speed_mps + tl.relative_speed_mps;
     (0..s.len())
         .map(|i| {
             let (x, p) = (&s[i], &s[i.checked_sub(lag)?]);
-            let (tl, pl) = (x.truth?, p.truth?);
-            (tl.id == pl.id).then(|| (lead_speed(x, &tl) - lead_speed(p, &pl)) / (x.t_s - p.t_s).max(1e-6))
+            if x.truth?.id != p.truth?.id {
+                return None;
+            }
+            Some((x.lead_speed_mps()? - p.lead_speed_mps()?) / (x.t_s - p.t_s).max(1e-6))
         })
         .collect()
 }
@@ -217,7 +224,7 @@ fn steady_lead(stretch: &[Sample], now: &Sample) -> bool {
     if now.t_s - stretch[0].t_s < 2.0 * STEADY_S {
         return false;
     }
-    let lead_speed = |w: &Sample| w.speed_mps + w.truth.map_or(0.0, |t| t.relative_speed_mps);
+    let lead_speed = |w: &Sample| w.lead_speed_mps().unwrap_or(w.speed_mps);
     let (lo, hi) = stretch
         .iter()
         .filter(|w| w.t_s >= now.t_s - STEADY_S)
@@ -246,7 +253,7 @@ impl Tally {
         if x.mode == AccMode::Follow && x.speed_mps > 3.0 && steady_lead(&s[from..=i], x) {
             self.gap_errors.push((tl.gap_m - standstill_m) / x.speed_mps - x.time_gap_s);
             // The lead's acceleration over the last LEAD_ACCEL_WINDOW_S, against the ego's.
-            let lead_speed = |w: &Sample| w.speed_mps + w.truth.map_or(0.0, |t| t.relative_speed_mps);
+            let lead_speed = |w: &Sample| w.lead_speed_mps().unwrap_or(w.speed_mps);
             // Settled behind a lead holding its speed: the ego's acceleration stays with the
             // lead's (a limit cycle shows here; following a lead's speed changes does not).
             // (The trace is judged whole: the lead must also hold its speed a little beyond now,
@@ -329,24 +336,26 @@ impl Tally {
     /// when it starts, and when the ACC's target first asks for what stopping behind it needs.
     fn hard_braking(&mut self, x: &Sample, lead_accel: Option<f64>) {
         let h = &mut self.hard;
-        let Some((tl, a)) = x.truth.zip(lead_accel).filter(|(tl, _)| h.episode.is_none_or(|e| e.0 == tl.id)) else {
+        let Some((tl, a)) = x.truth.zip(lead_accel).filter(|(tl, _)| h.episode.is_none_or(|e| e.lead_id == tl.id))
+        else {
             h.end(x.t_s);
             return;
         };
         if h.episode.is_none() && a < -aims::MAX_DECEL_MPS2 {
-            h.episode = Some((tl.id, x.t_s, 0.0, false));
+            h.episode = Some(Episode { lead_id: tl.id, from_s: x.t_s, most_needed_mps2: 0.0, answered: false });
         }
-        let Some((id, from, most, answered)) = h.episode else { return };
+        let Some(mut e) = h.episode else { return };
         if a > -PHANTOM_DECEL_MPS2 {
             h.end(x.t_s);
             return;
         }
         let needed = needed_behind(&tl, x.speed_mps, a);
-        let now_answered = !answered && x.target_accel_mps2 <= -NEED_SHARE * needed;
-        if now_answered {
-            h.record(x.t_s - from);
+        if !e.answered && x.target_accel_mps2 <= -NEED_SHARE * needed {
+            e.answered = true;
+            h.record(x.t_s - e.from_s);
         }
-        h.episode = Some((id, from, most.max(needed), answered || now_answered));
+        e.most_needed_mps2 = e.most_needed_mps2.max(needed);
+        h.episode = Some(e);
     }
 
     /// Speed mode at sample `i`: the speed error once at the same set speed for STEADY_S.

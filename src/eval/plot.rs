@@ -153,7 +153,7 @@ pub fn plot(trace: &Trace, title: &str, path: &Path) -> anyhow::Result<()> {
             "speed (m/s)",
             vec![
                 ("ego", blue, series(&|x| Some(x.speed_mps))),
-                ("lead (truth)", orange, series(&|x| x.truth.map(|t| x.speed_mps + t.relative_speed_mps))),
+                ("lead (truth)", orange, series(&|x| x.lead_speed_mps())),
                 ("set speed", grey, series(&|x| Some(x.set_speed_mps))),
             ],
         )?;

@@ -67,6 +67,11 @@ impl Sample {
             truth,
         }
     }
+
+    /// The true lead's speed, when there is one.
+    pub fn lead_speed_mps(&self) -> Option<f64> {
+        self.truth.map(|t| self.speed_mps + t.relative_speed_mps)
+    }
 }
 
 /// One run of a scenario.
@@ -177,7 +182,7 @@ impl Trace {
                 x.time_gap_s,
                 opt(x.acc_gap_m),
                 opt(x.truth.map(|t| t.gap_m)),
-                opt(x.truth.map(|t| x.speed_mps + t.relative_speed_mps)),
+                opt(x.lead_speed_mps()),
             ));
         }
         std::fs::write(path, out).with_context(|| format!("write {}", path.display()))
