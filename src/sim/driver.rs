@@ -186,6 +186,8 @@ pub struct TrafficDriver {
     pub cruise: Cruise,
     pub follow: bool,
     lane: u32,
+    /// Where across the lane it drives, from the lane's centre (positive left).
+    offset_m: f64,
     lane_change: Option<LaneChange>,
     /// Actions not yet started, in file order.
     pending: Vec<Action>,
@@ -193,8 +195,28 @@ pub struct TrafficDriver {
 }
 
 impl TrafficDriver {
-    pub fn new(lane: u32, speed_mps: f64, follow: bool, actions: Vec<Action>, wander: Option<Wander>) -> Self {
-        TrafficDriver { cruise: Cruise::new(speed_mps), follow, lane, lane_change: None, pending: actions, wander }
+    pub fn new(
+        lane: u32,
+        offset_m: f64,
+        speed_mps: f64,
+        follow: bool,
+        actions: Vec<Action>,
+        wander: Option<Wander>,
+    ) -> Self {
+        TrafficDriver {
+            cruise: Cruise::new(speed_mps),
+            follow,
+            lane,
+            offset_m,
+            lane_change: None,
+            pending: actions,
+            wander,
+        }
+    }
+
+    /// Where across the road the driver holds the vehicle when not changing lanes.
+    fn own_d(&self, road: &Road) -> f64 {
+        road.lane_center_d(self.lane) + self.offset_m
     }
 
     /// The lane the driver is in or heading to.
@@ -217,8 +239,9 @@ impl TrafficDriver {
                 self.cruise.target_mps = v;
                 self.cruise.ramp_mps2 = a.accel_mps2;
             }
-            if let Some(lane) = a.lane {
-                self.change_lane(road, me, lane, t_s, a.duration_s);
+            if a.lane.is_some() || a.offset_m.is_some() {
+                self.offset_m = a.offset_m.unwrap_or(self.offset_m);
+                self.change_lane(road, me, a.lane.unwrap_or(self.lane), t_s, a.duration_s);
             }
         }
     }
@@ -226,7 +249,7 @@ impl TrafficDriver {
     fn change_lane(&mut self, road: &Road, me: &Observation, lane: u32, t_s: f64, duration_s: f64) {
         let from_d = self.lane_change.map_or(me.d_m, |c| c.d_at(t_s));
         self.lane = lane;
-        self.lane_change = Some(LaneChange { from_d, to_d: road.lane_center_d(lane), start_s: t_s, duration_s });
+        self.lane_change = Some(LaneChange { from_d, to_d: self.own_d(road), start_s: t_s, duration_s });
     }
 
     /// Considers a random lane change: to a neighbouring allowed lane where the gap is safe.
@@ -274,7 +297,7 @@ impl TrafficDriver {
         // once it gets there (the lookahead's time ahead): so the move takes its duration_s,
         // where aiming at today's offset lagged it by about as much again.
         let preview_s = lookahead_m(me.speed_mps) / me.speed_mps.max(1.0);
-        let d_target = self.lane_change.map_or(road.lane_center_d(self.lane), |c| c.d_at(t_s + preview_s));
+        let d_target = self.lane_change.map_or(self.own_d(road), |c| c.d_at(t_s + preview_s));
         Actuation { throttle, brake, steer: pursue(params, road, me, d_target) }
     }
 }

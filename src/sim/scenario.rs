@@ -21,8 +21,12 @@ pub const BUILT_IN: &[(&str, &str)] = &[
     ("cut-out-revealing-stopped-car", include_str!("../../scenarios/cut-out-revealing-stopped-car.json5")),
     ("busy-traffic", include_str!("../../scenarios/busy-traffic.json5")),
     ("curve-follow", include_str!("../../scenarios/curve-follow.json5")),
+    ("stopped-car-on-shoulder", include_str!("../../scenarios/stopped-car-on-shoulder.json5")),
     ("open-road", include_str!("../../scenarios/open-road.json5")),
 ];
+
+/// How far beyond its lane's edge a vehicle may be placed (`offset_m`): a shoulder's width.
+pub const MAX_SHOULDER_M: f64 = 3.0;
 
 const FIX: &str = "see docs/simulator.md (scenario format) for every field and its allowed values";
 
@@ -139,6 +143,11 @@ pub struct TrafficSpec {
     /// Bumper-to-bumper distance ahead of the ego at the start (negative: behind it).
     pub gap_m: f64,
     pub speed_mps: f64,
+    /// Where across its lane it drives: metres from the lane's centre, positive left. Beyond
+    /// the lane's half width it straddles the line; beyond the road's edge it is on the
+    /// shoulder (a stopped car there, say).
+    #[serde(default)]
+    pub offset_m: f64,
     #[serde(default)]
     pub color: Option<[u8; 3]>,
     /// Slow down for the vehicle ahead in its lane (never for one behind).
@@ -167,6 +176,9 @@ pub struct Action {
     /// New lane...
     #[serde(default)]
     pub lane: Option<u32>,
+    /// ...and/or new place across it (as the vehicle's `offset_m`)...
+    #[serde(default)]
+    pub offset_m: Option<f64>,
     /// ...reached over this long.
     #[serde(default = "Action::default_duration")]
     pub duration_s: f64,
@@ -368,6 +380,9 @@ impl Scenario {
         if !speed_ok(t.speed_mps) {
             return err(&key("speed_mps"), format!("{} m/s", t.speed_mps), "use 0 to 70 m/s");
         }
+        if !self.offset_ok(t.offset_m) {
+            return err(&key("offset_m"), format!("{} m", t.offset_m), &self.offset_fix());
+        }
         if t.lane == self.ego.lane && t.gap_m.abs() < 2.0 {
             return err(&key("gap_m"), format!("{} m overlaps the ego in its lane", t.gap_m), "use |gap_m| >= 2");
         }
@@ -377,8 +392,11 @@ impl Scenario {
                 (Some(_), None) | (None, Some(_)) => {}
                 _ => return err(&key(""), "needs exactly one trigger".into(), "give either at_s or when_gap_m"),
             }
-            if a.speed_mps.is_none() && a.lane.is_none() {
-                return err(&key(""), "does nothing".into(), "give speed_mps, lane, or both");
+            if a.speed_mps.is_none() && a.lane.is_none() && a.offset_m.is_none() {
+                return err(&key(""), "does nothing".into(), "give speed_mps, lane, offset_m or several");
+            }
+            if let Some(o) = a.offset_m.filter(|o| !self.offset_ok(*o)) {
+                return err(&key(".offset_m"), format!("{o} m"), &self.offset_fix());
             }
             if let Some(v) = a.speed_mps.filter(|v| !speed_ok(*v)) {
                 return err(&key(".speed_mps"), format!("{v} m/s"), "use 0 to 70 m/s");
@@ -394,6 +412,18 @@ impl Scenario {
             }
         }
         Ok(())
+    }
+
+    /// An offset across a lane: within the lane, on its lines, or up to MAX_SHOULDER_M beyond.
+    fn offset_ok(&self, offset_m: f64) -> bool {
+        offset_m.is_finite() && offset_m.abs() <= self.road.lane_width_m / 2.0 + MAX_SHOULDER_M
+    }
+
+    fn offset_fix(&self) -> String {
+        format!(
+            "use metres from the lane's centre, positive left, at most {} (half a lane plus {MAX_SHOULDER_M} m of shoulder)",
+            self.road.lane_width_m / 2.0 + MAX_SHOULDER_M
+        )
     }
 
     fn check_random_traffic(&self, r: &RandomTraffic) -> Result<(), Invalid> {
@@ -482,6 +512,11 @@ mod tests {
         assert_eq!(e.key, "expect.min_gap_m", "{e}");
         let expect = fine.replacen("ego:", "expect: { min_gap_m: 5 }, ego:", 1);
         assert_eq!(Scenario::parse(&expect, "my.json5").unwrap().expect.min_gap_m, Some(5.0));
+
+        let off = fine.replace("lane: 1, gap_m: 30", "lane: 1, offset_m: 9, gap_m: 30");
+        let e = Scenario::parse(&off, "my.json5").unwrap_err();
+        assert_eq!(e.key, "traffic[0].offset_m", "{e}");
+        assert!(e.fix.contains("4.75"), "{e}");
 
         let e = Scenario::parse("{ name: ", "my.json5").unwrap_err();
         assert!(e.problem.starts_with("not valid JSON5"), "{e}");

@@ -168,12 +168,15 @@ impl Placing<'_> {
         self.bodies.len() as u32
     }
 
-    /// A vehicle at road position `s` (rear axle) in the centre of `lane`, moving at `speed`.
+    /// A vehicle at road position `s` (rear axle) in `lane`, `offset_m` left of its centre,
+    /// moving at `speed`.
+    #[allow(clippy::too_many_arguments)]
     fn add(
         &mut self,
         class: ObjectClass,
         color: [u8; 3],
         lane: u32,
+        offset_m: f64,
         s: f64,
         speed: f64,
         driver: Option<TrafficDriver>,
@@ -181,7 +184,7 @@ impl Placing<'_> {
         let id = self.next_id();
         let params = VehicleParams::of_class(class);
         let (_, heading) = self.road.center(s);
-        let at = self.road.to_world(s, self.road.lane_center_d(lane));
+        let at = self.road.to_world(s, self.road.lane_center_d(lane) + offset_m);
         let body = self.physics.add_vehicle(id, &params, at, heading, speed);
         self.starts.push((lane, s));
         // Starting at speed: the throttle that holds it is already applied.
@@ -207,8 +210,8 @@ impl Placing<'_> {
                 ego_rear + gap.min(-0.5) - (params.size_m[0] - params.rear_overhang_m)
             };
             let color = t.color.unwrap_or(PALETTE[vrng.below(PALETTE.len() as u64) as usize]);
-            let driver = TrafficDriver::new(t.lane, speed, t.follow, t.actions.clone(), None);
-            self.add(t.class.into(), color, t.lane, s, speed, Some(driver));
+            let driver = TrafficDriver::new(t.lane, t.offset_m, speed, t.follow, t.actions.clone(), None);
+            self.add(t.class.into(), color, t.lane, t.offset_m, s, speed, Some(driver));
         }
     }
 
@@ -241,8 +244,8 @@ impl Placing<'_> {
                     next_s: every * (0.5 + grng.unit()),
                     rng: grng.fork(id as u64),
                 });
-                let driver = TrafficDriver::new(lane, speed, true, Vec::new(), wander);
-                self.add(class.into(), color, lane, s, speed, Some(driver));
+                let driver = TrafficDriver::new(lane, 0.0, speed, true, Vec::new(), wander);
+                self.add(class.into(), color, lane, 0.0, s, speed, Some(driver));
                 break;
             }
         }
@@ -259,7 +262,7 @@ impl World {
         let ego = &scenario.ego;
         let ego_class: ObjectClass = ego.class.into();
         let ego_color = ego.color.unwrap_or([235, 235, 235]);
-        placing.add(ego_class, ego_color, ego.lane, ego.s_m, ego.speed_mps, None);
+        placing.add(ego_class, ego_color, ego.lane, 0.0, ego.s_m, ego.speed_mps, None);
         placing.scripted_traffic(&scenario, &mut rng);
         if let Some(r) = &scenario.random_traffic {
             placing.random_traffic(r, ego.s_m, &mut rng);

@@ -207,6 +207,32 @@ fn a_lane_change_takes_its_duration() {
     }
 }
 
+/// A vehicle placed across its lane (`offset_m`) starts and stays there, off the road on the
+/// shoulder too (ground truth then puts it in no lane), and an action moves it to a new offset.
+#[test]
+fn a_vehicle_holds_its_place_across_the_lane_and_moves_when_told() {
+    let mut w = world(
+        "{ name: 'off', duration_s: 60, variation: { gap_m: 0, speed_mps: 0 }, ego: { lane: 1, speed_mps: 20 }, \
+         traffic: [ { lane: 0, offset_m: -3.0, gap_m: 80, speed_mps: 0 }, \
+                    { lane: 2, offset_m: 1.0, gap_m: 40, speed_mps: 20, actions: [ { at_s: 5, offset_m: -1.0, duration_s: 2 } ] } ] }",
+    );
+    let (shoulder, mover) = (w.road().lane_center_d(0) - 3.0, w.road().lane_center_d(2));
+    let (mut worst_shoulder, mut worst_before) = (0.0f64, 0.0f64);
+    for step in 0..(10 * HZ) {
+        w.step(EgoInput::Cruise);
+        worst_shoulder = worst_shoulder.max((w.vehicles()[1].d_m - shoulder).abs());
+        if step < 5 * HZ {
+            worst_before = worst_before.max((w.vehicles()[2].d_m - (mover + 1.0)).abs());
+        }
+    }
+    assert!(worst_shoulder < 0.05, "the parked car moved {worst_shoulder:.2} m across");
+    assert_eq!(w.vehicles()[1].lane, -1, "on the shoulder it is in no lane");
+    assert!(worst_before < 0.3, "strays {worst_before:.2} m from its offset");
+    let after = w.vehicles()[2].d_m - mover;
+    assert!((after + 1.0).abs() < 0.3, "at {after:.2} m from the lane centre after moving to -1 m");
+    assert_eq!(w.vehicles()[2].lane, 2, "a metre either side of the centre is still its lane");
+}
+
 /// Random lane changes accept a gap only when nobody has to brake hard for it (the new
 /// follower in the target lane and the changer behind its new leader, MOBIL's safety
 /// criterion): dense traffic that weaves all the time has no crash of its own.
