@@ -18,6 +18,7 @@
 //!
 //! **Domain**: the loop's parts; each stands alone on the contract.
 //! - [`vehicle`]: the vehicle model shared by the simulator and the controllers.
+//! - [`road`]: the road's geometry (lanes, curves, road coordinates), shared the same way.
 //! - [`sim`]: slipstream-sim, the deterministic driving simulator.
 //! - [`perception`]: slipstream-detect, vehicles from camera frames (never the simulator).
 //! - [`acc`]: slipstream-acc, the adaptive cruise control (never the simulator).
@@ -42,6 +43,7 @@ pub mod config;
 
 pub mod acc;
 pub mod perception;
+pub mod road;
 pub mod sim;
 pub mod vehicle;
 

@@ -22,10 +22,11 @@ pub enum Topic {
     SimEvents,
     AccStatus,
     AccCommand,
+    SimRoad,
 }
 
 impl Topic {
-    pub const ALL: [Topic; 11] = [
+    pub const ALL: [Topic; 12] = [
         Topic::VehicleSpeed,
         Topic::VehicleState,
         Topic::VehicleControl,
@@ -37,6 +38,7 @@ impl Topic {
         Topic::SimEvents,
         Topic::AccStatus,
         Topic::AccCommand,
+        Topic::SimRoad,
     ];
 
     /// The logical name, which is also the default key (before the namespace).
@@ -53,6 +55,7 @@ impl Topic {
             Topic::SimEvents => "sim/events",
             Topic::AccStatus => "acc/status",
             Topic::AccCommand => "acc/command",
+            Topic::SimRoad => "sim/road",
         }
     }
 
@@ -74,6 +77,7 @@ impl Topic {
             Topic::SimEvents => MessageKind::SimEvent,
             Topic::AccStatus => MessageKind::AccStatus,
             Topic::AccCommand => MessageKind::AccCommand,
+            Topic::SimRoad => MessageKind::RoadMap,
         }
     }
 
@@ -96,7 +100,7 @@ impl Topic {
                 delivery: Delivery::Latest,
                 ..base
             },
-            Topic::CameraFrontInfo => TopicQos {
+            Topic::CameraFrontInfo | Topic::SimRoad => TopicQos {
                 congestion_control: crate::qos::Congestion::Block,
                 delivery: Delivery::Queue(64),
                 latched: true,
@@ -150,6 +154,7 @@ pub const SIM_CLOCK: TopicDef<msg::SimClock> = TopicDef::new(Topic::SimClock);
 pub const SIM_EVENTS: TopicDef<msg::SimEvent> = TopicDef::new(Topic::SimEvents);
 pub const ACC_STATUS: TopicDef<msg::AccStatus> = TopicDef::new(Topic::AccStatus);
 pub const ACC_COMMAND: TopicDef<msg::AccCommand> = TopicDef::new(Topic::AccCommand);
+pub const SIM_ROAD: TopicDef<msg::RoadSpec> = TopicDef::new(Topic::SimRoad);
 
 /// The key prefix (under the namespace) where nodes declare liveliness tokens:
 /// `<namespace>/nodes/<node name>`.

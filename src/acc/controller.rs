@@ -7,10 +7,11 @@
 
 use std::collections::HashMap;
 
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::{Matrix3, Vector2, Vector3};
 
 use super::settings::{AccSettings, PerceptionSource, TIME_GAP_RANGE_S};
-use crate::msg::{AccCommand, AccMode, AccStatus, AccWarning, Detections, GroundTruthObjects, LeadInfo};
+use crate::msg::{AccCommand, AccMode, AccStatus, AccWarning, Detections, GroundTruthObjects, LeadInfo, RoadSpec};
+use crate::road::Road;
 use crate::vehicle::{actuate_acceleration, VehicleParams};
 
 /// A vehicle ahead, as perception (or ground truth) reports it.
@@ -73,6 +74,57 @@ pub struct EgoNow {
     /// Measured longitudinal acceleration.
     pub accel_mps2: f64,
     pub yaw_rate_radps: f64,
+    /// Where the ego is, when known (vehicle/state): with the road's map it gives the lane
+    /// ahead.
+    pub pose: Option<Pose>,
+}
+
+/// The ego's rear-axle position and heading in the road's frame (vehicle/state's world frame).
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct Pose {
+    pub x_m: f64,
+    pub y_m: f64,
+    pub yaw_rad: f64,
+}
+
+impl Pose {
+    pub fn of(state: &crate::msg::VehicleState) -> Pose {
+        let p = state.position_in_world_m;
+        Pose { x_m: p[0], y_m: p[1], yaw_rad: state.yaw_in_world_rad }
+    }
+}
+
+/// The ego's lane on the map now: where a point in the ego's frame lies across that lane.
+struct LaneAhead<'a> {
+    road: &'a Road,
+    pose: Pose,
+    s_m: f64,
+    centre_d_m: f64,
+}
+
+impl LaneAhead<'_> {
+    /// The ego's lane on `road`, when the pose is known and on the road; `last_s_m` (the ego's
+    /// last place along it, a search hint) moves on.
+    fn find<'a>(road: Option<&'a Road>, last_s_m: &mut Option<f64>, ego: &EgoNow) -> Option<LaneAhead<'a>> {
+        let (road, pose) = (road?, ego.pose?);
+        let p = Vector2::new(pose.x_m, pose.y_m);
+        let (s, d) = match *last_s_m {
+            Some(hint) => road.project(p, hint),
+            None => road.project_anywhere(p),
+        };
+        *last_s_m = Some(s);
+        let lane = u32::try_from(road.lane_at(d)).ok()?;
+        Some(LaneAhead { road, pose, s_m: s, centre_d_m: road.lane_center_d(lane) })
+    }
+
+    /// How far left of the ego lane's centre a point (ego frame: `x` forward, `y` left) is,
+    /// measured across the road where the point is: a bend ahead bends the lane with it.
+    fn offset_m(&self, x_m: f64, y_m: f64) -> f64 {
+        let (sin, cos) = self.pose.yaw_rad.sin_cos();
+        let p = Vector2::new(self.pose.x_m + x_m * cos - y_m * sin, self.pose.y_m + x_m * sin + y_m * cos);
+        let (_, d) = self.road.project(p, self.s_m + x_m);
+        d - self.centre_d_m
+    }
 }
 
 /// What one control step decided.
@@ -87,6 +139,7 @@ pub struct Output {
 #[derive(Debug, Clone, Copy)]
 struct Track {
     stamp_s: f64,
+    /// Its offset from the ego's lane centre (or predicted path, without a map).
     lateral_m: f64,
     lateral_rate_mps: f64,
     seen: u32,
@@ -260,6 +313,9 @@ struct LeadNow {
 
 pub struct Controller {
     s: AccSettings,
+    /// The road's map (sim/road), when one was received, and the ego's last place along it.
+    road: Option<Road>,
+    road_s_m: Option<f64>,
     params: VehicleParams,
     enabled: bool,
     set_speed_mps: f64,
@@ -338,6 +394,8 @@ impl Controller {
             set_speed_mps: settings.set_speed_mps,
             time_gap_s: settings.time_gap_s,
             s: settings,
+            road: None,
+            road_s_m: None,
             tracks: HashMap::new(),
             lead: None,
             noise,
@@ -393,31 +451,52 @@ impl Controller {
         note
     }
 
+    /// Takes the road's map (sim/road): from now on the lane ahead comes from it wherever the
+    /// ego's pose is known and on the road.
+    pub fn set_road(&mut self, spec: &RoadSpec) {
+        if self.road.as_ref().is_some_and(|r| r.spec() == spec) {
+            return;
+        }
+        tracing::info!(lanes = spec.lanes, curves = spec.curves.len(), "road map received: lanes ahead from it");
+        self.road = Some(Road::new(spec.clone()));
+        self.road_s_m = None;
+    }
+
     /// The ego's path curvature, from its yaw rate.
     fn curvature(ego: &EgoNow) -> f64 {
         ego.yaw_rate_radps / ego.speed_mps.max(2.0)
     }
 
     /// Takes a perception frame: updates the tracks, picks the lead and updates its estimate.
+    ///
+    /// A vehicle is in the ego's lane by its offset from the lane's centre: on the map's lane
+    /// where there is a map (bends ahead included), else from the path the yaw rate predicts.
     pub fn perceive(&mut self, frame: &PerceptionFrame, ego: &EgoNow) {
         let front = self.s.vehicle.front_overhang_from_origin_m;
         let kappa = Self::curvature(ego);
+        let lane_ahead = LaneAhead::find(self.road.as_ref(), &mut self.road_s_m, ego);
         let lane = &self.s.lane;
         let current = self.lead.map(|l| l.id);
         let mut best: Option<(u32, f64, f64)> = None;
         for o in &frame.objects {
+            let off = match &lane_ahead {
+                Some(l) => l.offset_m(o.distance_m, o.lateral_m),
+                None => o.lateral_m - kappa * o.distance_m * o.distance_m / 2.0,
+            };
+            // The rate of that same offset: in a bend a car standing in the next lane sweeps
+            // across the ego's own frame as the ego turns, not across its lane.
             let track = match self.tracks.get(&o.id) {
                 Some(t) if frame.stamp_s > t.stamp_s => {
-                    let lat_rate = (o.lateral_m - t.lateral_m) / (frame.stamp_s - t.stamp_s);
+                    let lat_rate = (off - t.lateral_m) / (frame.stamp_s - t.stamp_s);
                     Track {
                         stamp_s: frame.stamp_s,
-                        lateral_m: o.lateral_m,
+                        lateral_m: off,
                         lateral_rate_mps: t.lateral_rate_mps + RATE_FILTER * (lat_rate - t.lateral_rate_mps),
                         seen: t.seen.saturating_add(1),
                     }
                 }
                 Some(t) => *t,
-                None => Track { stamp_s: frame.stamp_s, lateral_m: o.lateral_m, lateral_rate_mps: 0.0, seen: 1 },
+                None => Track { stamp_s: frame.stamp_s, lateral_m: off, lateral_rate_mps: 0.0, seen: 1 },
             };
             self.tracks.insert(o.id, track);
 
@@ -425,8 +504,6 @@ impl Controller {
             if o.distance_m <= 0.0 || gap > lane.range_m {
                 continue;
             }
-            let path_y = kappa * o.distance_m * o.distance_m / 2.0;
-            let off = o.lateral_m - path_y;
             // Lateral speed counts once a track has a few frames behind it.
             let predicted = if track.seen >= 4 { off + track.lateral_rate_mps * lane.lateral_lookahead_s } else { off };
             let limit = if current == Some(o.id) { lane.stay_in_lane_m } else { lane.in_lane_m };

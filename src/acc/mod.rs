@@ -20,7 +20,7 @@ pub mod controller;
 pub mod node;
 pub mod settings;
 
-pub use controller::{Controller, EgoNow, Object, PerceptionFrame};
+pub use controller::{Controller, EgoNow, Object, PerceptionFrame, Pose};
 pub use settings::{AccSettings, PerceptionSource};
 
 #[cfg(test)]

@@ -16,13 +16,13 @@ use std::time::{Duration, Instant};
 
 use serde::Serialize;
 
-use super::controller::{Controller, EgoNow, Output, PerceptionFrame};
+use super::controller::{Controller, EgoNow, Output, PerceptionFrame, Pose};
 use super::settings::{AccSettings, PerceptionSource};
 use crate::bus::{Arrivals, Bus, BusError, Following, NodeWatch, Received, StatsSnapshot, Subscriber};
 use crate::config::ConfigError;
 use crate::msg::{
-    AccCommand, AccMode, AccStatus, AccWarning, CameraInfo, ControlCommand, Detections, GroundTruthObjects, Speed,
-    VehicleState,
+    AccCommand, AccMode, AccStatus, AccWarning, CameraInfo, ControlCommand, Detections, GroundTruthObjects, RoadSpec,
+    Speed, VehicleState,
 };
 use crate::topics;
 
@@ -160,6 +160,8 @@ struct Inputs {
     state: Subscriber<VehicleState>,
     command: Subscriber<AccCommand>,
     info: Subscriber<CameraInfo>,
+    /// The road's map (latched): the lane ahead.
+    road: Subscriber<RoadSpec>,
     perception: PerceptionSub,
     /// The detector's liveliness (camera perception only).
     detector: Option<NodeWatch>,
@@ -180,6 +182,7 @@ impl Inputs {
             state: bus.subscriber(topics::VEHICLE_STATE).await?,
             command: bus.subscriber(topics::ACC_COMMAND).await?,
             info: bus.subscriber(topics::CAMERA_FRONT_INFO).await?,
+            road: bus.subscriber(topics::SIM_ROAD).await?,
             perception,
             detector,
         })
@@ -262,6 +265,7 @@ async fn answer_speed(st: &mut State, inputs: &Inputs, settings: &AccSettings, s
         speed_mps: speed.msg.speed_mps,
         accel_mps2: state.as_ref().map_or(st.ego.accel_mps2, |s| s.acceleration_in_body_mps2[0]),
         yaw_rate_radps: state.as_ref().map_or(st.ego.yaw_rate_radps, |s| s.yaw_rate_radps),
+        pose: state.as_ref().map(Pose::of).or(st.ego.pose),
     };
     while let Some(c) = inputs.command.try_recv() {
         if let Some(note) = st.ctl.command(&c.msg) {
@@ -269,6 +273,9 @@ async fn answer_speed(st: &mut State, inputs: &Inputs, settings: &AccSettings, s
         }
     }
     take_camera_info(st, &inputs.info, settings).await;
+    while let Some(road) = inputs.road.try_recv() {
+        st.ctl.set_road(&road.msg);
+    }
     while let Some((frame, pub_ns, source)) = inputs.perception.frame() {
         if st.perception_from.accept(source.as_deref(), Instant::now()) {
             take_perception(st, &frame, pub_ns);

@@ -13,7 +13,7 @@ fn truth() -> AccSettings {
 }
 
 fn ego(t_s: f64, speed_mps: f64) -> EgoNow {
-    EgoNow { t_s, speed_mps, accel_mps2: 0.0, yaw_rate_radps: 0.0 }
+    EgoNow { t_s, speed_mps, ..EgoNow::default() }
 }
 
 fn obj(id: u32, gap_m: f64, lateral_m: f64, relative_speed_mps: f64) -> Object {
@@ -345,4 +345,40 @@ fn a_lead_braking_beyond_comfort_is_answered_at_once_and_a_steady_one_never() {
             (false, None) => {}
         }
     }
+}
+
+/// With the road's map a car standing in the next lane just into a bend (on the ego's
+/// straight-ahead line) is not the lead and a car in the ego's lane further round it is; on the
+/// yaw rate alone (no map, still on the straight) the first one would be.
+#[test]
+fn with_the_road_map_the_lead_is_in_the_ego_lane_round_a_bend() {
+    use crate::msg::{Curve, RoadSpec};
+    use crate::road::Road;
+    let spec =
+        RoadSpec { curves: vec![Curve { start_m: 400.0, length_m: 300.0, radius_m: 300.0 }], ..RoadSpec::default() };
+    let road = Road::new(spec.clone());
+    let at = road.to_world(350.0, road.lane_center_d(1));
+    let pose = Pose { x_m: at.x, y_m: at.y, yaw_rad: road.center(350.0).1 };
+    // Rear-bumper points of the two cars in the ego's frame (heading +x at s = 350 m).
+    let in_ego = |s: f64, lane: u32| {
+        let p = road.to_world(s, road.lane_center_d(lane)) - at;
+        (p.x, p.y)
+    };
+    let (next_lane, own_lane) = (in_ego(450.0, 0), in_ego(480.0, 1));
+    assert!(next_lane.1.abs() < 1.6, "the next lane's car lies on the straight-ahead line: {next_lane:?}");
+    let objects = vec![
+        Object { id: 1, distance_m: next_lane.0, lateral_m: next_lane.1, relative_speed_mps: -25.0 },
+        Object { id: 2, distance_m: own_lane.0, lateral_m: own_lane.1, relative_speed_mps: -25.0 },
+    ];
+    let lead_of = |map: bool| {
+        let mut c = Controller::new(truth());
+        if map {
+            c.set_road(&spec);
+        }
+        let now = EgoNow { pose: Some(pose), ..ego(0.0, 25.0) };
+        c.perceive(&frame(0.0, objects.clone()), &now);
+        c.step(&now, &[]).status.lead.map(|l| l.id)
+    };
+    assert_eq!(lead_of(true), Some(2), "on the map: the car in the ego's lane");
+    assert_eq!(lead_of(false), Some(1), "on the yaw rate alone: the car on the straight-ahead line");
 }

@@ -219,9 +219,10 @@ fn ttc(tl: &TruthLead) -> Option<f64> {
 }
 
 /// Steady following: the same lead for 2 x STEADY_S (time to settle), its speed within 1 m/s
-/// over the last STEADY_S of `stretch`, which ends at `now`.
+/// over the last STEADY_S of `stretch`, which ends at `now`, and the ego at its speed (within
+/// 1 m/s): closing on a car that stood still all along is an approach, not following.
 fn steady_lead(stretch: &[Sample], now: &Sample) -> bool {
-    if now.t_s - stretch[0].t_s < 2.0 * STEADY_S {
+    if now.t_s - stretch[0].t_s < 2.0 * STEADY_S || now.truth.is_none_or(|t| t.relative_speed_mps.abs() >= 1.0) {
         return false;
     }
     let lead_speed = |w: &Sample| w.lead_speed_mps().unwrap_or(w.speed_mps);

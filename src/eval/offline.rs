@@ -4,7 +4,7 @@
 //! with it. `slipstream eval acc` runs the real processes instead.
 
 use super::trace::{truth_lead, Sample, Trace};
-use crate::acc::{AccSettings, Controller, EgoNow, PerceptionFrame, PerceptionSource};
+use crate::acc::{AccSettings, Controller, EgoNow, PerceptionFrame, PerceptionSource, Pose};
 use crate::msg::{due, ControlCommand, ImageEncoding};
 use crate::perception::{Detector, DetectorParams, Tracker};
 use crate::sim::ground_truth::ground_truth;
@@ -59,6 +59,8 @@ pub fn run(scenario: Scenario, settings: AccSettings, physics_hz: u32, camera_hz
     let mut world = World::new(scenario, seed, physics_hz);
     let mut camera = (settings.perception == PerceptionSource::Camera).then(|| Camera::new(&world));
     let mut ctl = Controller::new(settings);
+    // The road's map, as the simulator's sim/road gives it to slipstream-acc.
+    ctl.set_road(world.road().spec());
     let mut trace = Trace { standstill_m, min_gap_aim_m, ..Default::default() };
     let mut truth = None;
     loop {
@@ -70,6 +72,7 @@ pub fn run(scenario: Scenario, settings: AccSettings, physics_hz: u32, camera_hz
             speed_mps: world.measured_speed_mps(),
             accel_mps2: state.acceleration_in_body_mps2[0],
             yaw_rate_radps: state.yaw_rate_radps,
+            pose: Some(Pose::of(&state)),
         };
         if due(k, camera_hz, physics_hz) {
             let gt = ground_truth(&world, &[]);

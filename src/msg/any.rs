@@ -5,7 +5,8 @@ use serde_json::{json, Value};
 
 use super::{
     decode, AccCommand, AccStatus, CameraFrameRef, CameraInfo, ControlCommand, DecodeError, Detections,
-    GroundTruthObjects, Header, MessageKind, SimClock, SimEvent, Speed, VehicleState, PREAMBLE_LEN, WIRE_VERSION,
+    GroundTruthObjects, Header, MessageKind, RoadSpec, SimClock, SimEvent, Speed, VehicleState, PREAMBLE_LEN,
+    WIRE_VERSION,
 };
 
 /// The kind a payload says it holds (version and kind bytes only).
@@ -54,6 +55,7 @@ pub fn decode_json(bytes: &[u8]) -> Result<(MessageKind, Header, Value), DecodeE
         MessageKind::SimEvent => as_json::<SimEvent>(bytes)?,
         MessageKind::AccStatus => as_json::<AccStatus>(bytes)?,
         MessageKind::AccCommand => as_json::<AccCommand>(bytes)?,
+        MessageKind::RoadMap => as_json::<RoadSpec>(bytes)?,
     };
     Ok((kind, header, body))
 }

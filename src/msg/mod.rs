@@ -19,6 +19,7 @@ mod any;
 mod camera;
 mod codec;
 mod objects;
+mod road;
 mod sim;
 mod vehicle;
 
@@ -27,6 +28,7 @@ pub use any::{decode_json, peek_kind};
 pub use camera::{encode_jpeg, frame_prefix, CameraFrame, CameraFrameRef, CameraInfo, ImageEncoding};
 pub use codec::{decode, decode_header, encode, encode_into, DecodeError, Stamped};
 pub use objects::{BoundingBox2d, Detection, Detections, GroundTruthObject, GroundTruthObjects, ObjectClass};
+pub use road::{Curve, RoadSpec};
 pub use sim::{due, SimClock, SimEvent, SimEventKind, SimMode};
 pub use vehicle::{ControlCommand, ControlTiming, Speed, VehicleState};
 /// Example messages of docs/wire-format.md, for tests elsewhere in the crate.
@@ -71,10 +73,11 @@ pub enum MessageKind {
     SimEvent = 9,
     AccStatus = 10,
     AccCommand = 11,
+    RoadMap = 12,
 }
 
 impl MessageKind {
-    pub const ALL: [MessageKind; 11] = [
+    pub const ALL: [MessageKind; 12] = [
         MessageKind::Speed,
         MessageKind::VehicleState,
         MessageKind::ControlCommand,
@@ -86,6 +89,7 @@ impl MessageKind {
         MessageKind::SimEvent,
         MessageKind::AccStatus,
         MessageKind::AccCommand,
+        MessageKind::RoadMap,
     ];
 
     pub fn from_u8(value: u8) -> Option<Self> {
@@ -106,6 +110,7 @@ impl MessageKind {
             MessageKind::SimEvent => "SimEvent",
             MessageKind::AccStatus => "AccStatus",
             MessageKind::AccCommand => "AccCommand",
+            MessageKind::RoadMap => "RoadMap",
         }
     }
 
@@ -184,6 +189,18 @@ pub fn examples() -> Vec<(MessageKind, Vec<u8>)> {
         e(
             MessageKind::AccCommand,
             encode(&h, &AccCommand { enable: Some(true), set_speed_mps: Some(25.0), time_gap_s: None }),
+        ),
+        e(
+            MessageKind::RoadMap,
+            encode(
+                &h,
+                &RoadSpec {
+                    lanes: 3,
+                    lane_width_m: 3.5,
+                    length_m: 4000.0,
+                    curves: vec![Curve { start_m: 300.0, length_m: 350.0, radius_m: 600.0 }],
+                },
+            ),
         ),
     ]
 }

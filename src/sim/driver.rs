@@ -11,8 +11,8 @@ use nalgebra::Vector2;
 
 use super::dynamics::Actuation;
 use super::rng::SimRng;
-use super::road::Road;
 use super::scenario::Action;
+use crate::road::Road;
 use crate::vehicle::{actuate_acceleration, lag_toward, VehicleParams};
 
 /// Where a vehicle is and how it moves, as a driver sees it.

@@ -2,7 +2,7 @@
 //!
 //! # Layout
 //! - [`scenario`]: the scenario file format (scenarios/*.json5) and its checks.
-//! - [`road`]: the road's centre line, lanes and road coordinates (s, d).
+//! - [`crate::road`]: the road's centre line, lanes and road coordinates (s, d), shared.
 //! - [`dynamics`]: the forces on a vehicle's body (engine, brakes, drag, rolling resistance,
 //!   tyres, steering) from the shared model in [`crate::vehicle`].
 //! - [`physics`]: the one boundary to rapier3d (rigid bodies, contacts).
@@ -26,7 +26,6 @@ pub mod physics;
 pub mod preview;
 pub mod render;
 pub mod rng;
-pub mod road;
 pub mod scenario;
 pub mod settings;
 pub mod world;

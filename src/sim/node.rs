@@ -28,7 +28,7 @@ use crate::bus::{
     StatsSnapshot,
 };
 use crate::msg::{
-    due, CameraInfo, ControlCommand, ControlTiming, GroundTruthObjects, ImageEncoding, SimClock, SimEvent,
+    due, CameraInfo, ControlCommand, ControlTiming, GroundTruthObjects, ImageEncoding, RoadSpec, SimClock, SimEvent,
     SimEventKind, Speed, VehicleState,
 };
 use crate::topics;
@@ -291,6 +291,8 @@ struct Node<'a> {
     events: Publisher<SimEvent>,
     objects: Publisher<GroundTruthObjects>,
     info_pub: Publisher<CameraInfo>,
+    /// The road (latched): where lanes go, for controllers.
+    road_pub: Publisher<RoadSpec>,
     frames: FramePublisher,
     info: CameraInfo,
     renderer: Renderer,
@@ -334,6 +336,7 @@ impl<'a> Node<'a> {
             events: bus.publisher(topics::SIM_EVENTS).await?,
             objects: bus.publisher(topics::OBJECTS).await?,
             info_pub: bus.publisher(topics::CAMERA_FRONT_INFO).await?,
+            road_pub: bus.publisher(topics::SIM_ROAD).await?,
             frames,
             scratch: vec![0u8; renderer.frame_len()],
             info,
@@ -351,9 +354,11 @@ impl<'a> Node<'a> {
         })
     }
 
-    /// The camera info (latched), the lockstep start (its nodes up), the scenario's start.
+    /// The camera info and the road (latched), the lockstep start (its nodes up), the
+    /// scenario's start.
     async fn start(&self, bus: &Bus, world: &World, stop: &AtomicBool) -> Result<(), SimError> {
         self.info_pub.put(0, &self.info)?;
+        self.road_pub.put(0, world.road().spec())?;
         let lockstep = &self.settings.lockstep;
         if self.settings.mode == Mode::Lockstep {
             wait_for_nodes(bus, &lockstep.wait_for, lockstep.start_timeout_ms, stop).await?;

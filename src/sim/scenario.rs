@@ -6,9 +6,9 @@ use std::path::Path;
 
 use serde::Deserialize;
 
-use super::road::RoadSpec;
 use crate::config::{parse_json5, ConfigError};
 use crate::msg::ObjectClass;
+use crate::road::RoadSpec;
 
 /// The scenarios shipped in scenarios/, by name.
 pub const BUILT_IN: &[(&str, &str)] = &[
@@ -22,6 +22,8 @@ pub const BUILT_IN: &[(&str, &str)] = &[
     ("busy-traffic", include_str!("../../scenarios/busy-traffic.json5")),
     ("curve-follow", include_str!("../../scenarios/curve-follow.json5")),
     ("stopped-car-on-shoulder", include_str!("../../scenarios/stopped-car-on-shoulder.json5")),
+    ("bend-with-stopped-cars", include_str!("../../scenarios/bend-with-stopped-cars.json5")),
+    ("bend-stopped-car-in-lane", include_str!("../../scenarios/bend-stopped-car-in-lane.json5")),
     ("open-road", include_str!("../../scenarios/open-road.json5")),
 ];
 
@@ -334,26 +336,8 @@ impl Scenario {
         if !(self.duration_s.is_finite() && self.duration_s > 0.0) {
             return err("duration_s", format!("{} is not a positive duration", self.duration_s), "give seconds > 0");
         }
-        if !(1..=8).contains(&lanes) {
-            return err("road.lanes", format!("{lanes} lanes"), "use 1 to 8 lanes");
-        }
-        if !(2.0..=6.0).contains(&self.road.lane_width_m) {
-            return err("road.lane_width_m", format!("{} m", self.road.lane_width_m), "use 2 to 6 m");
-        }
-        if !(self.road.length_m >= 100.0 && self.road.length_m <= 100_000.0) {
-            return err("road.length_m", format!("{} m", self.road.length_m), "use 100 m to 100 km");
-        }
-        for (i, c) in self.road.curves.iter().enumerate() {
-            if !(c.radius_m.abs() >= 30.0 && c.radius_m.is_finite()) {
-                return err(
-                    &format!("road.curves[{i}].radius_m"),
-                    format!("radius {} m is too tight", c.radius_m),
-                    "use |radius| >= 30 m (positive turns left, negative right)",
-                );
-            }
-            if !(c.length_m > 0.0 && c.start_m >= 0.0) {
-                return err(&format!("road.curves[{i}]"), "start_m must be >= 0 and length_m > 0".into(), FIX);
-            }
+        if let Some(invalid) = self.road.invalid() {
+            return Err(invalid);
         }
         if self.ego.lane >= lanes {
             return err("ego.lane", format!("lane {} does not exist on a {lanes}-lane road", self.ego.lane), &lane_fix);

@@ -7,9 +7,9 @@ use super::driver::{pursue, Cruise, Lead, Neighbour, Observation, TrafficDriver,
 use super::dynamics::{forces, Actuation};
 use super::physics::{BodyId, Physics};
 use super::rng::SimRng;
-use super::road::Road;
 use super::scenario::{ClassSpec, RandomTraffic, Scenario};
 use crate::msg::{ControlCommand, ObjectClass, VehicleState};
+use crate::road::Road;
 use crate::vehicle::{actuate_acceleration, lag_toward, VehicleParams};
 
 /// The ego's id in ground truth and collisions; traffic is numbered from 1.

@@ -14,7 +14,7 @@ use serde::Serialize;
 
 use crate::bus::FrameSample;
 use crate::msg::{AccMode, AccStatus, CameraInfo, Detections, GroundTruthObjects, ImageEncoding, VehicleState};
-use crate::sim::road::Road;
+use crate::road::Road;
 use crate::sim::Scenario;
 use crate::vehicle::VehicleParams;
 
@@ -468,7 +468,7 @@ mod tests {
 
     #[test]
     fn the_road_has_one_line_per_lane_boundary_around_the_ego() {
-        let spec = crate::sim::road::RoadSpec::default();
+        let spec = crate::road::RoadSpec::default();
         let r = Road::new(spec.clone());
         let update = road_update(1, &r, 100.0);
         let lines = &update.entities[0].lines;

@@ -32,6 +32,9 @@ fn temp_file(name: &str, text: &str) -> PathBuf {
 
 #[test]
 fn demo_runs_two_processes_that_find_each_other() {
+    // Two realtime processes counting frames: not beside the loop tests (under a full suite's
+    // load the frames once fell back from shared memory).
+    let _serial = common::serial();
     let ep = free_endpoint();
     let mut cmd = bin();
     cmd.args(["demo", "--duration", "4", "--json", "-l", &ep, "-e", &ep]);

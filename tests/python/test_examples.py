@@ -53,8 +53,12 @@ def test_examples_and_every_published_type_decode_during_up(slipstream_bin, free
 
         with zenoh.open(peer_config(endpoint)) as session:
             sub = session.declare_subscriber("**", on_sample)
-            info = zenoh.ext.declare_advanced_subscriber(
-                session, "camera/front/info", on_sample, history=zenoh.ext.HistoryConfig(detect_late_publishers=True))
+            # The latched topics (camera info, the road): their history, whenever they were sent.
+            latched = [
+                zenoh.ext.declare_advanced_subscriber(
+                    session, key, on_sample, history=zenoh.ext.HistoryConfig(detect_late_publishers=True))
+                for key in ("camera/front/info", "sim/road")
+            ]
             speed = example("print_speed.py", "-e", endpoint, "--count", "50")
             camera = example("camera_numpy.py", "-e", endpoint, "--count", "5")
             # An operator command from Python: the Rust ACC takes the new set speed.
@@ -68,7 +72,8 @@ def test_examples_and_every_published_type_decode_during_up(slipstream_bin, free
                         break
                 time.sleep(0.1)
             up.wait(timeout=90)  # subscribed to the end: sim/events carries ScenarioEnd
-            info.undeclare()
+            for s in latched:
+                s.undeclare()
             sub.undeclare()
     finally:
         if up.poll() is None:

@@ -15,7 +15,7 @@ def examples(slipstream_bin):
 
 
 def test_every_rust_example_decodes_and_reencodes_byte_for_byte(examples):
-    assert len(examples) == 11
+    assert len(examples) == 12
     for kind, payload in examples.items():
         got_kind, header, body = decode(payload)
         assert got_kind == kind
@@ -25,6 +25,9 @@ def test_every_rust_example_decodes_and_reencodes_byte_for_byte(examples):
 
 def test_decoded_values_are_the_documented_ones(examples):
     assert decode(examples["Speed"])[2] == {"speed_mps": 27.5}
+    assert decode(examples["RoadMap"])[2] == {
+        "lanes": 3, "lane_width_m": 3.5, "length_m": 4000.0,
+        "curves": [{"start_m": 300.0, "length_m": 350.0, "radius_m": 600.0}]}
     control = decode(examples["ControlCommand"])[2]
     assert control == {"throttle": 0.25, "brake": 0.0, "steer": -0.5, "answers_step": 125,
                        "perception_stamp_pub_ns": 1_700_000_000_100_000_000}

@@ -81,6 +81,8 @@ STRUCTS = {
         ("warnings", ("seq", ("enum", ["ForwardCollision", "StaleSpeed", "StalePerception", "PerceptionLost"]))),
     ],
     "AccCommand": [("enable", ("opt", "bool")), ("set_speed_mps", ("opt", "f64")), ("time_gap_s", ("opt", "f64"))],
+    "Curve": [("start_m", "f64"), ("length_m", "f64"), ("radius_m", "f64")],
+    "RoadMap": [("lanes", "u32"), ("lane_width_m", "f64"), ("length_m", "f64"), ("curves", ("seq", ("struct", "Curve")))],
 }
 
 VARIANTS = {
@@ -94,7 +96,7 @@ VARIANTS = {
 
 KINDS = {
     1: "Speed", 2: "VehicleState", 3: "ControlCommand", 4: "CameraFrame", 5: "CameraInfo", 6: "GroundTruthObjects",
-    7: "Detections", 8: "SimClock", 9: "SimEvent", 10: "AccStatus", 11: "AccCommand",
+    7: "Detections", 8: "SimClock", 9: "SimEvent", 10: "AccStatus", 11: "AccCommand", 12: "RoadMap",
 }
 KIND_IDS = {name: kid for kid, name in KINDS.items()}
 
@@ -103,7 +105,7 @@ DEFAULT_KEYS = {
     "vehicle/speed": "Speed", "vehicle/state": "VehicleState", "vehicle/control": "ControlCommand",
     "camera/front": "CameraFrame", "camera/front/info": "CameraInfo", "objects": "GroundTruthObjects",
     "perception/objects": "Detections", "sim/clock": "SimClock", "sim/events": "SimEvent",
-    "acc/status": "AccStatus", "acc/command": "AccCommand",
+    "acc/status": "AccStatus", "acc/command": "AccCommand", "sim/road": "RoadMap",
 }
 
 _VARINT_MAX = {"u32": 5, "u64": 10}

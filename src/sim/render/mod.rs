@@ -16,9 +16,9 @@ use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
 use self::raster::{fill_polygon, fill_polygon_smooth, Layer, Projection, Target};
 use super::rng::SimRng;
-use super::road::Road;
 use super::world::VehicleView;
 use crate::msg::{BoundingBox2d, CameraInfo};
+use crate::road::Road;
 
 /// What the renderer found out about one vehicle while drawing it.
 #[derive(Debug, Clone, Copy, PartialEq)]

@@ -3,9 +3,9 @@
 
 use nalgebra::{Point3, Vector3};
 
-use super::super::road::Road;
 use super::super::world::VehicleView;
 use crate::msg::ObjectClass;
+use crate::road::Road;
 
 const GRASS: [u8; 3] = [78, 118, 62];
 const ASPHALT: [u8; 3] = [84, 84, 88];

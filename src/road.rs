@@ -4,36 +4,13 @@
 //! centre line from the road start, d the signed lateral offset from it (positive left). The
 //! road starts at the world origin heading along world +x. Lane 0 is the rightmost; lane i's
 //! centre is at d = (i + 0.5 - lanes / 2) * lane_width.
+//!
+//! Shared by the domain modules like the vehicle model: the simulator builds its world on it,
+//! the ACC finds its lane ahead on it (from the map the simulator publishes on sim/road).
 
 use nalgebra::Vector2;
-use serde::{Deserialize, Serialize};
 
-/// A constant-radius curve on the centre line.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Curve {
-    /// Where the curve starts, along the centre line.
-    pub start_m: f64,
-    pub length_m: f64,
-    /// Radius of the centre line; positive turns left, negative right.
-    pub radius_m: f64,
-}
-
-/// The road as a scenario describes it.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields, default)]
-pub struct RoadSpec {
-    pub lanes: u32,
-    pub lane_width_m: f64,
-    pub length_m: f64,
-    pub curves: Vec<Curve>,
-}
-
-impl Default for RoadSpec {
-    fn default() -> Self {
-        RoadSpec { lanes: 3, lane_width_m: 3.5, length_m: 4000.0, curves: Vec::new() }
-    }
-}
+pub use crate::msg::{Curve, RoadSpec};
 
 /// Spacing of the precomputed centre-line samples.
 const SAMPLE_M: f64 = 0.5;

@@ -1,0 +1,76 @@
+//! sim/road: the road the vehicles drive on, as the simulator announces it (latched): what a
+//! controller needs to know where its lane goes ahead. The same description is a scenario's
+//! `road` block (docs/simulator.md).
+
+use serde::{Deserialize, Serialize};
+
+use super::{Message, MessageKind};
+
+/// A constant-radius curve on the centre line.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Curve {
+    /// Where the curve starts, along the centre line.
+    pub start_m: f64,
+    pub length_m: f64,
+    /// Radius of the centre line; positive turns left, negative right.
+    pub radius_m: f64,
+}
+
+/// The road as a scenario describes it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct RoadSpec {
+    pub lanes: u32,
+    pub lane_width_m: f64,
+    pub length_m: f64,
+    pub curves: Vec<Curve>,
+}
+
+impl Default for RoadSpec {
+    fn default() -> Self {
+        RoadSpec { lanes: 3, lane_width_m: 3.5, length_m: 4000.0, curves: Vec::new() }
+    }
+}
+
+impl RoadSpec {
+    /// The limits a scenario's road must keep (docs/simulator.md): the first one off, as
+    /// (key, problem, fix).
+    pub fn invalid(&self) -> Option<(String, String, String)> {
+        let bad = |key: &str, problem: String, fix: &str| Some((key.to_string(), problem, fix.to_string()));
+        if !(1..=8).contains(&self.lanes) {
+            return bad("road.lanes", format!("{} lanes", self.lanes), "use 1 to 8 lanes");
+        }
+        if !(2.0..=6.0).contains(&self.lane_width_m) {
+            return bad("road.lane_width_m", format!("{} m", self.lane_width_m), "use 2 to 6 m");
+        }
+        if !(self.length_m >= 100.0 && self.length_m <= 100_000.0) {
+            return bad("road.length_m", format!("{} m", self.length_m), "use 100 m to 100 km");
+        }
+        for (i, c) in self.curves.iter().enumerate() {
+            if !(c.radius_m.abs() >= 30.0 && c.radius_m.is_finite()) {
+                return bad(
+                    &format!("road.curves[{i}].radius_m"),
+                    format!("radius {} m is too tight", c.radius_m),
+                    "use |radius| >= 30 m (positive turns left, negative right)",
+                );
+            }
+            if !(c.length_m > 0.0 && c.start_m >= 0.0 && c.length_m.is_finite() && c.start_m.is_finite()) {
+                return bad(
+                    &format!("road.curves[{i}]"),
+                    "start_m must be >= 0 and length_m > 0".into(),
+                    "see docs/simulator.md (scenario format)",
+                );
+            }
+        }
+        None
+    }
+}
+
+impl Message for RoadSpec {
+    const KIND: MessageKind = MessageKind::RoadMap;
+
+    fn check(&self) -> Result<(), String> {
+        self.invalid().map_or(Ok(()), |(key, problem, _)| Err(format!("{key}: {problem}")))
+    }
+}
