@@ -18,6 +18,7 @@
 
 use super::geometry::CameraModel;
 use crate::msg::{BoundingBox2d, CameraInfo, ObjectClass};
+use crate::vehicle::VehicleParams;
 
 /// Tunable thresholds (the defaults are what docs/perception.md measures).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -336,6 +337,15 @@ impl Detector {
             }
         };
         let confidence = (plausible(width_m, 1.4, 2.8) * plausible(height_m, 1.1, 3.8)).clamp(0.05, 1.0) as f32;
+        // A vehicle cut by the image's side (one being passed): the band's centre is the visible
+        // part's, metres inside the vehicle's own, which would put a car of the next lane into
+        // the ego's. Its inner side is measured: the centre lies half its class's width beyond.
+        let half_width = VehicleParams::of_class(class).size_m[1] / 2.0;
+        let lateral_offset_m = match (bu0 == 0, bu1 as usize + 1 >= w) {
+            (true, false) => self.camera.lateral_at((bu1 + 1) as f64, edge_v, contact.x) + half_width,
+            (false, true) => self.camera.lateral_at(bu0 as f64, edge_v, contact.x) - half_width,
+            _ => contact.y,
+        };
         Ok(FrameDetection {
             bbox: BoundingBox2d {
                 u_min_px: u0 as f32,
@@ -345,7 +355,7 @@ impl Detector {
             },
             class,
             distance_m: contact.x,
-            lateral_offset_m: contact.y,
+            lateral_offset_m,
             height_m,
             width_m,
             confidence,

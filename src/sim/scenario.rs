@@ -24,6 +24,7 @@ pub const BUILT_IN: &[(&str, &str)] = &[
     ("stopped-car-on-shoulder", include_str!("../../scenarios/stopped-car-on-shoulder.json5")),
     ("bend-with-stopped-cars", include_str!("../../scenarios/bend-with-stopped-cars.json5")),
     ("bend-stopped-car-in-lane", include_str!("../../scenarios/bend-stopped-car-in-lane.json5")),
+    ("passing-trucks", include_str!("../../scenarios/passing-trucks.json5")),
     ("open-road", include_str!("../../scenarios/open-road.json5")),
 ];
 
