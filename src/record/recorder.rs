@@ -185,6 +185,7 @@ impl Recording {
         about.insert("wire_version".to_string(), WIRE_VERSION.to_string());
         about.insert("started_unix_ns".to_string(), msg::wall_clock_ns().to_string());
         about.insert("viewable_copies".to_string(), viewable.is_some().to_string());
+        let viewable = viewable.map(|c| c.with_topics(bus.topics().clone()));
         let thread = {
             let (shared, path) = (shared.clone(), path.to_path_buf());
             std::thread::Builder::new()
@@ -324,9 +325,9 @@ fn write_loop(
             if let Some(copies) = viewable.as_mut() {
                 // The payloads first: copies wait for a writer that keeps up.
                 if shared.queued_bytes.load(Ordering::Relaxed) > VIEWABLE_BACKLOG {
-                    viewable_skipped += copies.skip(&item.payload);
+                    viewable_skipped += copies.skip(&item.key, &item.payload);
                 } else {
-                    for c in copies.of(&item.payload) {
+                    for c in copies.of(&item.key, &item.payload) {
                         write_copy(&mut writer, &mut viewable_channels, c).map_err(fail)?;
                         viewable_copies += 1;
                     }

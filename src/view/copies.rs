@@ -12,6 +12,7 @@ use crate::msg::{
     VehicleState,
 };
 use crate::sim::Scenario;
+use crate::topics::Topic;
 
 /// The copies' topics: the live view's (docs/viewing.md), so one layout shows both.
 use super::live::{
@@ -47,6 +48,9 @@ pub struct Copies {
     status: Option<AccStatus>,
     context: SceneContext,
     road_drawn_ns: Option<u64>,
+    /// Which topic a key is (the recording's namespace and remapping); without it every key
+    /// is taken by its payload's kind.
+    topics: Option<crate::config::TopicMap>,
 }
 
 impl Copies {
@@ -56,8 +60,25 @@ impl Copies {
         Copies { context: SceneContext::of(scenario), ..Copies::default() }
     }
 
-    /// The viewable copies of one payload (none for what has no view, or a malformed payload).
-    pub fn of(&mut self, payload: &[u8]) -> Vec<ViewableCopy> {
+    /// Keys are told apart by `topics` (the bus's namespace and remapping): the narrow camera
+    /// has no view, and its frames and calibration must not pass for the front camera's.
+    pub fn with_topics(self, topics: crate::config::TopicMap) -> Copies {
+        Copies { topics: Some(topics), ..self }
+    }
+
+    /// Whether the sample on `key` has no view: the narrow camera's.
+    fn unviewed(&self, key: &str) -> bool {
+        let Some(topics) = &self.topics else { return false };
+        let topic = zenoh::key_expr::keyexpr::new(key).ok().and_then(|k| topics.topic_of(k));
+        matches!(topic, Some(Topic::CameraNarrow | Topic::CameraNarrowInfo))
+    }
+
+    /// The viewable copies of one payload received on `key` (none for what has no view, or a
+    /// malformed payload).
+    pub fn of(&mut self, key: &str, payload: &[u8]) -> Vec<ViewableCopy> {
+        if self.unviewed(key) {
+            return Vec::new();
+        }
         let Ok(kind) = msg::peek_kind(payload) else { return Vec::new() };
         match kind {
             MessageKind::CameraFrame => self.frame(payload),
@@ -85,12 +106,15 @@ impl Copies {
 
     /// Takes what `payload` tells (ground truth, status, ...) without making its copies
     /// (the recorder is behind); returns how many copies it would have made.
-    pub fn skip(&mut self, payload: &[u8]) -> u64 {
+    pub fn skip(&mut self, key: &str, payload: &[u8]) -> u64 {
+        if self.unviewed(key) {
+            return 0;
+        }
         match msg::peek_kind(payload) {
             Ok(MessageKind::CameraFrame) => 1 + u64::from(self.info.is_some()),
             Ok(MessageKind::Detections) => 1,
             Ok(MessageKind::VehicleState) => 3,
-            Ok(_) => self.of(payload).len() as u64,
+            Ok(_) => self.of(key, payload).len() as u64,
             Err(_) => 0,
         }
     }
@@ -171,37 +195,58 @@ mod tests {
         let topics = |v: Vec<ViewableCopy>| v.iter().map(|c| c.topic).collect::<Vec<_>>();
         let frame = CameraFrame { width: 4, height: 2, encoding: ImageEncoding::Rgb8, data: (0..24).collect() };
         // No calibration before camera/front/info.
-        assert_eq!(topics(c.of(&payload(0, &frame))), [TOPIC_CAMERA]);
-        assert!(c.of(&payload(0, &crate::msg::example_info())).is_empty());
-        let copies = c.of(&payload(50, &frame));
+        assert_eq!(topics(c.of("camera/front", &payload(0, &frame))), [TOPIC_CAMERA]);
+        assert!(c.of("camera/front/info", &payload(0, &crate::msg::example_info())).is_empty());
+        let copies = c.of("camera/front", &payload(50, &frame));
         assert_eq!(copies.iter().map(|c| c.topic).collect::<Vec<_>>(), [TOPIC_CAMERA, TOPIC_CALIBRATION]);
         assert_eq!(copies[0].schema.name, "foxglove.RawImage");
         assert_eq!((copies[0].message_encoding.as_str(), copies[0].log_time), ("protobuf", 5_000_000_050));
         assert!(copies[0].data.windows(24).any(|w| w == (0..24).collect::<Vec<u8>>()), "the pixels, whole");
-        assert_eq!(topics(c.of(&payload(60, &msg::example_detections()))), [TOPIC_ANNOTATIONS]);
+        assert_eq!(topics(c.of("perception/objects", &payload(60, &msg::example_detections()))), [TOPIC_ANNOTATIONS]);
         // The road with the first state and again a simulated second later, not in between.
         let state = crate::msg::example_state();
-        assert_eq!(topics(c.of(&payload(0, &state))), [TOPIC_VEHICLES, TOPIC_TF, TOPIC_ROAD, TOPIC_ACC]);
-        assert_eq!(topics(c.of(&payload(10_000_000, &state))), [TOPIC_VEHICLES, TOPIC_TF, TOPIC_ACC]);
-        assert_eq!(topics(c.of(&payload(1_000_000_000, &state))), [TOPIC_VEHICLES, TOPIC_TF, TOPIC_ROAD, TOPIC_ACC]);
-        let acc = c.of(&payload(1_010_000_000, &state)).pop().unwrap();
+        assert_eq!(
+            topics(c.of("vehicle/state", &payload(0, &state))),
+            [TOPIC_VEHICLES, TOPIC_TF, TOPIC_ROAD, TOPIC_ACC]
+        );
+        assert_eq!(topics(c.of("vehicle/state", &payload(10_000_000, &state))), [TOPIC_VEHICLES, TOPIC_TF, TOPIC_ACC]);
+        assert_eq!(
+            topics(c.of("vehicle/state", &payload(1_000_000_000, &state))),
+            [TOPIC_VEHICLES, TOPIC_TF, TOPIC_ROAD, TOPIC_ACC]
+        );
+        let acc = c.of("vehicle/state", &payload(1_010_000_000, &state)).pop().unwrap();
         assert_eq!((acc.message_encoding.as_str(), acc.schema.encoding.as_str()), ("json", "jsonschema"));
         assert_eq!(serde_json::from_slice::<serde_json::Value>(&acc.data).unwrap()["t_s"], 1.01);
         // Skipped while the recorder is behind: counted, and what it tells is still taken.
-        assert_eq!(c.skip(&payload(1_020_000_000, &frame)), 2);
-        assert_eq!(c.skip(&payload(0, &crate::msg::example_status())), 0);
+        assert_eq!(c.skip("camera/front", &payload(1_020_000_000, &frame)), 2);
+        assert_eq!(c.skip("acc/status", &payload(0, &crate::msg::example_status())), 0);
         // Nothing to draw, or not a payload at all.
-        assert!(c.of(&payload(0, &msg::Speed { speed_mps: 1.0 })).is_empty());
-        assert!(c.of(&[1, 2, 3]).is_empty());
+        assert!(c.of("vehicle/speed", &payload(0, &msg::Speed { speed_mps: 1.0 })).is_empty());
+        assert!(c.of("vehicle/speed", &[1, 2, 3]).is_empty());
+    }
+
+    /// The narrow camera's frames and calibration are not the front camera's: no copies, and
+    /// the front calibration stays.
+    #[test]
+    fn the_narrow_camera_gets_no_copies_and_leaves_the_front_calibration() {
+        let mut c = Copies::new(None).with_topics(crate::config::TopicMap::default());
+        let frame = CameraFrame { width: 4, height: 2, encoding: ImageEncoding::Rgb8, data: (0..24).collect() };
+        c.of("camera/front/info", &payload(0, &crate::msg::example_info()));
+        let narrow = crate::msg::CameraInfo { width: 2, ..crate::msg::example_info() };
+        assert!(c.of("camera/narrow/info", &payload(0, &narrow)).is_empty());
+        assert!(c.of("camera/narrow", &payload(50, &frame)).is_empty());
+        assert_eq!(c.skip("camera/narrow", &payload(50, &frame)), 0);
+        assert_eq!(c.info.as_ref().map(|i| i.width), Some(640));
+        assert_eq!(c.of("camera/front", &payload(50, &frame)).len(), 2);
     }
 
     #[test]
     fn without_a_scenario_the_announced_one_gives_the_road() {
         let mut c = Copies::new(None);
         let state = crate::msg::example_state();
-        assert!(!c.of(&payload(0, &state)).iter().any(|c| c.topic == TOPIC_ROAD));
+        assert!(!c.of("vehicle/state", &payload(0, &state)).iter().any(|c| c.topic == TOPIC_ROAD));
         let start = SimEvent { kind: SimEventKind::ScenarioStart { name: "cut-in".into(), seed: 1 } };
-        c.of(&payload(0, &start));
-        assert!(c.of(&payload(0, &state)).iter().any(|c| c.topic == TOPIC_ROAD));
+        c.of("sim/events", &payload(0, &start));
+        assert!(c.of("vehicle/state", &payload(0, &state)).iter().any(|c| c.topic == TOPIC_ROAD));
     }
 }

@@ -272,8 +272,8 @@ fn echo_decodes_every_topic() {
         .map(|t| {
             let mut cmd = bin("slipstream");
             cmd.args(["echo", t.name(), "--count", "2", "--duration", "30", "-e", &ep(p), "-l", "tcp/127.0.0.1:0"]);
-            if t == Topic::CameraFront {
-                cmd.arg("--save").arg(&dir);
+            if t.kind() == MessageKind::CameraFrame {
+                cmd.arg("--save").arg(dir.join(t.name().replace('/', "_")));
             }
             (t, cmd.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap())
         })
