@@ -25,6 +25,7 @@ pub const BUILT_IN: &[(&str, &str)] = &[
     ("bend-with-stopped-cars", include_str!("../../scenarios/bend-with-stopped-cars.json5")),
     ("bend-stopped-car-in-lane", include_str!("../../scenarios/bend-stopped-car-in-lane.json5")),
     ("passing-trucks", include_str!("../../scenarios/passing-trucks.json5")),
+    ("truck-reveals-stopped-car", include_str!("../../scenarios/truck-reveals-stopped-car.json5")),
     ("open-road", include_str!("../../scenarios/open-road.json5")),
 ];
 
