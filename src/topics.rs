@@ -23,10 +23,12 @@ pub enum Topic {
     AccStatus,
     AccCommand,
     SimRoad,
+    CameraNarrow,
+    CameraNarrowInfo,
 }
 
 impl Topic {
-    pub const ALL: [Topic; 12] = [
+    pub const ALL: [Topic; 14] = [
         Topic::VehicleSpeed,
         Topic::VehicleState,
         Topic::VehicleControl,
@@ -39,6 +41,8 @@ impl Topic {
         Topic::AccStatus,
         Topic::AccCommand,
         Topic::SimRoad,
+        Topic::CameraNarrow,
+        Topic::CameraNarrowInfo,
     ];
 
     /// The logical name, which is also the default key (before the namespace).
@@ -56,6 +60,8 @@ impl Topic {
             Topic::AccStatus => "acc/status",
             Topic::AccCommand => "acc/command",
             Topic::SimRoad => "sim/road",
+            Topic::CameraNarrow => "camera/narrow",
+            Topic::CameraNarrowInfo => "camera/narrow/info",
         }
     }
 
@@ -69,8 +75,8 @@ impl Topic {
             Topic::VehicleSpeed => MessageKind::Speed,
             Topic::VehicleState => MessageKind::VehicleState,
             Topic::VehicleControl => MessageKind::ControlCommand,
-            Topic::CameraFront => MessageKind::CameraFrame,
-            Topic::CameraFrontInfo => MessageKind::CameraInfo,
+            Topic::CameraFront | Topic::CameraNarrow => MessageKind::CameraFrame,
+            Topic::CameraFrontInfo | Topic::CameraNarrowInfo => MessageKind::CameraInfo,
             Topic::Objects => MessageKind::GroundTruthObjects,
             Topic::PerceptionObjects => MessageKind::Detections,
             Topic::SimClock => MessageKind::SimClock,
@@ -94,13 +100,13 @@ impl Topic {
             Topic::VehicleState | Topic::PerceptionObjects => {
                 TopicQos { priority: Priority::InteractiveHigh, express: true, ..base }
             }
-            Topic::CameraFront => TopicQos {
+            Topic::CameraFront | Topic::CameraNarrow => TopicQos {
                 priority: Priority::DataLow,
                 congestion_control: crate::qos::Congestion::Drop,
                 delivery: Delivery::Latest,
                 ..base
             },
-            Topic::CameraFrontInfo | Topic::SimRoad => TopicQos {
+            Topic::CameraFrontInfo | Topic::CameraNarrowInfo | Topic::SimRoad => TopicQos {
                 congestion_control: crate::qos::Congestion::Block,
                 delivery: Delivery::Queue(64),
                 latched: true,
@@ -148,6 +154,8 @@ pub const VEHICLE_STATE: TopicDef<msg::VehicleState> = TopicDef::new(Topic::Vehi
 pub const VEHICLE_CONTROL: TopicDef<msg::ControlCommand> = TopicDef::new(Topic::VehicleControl);
 pub const CAMERA_FRONT: TopicDef<msg::CameraFrame> = TopicDef::new(Topic::CameraFront);
 pub const CAMERA_FRONT_INFO: TopicDef<msg::CameraInfo> = TopicDef::new(Topic::CameraFrontInfo);
+pub const CAMERA_NARROW: TopicDef<msg::CameraFrame> = TopicDef::new(Topic::CameraNarrow);
+pub const CAMERA_NARROW_INFO: TopicDef<msg::CameraInfo> = TopicDef::new(Topic::CameraNarrowInfo);
 pub const OBJECTS: TopicDef<msg::GroundTruthObjects> = TopicDef::new(Topic::Objects);
 pub const PERCEPTION_OBJECTS: TopicDef<msg::Detections> = TopicDef::new(Topic::PerceptionObjects);
 pub const SIM_CLOCK: TopicDef<msg::SimClock> = TopicDef::new(Topic::SimClock);

@@ -278,7 +278,7 @@ async fn receive_bus(
         // zero-copy), touching the last byte.
         let c = col.clone();
         let sub = bus
-            .subscribe_frames_with(move |s| {
+            .subscribe_frames_with(crate::topics::CAMERA_FRONT, move |s| {
                 let f = s.frame();
                 let _ = std::hint::black_box(f.msg.data.last());
                 if s.is_shared_memory() {
@@ -291,7 +291,7 @@ async fn receive_bus(
     } else if frames_measured || spec.background.is_some() {
         // Latency and background load: the application's path, a latest-only
         // FrameSubscriber read by its own task.
-        let sub = bus.frame_subscriber().await?;
+        let sub = bus.frame_subscriber(crate::topics::CAMERA_FRONT).await?;
         let (c, stop, measured) = (col.clone(), stop.clone(), frames_measured);
         tokio::spawn(async move {
             while !stop.load(Ordering::Relaxed) {
@@ -508,7 +508,7 @@ async fn send_bus(spec: &CaseSpec, endpoint: &str, max: Duration) -> Result<Send
             .await??;
         }
         Payload::Frame { width, height } => {
-            let publisher = bus.frame_publisher().await?;
+            let publisher = bus.frame_publisher(crate::topics::CAMERA_FRONT).await?;
             if !publisher.publisher().wait_for_subscriber(MATCH_WAIT).await {
                 bail!("no subscriber matched camera/front within {MATCH_WAIT:?}");
             }
@@ -535,7 +535,7 @@ async fn send_bus(spec: &CaseSpec, endpoint: &str, max: Duration) -> Result<Send
 }
 
 async fn send_background(bus: Arc<Bus>, bg: Background, done: Arc<AtomicBool>, deadline: Instant) -> Result<u64> {
-    let publisher = bus.frame_publisher().await?;
+    let publisher = bus.frame_publisher(crate::topics::CAMERA_FRONT).await?;
     let len = (bg.width * bg.height * 3) as usize;
     tokio::task::spawn_blocking(move || {
         let pacer = Pacer::new(bg.rate_hz);

@@ -1,5 +1,6 @@
 //! `slipstream bench sim`: the simulator's own speed, in process: physics steps/s with 1, 10
 //! and 50 vehicles, software render time per frame, the vehicle detector's time per frame,
+//! both default cameras rendered and detected per frame,
 //! and the real-time factor of a whole run in fast mode with the camera publishing on a
 //! loopback bus. A frame-sized memcpy runs in the
 //! same process as the machine's yardstick for the render figures.
@@ -107,6 +108,32 @@ fn detect_ms(frames: usize) -> Result<f64> {
     Ok(median(times))
 }
 
+/// Median milliseconds for a whole camera step of busy-traffic (noisy): both default cameras
+/// rendered (front 640x480, narrow 640x240) and their vehicles detected and fused, as
+/// slipstream-sim and slipstream-detect share it per frame.
+fn cameras_ms(frames: usize) -> Result<f64> {
+    let settings = SimSettings::default();
+    let scenario = Scenario::find("busy-traffic").map_err(anyhow::Error::msg)?;
+    let mut world = World::new(scenario, 7, settings.physics_hz);
+    let mut cameras = crate::sim::cameras::Cameras::new(&settings, &world);
+    let mut rig = crate::perception::CameraRig::new(
+        cameras.front.info(),
+        cameras.narrow_info(),
+        crate::perception::DetectorParams::default(),
+    );
+    let mut times = Vec::with_capacity(frames);
+    for _ in 0..frames {
+        for _ in 0..5 {
+            world.step(EgoInput::Cruise);
+        }
+        let t = Instant::now();
+        std::hint::black_box(cameras.draw(&world));
+        std::hint::black_box(rig.detect(&cameras.front.rgb, cameras.narrow_rgb()));
+        times.push(t.elapsed().as_secs_f64() * 1e3);
+    }
+    Ok(median(times))
+}
+
 /// Median milliseconds to copy a frame of this size (cold destination each time is not
 /// modelled: this is the hot-cache yardstick).
 fn memcpy_ms(width: u32, height: u32, copies: usize) -> f64 {
@@ -131,7 +158,7 @@ async fn fast_rtf(scenario: &str, sim_s: f64) -> Result<f64> {
     let topics = crate::TopicMap::default();
     let sim_bus = crate::Bus::from_session(sim_session, topics.clone(), "bench-sim").await?;
     let sub_bus = crate::Bus::from_session(sub_session, topics, "bench-viewer").await?;
-    let frames = sub_bus.frame_subscriber().await?;
+    let frames = sub_bus.frame_subscriber(crate::topics::CAMERA_FRONT).await?;
     let mut scenario = Scenario::find(scenario).map_err(anyhow::Error::msg)?;
     scenario.duration_s = sim_s;
     let settings = SimSettings { mode: Mode::Fast, ..SimSettings::default() };
@@ -171,6 +198,9 @@ pub fn run(quick: bool, repeat: usize) -> Result<Vec<SimFigure>> {
     let vga = figure("render 640x480, busy-traffic", "ms/frame", "<= 5", &mut || render_ms(640, 480, frames))?;
     figure("render 1280x720, busy-traffic", "ms/frame", "-", &mut || render_ms(1280, 720, frames))?;
     figure("detect vehicles 640x480, busy-traffic (noisy)", "ms/frame", "<= 5", &mut || detect_ms(frames))?;
+    figure("render + detect, front 640x480 + narrow 640x240, busy-traffic (noisy)", "ms/frame", "<= 5", &mut || {
+        cameras_ms(frames)
+    })?;
     let copy = figure("memcpy of a 640x480 RGB frame (yardstick)", "ms", "-", &mut || {
         Ok(memcpy_ms(640, 480, frames.max(50)))
     })?;

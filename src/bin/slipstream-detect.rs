@@ -39,11 +39,13 @@ fn main() -> Result<()> {
             .await
             .context("detect: run")?;
         tracing::info!(
-            "{} frames, {} skipped, {} unusable, {} detections",
+            "{} frames, {} skipped, {} unusable, {} detections; {} with the narrow camera, {} without its frame",
             stats.frames,
             stats.skipped,
             stats.unusable,
-            stats.detections
+            stats.detections,
+            stats.narrow_frames,
+            stats.narrow_missing
         );
         bus.close().await.context("detect: leave the bus")?;
         anyhow::Ok(())

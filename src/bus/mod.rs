@@ -22,7 +22,7 @@ pub use subscriber::{
 };
 
 use crate::config::{ConfigError, FaultProfile, TopicMap};
-use crate::msg::Message;
+use crate::msg::{CameraFrame, Message};
 use crate::topics::TopicDef;
 
 /// What can go wrong on the bus. Decode errors are not here: they are counted per
@@ -175,9 +175,10 @@ impl Bus {
         Publisher::declare(&self.session, &self.topics, def.topic, &self.node).await
     }
 
-    /// The camera-frame publisher: renders straight into shared memory when it can.
-    pub async fn frame_publisher(&self) -> Result<FramePublisher, BusError> {
-        FramePublisher::declare(&self.session, &self.topics, &self.node).await
+    /// A camera-frame publisher (`def`: camera/front or camera/narrow): renders straight into
+    /// shared memory when it can.
+    pub async fn frame_publisher(&self, def: TopicDef<CameraFrame>) -> Result<FramePublisher, BusError> {
+        FramePublisher::declare(&self.session, &self.topics, def.topic, &self.node).await
     }
 
     /// A typed subscriber with the topic's configured delivery (latest-only or a queue).
@@ -193,9 +194,10 @@ impl Bus {
         Ok(sub)
     }
 
-    /// The camera/front subscriber: frames are read in place (shared memory on one host).
-    pub async fn frame_subscriber(&self) -> Result<FrameSubscriber, BusError> {
-        let topic = crate::topics::CAMERA_FRONT.topic;
+    /// A camera-frame subscriber (`def`: camera/front or camera/narrow): frames are read in
+    /// place (shared memory on one host).
+    pub async fn frame_subscriber(&self, def: TopicDef<CameraFrame>) -> Result<FrameSubscriber, BusError> {
+        let topic = def.topic;
         let sub =
             FrameSubscriber::declare(&self.session, self.topics.key(topic), topic.name(), self.inlet(topic)).await?;
         self.register(sub.stats());
@@ -223,11 +225,15 @@ impl Bus {
 
     /// Calls `handler` with every valid camera frame on Zenoh's receive thread (zero-copy,
     /// no inbox): for consumers that queue or hand frames off themselves, such as a recorder.
-    pub async fn subscribe_frames_with<F>(&self, handler: F) -> Result<CallbackSubscriber, BusError>
+    pub async fn subscribe_frames_with<F>(
+        &self,
+        def: TopicDef<CameraFrame>,
+        handler: F,
+    ) -> Result<CallbackSubscriber, BusError>
     where
         F: Fn(FrameSample) + Send + Sync + 'static,
     {
-        let topic = crate::topics::CAMERA_FRONT.topic;
+        let topic = def.topic;
         let sub = CallbackSubscriber::declare_frames(
             &self.session,
             self.topics.key(topic),

@@ -197,8 +197,13 @@ pub struct FramePublisher {
 }
 
 impl FramePublisher {
-    pub(super) async fn declare(session: &zenoh::Session, topics: &TopicMap, node: &str) -> Result<Self, BusError> {
-        let inner = Publisher::declare(session, topics, Topic::CameraFront, node).await?;
+    pub(super) async fn declare(
+        session: &zenoh::Session,
+        topics: &TopicMap,
+        topic: Topic,
+        node: &str,
+    ) -> Result<Self, BusError> {
+        let inner = Publisher::declare(session, topics, topic, node).await?;
         let shm = if topics.camera.shared_memory {
             match ShmProviderBuilder::default_backend(topics.camera.shm_pool_mib << 20).wait() {
                 Ok(p) => Some(p),

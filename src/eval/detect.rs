@@ -4,23 +4,55 @@
 //! ground truth of the same frame (same simulation step, so matching by time is exact).
 //!
 //! A ground-truth vehicle counts for recall when it is within `max_range_m` ahead and at least
-//! `min_visible` visible; a detection is a true positive when it overlaps (IoU >= 0.3) any
-//! ground-truth vehicle in view, near or far.
+//! `min_visible` visible (beyond, to its class's long range, for the long-range recall); a
+//! detection is a true positive when it overlaps (IoU >= 0.3) any ground-truth vehicle in view,
+//! near or far, or places its rear within 5 % of its distance and 1 m across (far vehicles
+//! are a few pixels in the front image, where boxes are compared).
 
 use serde::Serialize;
 
-use crate::msg::{Detection, GroundTruthObject, ImageEncoding};
-use crate::perception::{Detector, DetectorParams, Tracker};
+use crate::msg::{Detection, GroundTruthObject};
+use crate::perception::{CameraRig, DetectorParams};
+use crate::sim::cameras::Cameras;
 use crate::sim::ground_truth::ground_truth;
-use crate::sim::render::Renderer;
 use crate::sim::settings::SimSettings;
 use crate::sim::world::{EgoInput, World};
 use crate::sim::Scenario;
 
 pub const IOU_MATCH: f32 = 0.3;
+/// An overlap match also needs the distance within this share of the true one.
+pub const IOU_DISTANCE_SHARE: f64 = 0.3;
 
 /// Distance bands errors are reported in.
-pub const RANGES_M: [(f64, f64); 4] = [(0.0, 20.0), (20.0, 40.0), (40.0, 60.0), (60.0, f64::INFINITY)];
+pub const RANGES_M: [(f64, f64); 5] = [(0.0, 20.0), (20.0, 40.0), (40.0, 60.0), (60.0, 150.0), (150.0, f64::INFINITY)];
+
+/// Beyond the near range, recall counts vehicles in full view (at least this visible): a
+/// vehicle far ahead is partly hidden by a nearer one at its bottom, where the detector finds
+/// vehicles (docs/perception.md).
+pub const FAR_MIN_VISIBLE: f32 = 0.9;
+
+/// Beyond the near range, the long range recall is counted to: cars and vans to 150 m,
+/// trucks to 200 m (what an ACC needs at motorway speed, docs/perception.md).
+pub fn long_range_m(class: crate::msg::ObjectClass) -> f64 {
+    match class {
+        crate::msg::ObjectClass::Truck => 200.0,
+        _ => 150.0,
+    }
+}
+
+/// A detection also matches a vehicle whose rear it places within this share of the
+/// distance and `PLACED_LATERAL_M` across: a vehicle 150 m ahead is a few pixels in the front
+/// image the boxes are in, and a box of a partly hidden one overlaps its whole box little.
+pub const PLACED_DISTANCE_SHARE: f64 = 0.05;
+pub const PLACED_LATERAL_M: f64 = 1.0;
+
+/// How well `d` places `o` (1 exactly, towards 0 at the limits), None beyond them.
+fn placed_on(d: &Detection, o: &GroundTruthObject) -> Option<f32> {
+    let [x, y, _] = o.position_in_ego_m;
+    let along = (d.distance_m - x).abs() / (PLACED_DISTANCE_SHARE * x);
+    let across = (d.lateral_offset_m - y).abs() / PLACED_LATERAL_M;
+    (x > 0.0 && along < 1.0 && across < 1.0).then(|| (1.0 - along.max(across)) as f32)
+}
 
 /// One matched pair's errors.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
@@ -41,6 +73,10 @@ pub struct Tally {
     pub true_positives: u64,
     pub eligible: u64,
     pub eligible_found: u64,
+    /// Vehicles in full view ([`FAR_MIN_VISIBLE`]) beyond the near range, to their class's
+    /// long range ([`long_range_m`]): how many, how many found.
+    pub far_eligible: u64,
+    pub far_found: u64,
     pub errors: Vec<MatchError>,
     /// Times a ground-truth vehicle's matched track id changed.
     pub id_switches: u64,
@@ -59,8 +95,13 @@ impl Tally {
         for (i, d) in dets.iter().enumerate() {
             for (j, o) in in_view.iter().enumerate() {
                 let score = d.bbox.iou(o.bbox.as_ref().unwrap_or(&d.bbox));
-                if score >= IOU_MATCH {
+                // Overlapping boxes at distances far apart are two vehicles, one behind the other.
+                let x = o.position_in_ego_m[0];
+                if score >= IOU_MATCH && (d.distance_m - x).abs() < IOU_DISTANCE_SHARE * x.abs() {
                     pairs.push((score, i, j));
+                } else if let Some(closeness) = placed_on(d, o) {
+                    // Below any overlap match: boxes decide where they can.
+                    pairs.push((closeness * IOU_MATCH, i, j));
                 }
             }
         }
@@ -92,9 +133,15 @@ impl Tally {
         }
         for (j, o) in in_view.iter().enumerate() {
             let x = o.position_in_ego_m[0];
-            if x > 0.0 && x <= max_range_m && o.visible_fraction >= min_visible {
+            if x <= 0.0 {
+                continue;
+            }
+            if x <= max_range_m && o.visible_fraction >= min_visible {
                 self.eligible += 1;
                 self.eligible_found += gt_used[j] as u64;
+            } else if x > max_range_m && x <= long_range_m(o.class) && o.visible_fraction >= FAR_MIN_VISIBLE {
+                self.far_eligible += 1;
+                self.far_found += gt_used[j] as u64;
             }
         }
     }
@@ -113,6 +160,11 @@ impl Tally {
         } else {
             self.eligible_found as f64 / self.eligible as f64
         }
+    }
+
+    /// Recall beyond the near range, None when no vehicle was there.
+    pub fn far_recall(&self) -> Option<f64> {
+        (self.far_eligible > 0).then(|| self.far_found as f64 / self.far_eligible as f64)
     }
 
     /// (median, p90) of relative distance error for true distances in [lo, hi).
@@ -143,21 +195,16 @@ fn percentiles(values: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
 
 /// Runs one scenario (for at most `max_seconds` simulated) and scores every frame.
 pub fn evaluate_scenario(scenario: Scenario, seed: u64, settings: &SimSettings, max_seconds: f64, tally: &mut Tally) {
-    let info = settings.camera_info(ImageEncoding::Rgb8);
-    let noise = scenario.noise.clone();
     let mut world = World::new(scenario, seed, settings.physics_hz);
-    let (mut renderer, mut look_rng) = Renderer::seeded(&info, noise.camera_stddev, seed);
-    let mut detector = Detector::new(&info, DetectorParams::default());
-    let mut tracker = Tracker::new();
-    let mut rgb = vec![0u8; renderer.frame_len()];
+    let mut cameras = Cameras::new(settings, &world);
+    let mut rig = CameraRig::new(cameras.front.info(), cameras.narrow_info(), DetectorParams::default());
     let every = (settings.physics_hz as f64 / settings.rates_hz.camera).round().max(1.0) as u64;
     let last_step = (max_seconds * settings.physics_hz as f64) as u64;
     while world.ended().is_none() && world.step_count() <= last_step {
         if world.step_count() % every == 0 {
-            let look = renderer.draw_look(noise.brightness, &mut look_rng);
-            let vis = renderer.render(world.road(), world.ego(), world.vehicles(), look, &mut rgb);
+            let vis = cameras.draw(&world);
             let truth = ground_truth(&world, &vis);
-            let dets = tracker.update(&detector.detect(&rgb), world.time_ns() as f64 / 1e9);
+            let dets = rig.update(&cameras.front.rgb, cameras.narrow_rgb(), world.time_ns() as f64 / 1e9);
             tally.add_frame(&dets, &truth.objects, 60.0, 0.5);
         }
         world.step(EgoInput::Follow);
@@ -187,6 +234,11 @@ pub struct ScenarioScore {
     /// Vehicles within 60 m and at least half visible: how many, how many found.
     pub eligible: u64,
     pub found: u64,
+    /// Beyond 60 m to 150 m (cars, vans) or 200 m (trucks), in full view: recall, how many,
+    /// how many found.
+    pub far_recall: Option<f64>,
+    pub far_eligible: u64,
+    pub far_found: u64,
     /// Per range band "lo-hi m": (median, p90) of |distance error| / true distance.
     pub distance_error: Vec<(String, Option<(f64, f64)>)>,
     /// (median, p90) of |lateral error|, metres.
@@ -206,6 +258,9 @@ impl ScenarioScore {
             recall: t.recall(),
             eligible: t.eligible,
             found: t.eligible_found,
+            far_recall: t.far_recall(),
+            far_eligible: t.far_eligible,
+            far_found: t.far_found,
             distance_error: RANGES_M
                 .iter()
                 .map(|&(lo, hi)| {
@@ -249,6 +304,8 @@ impl Tally {
         self.true_positives += other.true_positives;
         self.eligible += other.eligible;
         self.eligible_found += other.eligible_found;
+        self.far_eligible += other.far_eligible;
+        self.far_found += other.far_found;
         self.errors.extend(other.errors);
         self.id_switches += other.id_switches;
     }
@@ -259,21 +316,23 @@ pub fn markdown(report: &DetectReport) -> String {
     let pct =
         |e: Option<(f64, f64)>| e.map_or("-".to_string(), |(m, p)| format!("{:.1}% / {:.1}%", m * 100.0, p * 100.0));
     let mut s = String::from(
-        "| scenario | frames | precision | recall (found/eligible) | dist. err. 0-20 m | 20-40 m | 40-60 m | 60+ m | lateral err. m | rel. speed err. m/s | id switches |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| scenario | frames | precision | recall to 60 m (found/eligible) | recall 60-150/200 m, full view | dist. err. 0-20 m | 20-40 m | 40-60 m | 60-150 m | 150+ m | lateral err. m | rel. speed err. m/s | id switches |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in report.scenarios.iter().chain(std::iter::once(&report.overall)) {
         s.push_str(&format!(
-            "| {} | {} | {:.3} | {:.3} ({}/{}) | {} | {} | {} | {} | {} | {} | {} |\n",
+            "| {} | {} | {:.3} | {:.3} ({}/{}) | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
             r.scenario,
             r.frames,
             r.precision,
             r.recall,
             r.found,
             r.eligible,
+            r.far_recall.map_or("-".into(), |f| format!("{f:.3} ({}/{})", r.far_found, r.far_eligible)),
             pct(r.distance_error[0].1),
             pct(r.distance_error[1].1),
             pct(r.distance_error[2].1),
             pct(r.distance_error[3].1),
+            pct(r.distance_error[4].1),
             r.lateral_error_m.map_or("-".into(), |(m, p)| format!("{m:.2} / {p:.2}")),
             r.relative_speed_error_mps.map_or("-".into(), |(m, p)| format!("{m:.2} / {p:.2}")),
             r.id_switches,
@@ -408,6 +467,76 @@ mod rendered {
                 assert!(side * lateral > 2.5, "{what}");
                 assert!(gap < 4 || (lateral - y).abs() < 0.6, "{what}");
             }
+        }
+    }
+
+    /// Renders both default cameras at the start of a one-off scenario and runs the camera
+    /// rig (front + narrow, fused) on them.
+    fn rig_detect_in(traffic: &str, noise: f64) -> (Vec<FrameDetection>, crate::msg::GroundTruthObjects) {
+        let text = format!(
+            "{{ name: 't', duration_s: 10, seed: 3, variation: {{ gap_m: 0, speed_mps: 0 }}, noise: {{ camera_stddev: {noise} }}, ego: {{ lane: 1, speed_mps: 0 }}, traffic: [{traffic}] }}"
+        );
+        let world = World::new(Scenario::parse(&text, "test").unwrap(), 3, 100);
+        let mut cameras = crate::sim::cameras::Cameras::new(&SimSettings::default(), &world);
+        let vis = cameras.draw(&world);
+        let mut rig =
+            crate::perception::CameraRig::new(cameras.front.info(), cameras.narrow_info(), DetectorParams::default());
+        (rig.detect(&cameras.front.rgb, cameras.narrow_rgb()), ground_truth(&world, &vis))
+    }
+
+    /// Long range through the narrow camera: cars to 150 m and trucks to 200 m, in the ego's
+    /// lane and the next, are found in at least 90% of positions swept every 3.7 m, within 3%
+    /// of their distance; the front camera alone stops at 80 m. Beyond ~130 m a car's contact
+    /// band is thinner than a row and only its wheels are darker than the threshold: the
+    /// detector joins them (without that, cars were lost from 156 m, trucks from 165 m).
+    #[test]
+    fn cars_to_150_m_and_trucks_to_200_m_are_found_through_the_narrow_camera() {
+        for (class, from, to) in [("car", 60.0, 150.0), ("truck", 60.0, 200.0)] {
+            for lane in [1, 0] {
+                let (mut seen, mut found, mut errors) = (0, 0, Vec::new());
+                let mut gap = from;
+                while gap <= to {
+                    let (dets, truth) = rig_detect_in(
+                        &format!("{{ lane: {lane}, gap_m: {gap}, speed_mps: 0, class: '{class}' }}"),
+                        3.0,
+                    );
+                    let [x, y, _] = truth.objects[0].position_in_ego_m;
+                    seen += 1;
+                    if let Some(d) = dets.iter().find(|d| (d.lateral_offset_m - y).abs() < 1.0) {
+                        found += 1;
+                        errors.push((x, (d.distance_m - x) / x));
+                    }
+                    gap += 3.7;
+                }
+                let what = format!("{class} in lane {lane}, {from}-{to} m");
+                assert!(found * 10 >= seen * 9, "{what}: found {found} of {seen}: {errors:?}");
+                assert!(errors.iter().all(|e| e.1.abs() < 0.03), "{what}: {errors:?}");
+            }
+        }
+    }
+
+    /// A far vehicle whose contact band touches a nearer vehicle's dark glass in the image is
+    /// still found: a thin band meeting a tall dark region a step lower is split from it.
+    /// approach-slower-lead at 19 s: the car 109 m ahead in the next lane, seen beside the
+    /// lead's roof 37 m ahead, was lost for 0.7 s.
+    #[test]
+    fn a_far_car_beside_the_leads_roof_is_found() {
+        let scenario = Scenario::find("approach-slower-lead").unwrap();
+        let seed = scenario.seed;
+        let mut world = World::new(scenario, seed, 100);
+        while world.time_ns() < 19_000_000_000 {
+            world.step(crate::sim::world::EgoInput::Follow);
+        }
+        let mut cameras = crate::sim::cameras::Cameras::new(&SimSettings::default(), &world);
+        let truth = ground_truth(&world, &cameras.draw(&world));
+        let mut rig =
+            crate::perception::CameraRig::new(cameras.front.info(), cameras.narrow_info(), DetectorParams::default());
+        let dets = rig.detect(&cameras.front.rgb, cameras.narrow_rgb());
+        assert_eq!(truth.objects.len(), 2);
+        for o in &truth.objects {
+            let [x, y, _] = o.position_in_ego_m;
+            let d = dets.iter().find(|d| (d.lateral_offset_m - y).abs() < 1.0 && (d.distance_m - x).abs() < 0.03 * x);
+            assert!(d.is_some(), "vehicle at {x:.1} m, {y:.1} m not found in {dets:?}");
         }
     }
 }

@@ -62,6 +62,9 @@ pub struct FrameDetection {
     pub class: ObjectClass,
     /// Ego body x of the vehicle's rear (its contact line).
     pub distance_m: f64,
+    /// The distance's expected error (one standard deviation), from the ground one row
+    /// covers there through this camera.
+    pub distance_sigma_m: f64,
     /// Ego body y of its centre.
     pub lateral_offset_m: f64,
     pub height_m: f64,
@@ -78,6 +81,18 @@ const MIN_BAND_RATIO: f32 = 0.3;
 
 /// How far one frame's measurement of the band's brightness moves the detector's estimate.
 const BAND_RATIO_GAIN: f32 = 0.05;
+
+/// How well the contact edge is located, rows (docs/perception.md: 0.2-1% errors to 60 m
+/// through the front camera).
+const EDGE_SIGMA_ROWS: f64 = 0.06;
+const DISTANCE_SIGMA_FLOOR_M: f64 = 0.05;
+
+/// Pixels between two dark components on one row darker than this share of the road's
+/// luminance (on average) are the thin band of one vehicle joining its wheels.
+const BRIDGE_RATIO: f32 = 0.9;
+
+/// A dark region this many times as tall as the band beside it is something else.
+const TALL_RATIO: u32 = 4;
 
 /// Rows within which a contact profile counts as flat.
 const FLAT_PX: u32 = 2;
@@ -155,6 +170,7 @@ impl Detector {
         let dark = (road as f32 * self.params.dark_ratio) as u8;
         self.dark = dark;
         let components = self.dark_components(w, h, first_ground_row, dark);
+        let components = self.join_split_bands(w, road, components);
         if tracing::enabled!(tracing::Level::TRACE) {
             tracing::trace!(road, dark, first_ground_row, runs = self.runs.len(), "frame");
             for c in &components {
@@ -272,7 +288,8 @@ impl Detector {
             for i in 1..=merged.len() {
                 let split = i == merged.len()
                     || merged[i].0 != merged[i - 1].0 + 1
-                    || (merged[i].1 as i64 - merged[i - 1].1 as i64).abs() > JUMP_PX;
+                    || (merged[i].1 as i64 - merged[i - 1].1 as i64).abs() > JUMP_PX
+                    || thin_meets_tall(merged[i - 1], merged[i]);
                 if split {
                     let seg = &merged[start..i];
                     if seg.len() >= 2 {
@@ -288,6 +305,54 @@ impl Detector {
             }
         }
         out
+    }
+
+    /// Far away the band under a vehicle is thinner than a row: blended with the road, it is
+    /// no longer darker than the threshold, and only the wheels at its sides are. Two
+    /// components on the same contact row are one vehicle's when the pixels between them on
+    /// that row are darker than the road (the thin band) and together they are no wider than a
+    /// vehicle at their distance (two vehicles side by side are a lane apart: wider).
+    fn join_split_bands(&self, w: usize, road: u8, mut components: Vec<Component>) -> Vec<Component> {
+        let origin_x = self.camera.origin_in_body().x;
+        let bridge = road as f32 * BRIDGE_RATIO;
+        components.sort_by_key(|c| c.u0);
+        let mut i = 0;
+        while i < components.len() {
+            let a = components[i];
+            let partner = components.iter().enumerate().skip(i + 1).find_map(|(j, b)| {
+                if b.u0 <= a.u1 + 1 || b.v1.abs_diff(a.v1) > 1 {
+                    return None;
+                }
+                let v1 = a.v1.max(b.v1);
+                let contact = self.camera.ground_point((a.u0 + b.u1 + 1) as f64 / 2.0, v1 as f64 + 1.0)?;
+                let px_per_m = self.camera.info.fx_px / (contact.x - origin_x).max(0.5);
+                if (b.u1 + 1 - a.u0) as f64 / px_per_m > self.params.max_width_m {
+                    return None;
+                }
+                let between = |v: u32| {
+                    let row = &self.luma[v as usize * w..(v as usize + 1) * w];
+                    let gap = &row[a.u1 as usize + 1..b.u0 as usize];
+                    gap.iter().map(|&l| l as f32).sum::<f32>() / gap.len() as f32
+                };
+                let darkest = between(v1).min(between(v1.saturating_sub(1)));
+                (darkest < bridge).then_some(j)
+            });
+            match partner {
+                Some(j) => {
+                    let b = components.remove(j);
+                    components[i] = Component {
+                        u0: a.u0,
+                        u1: b.u1,
+                        v1: a.v1.max(b.v1),
+                        flat_u0: a.flat_u0.min(b.flat_u0),
+                        flat_u1: a.flat_u1.max(b.flat_u1),
+                    };
+                    // The joined band may join the next one too: look again from it.
+                }
+                None => i += 1,
+            }
+        }
+        components
     }
 
     /// Checks a dark component as a vehicle's contact band and measures the vehicle above it.
@@ -355,11 +420,21 @@ impl Detector {
             },
             class,
             distance_m: contact.x,
+            distance_sigma_m: self.distance_sigma_m(contact.x),
             lateral_offset_m,
             height_m,
             width_m,
             confidence,
         })
+    }
+
+    /// A contact distance's expected error: the edge is located to about EDGE_SIGMA_ROWS of a
+    /// row, and a row covers d^2 / (f h) metres of ground at distance d (f the focal length,
+    /// h the camera's height), plus a floor for the ground model.
+    fn distance_sigma_m(&self, d: f64) -> f64 {
+        let o = self.camera.origin_in_body();
+        let per_row = (d - o.x).max(0.5).powi(2) / (self.camera.info.fy_px * o.z.max(0.1));
+        DISTANCE_SIGMA_FLOOR_M + EDGE_SIGMA_ROWS * per_row
     }
 
     /// The rear edge's columns (its end columns left out: they hold background too) with the
@@ -470,6 +545,14 @@ impl Detector {
         }
         top
     }
+}
+
+/// Neighbouring columns (column, lowest row, highest row) where a thin band meets a tall dark
+/// region a step lower: a far vehicle's contact band touching a nearer one's dark body or
+/// glass in the image, not one band (a wheel at a band's side ends on the band's row).
+fn thin_meets_tall(a: (u32, u32, u32), b: (u32, u32, u32)) -> bool {
+    let (ta, tb) = (a.1 - a.2 + 1, b.1 - b.2 + 1);
+    a.1.abs_diff(b.1) >= 2 && ta.max(tb) >= TALL_RATIO * ta.min(tb)
 }
 
 fn median(mut xs: Vec<u8>) -> Option<f32> {

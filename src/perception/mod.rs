@@ -4,7 +4,8 @@
 //! - [`geometry`]: the calibrated camera: rays, the ground plane, distances.
 //! - [`detector`]: one frame -> vehicles, classical computer vision (pixels + camera info only).
 //! - [`tracker`]: detections joined into tracks; distance and relative speed by a Kalman filter.
-//! - [`node`]: slipstream-detect on the bus (camera/front -> perception/objects).
+//! - [`rig`]: the front and the narrow camera together: each vehicle once, tracked.
+//! - [`node`]: slipstream-detect on the bus (camera/front, camera/narrow -> perception/objects).
 //!
 //! It reads pixels and the camera's calibration only, never the simulator: scoring against the
 //! simulator's ground truth is the eval layer's (`slipstream eval detect`: src/eval/detect.rs).
@@ -14,8 +15,10 @@
 pub mod detector;
 pub mod geometry;
 pub mod node;
+pub mod rig;
 pub mod tracker;
 
 pub use detector::{Detector, DetectorParams, FrameDetection};
 pub use geometry::CameraModel;
+pub use rig::CameraRig;
 pub use tracker::Tracker;

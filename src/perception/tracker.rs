@@ -43,10 +43,9 @@ impl Track {
     }
 
     fn update(&mut self, d: &FrameDetection, t_s: f64) {
-        // Measurement noise grows with distance (a pixel of contact row covers more ground; the
-        // edge is located to a fraction of one: 0.2-1% errors to 60 m, docs/perception.md).
-        let sigma = 0.05 + 0.004 * d.distance_m;
-        let r = sigma * sigma;
+        // Measurement noise: the detector's, from the ground a row covers at that distance
+        // through the camera that measured it.
+        let r = d.distance_sigma_m * d.distance_sigma_m;
         let innovation = d.distance_m - self.x[0];
         let s = self.p[(0, 0)] + r;
         let k = Vector2::new(self.p[(0, 0)], self.p[(1, 0)]) / s;
@@ -155,6 +154,7 @@ mod tests {
             bbox: BoundingBox2d { u_min_px: u0, v_min_px: 200.0, u_max_px: u0 + 40.0, v_max_px: 240.0 },
             class: ObjectClass::Car,
             distance_m,
+            distance_sigma_m: 0.05 + 0.004 * distance_m,
             lateral_offset_m: 0.0,
             height_m: 1.4,
             width_m: 1.8,

@@ -8,7 +8,8 @@
 //! - [`physics`]: the one boundary to rapier3d (rigid bodies, contacts).
 //! - [`driver`]: traffic drivers (speed profiles, following, lane changes).
 //! - [`world`]: road + vehicles + drivers stepped at a fixed rate; no I/O.
-//! - [`render`]: the front camera, rendered in software.
+//! - [`render`]: a camera, rendered in software.
+//! - [`cameras`]: the front and the narrow camera drawn in process (eval), seeded as the node.
 //! - [`ground_truth`]: the objects message, from the world and the rendered frame.
 //! - [`settings`]: rates, camera, clock mode and control policy (config/sim.json5).
 //! - [`node`]: the simulator on the bus: clock modes, lockstep, publishing.
@@ -18,6 +19,7 @@
 //! docs/simulator.md describes the model, frames, scenario format and modes for users.
 
 pub mod args;
+pub mod cameras;
 pub mod driver;
 pub mod dynamics;
 pub mod ground_truth;

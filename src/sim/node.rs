@@ -19,7 +19,7 @@ use std::time::{Duration, Instant};
 use parking_lot::Mutex;
 
 use super::ground_truth::ground_truth;
-use super::render::{ObjectVisibility, Renderer};
+use super::render::{seen_by_either, ObjectVisibility, Renderer};
 use super::rng::SimRng;
 use super::settings::{BeforeFirst, ControlPolicy, Mode, OnTimeout, SimSettings};
 use super::world::{End, StepEvents, World, EGO_ID};
@@ -28,10 +28,10 @@ use crate::bus::{
     StatsSnapshot,
 };
 use crate::msg::{
-    due, CameraInfo, ControlCommand, ControlTiming, GroundTruthObjects, ImageEncoding, RoadSpec, SimClock, SimEvent,
-    SimEventKind, Speed, VehicleState,
+    due, CameraFrame, CameraInfo, ControlCommand, ControlTiming, GroundTruthObjects, ImageEncoding, RoadSpec, SimClock,
+    SimEvent, SimEventKind, Speed, VehicleState,
 };
-use crate::topics;
+use crate::topics::{self, Topic, TopicDef};
 
 #[derive(Debug, thiserror::Error)]
 pub enum SimError {
@@ -290,16 +290,11 @@ struct Node<'a> {
     clock: Publisher<SimClock>,
     events: Publisher<SimEvent>,
     objects: Publisher<GroundTruthObjects>,
-    info_pub: Publisher<CameraInfo>,
     /// The road (latched): where lanes go, for controllers.
     road_pub: Publisher<RoadSpec>,
-    frames: FramePublisher,
-    info: CameraInfo,
-    renderer: Renderer,
-    look_rng: SimRng,
-    brightness: f64,
-    /// Where JPEG frames and frames dropped by a rate limit are rendered.
-    scratch: Vec<u8>,
+    camera: SimCamera,
+    /// The long-range camera, when on.
+    narrow: Option<SimCamera>,
     inbox: Arc<ControlInbox>,
     control_sub: CallbackSubscriber,
     /// Faults are injected into vehicle/control here (`--faults`).
@@ -311,6 +306,71 @@ struct Node<'a> {
     lockstep_timeouts: u64,
 }
 
+/// One camera of the simulator: its renderer, its frames and its info (latched).
+struct SimCamera {
+    frames: FramePublisher,
+    info_pub: Publisher<CameraInfo>,
+    info: CameraInfo,
+    renderer: Renderer,
+    look_rng: SimRng,
+    brightness: f64,
+    /// Where JPEG frames and frames dropped by a rate limit are rendered.
+    scratch: Vec<u8>,
+}
+
+impl SimCamera {
+    async fn open(
+        bus: &Bus,
+        world: &World,
+        frames: TopicDef<CameraFrame>,
+        info: TopicDef<CameraInfo>,
+        describe: impl FnOnce(ImageEncoding) -> Option<CameraInfo>,
+    ) -> Result<SimCamera, SimError> {
+        let frames = bus.frame_publisher(frames).await?;
+        let camera_info = describe(frames.encoding()).expect("the camera opened is on");
+        let noise = &world.scenario().noise;
+        let (renderer, look_rng) = match frames.publisher().topic() {
+            Topic::CameraFront => Renderer::seeded(&camera_info, noise.camera_stddev, world.seed()),
+            _ => Renderer::seeded_narrow(&camera_info, noise.camera_stddev, world.seed()),
+        };
+        Ok(SimCamera {
+            frames,
+            info_pub: bus.publisher(info).await?,
+            scratch: vec![0u8; renderer.frame_len()],
+            info: camera_info,
+            renderer,
+            look_rng,
+            brightness: noise.brightness,
+        })
+    }
+
+    /// Renders and publishes a frame; every vehicle's visibility in it, and whether it went
+    /// out (a topic's max_rate can drop it: its visibility is still measured).
+    fn publish(&mut self, world: &World, t_ns: u64) -> Result<(Vec<ObjectVisibility>, bool), SimError> {
+        let look = self.renderer.draw_look(self.brightness, &mut self.look_rng);
+        let mut visibility: Option<Vec<ObjectVisibility>> = None;
+        let (w, h) = (self.info.width, self.info.height);
+        let renderer = &mut self.renderer;
+        let sent = match self.frames.encoding() {
+            ImageEncoding::Rgb8 => {
+                self.frames.put_with(t_ns, w, h, ImageEncoding::Rgb8, renderer.frame_len(), |buf| {
+                    visibility = Some(renderer.render(world.road(), world.ego(), world.vehicles(), look, buf));
+                })?
+            }
+            _ => {
+                visibility =
+                    Some(renderer.render(world.road(), world.ego(), world.vehicles(), look, &mut self.scratch));
+                self.frames.put_rgb(t_ns, w, h, &self.scratch)?
+            }
+        };
+        let visibility = match visibility {
+            Some(v) => v,
+            None => renderer.render(world.road(), world.ego(), world.vehicles(), look, &mut self.scratch),
+        };
+        Ok((visibility, sent.is_some()))
+    }
+}
+
 /// Which of the ego's topics step k published (lockstep answers those steps).
 struct Published {
     speed: bool,
@@ -319,10 +379,19 @@ struct Published {
 
 impl<'a> Node<'a> {
     async fn open(bus: &Bus, world: &World, settings: &'a SimSettings) -> Result<Node<'a>, SimError> {
-        let frames = bus.frame_publisher().await?;
-        let info = settings.camera_info(frames.encoding());
-        let noise = &world.scenario().noise;
-        let (renderer, look_rng) = Renderer::seeded(&info, noise.camera_stddev, world.seed());
+        let camera = SimCamera::open(bus, world, topics::CAMERA_FRONT, topics::CAMERA_FRONT_INFO, |e| {
+            Some(settings.camera_info(e))
+        })
+        .await?;
+        let narrow = match settings.narrow_camera.enabled {
+            true => Some(
+                SimCamera::open(bus, world, topics::CAMERA_NARROW, topics::CAMERA_NARROW_INFO, |e| {
+                    settings.narrow_camera_info(e)
+                })
+                .await?,
+            ),
+            false => None,
+        };
         let inbox = Arc::new(ControlInbox::default());
         let control_sub = {
             let inbox = inbox.clone();
@@ -335,14 +404,9 @@ impl<'a> Node<'a> {
             clock: bus.publisher(topics::SIM_CLOCK).await?,
             events: bus.publisher(topics::SIM_EVENTS).await?,
             objects: bus.publisher(topics::OBJECTS).await?,
-            info_pub: bus.publisher(topics::CAMERA_FRONT_INFO).await?,
             road_pub: bus.publisher(topics::SIM_ROAD).await?,
-            frames,
-            scratch: vec![0u8; renderer.frame_len()],
-            info,
-            renderer,
-            look_rng,
-            brightness: noise.brightness,
+            camera,
+            narrow,
             inbox,
             control_sub,
             faulted: bus.faults().is_some_and(|p| p.at(topics::VEHICLE_CONTROL.topic, bus.node()).is_some()),
@@ -357,7 +421,9 @@ impl<'a> Node<'a> {
     /// The camera info and the road (latched), the lockstep start (its nodes up), the
     /// scenario's start.
     async fn start(&self, bus: &Bus, world: &World, stop: &AtomicBool) -> Result<(), SimError> {
-        self.info_pub.put(0, &self.info)?;
+        for camera in std::iter::once(&self.camera).chain(&self.narrow) {
+            camera.info_pub.put(0, &camera.info)?;
+        }
         self.road_pub.put(0, world.road().spec())?;
         let lockstep = &self.settings.lockstep;
         if self.settings.mode == Mode::Lockstep {
@@ -394,29 +460,19 @@ impl<'a> Node<'a> {
         Ok(published)
     }
 
-    /// Renders the frame (into shared memory when raw), publishes it and its ground truth.
+    /// Renders the frames (into shared memory when raw), publishes them and the ground truth.
+    /// The narrow camera's frame goes first: a detector using both has it when the front
+    /// camera's frame of the same step arrives.
     fn publish_frame(&mut self, world: &World, t_ns: u64) -> Result<(), SimError> {
-        let look = self.renderer.draw_look(self.brightness, &mut self.look_rng);
-        let mut visibility: Option<Vec<ObjectVisibility>> = None;
-        let (w, h) = (self.info.width, self.info.height);
-        let renderer = &mut self.renderer;
-        let sent = match self.frames.encoding() {
-            ImageEncoding::Rgb8 => {
-                self.frames.put_with(t_ns, w, h, ImageEncoding::Rgb8, renderer.frame_len(), |buf| {
-                    visibility = Some(renderer.render(world.road(), world.ego(), world.vehicles(), look, buf));
-                })?
-            }
-            _ => {
-                visibility =
-                    Some(renderer.render(world.road(), world.ego(), world.vehicles(), look, &mut self.scratch));
-                self.frames.put_rgb(t_ns, w, h, &self.scratch)?
-            }
+        let narrow = match self.narrow.as_mut() {
+            Some(camera) => Some(camera.publish(world, t_ns)?.0),
+            None => None,
         };
-        self.frames_sent += sent.is_some() as u64;
-        // A frame dropped by the topic's max_rate still gets its ground truth.
-        let visibility = match visibility {
-            Some(v) => v,
-            None => renderer.render(world.road(), world.ego(), world.vehicles(), look, &mut self.scratch),
+        let (visibility, sent) = self.camera.publish(world, t_ns)?;
+        self.frames_sent += sent as u64;
+        let visibility = match narrow {
+            Some(narrow) => seen_by_either(visibility, &narrow),
+            None => visibility,
         };
         self.objects.put(t_ns, &ground_truth(world, &visibility))?;
         Ok(())

@@ -44,6 +44,8 @@ pub struct SimSettings {
     pub realtime_factor: f64,
     pub rates_hz: Rates,
     pub camera: CameraSpec,
+    /// The long-range camera (camera/narrow), at the front camera's rate and stamps.
+    pub narrow_camera: CameraSpec,
     pub lockstep: LockstepSpec,
     pub control: ControlPolicy,
 }
@@ -61,6 +63,9 @@ pub struct Rates {
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CameraSpec {
+    /// Only the narrow camera may be turned off.
+    #[serde(default = "on")]
+    pub enabled: bool,
     pub width: u32,
     pub height: u32,
     pub horizontal_fov_deg: f64,
@@ -68,6 +73,39 @@ pub struct CameraSpec {
     pub mount_position_m: [f64; 3],
     /// Roll, pitch (positive looks down), yaw relative to the body.
     pub mount_roll_pitch_yaw_deg: [f64; 3],
+}
+
+fn on() -> bool {
+    true
+}
+
+impl CameraSpec {
+    /// The camera as its info topic describes it.
+    pub fn info(&self, rate_hz: f64, encoding: ImageEncoding) -> CameraInfo {
+        CameraInfo::pinhole(
+            self.width,
+            self.height,
+            self.horizontal_fov_deg.to_radians(),
+            self.mount_position_m,
+            self.mount_roll_pitch_yaw_deg.map(f64::to_radians),
+            rate_hz,
+            encoding,
+        )
+    }
+
+    fn check(&self, key: &str) -> Result<(), (String, String, String)> {
+        let err = |k: &str, problem: String, fix: &str| Err((format!("{key}{k}"), problem, fix.to_string()));
+        if !(16..=4096).contains(&self.width) || !(16..=4096).contains(&self.height) {
+            return err("", format!("{}x{}", self.width, self.height), "use 16 to 4096 pixels a side");
+        }
+        if !(10.0..=170.0).contains(&self.horizontal_fov_deg) {
+            return err(".horizontal_fov_deg", format!("{}", self.horizontal_fov_deg), "use 10 to 170 degrees");
+        }
+        if self.mount_position_m[2] <= 0.1 {
+            return err(".mount_position_m", format!("{:?}", self.mount_position_m), "mount the camera above 0.1 m");
+        }
+        Ok(())
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize)]
@@ -154,15 +192,12 @@ impl SimSettings {
                 return err(key, format!("{v} Hz"), &format!("use a rate in (0, physics_hz = {}]", self.physics_hz));
             }
         }
-        let c = &self.camera;
-        if !(16..=4096).contains(&c.width) || !(16..=4096).contains(&c.height) {
-            return err("camera", format!("{}x{}", c.width, c.height), "use 16 to 4096 pixels a side");
+        self.camera.check("camera")?;
+        if !self.camera.enabled {
+            return err("camera.enabled", "false".into(), "the front camera is always on; remove the key");
         }
-        if !(10.0..=170.0).contains(&c.horizontal_fov_deg) {
-            return err("camera.horizontal_fov_deg", format!("{}", c.horizontal_fov_deg), "use 10 to 170 degrees");
-        }
-        if c.mount_position_m[2] <= 0.1 {
-            return err("camera.mount_position_m", format!("{:?}", c.mount_position_m), "mount the camera above 0.1 m");
+        if self.narrow_camera.enabled {
+            self.narrow_camera.check("narrow_camera")?;
         }
         if self.mode == Mode::Lockstep && self.lockstep.wait_for.is_empty() {
             return err(
@@ -182,16 +217,12 @@ impl SimSettings {
 
     /// The camera as camera/front/info describes it.
     pub fn camera_info(&self, encoding: ImageEncoding) -> CameraInfo {
-        let c = &self.camera;
-        CameraInfo::pinhole(
-            c.width,
-            c.height,
-            c.horizontal_fov_deg.to_radians(),
-            c.mount_position_m,
-            c.mount_roll_pitch_yaw_deg.map(f64::to_radians),
-            self.rates_hz.camera,
-            encoding,
-        )
+        self.camera.info(self.rates_hz.camera, encoding)
+    }
+
+    /// The narrow camera as camera/narrow/info describes it, when it is on.
+    pub fn narrow_camera_info(&self, encoding: ImageEncoding) -> Option<CameraInfo> {
+        self.narrow_camera.enabled.then(|| self.narrow_camera.info(self.rates_hz.camera, encoding))
     }
 }
 
@@ -215,5 +246,20 @@ mod tests {
         let e = SimSettings::parse("{ camera: { widht: 320 } }", "mine.json5").unwrap_err();
         assert_eq!((e.origin.as_str(), e.key.as_str()), ("mine.json5", "camera.widht"));
         assert!(e.problem.contains("unknown field `widht`"), "{e}");
+    }
+
+    #[test]
+    fn the_narrow_camera_is_on_by_default_can_be_turned_off_and_is_checked() {
+        let on = SimSettings::default().narrow_camera_info(ImageEncoding::Rgb8).unwrap();
+        assert_eq!((on.width, on.height), (640, 240));
+        // Three times the front camera's focal length: a vehicle three times as many pixels wide.
+        let front = SimSettings::default().camera_info(ImageEncoding::Rgb8);
+        assert!((on.fx_px / front.fx_px - 3.27).abs() < 0.01, "{} / {}", on.fx_px, front.fx_px);
+        let off = SimSettings::parse("{ narrow_camera: { enabled: false } }", "mine.json5").unwrap();
+        assert!(off.narrow_camera_info(ImageEncoding::Rgb8).is_none());
+        let e = SimSettings::parse("{ narrow_camera: { horizontal_fov_deg: 5 } }", "mine.json5").unwrap_err();
+        assert_eq!(e.key, "narrow_camera.horizontal_fov_deg");
+        let e = SimSettings::parse("{ camera: { enabled: false } }", "mine.json5").unwrap_err();
+        assert_eq!(e.key, "camera.enabled");
     }
 }

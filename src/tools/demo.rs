@@ -62,7 +62,7 @@ pub async fn publish(bus: &Bus, duration: Duration) -> Result<()> {
     let speed = bus.publisher(topics::VEHICLE_SPEED).await?;
     let clock = bus.publisher(topics::SIM_CLOCK).await?;
     let info = bus.publisher(topics::CAMERA_FRONT_INFO).await?;
-    let frames = bus.frame_publisher().await?;
+    let frames = bus.frame_publisher(crate::topics::CAMERA_FRONT).await?;
     let cam_info = CameraInfo::pinhole(
         WIDTH,
         HEIGHT,
@@ -107,7 +107,7 @@ pub async fn subscribe(bus: &Bus, duration: Duration) -> Result<DemoSummary> {
     let speed = bus.subscriber(topics::VEHICLE_SPEED).await?;
     let clock = bus.subscriber(topics::SIM_CLOCK).await?;
     let info = bus.subscriber(topics::CAMERA_FRONT_INFO).await?;
-    let frames = bus.frame_subscriber().await?;
+    let frames = bus.frame_subscriber(crate::topics::CAMERA_FRONT).await?;
     let start = Instant::now();
     let mut shm = 0u64;
     let mut next_report = Duration::from_secs(1);

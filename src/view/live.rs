@@ -310,7 +310,7 @@ impl Drop for LiveView {
 /// The subscriptions that keep `latest` current: short handlers on Zenoh's receive thread.
 async fn subscribe(bus: &Bus, latest: &Arc<Mutex<Latest>>) -> Result<Vec<CallbackSubscriber>> {
     let l = latest.clone();
-    let frames = bus.subscribe_frames_with(move |f| l.lock().frame = Some(f)).await?;
+    let frames = bus.subscribe_frames_with(topics::CAMERA_FRONT, move |f| l.lock().frame = Some(f)).await?;
     let l = latest.clone();
     let info = bus
         .subscribe_with(topics::CAMERA_FRONT_INFO, move |i: Received<CameraInfo>| l.lock().camera_info = Some(i.msg))

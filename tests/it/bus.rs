@@ -103,7 +103,7 @@ async fn configured_qos_reaches_the_wire() {
 }
 
 async fn send_frames(bus: &slipstream::Bus, n: u64) -> slipstream::bus::FramePublisher {
-    let publisher = bus.frame_publisher().await.unwrap();
+    let publisher = bus.frame_publisher(slipstream::topics::CAMERA_FRONT).await.unwrap();
     assert!(publisher.publisher().wait_for_subscriber(TIMEOUT).await);
     for i in 0..n {
         publisher.put_with(i, 4, 2, ImageEncoding::Rgb8, 24, |px| px.fill(i as u8)).unwrap().unwrap();
@@ -114,7 +114,7 @@ async fn send_frames(bus: &slipstream::Bus, n: u64) -> slipstream::bus::FramePub
 #[tokio::test(flavor = "multi_thread")]
 async fn latest_only_delivery_keeps_the_newest_and_counts_skips() {
     let (a, b) = bus_pair(TopicMap::default(), TopicMap::default()).await;
-    let sub = b.frame_subscriber().await.unwrap();
+    let sub = b.frame_subscriber(slipstream::topics::CAMERA_FRONT).await.unwrap();
     let _p = send_frames(&a, 10).await;
     // Wait until all ten arrived (counted on arrival), then read once.
     within!(async {
@@ -151,8 +151,8 @@ async fn frames_go_through_shared_memory_when_enabled() {
     for shm in [true, false] {
         let cfg = format!("{{ camera: {{ shared_memory: {shm} }} }}");
         let (a, b) = bus_pair(map(&cfg), map(&cfg)).await;
-        let sub = b.frame_subscriber().await.unwrap();
-        let publisher = a.frame_publisher().await.unwrap();
+        let sub = b.frame_subscriber(slipstream::topics::CAMERA_FRONT).await.unwrap();
+        let publisher = a.frame_publisher(slipstream::topics::CAMERA_FRONT).await.unwrap();
         assert_eq!(publisher.uses_shared_memory(), shm);
         assert!(publisher.publisher().wait_for_subscriber(TIMEOUT).await);
         let (w, h) = (640u32, 480u32);
@@ -291,8 +291,8 @@ async fn a_late_subscriber_gets_the_latched_camera_info() {
 async fn jpeg_camera_encoding_from_config() {
     let cfg = r#"{ camera: { encoding: "jpeg", jpeg_quality: 90 } }"#;
     let (a, b) = bus_pair(map(cfg), map(cfg)).await;
-    let sub = b.frame_subscriber().await.unwrap();
-    let publisher = a.frame_publisher().await.unwrap();
+    let sub = b.frame_subscriber(slipstream::topics::CAMERA_FRONT).await.unwrap();
+    let publisher = a.frame_publisher(slipstream::topics::CAMERA_FRONT).await.unwrap();
     assert_eq!(publisher.encoding(), ImageEncoding::Jpeg);
     assert!(publisher.publisher().wait_for_subscriber(TIMEOUT).await);
     let (w, h) = (64u32, 48u32);

@@ -72,6 +72,9 @@ async fn the_detector_node_reports_the_lead_matched_to_ground_truth_by_time() {
     let (stats, _bus) = within!(detector).unwrap();
     let stats = stats.unwrap();
     assert!(stats.frames >= 30, "{stats:?}");
+    // Each front frame was detected with the narrow camera's frame of the same step, or
+    // counted as without it.
+    assert!(stats.narrow_frames > 0 && stats.narrow_frames + stats.narrow_missing == stats.frames, "{stats:?}");
 
     let detections = detections.lock().clone();
     let truth = truth.lock().clone();

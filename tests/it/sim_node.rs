@@ -63,6 +63,7 @@ impl Recorder {
             topics::OBJECTS.topic,
             topics::CAMERA_FRONT.topic,
             topics::CAMERA_FRONT_INFO.topic,
+            topics::CAMERA_NARROW.topic,
         ] {
             let samples = samples.clone();
             let sub = session
@@ -363,6 +364,7 @@ async fn another_process_receives_every_topic_at_its_rate() {
         ("vehicle/state", 10_000_000),
         ("sim/clock", 10_000_000),
         ("camera/front", 50_000_000),
+        ("camera/narrow", 50_000_000),
         ("objects", 50_000_000),
     ] {
         let got = stamps(key);
@@ -375,6 +377,9 @@ async fn another_process_receives_every_topic_at_its_rate() {
     let frames: Vec<u64> = stamps("camera/front");
     let objects: Vec<u64> = stamps("objects");
     assert!(frames.iter().filter(|t| **t >= 1_000_000_000).all(|t| objects.contains(t)));
+    // The narrow camera renders on the front camera's steps, with their stamps.
+    let narrow: Vec<u64> = stamps("camera/narrow");
+    assert!(narrow.iter().filter(|t| **t >= 1_000_000_000).all(|t| objects.contains(t)));
     // sim/clock reports the measured real-time factor: about 1 in realtime mode.
     let last_clock = recorder
         .samples
@@ -395,6 +400,9 @@ async fn another_process_receives_every_topic_at_its_rate() {
         (frame.width, frame.height, frame.encoding, frame.data.len()),
         (640, 480, msg::ImageEncoding::Rgb8, 640 * 480 * 3)
     );
+    let narrow = recorder.samples.lock().iter().find(|(k, _)| k == "camera/narrow").map(|(_, b)| b.clone()).unwrap();
+    let narrow = msg::decode::<msg::CameraFrameRef>(&narrow).unwrap().msg;
+    assert_eq!((narrow.width, narrow.height, narrow.data.len()), (640, 240, 640 * 240 * 3));
     let events = recorder.events();
     assert!(matches!(&events.last().unwrap().kind, SimEventKind::ScenarioEnd { success: true, .. }), "{events:?}");
 }

@@ -96,7 +96,8 @@ def test_up_record_is_read_whole_by_an_independent_reader(lockstep_run):
     channels, info = check_recording(report / "run.mcap")
     # What the loop publishes, each key its own channel; frames and detections among them.
     for key in ("vehicle/speed", "vehicle/state", "vehicle/control", "camera/front", "camera/front/info",
-                "objects", "perception/objects", "sim/clock", "sim/events", "acc/status"):
+                "camera/narrow", "camera/narrow/info", "objects", "perception/objects", "sim/clock", "sim/events",
+                "acc/status"):
         assert key in channels, sorted(channels)
     # The same keys `up` saw on the bus (its `top` view).
     seen = {row["key"] for row in up["topics"]}

@@ -106,6 +106,7 @@ DEFAULT_KEYS = {
     "camera/front": "CameraFrame", "camera/front/info": "CameraInfo", "objects": "GroundTruthObjects",
     "perception/objects": "Detections", "sim/clock": "SimClock", "sim/events": "SimEvent",
     "acc/status": "AccStatus", "acc/command": "AccCommand", "sim/road": "RoadMap",
+    "camera/narrow": "CameraFrame", "camera/narrow/info": "CameraInfo",
 }
 
 _VARINT_MAX = {"u32": 5, "u64": 10}

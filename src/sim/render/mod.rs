@@ -32,6 +32,18 @@ pub struct ObjectVisibility {
     pub visible_fraction: f32,
 }
 
+/// Visibility over two cameras: the first camera's boxes (its image is the one boxes refer
+/// to), each vehicle's visible fraction the larger of the two (a vehicle 150 m ahead is a few
+/// pixels in a wide camera, whole in a narrow one).
+pub fn seen_by_either(mut first: Vec<ObjectVisibility>, second: &[ObjectVisibility]) -> Vec<ObjectVisibility> {
+    for v in &mut first {
+        if let Some(o) = second.iter().find(|o| o.id == v.id) {
+            v.visible_fraction = v.visible_fraction.max(o.visible_fraction);
+        }
+    }
+    first
+}
+
 /// Brightness and noise for one frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FrameLook {
@@ -133,6 +145,12 @@ impl Renderer {
     /// the same frames for the same run.
     pub fn seeded(info: &CameraInfo, noise_stddev: f64, seed: u64) -> (Renderer, SimRng) {
         (Renderer::new(info, noise_stddev, &mut SimRng::new(seed ^ 0xCA3E_2A00)), SimRng::new(seed ^ 0x1006_0000))
+    }
+
+    /// The narrow camera of a run with `seed`: seeded like [`Renderer::seeded`], with noise of
+    /// its own.
+    pub fn seeded_narrow(info: &CameraInfo, noise_stddev: f64, seed: u64) -> (Renderer, SimRng) {
+        Renderer::seeded(info, noise_stddev, seed ^ 0x4E52_0000_0000)
     }
 
     pub fn info(&self) -> &CameraInfo {
