@@ -90,10 +90,28 @@ impl VehicleParams {
         actuator_lag_s: 0.5,
     };
 
+    /// A mid-size motorcycle with its rider: narrow (a third of a lane), light, quick to
+    /// brake, and as tall as a car.
+    pub const MOTORCYCLE: VehicleParams = VehicleParams {
+        mass_kg: 300.0,
+        size_m: [2.2, 0.8, 1.5],
+        wheelbase_m: 1.45,
+        rear_overhang_m: 0.35,
+        max_power_w: 70_000.0,
+        max_drive_force_n: 2_800.0,
+        max_brake_decel_mps2: 9.0,
+        drag_area_m2: 0.45,
+        rolling_coeff: 0.015,
+        max_steer_rad: 0.6,
+        tyre_mu: 1.0,
+        actuator_lag_s: 0.2,
+    };
+
     pub fn of_class(class: ObjectClass) -> VehicleParams {
         match class {
             ObjectClass::Van => Self::VAN,
             ObjectClass::Truck => Self::TRUCK,
+            ObjectClass::Motorcycle => Self::MOTORCYCLE,
             ObjectClass::Car | ObjectClass::Unknown => Self::CAR,
         }
     }

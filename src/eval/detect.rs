@@ -539,4 +539,24 @@ mod rendered {
             assert!(d.is_some(), "vehicle at {x:.1} m, {y:.1} m not found in {dets:?}");
         }
     }
+
+    /// A motorcycle (a band a third of a car's width under a rider as tall as a car) is found at
+    /// its distance and lateral offset, riding anywhere across its lane, and named a
+    /// motorcycle, near through the front camera and far through the narrow one.
+    #[test]
+    fn a_motorcycle_is_found_and_named_across_its_lane() {
+        for (lane, offset, gap) in [(1, 0.0, 12.0), (1, 1.0, 30.0), (1, -1.0, 55.0), (0, 0.8, 25.0), (1, 0.6, 90.0)] {
+            let (dets, truth) = rig_detect_in(
+                &format!("{{ lane: {lane}, offset_m: {offset}, gap_m: {gap}, speed_mps: 0, class: 'motorcycle' }}"),
+                3.0,
+            );
+            let [x, y, _] = truth.objects[0].position_in_ego_m;
+            let what = format!("lane {lane} offset {offset} at {x:.1} m");
+            assert_eq!(dets.len(), 1, "{what}: {dets:?}");
+            let d = &dets[0];
+            assert!((d.distance_m - x).abs() < 0.03 * x, "{what}: distance {:.2}", d.distance_m);
+            assert!((d.lateral_offset_m - y).abs() < 0.3, "{what}: lateral {:.2} vs {y:.2}", d.lateral_offset_m);
+            assert_eq!(d.class, ObjectClass::Motorcycle, "{what}: {d:?}");
+        }
+    }
 }

@@ -10,6 +10,8 @@ pub enum ObjectClass {
     Car,
     Van,
     Truck,
+    /// A motorcycle with its rider (appended: older payloads decode unchanged).
+    Motorcycle,
 }
 
 /// An axis-aligned box in image pixels (u right, v down), min inclusive, max exclusive.

@@ -87,6 +87,10 @@ const BAND_RATIO_GAIN: f32 = 0.05;
 const EDGE_SIGMA_ROWS: f64 = 0.06;
 const DISTANCE_SIGMA_FLOOR_M: f64 = 0.05;
 
+/// A contact band narrower than this (and seen whole) is a motorcycle's: cars are 1.6 m wide
+/// and more.
+const MOTORCYCLE_MAX_WIDTH_M: f64 = 1.2;
+
 /// Pixels between two dark components on one row darker than this share of the road's
 /// luminance (on average) are the thin band of one vehicle joining its wheels.
 const BRIDGE_RATIO: f32 = 0.9;
@@ -204,11 +208,7 @@ impl Detector {
         candidates.sort_by(|a, b| b.1.bbox.v_max_px.total_cmp(&a.1.bbox.v_max_px));
         let mut kept: Vec<(usize, FrameDetection)> = Vec::new();
         for (i, c) in candidates {
-            let inside = kept.iter().any(|(_, k)| {
-                let overlap = c.bbox.u_max_px.min(k.bbox.u_max_px) - c.bbox.u_min_px.max(k.bbox.u_min_px);
-                let width = c.bbox.u_max_px - c.bbox.u_min_px;
-                overlap > 0.5 * width && c.bbox.v_max_px <= k.bbox.v_max_px && c.bbox.v_max_px >= k.bbox.v_min_px
-            });
+            let inside = kept.iter().any(|(_, k)| part_of(&c.bbox, &k.bbox));
             if !inside {
                 kept.push((i, c));
             }
@@ -385,10 +385,15 @@ impl Detector {
         if height_m < p.min_height_m || height_m > p.max_height_m {
             return Err(format!("height {height_m:.2} m"));
         }
+        // A band narrower than any car's, seen whole (not cut by the image's side), under
+        // something as tall as a rider: a motorcycle.
+        let whole = bu0 > 0 && (bu1 as usize) + 1 < w;
         let class = if height_m > 2.9 {
             ObjectClass::Truck
         } else if height_m > 1.9 {
             ObjectClass::Van
+        } else if whole && width_m < MOTORCYCLE_MAX_WIDTH_M {
+            ObjectClass::Motorcycle
         } else {
             ObjectClass::Car
         };
@@ -401,7 +406,9 @@ impl Detector {
                 1.0
             }
         };
-        let confidence = (plausible(width_m, 1.4, 2.8) * plausible(height_m, 1.1, 3.8)).clamp(0.05, 1.0) as f32;
+        let widths = if class == ObjectClass::Motorcycle { (0.6, 1.2) } else { (1.4, 2.8) };
+        let confidence =
+            (plausible(width_m, widths.0, widths.1) * plausible(height_m, 1.1, 3.8)).clamp(0.05, 1.0) as f32;
         // A vehicle cut by the image's side (one being passed): the band's centre is the visible
         // part's, metres inside the vehicle's own, which would put a car of the next lane into
         // the ego's. Its inner side is measured: the centre lies half its class's width beyond.
@@ -553,6 +560,15 @@ impl Detector {
 fn thin_meets_tall(a: (u32, u32, u32), b: (u32, u32, u32)) -> bool {
     let (ta, tb) = (a.1 - a.2 + 1, b.1 - b.2 + 1);
     a.1.abs_diff(b.1) >= 2 && ta.max(tb) >= TALL_RATIO * ta.min(tb)
+}
+
+/// Whether a candidate with box `c` is part of the nearer vehicle with box `nearer`: its
+/// contact line lies within that box and most of its columns under it (a dark window, a
+/// black car's body, a rider's dark clothes).
+pub(crate) fn part_of(c: &BoundingBox2d, nearer: &BoundingBox2d) -> bool {
+    let overlap = c.u_max_px.min(nearer.u_max_px) - c.u_min_px.max(nearer.u_min_px);
+    let width = c.u_max_px - c.u_min_px;
+    overlap > 0.5 * width && c.v_max_px <= nearer.v_max_px && c.v_max_px >= nearer.v_min_px
 }
 
 fn median(mut xs: Vec<u8>) -> Option<f32> {

@@ -9,7 +9,7 @@
 //! (docs/wire-format.md), so a narrow camera's box is mapped into it through the vehicle's
 //! measured distance.
 
-use super::detector::{Detector, DetectorParams, FrameDetection};
+use super::detector::{part_of, Detector, DetectorParams, FrameDetection};
 use super::tracker::Tracker;
 use crate::msg::{BoundingBox2d, CameraInfo, Detection};
 
@@ -102,7 +102,12 @@ fn fuse(
             }
             (None, _) => {
                 n.bbox = to_image_of(wide, narrow, &n);
-                out.push(n);
+                // The narrow camera sees the ground only from ~16 m: a nearer vehicle's body
+                // (its contact below the image) can pass for a far one; in the front image it
+                // lies on that vehicle.
+                if !out.iter().any(|f| f.distance_m < n.distance_m && part_of(&n.bbox, &f.bbox)) {
+                    out.push(n);
+                }
             }
         }
     }
@@ -192,5 +197,14 @@ mod tests {
         );
         assert_eq!(fused.len(), 2, "{fused:?}");
         assert!(fused[1].bbox.u_max_px - fused[1].bbox.u_min_px < 9.0, "{:?}", fused[1].bbox);
+        // A "far" vehicle the narrow camera reads off a near one's body (its contact below
+        // the narrow image) lies on the near one in the front image: dropped.
+        let fused = fuse(
+            vec![det(15.5, 0.0, [300.0, 213.0, 340.0, 265.0])],
+            vec![det(41.3, 0.0, [262.0, 60.0, 378.0, 140.0])],
+            &tele,
+            &wide,
+        );
+        assert_eq!(fused.len(), 1, "{fused:?}");
     }
 }

@@ -26,6 +26,7 @@ pub const BUILT_IN: &[(&str, &str)] = &[
     ("bend-stopped-car-in-lane", include_str!("../../scenarios/bend-stopped-car-in-lane.json5")),
     ("passing-trucks", include_str!("../../scenarios/passing-trucks.json5")),
     ("truck-reveals-stopped-car", include_str!("../../scenarios/truck-reveals-stopped-car.json5")),
+    ("motorcycles", include_str!("../../scenarios/motorcycles.json5")),
     ("open-road", include_str!("../../scenarios/open-road.json5")),
 ];
 
@@ -45,6 +46,7 @@ pub enum ClassSpec {
     Car,
     Van,
     Truck,
+    Motorcycle,
 }
 
 impl From<ClassSpec> for ObjectClass {
@@ -53,6 +55,7 @@ impl From<ClassSpec> for ObjectClass {
             ClassSpec::Car => ObjectClass::Car,
             ClassSpec::Van => ObjectClass::Van,
             ClassSpec::Truck => ObjectClass::Truck,
+            ClassSpec::Motorcycle => ObjectClass::Motorcycle,
         }
     }
 }

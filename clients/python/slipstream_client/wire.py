@@ -37,7 +37,7 @@ class BadPayloads:
 # ("opt", T), ("seq", T), ("arr", T, N), ("enum", [names]), ("struct", NAME), ("variants", NAME).
 VEC3 = ("arr", "f64", 3)
 IMAGE_ENCODING = ("enum", ["Rgb8", "Jpeg", "Png"])
-OBJECT_CLASS = ("enum", ["Unknown", "Car", "Van", "Truck"])
+OBJECT_CLASS = ("enum", ["Unknown", "Car", "Van", "Truck", "Motorcycle"])
 
 STRUCTS = {
     "Header": [("seq", "u64"), ("stamp_sim_ns", "u64"), ("stamp_pub_ns", "u64")],

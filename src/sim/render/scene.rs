@@ -14,6 +14,8 @@ pub const SHADOW: [u8; 3] = [42, 42, 46];
 const GLASS: [u8; 3] = [38, 50, 62];
 const TYRE: [u8; 3] = [22, 22, 22];
 const TAIL_LIGHT: [u8; 3] = [205, 25, 25];
+/// A rider's clothing.
+const RIDER: [u8; 3] = [48, 50, 58];
 const TRIM: [u8; 3] = [35, 35, 38];
 
 /// Road visible ahead of the ego, and markings (finer detail) up to here.
@@ -165,6 +167,9 @@ fn cuboid(out: &mut Vec<Face>, min: [f64; 3], max: [f64; 3], colors: BoxColors) 
 
 /// A vehicle as boxes: body, cabin (glass sides), wheels, tail lights; a truck gets a cargo box.
 pub fn vehicle_faces(v: &VehicleView) -> Vec<Face> {
+    if v.class == ObjectClass::Motorcycle {
+        return motorcycle_faces(v);
+    }
     let p = &v.params;
     let [length, width, height] = p.size_m;
     let rear = -p.rear_overhang_m;
@@ -193,7 +198,8 @@ pub fn vehicle_faces(v: &VehicleView) -> Vec<Face> {
                 BoxColors { front: GLASS, rear: body, sides: body, top: body },
             );
         }
-        ObjectClass::Car | ObjectClass::Unknown => {
+        // Motorcycles are drawn by `motorcycle_faces`.
+        ObjectClass::Car | ObjectClass::Unknown | ObjectClass::Motorcycle => {
             let waist = height * 0.58;
             cuboid(&mut faces, [rear, -hw, 0.28], [front, hw, waist], BoxColors::all(body));
             cuboid(
@@ -223,5 +229,24 @@ pub fn vehicle_faces(v: &VehicleView) -> Vec<Face> {
             BoxColors::all(TAIL_LIGHT),
         );
     }
+    faces
+}
+
+/// A motorcycle and its rider as boxes: two wheels in line, the machine between them, the
+/// rider's torso and helmet, one tail light.
+fn motorcycle_faces(v: &VehicleView) -> Vec<Face> {
+    let p = &v.params;
+    let [length, _, height] = p.size_m;
+    let rear = -p.rear_overhang_m;
+    let front = rear + length;
+    let mut faces = Vec::with_capacity(30);
+    let r = 0.32;
+    for x in [0.0, p.wheelbase_m] {
+        cuboid(&mut faces, [x - r, -0.08, 0.0], [x + r, 0.08, 2.0 * r], BoxColors::all(TYRE));
+    }
+    cuboid(&mut faces, [rear + 0.15, -0.22, 0.3], [front - 0.3, 0.22, 0.85], BoxColors::all(v.color));
+    cuboid(&mut faces, [0.2, -0.25, 0.85], [0.75, 0.25, height - 0.28], BoxColors::all(RIDER));
+    cuboid(&mut faces, [0.33, -0.14, height - 0.28], [0.63, 0.14, height], BoxColors::all(v.color));
+    cuboid(&mut faces, [rear - 0.03, -0.1, 0.68], [rear + 0.01, 0.1, 0.8], BoxColors::all(TAIL_LIGHT));
     faces
 }
