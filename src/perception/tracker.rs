@@ -7,7 +7,7 @@ use super::detector::FrameDetection;
 use crate::msg::{BoundingBox2d, Detection, ObjectClass};
 
 /// Acceleration noise of the constant-velocity model, m/s2 (a lead can brake hard).
-const ACCEL_NOISE_MPS2: f64 = 4.0;
+const ACCEL_NOISE_MPS2: f64 = 8.0;
 /// A track not seen for this long is dropped.
 const MAX_COAST_S: f64 = 0.5;
 
