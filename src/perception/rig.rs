@@ -41,10 +41,6 @@ impl CameraRig {
         CameraRig { front: Detector::new(front, params), narrow, tracker: Tracker::new() }
     }
 
-    pub fn front(&self) -> &CameraInfo {
-        &self.front.camera().info
-    }
-
     pub fn narrow(&self) -> Option<&CameraInfo> {
         self.narrow.as_ref().map(|d| &d.camera().info)
     }
