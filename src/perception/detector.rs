@@ -166,10 +166,11 @@ impl Detector {
         if first_ground_row + 4 >= h {
             return Vec::new();
         }
-        self.luma.clear();
-        self.luma.extend(
-            rgb.chunks_exact(3).map(|p| ((77 * p[0] as u32 + 150 * p[1] as u32 + 29 * p[2] as u32) >> 8) as u8),
-        );
+        self.luma.resize(w * h, 0);
+        // Weights summing to 256 in 16 bits: the loop vectorises.
+        for (y, p) in self.luma.iter_mut().zip(rgb.chunks_exact(3)) {
+            *y = ((77 * p[0] as u16 + 150 * p[1] as u16 + 29 * p[2] as u16) >> 8) as u8;
+        }
         let road = road_luma(&self.luma, w, h, first_ground_row);
         let dark = (road as f32 * self.params.dark_ratio) as u8;
         self.dark = dark;
@@ -255,33 +256,57 @@ impl Detector {
                 }
             }
         }
-        // Per component, the lowest dark row of each column: the contact profile.
-        let mut profiles: std::collections::BTreeMap<u32, Vec<(u32, u32, u32)>> = std::collections::BTreeMap::new();
+        // Per component, the lowest and the highest dark row of each column it covers: the
+        // contact profile. Components are numbered by their root, their columns laid out in
+        // one buffer: one pass over the runs, no per-pixel allocation or sort.
+        let mut roots = Vec::with_capacity(self.runs.len());
+        let mut extent: std::collections::HashMap<u32, (u32, u32, u32)> = std::collections::HashMap::new();
         for i in 0..self.runs.len() {
             let root = find(&mut self.parent, i as u32);
+            roots.push(root);
             let r = self.runs[i];
-            let cols = profiles.entry(root).or_default();
-            for u in r.u0..=r.u1 {
-                cols.push((u, r.row, r.row));
+            let e = extent.entry(root).or_insert((r.u0, r.u1, 0));
+            e.0 = e.0.min(r.u0);
+            e.1 = e.1.max(r.u1);
+            e.2 += r.u1 - r.u0 + 1;
+        }
+        // Components of at least three pixels in root order: (root, first column, offset of
+        // its columns in `cols`).
+        let mut kept: Vec<(u32, u32, u32)> = extent.iter().filter(|e| e.1 .2 >= 3).map(|(&r, e)| (r, e.0, e.1)).collect();
+        kept.sort_unstable();
+        let mut len = 0;
+        let kept: Vec<(u32, u32, usize)> = kept
+            .into_iter()
+            .map(|(root, u0, u1)| {
+                let offset = len;
+                len += (u1 - u0 + 1) as usize;
+                (root, u0, offset)
+            })
+            .collect();
+        // (lowest row, highest row) per column; NONE where the component has no pixel.
+        const NONE: (u32, u32) = (0, u32::MAX);
+        let mut cols = vec![NONE; len];
+        for (r, root) in self.runs.iter().zip(&roots) {
+            let Ok(k) = kept.binary_search_by_key(root, |c| c.0) else { continue };
+            let (_, first, offset) = kept[k];
+            for c in &mut cols[offset + (r.u0 - first) as usize..=offset + (r.u1 - first) as usize] {
+                c.0 = c.0.max(r.row);
+                c.1 = c.1.min(r.row);
             }
         }
         let mut out = Vec::new();
-        for (_, mut cols) in profiles {
-            if cols.len() < 3 {
-                continue;
-            }
+        let mut merged: Vec<(u32, u32, u32)> = Vec::new();
+        for (k, &(_, first, offset)) in kept.iter().enumerate() {
+            let end = kept.get(k + 1).map_or(len, |c| c.2);
             // (column, lowest row, highest row) per column.
-            cols.sort_unstable();
-            let mut merged: Vec<(u32, u32, u32)> = Vec::with_capacity(cols.len());
-            for (u, lo, hi) in cols {
-                match merged.last_mut() {
-                    Some(m) if m.0 == u => {
-                        m.1 = m.1.max(lo);
-                        m.2 = m.2.min(hi);
-                    }
-                    _ => merged.push((u, lo, hi)),
-                }
-            }
+            merged.clear();
+            merged.extend(
+                cols[offset..end]
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, c)| c.1 != u32::MAX)
+                    .map(|(j, &(lo, hi))| (first + j as u32, lo, hi)),
+            );
             // Split where the contact row jumps or a column is missing: two vehicles whose
             // dark bands touch in the image stand at different distances.
             let mut start = 0;
