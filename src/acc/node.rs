@@ -46,6 +46,10 @@ pub struct AccStats {
     /// Speed, state and perception messages from another publisher than the one followed
     /// (see `Following`): not used.
     pub foreign_inputs: u64,
+    /// Wall time spent computing answers (inputs taken, controller stepped), seconds.
+    pub busy_s: f64,
+    /// Wall time answers waited for their step's state and perception, seconds.
+    pub waiting_s: f64,
     /// The inputs' statistics at the end: received, lost on the way (sequence gaps), dropped
     /// or delayed by injected faults (`--faults`).
     pub inputs: Vec<StatsSnapshot>,
@@ -258,7 +262,9 @@ async fn answer_speed(st: &mut State, inputs: &Inputs, settings: &AccSettings, s
     // In lockstep the answer must not depend on how fast the state travelled: wait for it as
     // long as for perception. Otherwise never hold the answer long for it.
     let state_wait = if settings.lockstep { Duration::from_millis(settings.lockstep_wait_ms) } else { STATE_WAIT };
+    let waiting = Instant::now();
     let state = await_state(st, &inputs.state, t_ns, state_wait).await;
+    let mut waited = waiting.elapsed();
     let answers_step = answers_step(st, t_ns);
     st.ego = EgoNow {
         t_s,
@@ -284,11 +290,17 @@ async fn answer_speed(st: &mut State, inputs: &Inputs, settings: &AccSettings, s
     // Something arrived already, even if injected faults hold it back.
     let seen_any = inputs.perception.arrivals().since(0);
     if settings.lockstep && st.frame_expected_at(t_s, seen_any) && !st.has_perception_at(t_s) {
+        let waiting = Instant::now();
         await_perception(st, &inputs.perception, settings.lockstep_wait_ms, t_ns).await;
+        waited += waiting.elapsed();
     }
     let answer = st.answer(t_ns, answers_step, inputs.detector_alive());
     // Up to date from here: time spent waiting above (lockstep) does not age the speed.
-    st.last_speed_at = Some(Instant::now());
+    let now = Instant::now();
+    let spent = now.duration_since(st.last_speed_at.unwrap_or(now));
+    st.stats.waiting_s += waited.as_secs_f64();
+    st.stats.busy_s += spent.saturating_sub(waited).as_secs_f64();
+    st.last_speed_at = Some(now);
     answer
 }
 

@@ -22,6 +22,10 @@ struct Cli {
     /// This node's name on the bus
     #[arg(long, default_value = "detect")]
     name: String,
+    /// At exit, print the run's statistics as JSON on stdout (frames, detections, time spent
+    /// detecting)
+    #[arg(long)]
+    json: bool,
 }
 
 fn main() -> Result<()> {
@@ -47,6 +51,9 @@ fn main() -> Result<()> {
             stats.narrow_frames,
             stats.narrow_missing
         );
+        if cli.json {
+            println!("{}", serde_json::to_string_pretty(&stats)?);
+        }
         bus.close().await.context("detect: leave the bus")?;
         anyhow::Ok(())
     })

@@ -19,8 +19,8 @@ use super::trace::{judge, Recorder};
 use super::{fmt_opt, plot};
 use crate::acc::PerceptionSource;
 use crate::config::{FaultArgs, FaultProfile};
-use crate::launch::{ClockMode, LoopRun, LoopSpec, Network, NodeInput, NODE_POLL};
-use crate::sim::Scenario;
+use crate::launch::{ClockMode, LinkKind, LoopRun, LoopSpec, Network, NodeInput, NODE_POLL};
+use crate::sim::{Scenario, SimTime};
 
 #[derive(Debug, Clone, clap::Args)]
 pub struct EvalAccArgs {
@@ -48,6 +48,13 @@ pub struct EvalAccArgs {
     /// temporary directory, removed when every scenario passes]
     #[arg(long, value_name = "DIR")]
     pub logs: Option<PathBuf>,
+    /// Scenarios run at once, each loop in its own processes, ports and namespace (lockstep
+    /// runs are the same whatever runs beside them) [default: the CPU cores, at most 4]
+    #[arg(long, short = 'j', value_name = "N")]
+    pub jobs: Option<usize>,
+    /// How the loop's processes reach each other (to compare the two)
+    #[arg(long, value_enum, default_value = "unix")]
+    pub link: LinkKind,
     #[command(flatten)]
     pub faults: FaultArgs,
 }
@@ -67,13 +74,66 @@ pub struct ScenarioResult {
     pub faults: Option<String>,
     /// The ACC's and the simulator's inputs: lost on the way vs dropped by injected faults.
     pub inputs: Vec<NodeInput>,
+    /// Where the run's wall time went.
+    pub time: RunTime,
 }
+
+/// Where one run's wall time went, in seconds.
+#[derive(Debug, Clone, Copy, Default, Serialize)]
+pub struct RunTime {
+    /// Simulated time.
+    pub simulated_s: f64,
+    /// The whole run: joining the bus, starting the nodes, the simulation, stopping them.
+    pub wall_s: f64,
+    /// The simulator's own run, first step to last.
+    pub sim_wall_s: f64,
+    /// The simulator's shares of `sim_wall_s`.
+    pub sim: SimTime,
+    /// The detector computing (camera perception), inside the simulator's wait for answers.
+    pub detect_busy_s: f64,
+    /// The ACC computing its answers, inside the simulator's wait.
+    pub acc_busy_s: f64,
+}
+
+impl RunTime {
+    /// Starting and stopping the processes: the run less the simulator's own run.
+    pub fn start_stop_s(&self) -> f64 {
+        (self.wall_s - self.sim_wall_s).max(0.0)
+    }
+
+    /// What the simulator waited for that no node spent computing: the messages' way through
+    /// the transport, the nodes' wake-ups and the ACC's wait for the detections.
+    pub fn transport_s(&self) -> f64 {
+        (self.sim.awaiting_s - self.detect_busy_s - self.acc_busy_s).max(0.0)
+    }
+
+    fn add(&mut self, o: &RunTime) {
+        self.simulated_s += o.simulated_s;
+        self.wall_s += o.wall_s;
+        self.sim_wall_s += o.sim_wall_s;
+        self.sim.physics_s += o.sim.physics_s;
+        self.sim.render_s += o.sim.render_s;
+        self.sim.publish_s += o.sim.publish_s;
+        self.sim.awaiting_s += o.sim.awaiting_s;
+        self.sim.pacing_s += o.sim.pacing_s;
+        self.detect_busy_s += o.detect_busy_s;
+        self.acc_busy_s += o.acc_busy_s;
+    }
+}
+
+/// Scenarios run at once when --jobs is not given: one per core, at most this many (each
+/// loop holds shared-memory pools for its cameras).
+pub const MAX_DEFAULT_JOBS: usize = 4;
 
 #[derive(Debug, Clone, Serialize)]
 pub struct AccReport {
     pub command: String,
     pub results: Vec<ScenarioResult>,
     pub pass: bool,
+    /// Scenarios run at once.
+    pub jobs: usize,
+    /// The suite's wall time, seconds.
+    pub wall_s: f64,
 }
 
 /// Runs the suite; progress goes to stderr. The nodes and the recorder use the topic config
@@ -97,33 +157,59 @@ pub fn run(args: &EvalAccArgs, connect: &crate::config::ConnectArgs) -> Result<A
         Some(dir) => dir.clone(),
         None => std::env::temp_dir().join(format!("slipstream-eval-acc-{}", std::process::id())),
     };
-    let rt = tokio::runtime::Runtime::new()?;
-    let mut results = Vec::new();
-    for (i, (arg, scenario)) in names.iter().zip(scenarios).enumerate() {
-        let name = scenario.name.clone();
-        eprint!("[{}/{}] {name} ({:?} perception) ... ", i + 1, names.len(), args.perception);
-        let started = Instant::now();
-        // Named by perception too: runs with camera and ground truth into one directory keep
-        // both.
-        let run_logs = logs.join(format!("{name}-{}", args.perception.name()));
-        let result = rt
-            .block_on(run_one(arg, scenario, args, faults.clone(), connect.topics.as_deref(), &run_logs))
-            .with_context(|| format!("scenario {name} (node logs in {})", run_logs.display()))?;
-        eprintln!(
-            "{} in {:.1} s{}",
-            if result.metrics.pass { "pass" } else { "FAIL" },
-            started.elapsed().as_secs_f64(),
-            result.plot.as_ref().map_or(String::new(), |p| format!(", plot {}", p.display()))
-        );
-        results.push(result);
+    let jobs = match args.jobs {
+        Some(0) => bail!("--jobs must be at least 1"),
+        Some(n) => n,
+        None => std::thread::available_parallelism().map_or(1, |n| n.get()).min(MAX_DEFAULT_JOBS),
     }
+    .min(names.len().max(1));
+    let suite_started = Instant::now();
+    let rt = tokio::runtime::Runtime::new()?;
+    let results = rt.block_on(async {
+        let slots = std::sync::Arc::new(tokio::sync::Semaphore::new(jobs));
+        let mut running = tokio::task::JoinSet::new();
+        for (i, (arg, scenario)) in names.iter().cloned().zip(scenarios).enumerate() {
+            let (args, faults, topics) = (args.clone(), faults.clone(), connect.topics.clone());
+            // Named by perception too: runs with camera and ground truth into one directory
+            // keep both.
+            let run_logs = logs.join(format!("{}-{}", scenario.name, args.perception.name()));
+            let slots = slots.clone();
+            running.spawn(async move {
+                let _slot = slots.acquire_owned().await.expect("the semaphore is never closed");
+                let name = scenario.name.clone();
+                let result = run_one(&arg, scenario, &args, faults, topics.as_deref(), &run_logs)
+                    .await
+                    .with_context(|| format!("scenario {name} (node logs in {})", run_logs.display()));
+                (i, name, result)
+            });
+        }
+        let mut results: Vec<Option<ScenarioResult>> = vec![None; names.len()];
+        let mut done = 0;
+        while let Some(joined) = running.join_next().await {
+            let (i, name, result) = joined.context("a scenario's task failed")?;
+            done += 1;
+            let result = result?;
+            eprintln!(
+                "[{done}/{}] {name} ({} perception): {} in {:.1} s ({:.0} s simulated){}",
+                names.len(),
+                args.perception.name(),
+                if result.metrics.pass { "pass" } else { "FAIL" },
+                result.time.wall_s,
+                result.time.simulated_s,
+                result.plot.as_ref().map_or(String::new(), |p| format!(", plot {}", p.display()))
+            );
+            results[i] = Some(result);
+        }
+        anyhow::Ok(results.into_iter().flatten().collect::<Vec<_>>())
+    })?;
+    let wall_s = suite_started.elapsed().as_secs_f64();
     let pass = results.iter().all(|r| r.metrics.pass && r.lockstep_timeouts == 0);
     if pass && args.logs.is_none() {
         let _ = std::fs::remove_dir_all(&logs);
     } else {
         eprintln!("node logs: {}", logs.display());
     }
-    Ok(AccReport { command: std::env::args().collect::<Vec<_>>().join(" "), results, pass })
+    Ok(AccReport { command: std::env::args().collect::<Vec<_>>().join(" "), results, pass, jobs, wall_s })
 }
 
 /// One scenario through the launch layer, judged; `faults` injected by every node.
@@ -149,12 +235,14 @@ pub(crate) async fn run_one(
         set_speed_mps: set_speed,
         time_gap_s: scenario.ego.time_gap_s,
         faults,
+        link: args.link,
     };
     let faults = spec.faults.as_ref().map(|p| p.summary());
     // A namespace and ports of this run's own: nothing else on the machine is disturbed.
     let namespace =
         format!("eval-acc-{}-{}", std::process::id(), name.replace(|c: char| !c.is_ascii_alphanumeric(), "-"));
     let network = Network::Isolated { topics: topics_file.map(Path::to_path_buf), namespace };
+    let opened = Instant::now();
     let mut lp = LoopRun::open(spec, network, logs, "eval-acc").await?;
     let recorder = Recorder::start(lp.bus()).await?;
     let started = Instant::now();
@@ -173,12 +261,25 @@ pub(crate) async fn run_one(
     drop(recorder);
     let sim = lp.sim_report();
     let inputs = lp.inputs();
+    let (acc_busy_s, detect_busy_s) = (
+        lp.acc_report().map_or(0.0, |a| a.busy_s),
+        lp.detect_report().ok().flatten().map_or(0.0, |d| d.busy_s),
+    );
     lp.close().await;
+    let wall_s = opened.elapsed().as_secs_f64();
     if progress.sim_ended.is_none() && progress.died.is_empty() {
         bail!("slipstream-sim did not finish within {} s (--timeout)", args.timeout);
     }
     anyhow::ensure!(progress.died.is_empty(), "{} ended before the run was over", progress.died.join(", "));
     let sim = sim?;
+    let time = RunTime {
+        simulated_s: sim.sim_time_s,
+        wall_s,
+        sim_wall_s: sim.wall_time_s,
+        sim: sim.time,
+        detect_busy_s,
+        acc_busy_s,
+    };
 
     let judged = judge(&rec, &scenario, Some(&sim), "stopped");
     let trace = judged.trace;
@@ -206,6 +307,7 @@ pub(crate) async fn run_one(
         plot,
         faults,
         inputs,
+        time,
     })
 }
 
@@ -250,5 +352,41 @@ pub fn markdown(report: &AccReport) -> String {
         aims::MAX_JERK_MPS3,
         aims::HARD_BRAKING_RESPONSE_S,
     ));
+    out.push('\n');
+    out.push_str(&time_table(report));
+    out
+}
+
+/// Where the suite's time went: the runs' wall time summed, split by what the processes did.
+pub fn time_table(report: &AccReport) -> String {
+    let mut t = RunTime::default();
+    for r in &report.results {
+        t.add(&r.time);
+    }
+    let rtf = |wall: f64| if wall > 0.0 { t.simulated_s / wall } else { 0.0 };
+    let share = |x: f64| if t.wall_s > 0.0 { 100.0 * x / t.wall_s } else { 0.0 };
+    let mut out = format!(
+        "Time: {:.0} s simulated in {:.1} s with {} scenario(s) at once: **{:.1}x real time** ({:.1}x per run, {:.1}x inside the simulator). Where each run's time went, summed over the runs ({:.1} s):\n\n| share | s | % |\n|---|---|---|\n",
+        t.simulated_s,
+        report.wall_s,
+        report.jobs,
+        rtf(report.wall_s),
+        rtf(t.wall_s),
+        rtf(t.sim_wall_s),
+        t.wall_s,
+    );
+    let rows = [
+        ("starting and stopping the processes (and joining the bus)", t.start_stop_s()),
+        ("physics (drivers, vehicle model, rapier)", t.sim.physics_s),
+        ("rendering the cameras, with the ground truth", t.sim.render_s),
+        ("publishing speed, state, clock, objects", t.sim.publish_s),
+        ("detecting, fusing, tracking (slipstream-detect)", t.detect_busy_s),
+        ("the ACC computing (slipstream-acc)", t.acc_busy_s),
+        ("transport and wake-ups (the simulator waiting, no node computing)", t.transport_s()),
+        ("pacing (the simulator yielding)", t.sim.pacing_s),
+    ];
+    for (what, s) in rows {
+        out.push_str(&format!("| {what} | {s:.2} | {:.1} |\n", share(s)));
+    }
     out
 }

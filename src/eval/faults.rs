@@ -265,6 +265,8 @@ pub fn run(args: &EvalFaultsArgs, connect: &crate::config::ConnectArgs) -> Resul
         duration: args.duration,
         timeout: args.timeout,
         logs: None,
+        jobs: Some(1),
+        link: Default::default(),
         faults: FaultArgs::default(),
     };
     let rt = tokio::runtime::Runtime::new()?;

@@ -484,6 +484,7 @@ pub async fn run(path: &Path, connect: &ConnectArgs, dir: &Path, progress: &mut 
             .and_then(|name| crate::sim::Scenario::find(name).ok())
             .and_then(|s| s.ego.time_gap_s),
         faults: None,
+        link: Default::default(),
     };
     let mut lp = LoopRun::open(spec.clone(), Network::User(connect), &dir.join("logs"), "resim").await?;
     let (inbox, subs) = Inbox::start(lp.bus()).await?;

@@ -14,8 +14,8 @@
 //! | constant | value | what for |
 //! |---|---|---|
 //! | [`NODE_START_TIMEOUT`] | 30 s | the controllers must be alive on the bus before the simulator starts (its first frame must find them listening) |
-//! | [`NODE_POLL`] | 50 ms | how often the launcher looks at the bus and the processes while waiting |
-//! | [`SETTLE`] | 200 ms | after the simulator ends, for its last messages to land before the others stop |
+//! | [`NODE_POLL`] | 20 ms | how often the launcher looks at the bus and the processes while waiting |
+//! | [`SETTLE`] | 200 ms | after the simulator ends, for its last messages to land (the others stop meanwhile) |
 //! | [`STOP_GRACE`] | 5 s | SIGINT, then this long to exit, then SIGKILL |
 //! | [`CLOSE_TIMEOUT`] | 5 s | closing the observer's session never holds up the report |
 
@@ -25,12 +25,12 @@ pub mod child;
 pub mod nodes;
 
 pub use child::{free_ports, sibling_binary, Child};
-pub use nodes::{ClockMode, LoopRun, LoopSpec, Network, NodeEnd, NodeInput};
+pub use nodes::{ClockMode, LinkKind, LoopRun, LoopSpec, Network, NodeEnd, NodeInput};
 
 /// How long the controllers may take to appear on the bus.
 pub const NODE_START_TIMEOUT: Duration = Duration::from_secs(30);
 /// How often the launcher checks the bus and the processes.
-pub const NODE_POLL: Duration = Duration::from_millis(50);
+pub const NODE_POLL: Duration = Duration::from_millis(20);
 /// After the simulator ends: time for its last messages to reach the observer.
 pub const SETTLE: Duration = Duration::from_millis(200);
 /// SIGINT, then this long, then SIGKILL.

@@ -26,6 +26,7 @@ use super::child::{free_ports, sibling_binary, Child};
 use super::{CLOSE_TIMEOUT, DEFAULT_RUST_LOG, NODE_POLL, NODE_START_TIMEOUT, SETTLE, STOP_GRACE};
 use crate::acc::node::AccStats;
 use crate::acc::PerceptionSource;
+use crate::perception::node::DetectStats;
 use crate::config::{ConnectArgs, FaultProfile, DEFAULT_ZENOH_CONFIG};
 use crate::sim::SimReport;
 use crate::Bus;
@@ -52,6 +53,18 @@ impl ClockMode {
     }
 }
 
+/// How the loop's processes on this host reach each other.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum LinkKind {
+    /// Unix sockets in a directory of the run's own: no TCP/IP stack between processes
+    /// (about half the latency of TCP on loopback, docs/performance.md)
+    #[default]
+    Unix,
+    /// TCP on loopback ports
+    Tcp,
+}
+
 /// Which loop to run.
 #[derive(Debug, Clone)]
 pub struct LoopSpec {
@@ -65,6 +78,8 @@ pub struct LoopSpec {
     pub time_gap_s: Option<f64>,
     /// Faults every node injects into what it receives (`--faults`); None: none.
     pub faults: Option<FaultProfile>,
+    /// The links between the loop's processes (peer mode).
+    pub link: LinkKind,
 }
 
 impl LoopSpec {
@@ -156,20 +171,58 @@ const SIM: &str = "slipstream-sim";
 const SIM_REPORT: &str = "slipstream-sim.json";
 /// The file slipstream-acc --json writes its statistics to, in the logs directory.
 const ACC_REPORT: &str = "slipstream-acc.json";
+/// The file slipstream-detect --json writes its statistics to, in the logs directory.
+const DETECT_REPORT: &str = "slipstream-detect.json";
 /// The fault profile handed to the nodes, in the logs directory.
 const FAULTS_FILE: &str = "faults.json5";
 
-/// Loopback ports: the observer's and each node's.
-#[derive(Debug, Clone, Copy)]
-struct Ports {
-    observer: u16,
-    acc: u16,
-    detect: u16,
-    sim: u16,
+/// Zenoh settings of an isolated loop's sessions (the observer's and every node's). Each node
+/// dials the observer and every node started before it, so the sessions form a full mesh
+/// without gossip; with gossip on, a session's open waited out Zenoh's scouting delay (500 ms)
+/// about every other time, for a peer connection gossip had made in parallel. A node whose
+/// peer is not listening yet (they start together) dials again after 20 ms, not 250.
+const ISOLATED_CFG: [(&str, &str); 2] = [
+    ("scouting/gossip/enabled", "false"),
+    ("connect/retry", "{period_init_ms: 20, period_max_ms: 2000, period_increase_factor: 2}"),
+];
+
+/// Where the observer and each node listen: loopback ports or unix sockets.
+#[derive(Debug)]
+struct Endpoints {
+    observer: String,
+    acc: String,
+    detect: String,
+    sim: String,
+    /// The unix sockets' directory (removed when the run ends).
+    dir: Option<PathBuf>,
 }
 
-fn endpoint(port: u16) -> String {
-    format!("tcp/127.0.0.1:{port}")
+impl Endpoints {
+    fn new(link: LinkKind) -> Result<Endpoints> {
+        match link {
+            LinkKind::Tcp => {
+                let [observer, acc, detect, sim] = free_ports::<4>()?.map(|p| format!("tcp/127.0.0.1:{p}"));
+                Ok(Endpoints { observer, acc, detect, sim, dir: None })
+            }
+            LinkKind::Unix => {
+                // Short: a socket's path has at most 107 bytes.
+                static RUNS: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+                let run = RUNS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                let dir = std::env::temp_dir().join(format!("slipstream-{}-{run}", std::process::id()));
+                std::fs::create_dir_all(&dir).with_context(|| format!("create {}", dir.display()))?;
+                let sock = |name: &str| format!("unixsock-stream/{}", dir.join(format!("{name}.sock")).display());
+                Ok(Endpoints { observer: sock("observer"), acc: sock(ACC), detect: sock(DETECT), sim: sock(SIM), dir: Some(dir) })
+            }
+        }
+    }
+}
+
+impl Drop for Endpoints {
+    fn drop(&mut self) {
+        if let Some(dir) = &self.dir {
+            let _ = std::fs::remove_dir_all(dir);
+        }
+    }
 }
 
 /// The loop's processes and the observer's session.
@@ -183,7 +236,7 @@ pub struct LoopRun {
     user_connect: Vec<String>,
     /// Peer mode: each node listens on its own port and dials the ones before it.
     peer: bool,
-    ports: Ports,
+    endpoints: Endpoints,
     nodes: Vec<Child>,
     died: Vec<String>,
 }
@@ -193,8 +246,7 @@ impl LoopRun {
     /// started yet: subscribe to what you record first, then [`LoopRun::start`].
     pub async fn open(spec: LoopSpec, network: Network<'_>, logs: &Path, observer: &str) -> Result<LoopRun> {
         std::fs::create_dir_all(logs).with_context(|| format!("create the log directory {}", logs.display()))?;
-        let [p_obs, p_acc, p_det, p_sim] = free_ports::<4>()?;
-        let ports = Ports { observer: p_obs, acc: p_acc, detect: p_det, sim: p_sim };
+        let endpoints = Endpoints::new(spec.link)?;
         let (config, topic_map, base_flags, user_connect, peer) = match network {
             Network::User(connect) => {
                 let mut config = connect.zenoh_config()?;
@@ -210,7 +262,7 @@ impl LoopRun {
                         .ok()
                         .and_then(|s| serde_json::from_str(&s).ok())
                         .unwrap_or_default();
-                    listen.push(endpoint(p_obs).into());
+                    listen.push(endpoints.observer.clone().into());
                     config
                         .insert_json5("listen/endpoints", &serde_json::Value::Array(listen).to_string())
                         .map_err(|e| anyhow::anyhow!("add a listen endpoint for the nodes: {e}"))?;
@@ -220,11 +272,15 @@ impl LoopRun {
             Network::Isolated { topics, namespace } => {
                 let mut config = zenoh::Config::from_json5(DEFAULT_ZENOH_CONFIG).map_err(anyhow::Error::msg)?;
                 config
-                    .insert_json5("listen/endpoints", &format!("[\"{}\"]", endpoint(p_obs)))
+                    .insert_json5("listen/endpoints", &format!("[\"{}\"]", endpoints.observer))
                     .map_err(anyhow::Error::msg)?;
                 config.insert_json5("connect/endpoints", "[]").map_err(anyhow::Error::msg)?;
                 let map = crate::TopicMap::load_or_default(topics.as_deref())?.with_namespace(&namespace)?;
                 let mut flags = vec!["-n".to_string(), namespace];
+                for (key, value) in ISOLATED_CFG {
+                    config.insert_json5(key, value).map_err(|e| anyhow::anyhow!("zenoh config key {key}: {e}"))?;
+                    flags.extend(["--cfg".into(), format!("{key}:{value}")]);
+                }
                 if let Some(file) = topics {
                     flags.extend(["-t".into(), file.display().to_string()]);
                 }
@@ -239,7 +295,7 @@ impl LoopRun {
             base_flags,
             user_connect,
             peer,
-            ports,
+            endpoints,
             nodes: Vec::new(),
             died: Vec::new(),
         })
@@ -293,9 +349,10 @@ impl LoopRun {
         if spec.clock == ClockMode::Lockstep {
             acc_args.push("--lockstep".into());
         }
-        self.spawn(ACC, acc_args, self.ports.acc, &[])?;
+        let (acc, detect) = (self.endpoints.acc.clone(), self.endpoints.detect.clone());
+        self.spawn(ACC, acc_args, &acc, &[])?;
         if self.camera() {
-            self.spawn(DETECT, Vec::new(), self.ports.detect, &[self.ports.acc])?;
+            self.spawn(DETECT, vec!["--json".into()], &detect, &[&acc])?;
         }
         self.await_controllers().await
     }
@@ -303,9 +360,11 @@ impl LoopRun {
     /// Starts the simulator, after [`LoopRun::start_controllers`].
     fn start_sim(&mut self) -> Result<()> {
         let spec = self.spec.clone();
-        let mut controllers = vec![self.ports.acc];
+        let (acc, detect, sim) =
+            (self.endpoints.acc.clone(), self.endpoints.detect.clone(), self.endpoints.sim.clone());
+        let mut controllers = vec![acc.as_str()];
         if self.camera() {
-            controllers.push(self.ports.detect);
+            controllers.push(&detect);
         }
         let mut sim_args = vec![
             "--scenario".to_string(),
@@ -319,7 +378,7 @@ impl LoopRun {
         if spec.clock == ClockMode::Lockstep {
             sim_args.extend(["--wait-for".into(), "acc".into()]);
         }
-        self.spawn(SIM, sim_args, self.ports.sim, &controllers)
+        self.spawn(SIM, sim_args, &sim, &controllers)
     }
 
     /// The simulator's first frame must find the detector and the ACC listening.
@@ -347,12 +406,12 @@ impl LoopRun {
     }
 
     /// The flags of one node: the shared ones, then its own port and whom it dials.
-    fn flags(&self, own: u16, earlier: &[u16]) -> Vec<String> {
+    fn flags(&self, own: &str, earlier: &[&str]) -> Vec<String> {
         let mut f = self.base_flags.clone();
         if self.peer {
-            f.extend(["-l".into(), endpoint(own)]);
-            for p in std::iter::once(&self.ports.observer).chain(earlier) {
-                f.extend(["-e".into(), endpoint(*p)]);
+            f.extend(["-l".into(), own.to_string()]);
+            for e in std::iter::once(self.endpoints.observer.as_str()).chain(earlier.iter().copied()) {
+                f.extend(["-e".into(), e.to_string()]);
             }
         }
         for e in &self.user_connect {
@@ -361,11 +420,12 @@ impl LoopRun {
         f
     }
 
-    fn spawn(&mut self, bin: &str, args: Vec<String>, own: u16, earlier: &[u16]) -> Result<()> {
+    fn spawn(&mut self, bin: &str, args: Vec<String>, own: &str, earlier: &[&str]) -> Result<()> {
         let stderr = create(&log_of(&self.logs, bin))?;
         let stdout_name = match bin {
             SIM => SIM_REPORT.to_string(),
             ACC => ACC_REPORT.to_string(),
+            DETECT => DETECT_REPORT.to_string(),
             _ => format!("{bin}.out"),
         };
         let stdout = create(&self.logs.join(stdout_name))?;
@@ -399,11 +459,16 @@ impl LoopRun {
         progress
     }
 
-    /// Stops the simulator first (it publishes the scenario's end), waits [`SETTLE`] for the
-    /// last messages, then stops the others. Returns how each node ended.
+    /// Stops the simulator first (it publishes the scenario's end), then the others, and waits
+    /// [`SETTLE`] for the last messages. Returns how each node ended.
     pub async fn stop(&mut self) -> Vec<NodeEnd> {
         if let Some(sim) = self.nodes.iter_mut().find(|n| n.name == SIM) {
             sim.stop(STOP_GRACE);
+        }
+        // What the controllers say after the simulator's end is not judged: they stop while
+        // the simulator's last messages land.
+        for n in &mut self.nodes {
+            n.interrupt();
         }
         tokio::time::sleep(SETTLE).await;
         for n in &mut self.nodes {
@@ -439,6 +504,19 @@ impl LoopRun {
         let path = self.logs.join(ACC_REPORT);
         let bytes = std::fs::read(&path).with_context(|| format!("read {}", path.display()))?;
         serde_json::from_slice(&bytes).with_context(|| format!("{} holds no ACC statistics", path.display()))
+    }
+
+    /// The detector's statistics (its --json output), once it has been stopped; None without
+    /// camera perception.
+    pub fn detect_report(&self) -> Result<Option<DetectStats>> {
+        if !self.camera() {
+            return Ok(None);
+        }
+        let path = self.logs.join(DETECT_REPORT);
+        let bytes = std::fs::read(&path).with_context(|| format!("read {}", path.display()))?;
+        serde_json::from_slice(&bytes)
+            .map(Some)
+            .with_context(|| format!("{} holds no detector statistics", path.display()))
     }
 
     /// The inputs of the ACC and the simulator as they ended (after [`LoopRun::stop`]): what

@@ -16,7 +16,8 @@ use crate::msg::{CameraFrameRef, CameraInfo, Detections};
 use crate::topics;
 
 /// What a run did.
-#[derive(Debug, Clone, Default, Serialize)]
+#[derive(Debug, Clone, Default, Serialize, serde::Deserialize)]
+#[serde(default)]
 pub struct DetectStats {
     pub frames: u64,
     /// Frames replaced by a newer one before they were read (latest-only delivery).
@@ -30,6 +31,8 @@ pub struct DetectStats {
     pub narrow_frames: u64,
     /// Front frames whose narrow frame did not come in time (with a narrow camera known).
     pub narrow_missing: u64,
+    /// Wall time spent detecting, fusing and tracking (not waiting for frames), seconds.
+    pub busy_s: f64,
 }
 
 /// How long a front frame waits for the narrow camera's frame of the same instant (the
@@ -131,7 +134,9 @@ pub async fn run(
             _ => None,
         };
         stats.narrow_frames += narrow_rgb.is_some() as u64;
+        let started = Instant::now();
         let detections = rig.update(&rgb, narrow_rgb.as_deref(), header.stamp_sim_ns as f64 / 1e9);
+        stats.busy_s += started.elapsed().as_secs_f64();
         stats.frames += 1;
         stats.detections += detections.len() as u64;
         out.put(

@@ -32,7 +32,7 @@ pub mod scenario;
 pub mod settings;
 pub mod world;
 
-pub use node::{run, SimReport};
+pub use node::{run, SimReport, SimTime};
 pub use scenario::Scenario;
 pub use settings::SimSettings;
 pub use world::World;

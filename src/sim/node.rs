@@ -73,6 +73,25 @@ pub struct SimReport {
     pub control_input: StatsSnapshot,
     /// None when stopped before the scenario ended.
     pub end: Option<End>,
+    /// Where the simulator's wall time went.
+    #[serde(default)]
+    pub time: SimTime,
+}
+
+/// Where the simulator's wall time went, in seconds: what `eval acc` and `up` show of a run.
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
+#[serde(default)]
+pub struct SimTime {
+    /// Stepping the world: drivers, vehicle model, rapier.
+    pub physics_s: f64,
+    /// Drawing camera frames (into shared memory when raw) and their ground truth.
+    pub render_s: f64,
+    /// Publishing everything else (speed, state, clock, objects, events).
+    pub publish_s: f64,
+    /// Waiting for the controllers' answers (lockstep), or taking the commands that came.
+    pub awaiting_s: f64,
+    /// Pacing: sleeping to the wall clock (realtime) or yielding (fast, lockstep).
+    pub pacing_s: f64,
 }
 
 impl SimReport {
@@ -304,6 +323,7 @@ struct Node<'a> {
     policy: Policy,
     frames_sent: u64,
     lockstep_timeouts: u64,
+    time: SimTime,
 }
 
 /// One camera of the simulator: its renderer, its frames and its info (latched).
@@ -415,6 +435,7 @@ impl<'a> Node<'a> {
             policy: Policy::new(settings.control.clone()),
             frames_sent: 0,
             lockstep_timeouts: 0,
+            time: SimTime::default(),
         })
     }
 
@@ -455,7 +476,9 @@ impl<'a> Node<'a> {
             self.clock.put(t_ns, &SimClock { step: k, real_time_factor: rtf, mode, physics_hz: hz as f64 })?;
         }
         if due(k, rates.camera, hz) {
+            let started = Instant::now();
             self.publish_frame(world, t_ns)?;
+            self.time.render_s += started.elapsed().as_secs_f64();
         }
         Ok(published)
     }
@@ -576,6 +599,7 @@ impl<'a> Node<'a> {
             control_input: self.control_sub.stats().snapshot(),
             control_foreign: self.control_from.rejected(),
             end,
+            time: self.time,
         })
     }
 }
@@ -589,22 +613,37 @@ async fn run_loop(
     let mut node = Node::open(bus, world, settings).await?;
     node.start(bus, world, stop).await?;
     let mut pace = Pace::new();
+    let mut lap = Instant::now();
+    // The wall time since the last lap, added to one of the run's shares.
+    let mut split = |share: &mut f64| {
+        let now = Instant::now();
+        *share += now.duration_since(lap).as_secs_f64();
+        lap = now;
+    };
     let end: Option<End> = loop {
         let (k, t_ns) = (world.step_count(), world.time_ns());
         pace.measure(k, t_ns, node.frames_sent);
+        let rendered = node.time.render_s;
         let published = node.publish(world, k, t_ns, pace.rtf)?;
-        if let Some(end) = node.take_commands(k, t_ns, &published, stop).await? {
+        // publish() added its frames' time to render_s: the rest of it is publishing.
+        split(&mut node.time.publish_s);
+        node.time.publish_s -= node.time.render_s - rendered;
+        let ended = node.take_commands(k, t_ns, &published, stop).await?;
+        split(&mut node.time.awaiting_s);
+        if let Some(end) = ended {
             break Some(end);
         }
         if stop.load(Ordering::SeqCst) {
             break None;
         }
         let events = world.step(node.policy.input(t_ns));
+        split(&mut node.time.physics_s);
         node.publish_collisions(&events, world.time_ns())?;
         if let Some(end) = events.ended {
             break Some(end);
         }
         pace.wait(settings.mode, settings.realtime_factor, k, world.time_ns()).await;
+        split(&mut node.time.pacing_s);
     };
     node.finish(world, end, &pace)
 }

@@ -218,6 +218,7 @@ pub fn run(args: &SoakArgs, connect: &crate::config::ConnectArgs) -> Result<Soak
         set_speed_mps: 30.0,
         time_gap_s: None,
         faults: None,
+        link: Default::default(),
     };
     let namespace = format!("soak-{}", std::process::id());
     let network = Network::Isolated { topics: connect.topics.clone(), namespace };

@@ -374,6 +374,7 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
         set_speed_mps: scenario.ego.controller_set_speed_mps(),
         time_gap_s: scenario.ego.time_gap_s,
         faults: args.faults.profile()?,
+        link: Default::default(),
     };
     let faults = spec.faults.as_ref().map(|p| p.summary());
     let mut lp = LoopRun::open(spec, Network::User(connect), &dir.join("logs"), "up").await.context("up")?;
