@@ -270,6 +270,11 @@ impl Noise {
 
 /// Filter constant for the per-track lateral speed, per perception frame.
 const RATE_FILTER: f64 = 0.3;
+/// The fastest a vehicle moves sideways (a swerve; a lane change takes ~1 m/s). A larger
+/// step between two frames is the measurement jumping (a vehicle being passed, cut by the
+/// image's side, is measured on what of it is still in view), not the vehicle: it counts
+/// as this much.
+const MAX_LATERAL_RATE_MPS: f64 = 3.0;
 /// Margin kept when computing the deceleration that still avoids a collision.
 const THREAT_MARGIN_M: f64 = 2.0;
 /// Lead deceleration below which the threat assessment assumes it brakes to a stop.
@@ -487,7 +492,8 @@ impl Controller {
             // across the ego's own frame as the ego turns, not across its lane.
             let track = match self.tracks.get(&o.id) {
                 Some(t) if frame.stamp_s > t.stamp_s => {
-                    let lat_rate = (off - t.lateral_m) / (frame.stamp_s - t.stamp_s);
+                    let lat_rate = ((off - t.lateral_m) / (frame.stamp_s - t.stamp_s))
+                        .clamp(-MAX_LATERAL_RATE_MPS, MAX_LATERAL_RATE_MPS);
                     Track {
                         stamp_s: frame.stamp_s,
                         lateral_m: off,

@@ -41,6 +41,9 @@ pub struct AccStats {
     pub emergencies: u64,
     /// Lockstep steps whose perception did not come within lockstep_wait_ms.
     pub lockstep_waits_timed_out: u64,
+    /// Outside lockstep: answers whose frame's perception did not come within
+    /// perception_wait_ms (answered with the perception there was).
+    pub perception_waits_timed_out: u64,
     /// Answers given without the vehicle/state of their step (it came too late).
     pub state_waits_timed_out: u64,
     /// Speed, state and perception messages from another publisher than the one followed
@@ -137,7 +140,7 @@ struct State {
     mode: Option<AccMode>,
     status_tick: Option<i64>,
     stats: AccStats,
-    lockstep_log: Every,
+    wait_log: Every,
     speed_from: Following,
     state_from: Following,
     perception_from: Following,
@@ -289,9 +292,13 @@ async fn answer_speed(st: &mut State, inputs: &Inputs, settings: &AccSettings, s
     }
     // Something arrived already, even if injected faults hold it back.
     let seen_any = inputs.perception.arrivals().since(0);
-    if settings.lockstep && st.frame_expected_at(t_s, seen_any) && !st.has_perception_at(t_s) {
+    // The answer waits for the perception of the frame taken at this step: always in lockstep
+    // (the run must not depend on timing), briefly otherwise (the loop reacts to the frame
+    // now rather than at the next speed message).
+    let wait_ms = if settings.lockstep { settings.lockstep_wait_ms } else { settings.perception_wait_ms };
+    if wait_ms > 0 && st.frame_expected_at(t_s, seen_any) && !st.has_perception_at(t_s) {
         let waiting = Instant::now();
-        await_perception(st, &inputs.perception, settings.lockstep_wait_ms, t_ns).await;
+        await_perception(st, &inputs.perception, wait_ms, t_ns, settings.lockstep).await;
         waited += waiting.elapsed();
     }
     let answer = st.answer(t_ns, answers_step, inputs.detector_alive());
@@ -352,9 +359,11 @@ async fn take_camera_info(st: &mut State, sub: &Subscriber<CameraInfo>, settings
     }
 }
 
-/// Lockstep: waits up to `wait_ms` for the perception of the frame at `t_ns` to arrive (taken
-/// when delivered; not waited for when injected faults dropped or held it).
-async fn await_perception(st: &mut State, perception: &PerceptionSub, wait_ms: u64, t_ns: u64) {
+/// Waits up to `wait_ms` for the perception of the frame at `t_ns` to arrive (taken when
+/// delivered; not waited for when injected faults dropped or held it). A wait that runs out
+/// is counted: in lockstep it is a warning (is the detector running?), outside it a late
+/// frame (the answer uses the perception there is).
+async fn await_perception(st: &mut State, perception: &PerceptionSub, wait_ms: u64, t_ns: u64, lockstep: bool) {
     let t_s = t_ns as f64 / 1e9;
     let deadline = Instant::now() + Duration::from_millis(wait_ms);
     loop {
@@ -373,8 +382,20 @@ async fn await_perception(st: &mut State, perception: &PerceptionSub, wait_ms: u
         }
         perception.arrivals().wait(left, || perception.arrivals().since(t_ns)).await;
     }
+    if !lockstep {
+        st.stats.perception_waits_timed_out += 1;
+        if let Some(more) = st.wait_log.ready() {
+            tracing::info!(
+                t_s,
+                waited_ms = wait_ms,
+                suppressed = more,
+                "the perception of this step's frame came later than perception_wait_ms; answered with the one before"
+            );
+        }
+        return;
+    }
     st.stats.lockstep_waits_timed_out += 1;
-    if let Some(more) = st.lockstep_log.ready() {
+    if let Some(more) = st.wait_log.ready() {
         tracing::warn!(
             t_s,
             waited_ms = wait_ms,
@@ -400,7 +421,7 @@ impl State {
             mode: None,
             status_tick: None,
             stats: AccStats::default(),
-            lockstep_log: Every::new(LOCKSTEP_LOG_EVERY),
+            wait_log: Every::new(LOCKSTEP_LOG_EVERY),
             speed_from: Following::new("vehicle/speed"),
             state_from: Following::new("vehicle/state"),
             perception_from: Following::new("perception"),

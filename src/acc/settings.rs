@@ -33,6 +33,9 @@ impl PerceptionSource {
     }
 }
 
+/// The longest `perception_wait_ms` the settings take.
+pub const MAX_PERCEPTION_WAIT_MS: u64 = 50;
+
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct AccSettings {
@@ -44,6 +47,7 @@ pub struct AccSettings {
     pub perception_node: String,
     pub lockstep: bool,
     pub lockstep_wait_ms: u64,
+    pub perception_wait_ms: u64,
     pub limits: Limits,
     pub gains: Gains,
     pub emergency: Emergency,
@@ -293,6 +297,13 @@ impl AccSettings {
         }
         if self.perception_node.is_empty() {
             return err("perception_node", "empty".into(), "name the detector node, e.g. \"detect\"");
+        }
+        if self.perception_wait_ms > MAX_PERCEPTION_WAIT_MS {
+            return err(
+                "perception_wait_ms",
+                format!("{} ms", self.perception_wait_ms),
+                &format!("use 0 to {MAX_PERCEPTION_WAIT_MS} ms: an answer held longer than the speed messages' period (10 ms at 100 Hz) makes the next ones queue"),
+            );
         }
         Ok(())
     }

@@ -233,8 +233,8 @@ mod tests {
     #[test]
     fn shipped_settings_parse_and_bad_values_name_key_and_fix() {
         let s = SimSettings::default();
-        assert_eq!((s.physics_hz, s.rates_hz.camera, s.camera.width), (100, 20.0, 640));
-        let bad = DEFAULT_SIM_CONFIG.replace("physics_hz: 100", "physics_hz: 5");
+        assert_eq!((s.physics_hz, s.rates_hz.camera, s.camera.width), (500, 20.0, 640));
+        let bad = DEFAULT_SIM_CONFIG.replace("physics_hz: 500", "physics_hz: 5");
         let e = SimSettings::parse(&bad, "sim.json5").unwrap_err();
         assert_eq!(e.key, "physics_hz");
         let bad = DEFAULT_SIM_CONFIG.replace("mode: \"realtime\"", "mode: \"turbo\"");
