@@ -143,6 +143,34 @@ fn a_car_cutting_in_becomes_the_lead_before_its_centre_is_in_the_lane_and_one_cu
 }
 
 #[test]
+fn a_lateral_jump_in_a_measurement_is_not_read_as_a_swerve_into_the_lane() {
+    // A car in the next lane, 10 m ahead, being passed: its measured lateral offset jumps
+    // 1.7 m toward the ego lane in one frame (the image's side cuts it), then keeps moving at a
+    // plausible rate. Read as 34 m/s it would be predicted inside the lane and braked for.
+    let mut c = Controller::new(truth());
+    let lateral = |i: usize| match i {
+        0..=5 => 7.7,
+        _ => 6.0 - 0.05 * (i - 6) as f64,
+    };
+    for i in 0..12 {
+        let t = i as f64 * 0.05;
+        c.perceive(&frame(t, vec![obj(79, 10.0, lateral(i), -5.0)]), &ego(t, 25.0));
+        let out = c.step(&ego(t, 25.0), &[]);
+        assert!(out.status.lead.is_none(), "frame {i} (lateral {:.2} m) made it the lead", lateral(i));
+        assert_ne!(out.status.mode, AccMode::Emergency);
+    }
+    // A real cut-in from the same place still becomes the lead (a_car_cutting_in_... above
+    // checks how early).
+    let mut became_lead = false;
+    for i in 0..60 {
+        let t = 1.0 + i as f64 * 0.05;
+        c.perceive(&frame(t, vec![obj(79, 25.0, (3.5 - 1.5 * i as f64 * 0.05).max(0.0), 0.0)]), &ego(t, 25.0));
+        became_lead |= c.step(&ego(t, 25.0), &[]).status.lead.is_some();
+    }
+    assert!(became_lead);
+}
+
+#[test]
 fn stop_and_go_holds_at_standstill_and_moves_off_after_the_lead() {
     let mut c = Controller::new(AccSettings { set_speed_mps: 15.0, ..truth() });
     // Standing 5.5 m behind a stopped lead.

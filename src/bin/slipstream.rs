@@ -136,9 +136,10 @@ enum EvalCommand {
     /// collisions, minimum gap and TTC, time-gap and speed errors, and comfort (accel, decel,
     /// jerk outside emergencies) and what a driver feels (unwarranted emergencies, phantom
     /// braking, stopping for nothing, acceleration swings behind a steady lead) against the
-    /// aims, with traffic collisions counted; exits with 1 when a scenario misses one.
-    /// The nodes use loopback ports and a namespace of their own (the topic config, -t, is
-    /// passed on; connection flags are not). Example:
+    /// aims, with traffic collisions counted, and where the time went; exits with 1 when a
+    /// scenario misses one. Runs one scenario per CPU core at once (-j). The nodes talk over
+    /// unix sockets in a namespace of their own (the topic config, -t, is passed on;
+    /// connection flags are not). Example:
     ///
     ///   slipstream eval acc --perception ground-truth --plots plots/
     #[command(verbatim_doc_comment)]

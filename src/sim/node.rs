@@ -41,6 +41,8 @@ pub enum SimError {
     Lockstep(String),
     #[error("camera: {0}")]
     Camera(String),
+    #[error("settings: {0}")]
+    Settings(String),
 }
 
 /// How a run went.
@@ -232,6 +234,14 @@ pub async fn run(
     settings: &SimSettings,
     shutdown: impl Future<Output = ()> + Send + 'static,
 ) -> Result<SimReport, SimError> {
+    // The publish rates are counted in the settings' steps: the world must step at that rate.
+    if world.physics_hz() != settings.physics_hz {
+        return Err(SimError::Settings(format!(
+            "the world steps at {} Hz but the settings' physics_hz is {} (build the world with World::new(.., settings.physics_hz))",
+            world.physics_hz(),
+            settings.physics_hz
+        )));
+    }
     let stop = Arc::new(AtomicBool::new(false));
     let stop_task = {
         let stop = stop.clone();

@@ -193,6 +193,46 @@ async fn control_answers_each_step_and_stale_perception_brakes_smoothly_then_rec
     });
 }
 
+/// Outside lockstep the answer to a speed message taken with a camera frame waits (at most
+/// `perception_wait_ms`) for that frame's perception, so the command reacts to the frame at
+/// once; with the wait off it answers with the perception it has.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_realtime_answer_waits_briefly_for_its_frames_perception() {
+    within!(async {
+        for wait_ms in [50, 0] {
+            let settings = AccSettings { perception_wait_ms: wait_ms, ..truth_settings() };
+            let (task, stop, sim_bus, _) = acc_and_sim(settings).await;
+            let controls = Collect::new(&sim_bus, topics::VEHICLE_CONTROL).await;
+            // Frames at 20 Hz (every fifth 100 Hz step), as camera/front/info says.
+            let info_pub = sim_bus.publisher(topics::CAMERA_FRONT_INFO).await.unwrap();
+            let info = slipstream::sim::SimSettings::default().camera_info(slipstream::msg::ImageEncoding::Rgb8);
+            info_pub.put(0, &info).unwrap();
+            let mut sim = FakeSim::new(&sim_bus).await;
+            sim.run(10, true).await;
+            until(&controls, answer_from(9)).await;
+            drain(&controls);
+            // Step 10 brings a frame: its speed and state first, its perception a little later
+            // (as a detector's would).
+            let t_ns = 10 * 10_000_000;
+            sim.speed.put(t_ns, &Speed { speed_mps: 20.0 }).unwrap();
+            sim.state.put(t_ns, &state(10, 20.0)).unwrap();
+            if wait_ms == 0 {
+                // Not waited for: the answer comes first, whenever the perception does.
+                until(&controls, answer_from(10)).await;
+            } else {
+                tokio::time::sleep(Duration::from_millis(2)).await;
+            }
+            let perceived = sim.objects.put(t_ns, &lead_truth(10, 40.0)).unwrap().unwrap();
+            until(&controls, answer_from(10)).await;
+            let answer = drain(&controls).into_iter().find(|c| c.msg.answers_step == Some(10)).unwrap();
+            let reacts_to_frame = answer.msg.perception_stamp_pub_ns == Some(perceived.stamp_pub_ns);
+            assert_eq!(reacts_to_frame, wait_ms > 0, "perception_wait_ms {wait_ms}: {answer:?}");
+            stop.send(()).unwrap();
+            task.await.unwrap();
+        }
+    });
+}
+
 /// The watchdog over the bus: its timing is unit-tested on an injected clock (src/acc/node.rs);
 /// here, that its commands and status reach the simulator and stop when speed returns.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -332,8 +372,17 @@ fn eval_acc_runs_every_scenario_as_separate_processes_without_a_collision() {
             .unwrap_or_else(|e| panic!("{perception}: {e}: {stdout}\n{}", String::from_utf8_lossy(&out.stderr)));
         let results = report["results"].as_array().unwrap();
         assert_eq!(results.len(), slipstream::sim::scenario::BUILT_IN.len());
+        assert!(report["jobs"].as_u64().is_some_and(|j| j >= 1), "{}", report["jobs"]);
         for r in results {
             let name = r["scenario"].as_str().unwrap();
+            // Where the run's time went: the simulator's shares fit in its own run, which fits
+            // in the whole run; the detector worked only with the camera.
+            let t = &r["time"];
+            let f = |v: &serde_json::Value| v.as_f64().unwrap();
+            let shares: f64 = ["physics_s", "render_s", "publish_s", "awaiting_s", "pacing_s"].iter().map(|k| f(&t["sim"][k])).sum();
+            assert!(f(&t["sim"]["physics_s"]) > 0.0 && f(&t["sim"]["render_s"]) > 0.0, "{name}: {t}");
+            assert!(shares <= f(&t["sim_wall_s"]) * 1.01 + 0.01 && f(&t["sim_wall_s"]) <= f(&t["wall_s"]), "{name}: {t}");
+            assert_eq!(f(&t["detect_busy_s"]) > 0.0, perception == "camera", "{name}: {t}");
             let m = &r["metrics"];
             assert_eq!(m["collisions"], 0, "{perception} {name}: collision");
             assert_eq!(r["lockstep_timeouts"], 0, "{perception} {name}: lockstep timeouts");

@@ -13,7 +13,10 @@ use zenoh::Wait;
 
 #[tokio::test(flavor = "multi_thread")]
 async fn typed_messages_cross_sessions_with_headers_and_stats() {
-    let (a, b) = bus_pair(TopicMap::default(), TopicMap::default()).await;
+    // Blocking, so that every message must arrive: with the default "drop" a put finding the
+    // send queue busy for a millisecond (two cores, tests in parallel) is dropped by design.
+    let lossless = || map(r#"{ topics: { "vehicle/speed": { congestion_control: "block" } } }"#);
+    let (a, b) = bus_pair(lossless(), lossless()).await;
     let sub = b.subscriber(VEHICLE_SPEED).await.unwrap();
     let publisher = a.publisher(VEHICLE_SPEED).await.unwrap();
     assert!(publisher.wait_for_subscriber(TIMEOUT).await);

@@ -27,8 +27,9 @@ fn lossless_map_with(extra: &str) -> TopicMap {
     TopicMap::from_json5(&format!("{{ {extra} topics: {{ {body} }} }}"), "test").unwrap()
 }
 
+/// The worlds of these tests step at 100 Hz: speed, state and clock every step.
 fn settings(mode: Mode, wait_for: &[&str]) -> SimSettings {
-    let mut s = SimSettings { mode, ..SimSettings::default() };
+    let mut s = SimSettings { mode, physics_hz: 100, ..SimSettings::default() };
     s.camera.width = 160;
     s.camera.height = 120;
     s.lockstep.wait_for = wait_for.iter().map(|s| s.to_string()).collect();
@@ -228,6 +229,17 @@ async fn lockstep_names_a_late_controller_and_stops_when_told() {
     let world = World::new(scenario("steady-follow", 1.0), 1, 100);
     let err = within!(slipstream::sim::run(&sim, world, &s, std::future::pending())).unwrap_err();
     assert!(err.to_string().contains("ghost not up after 300 ms"), "{err}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+async fn a_world_stepping_at_another_rate_than_the_settings_is_refused() {
+    let (s_sim, _ep) = listening_session().await;
+    let sim = Bus::from_session(s_sim, lossless_map(), "sim").await.unwrap();
+    let s = SimSettings { mode: Mode::Fast, ..SimSettings::default() };
+    let world = World::new(scenario("steady-follow", 1.0), 1, s.physics_hz / 5);
+    let err = within!(slipstream::sim::run(&sim, world, &s, std::future::pending())).unwrap_err();
+    let msg = err.to_string();
+    assert!(msg.contains(&format!("{} Hz", s.physics_hz / 5)) && msg.contains("physics_hz"), "{msg}");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
