@@ -7,6 +7,7 @@
 //! message: one-way latency on one host's clock.
 
 mod peer;
+pub mod scale;
 pub mod sim;
 mod spec;
 
@@ -36,6 +37,9 @@ pub enum Suite {
     Contention,
     /// d. the simulator: physics steps/s, render time per frame, fast-mode real-time factor
     Sim,
+    /// e. complete loops side by side in realtime (1, 2, 4, 8): real-time factor, loop
+    /// latency, CPU per loop; only when named (it loads the whole machine for minutes)
+    Scale,
 }
 
 #[derive(Debug, Clone, clap::Args)]
@@ -55,6 +59,12 @@ pub struct BenchArgs {
     /// Also write the table (markdown) to this file
     #[arg(long, value_name = "FILE")]
     pub markdown: Option<std::path::PathBuf>,
+    /// scale: how many complete loops side by side, in turn
+    #[arg(long, value_delimiter = ',', default_value = "1,2,4,8,12,16")]
+    pub loops: Vec<usize>,
+    /// scale: simulated (= wall) seconds each batch of loops runs
+    #[arg(long, default_value_t = 20.0)]
+    pub scale_seconds: f64,
 }
 
 /// One measured path in one suite, medians over runs.
@@ -89,6 +99,8 @@ pub struct BenchReport {
     pub ratios: Vec<Ratio>,
     /// The simulator suite's figures (d).
     pub sim: Vec<sim::SimFigure>,
+    /// Complete loops side by side (e), when asked for.
+    pub scale: Vec<scale::ScaleRow>,
 }
 
 struct Case {
@@ -170,6 +182,9 @@ fn cases(suites: &[Suite], quick: bool) -> Vec<Case> {
             for (phase, rate) in [("throughput", None), ("latency @20 Hz", Some(20.0))] {
                 let s = format!("b. {w}x{h} RGB frames, {phase}");
                 push(&s, "bus, shared memory", frame(Transport::Bus, true, rate));
+                // The link `up` and `eval` give the loop's processes: the shared-memory
+                // descriptor crosses a unix socket instead of TCP.
+                push(&s, "bus, shared memory, unix socket", CaseSpec { unix_socket: true, ..frame(Transport::Bus, true, rate) });
                 push(&s, "bus, TCP (shm off)", frame(Transport::Bus, false, rate));
                 push(&s, "raw zenoh, TCP (shm off)", frame(Transport::Zenoh, false, rate));
                 push(&s, "raw zenoh, implicit shm", frame(Transport::Zenoh, true, rate));
@@ -421,8 +436,20 @@ pub fn run(args: &BenchArgs) -> Result<BenchReport> {
     remove_seed_script();
     let ratios = ratios(&rows);
     let sim = if suites.contains(&Suite::Sim) { sim::run(args.quick, repeat)? } else { Vec::new() };
+    let scale = match suites.contains(&Suite::Scale) {
+        true if args.quick => scale::run(&[1, 2], 3.0)?,
+        true => {
+            anyhow::ensure!(
+                !args.loops.is_empty() && args.loops.iter().all(|n| (1..=32).contains(n)),
+                "--loops: give 1 to 32 loops per batch, e.g. --loops 1,2,4,8"
+            );
+            anyhow::ensure!(args.scale_seconds >= 1.0, "--scale-seconds must be at least 1");
+            scale::run(&args.loops, args.scale_seconds)?
+        }
+        false => Vec::new(),
+    };
     let command = std::env::args().collect::<Vec<_>>().join(" ");
-    Ok(BenchReport { command, rows, ratios, sim })
+    Ok(BenchReport { command, rows, ratios, sim, scale })
 }
 
 fn find<'a>(rows: &'a [Row], suite_prefix: &str, path: &str) -> Option<&'a Row> {
@@ -527,6 +554,9 @@ pub fn markdown(report: &BenchReport) -> String {
         for f in &report.sim {
             s.push_str(&format!("| {} | {:.2} | {} | {} |\n", f.what, f.value, f.unit, f.aim));
         }
+    }
+    if !report.scale.is_empty() {
+        s.push_str(&scale::markdown(&report.scale));
     }
     if !report.ratios.is_empty() {
         s.push_str("\n### Ratios (same run)\n\n| ratio | value | aim |\n|---|---|---|\n");

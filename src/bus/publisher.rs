@@ -240,12 +240,26 @@ impl FramePublisher {
         };
         let prefix = frame_prefix(&header, width, height, encoding, data_len);
         let total = prefix.len() + data_len;
+        // The header's publish stamp is taken when the frame is complete (allocated and
+        // filled, e.g. rendered), as the wire format says: at publish time.
+        let stamped = || {
+            let now = Header { stamp_pub_ns: msg::wall_clock_ns(), ..header };
+            let now_prefix = frame_prefix(&now, width, height, encoding, data_len);
+            // A varint of a later clock has the same length for centuries; if not, the
+            // prefix the buffer was laid out for stands.
+            if now_prefix.len() == prefix.len() {
+                (now, now_prefix)
+            } else {
+                (header, prefix.clone())
+            }
+        };
         if let Some(shm) = &self.shm {
             match shm.alloc(total).with_policy::<GarbageCollect>().wait() {
                 Ok(mut buf) => {
                     let bytes: &mut [u8] = &mut buf;
-                    bytes[..prefix.len()].copy_from_slice(&prefix);
                     fill(&mut bytes[prefix.len()..]);
+                    let (header, prefix) = stamped();
+                    bytes[..prefix.len()].copy_from_slice(&prefix);
                     self.inner.send(buf)?;
                     return Ok(Some(FrameSent { header, shared_memory: true }));
                 }
@@ -263,8 +277,9 @@ impl FramePublisher {
         // Zeroed allocation (calloc): a large buffer comes as fresh zero pages from the OS,
         // so the renderer's writes are the only pass over it (no memset first).
         let mut buf = vec![0u8; total];
-        buf[..prefix.len()].copy_from_slice(&prefix);
         fill(&mut buf[prefix.len()..]);
+        let (header, prefix) = stamped();
+        buf[..prefix.len()].copy_from_slice(&prefix);
         self.inner.send(buf)?;
         Ok(Some(FrameSent { header, shared_memory: false }))
     }

@@ -134,6 +134,50 @@ fn insert_bounded(map: &mut HashMap<u64, u64>, key: u64, value: u64) {
     }
 }
 
+/// The loop's latency, fed from a session's subscriptions to the messages that carry its
+/// stamps (detections, control, state; ground truth as the perception without the camera):
+/// what `up` shows and `bench scale` measures per loop.
+pub struct LatencyWatch {
+    pub latency: std::sync::Arc<parking_lot::Mutex<LoopLatency>>,
+    _subs: [crate::bus::CallbackSubscriber; 4],
+}
+
+impl LatencyWatch {
+    pub async fn start(bus: &crate::Bus, camera: bool) -> Result<LatencyWatch, crate::BusError> {
+        use crate::topics;
+        let latency = std::sync::Arc::new(parking_lot::Mutex::new(LoopLatency::default()));
+        let l = latency.clone();
+        let detections = bus
+            .subscribe_with(topics::PERCEPTION_OBJECTS, move |d| {
+                l.lock().on_detections(d.header.stamp_pub_ns, d.msg.frame_stamp_pub_ns)
+            })
+            .await?;
+        let l = latency.clone();
+        let control = bus
+            .subscribe_with(topics::VEHICLE_CONTROL, move |c| {
+                l.lock().on_command(c.header.stamp_pub_ns, c.msg.perception_stamp_pub_ns)
+            })
+            .await?;
+        let l = latency.clone();
+        let state = bus
+            .subscribe_with(topics::VEHICLE_STATE, move |s| {
+                if let Some(t) = s.msg.control_timing {
+                    l.lock().on_applied(t.command_stamp_pub_ns, t.applied_ns);
+                }
+            })
+            .await?;
+        let l = latency.clone();
+        let truth = bus
+            .subscribe_with(topics::OBJECTS, move |o| {
+                if !camera {
+                    l.lock().on_ground_truth(o.header.stamp_pub_ns)
+                }
+            })
+            .await?;
+        Ok(LatencyWatch { latency, _subs: [detections, control, state, truth] })
+    }
+}
+
 /// The smallest constant time gap a string of vehicles with this loop delay stays stable at:
 /// h > 2 (delay + actuator lag), the classic bound for a constant-time-gap policy with a
 /// delayed first-order actuator.

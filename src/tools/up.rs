@@ -23,7 +23,7 @@ use super::top::{KeyRow, Watcher};
 use crate::acc::PerceptionSource;
 use crate::bus::{CallbackSubscriber, Received};
 use crate::config::{ConnectArgs, FaultArgs};
-use crate::eval::latency::{self, HopStats, LoopLatency, HOPS_SHORT, WHOLE_LOOP};
+use crate::eval::latency::{self, HopStats, LatencyWatch, LoopLatency, HOPS_SHORT, WHOLE_LOOP};
 use crate::eval::trace::{judge, Recorder};
 use crate::eval::{fmt_opt, plot, Metrics};
 use crate::launch::{ClockMode, LoopRun, LoopSpec, Network, NodeEnd, NodeInput, NODE_POLL};
@@ -223,45 +223,17 @@ struct Watch {
     recorder: Recorder,
     keys: Watcher,
     latency: Arc<Mutex<LoopLatency>>,
+    _latency: LatencyWatch,
     clock: Arc<Mutex<Option<SimClock>>>,
     end_event: Arc<Mutex<Option<String>>>,
-    _subs: [CallbackSubscriber; 6],
+    _subs: [CallbackSubscriber; 2],
 }
 
 impl Watch {
     async fn start(bus: &Bus, camera: bool) -> Result<Watch> {
-        let latency = Arc::new(Mutex::new(LoopLatency::default()));
+        let watch = LatencyWatch::start(bus, camera).await?;
         let clock: Arc<Mutex<Option<SimClock>>> = Arc::default();
         let end_event: Arc<Mutex<Option<String>>> = Arc::default();
-        let l = latency.clone();
-        let s1 = bus
-            .subscribe_with(topics::PERCEPTION_OBJECTS, move |d| {
-                l.lock().on_detections(d.header.stamp_pub_ns, d.msg.frame_stamp_pub_ns)
-            })
-            .await?;
-        let l = latency.clone();
-        let s2 = bus
-            .subscribe_with(topics::VEHICLE_CONTROL, move |c| {
-                l.lock().on_command(c.header.stamp_pub_ns, c.msg.perception_stamp_pub_ns)
-            })
-            .await?;
-        let l = latency.clone();
-        let s3 = bus
-            .subscribe_with(topics::VEHICLE_STATE, move |s| {
-                if let Some(t) = s.msg.control_timing {
-                    l.lock().on_applied(t.command_stamp_pub_ns, t.applied_ns);
-                }
-            })
-            .await?;
-        // Ground truth is the perception only without the camera.
-        let l = latency.clone();
-        let s4 = bus
-            .subscribe_with(topics::OBJECTS, move |o| {
-                if !camera {
-                    l.lock().on_ground_truth(o.header.stamp_pub_ns)
-                }
-            })
-            .await?;
         let c = clock.clone();
         let s5 = bus.subscribe_with(topics::SIM_CLOCK, move |m| *c.lock() = Some(m.msg)).await?;
         let e = end_event.clone();
@@ -275,10 +247,11 @@ impl Watch {
         Ok(Watch {
             recorder: Recorder::start(bus).await?,
             keys: Watcher::start(bus).await?,
-            latency,
+            latency: watch.latency.clone(),
+            _latency: watch,
             clock,
             end_event,
-            _subs: [s1, s2, s3, s4, s5, s6],
+            _subs: [s5, s6],
         })
     }
 

@@ -82,6 +82,27 @@ fn a_bad_config_fails_with_file_key_and_fix() {
 /// The bench harness, quick: every path of every suite delivers, shared-memory paths use
 /// shared memory and the others do not. Latency and throughput are not judged here.
 #[test]
+fn bench_scale_runs_complete_loops_side_by_side() {
+    let _serial = common::serial();
+    let mut cmd = bin();
+    cmd.args(["bench", "scale", "--quick", "--json"]);
+    let out = run(cmd, Duration::from_secs(300));
+    assert!(out.status.success(), "stderr: {}", String::from_utf8_lossy(&out.stderr));
+    let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let rows = report["scale"].as_array().unwrap();
+    let loops: Vec<u64> = rows.iter().map(|r| r["loops"].as_u64().unwrap()).collect();
+    assert_eq!(loops, [1, 2]);
+    for r in rows {
+        // Every loop ran (a simulator that never stepped has no real-time factor), its
+        // latency was traced frame to command, and its processes were counted.
+        assert!(r["rtf_min"].as_f64().unwrap() > 0.0, "{r}");
+        assert!(r["loop_p50_ms"].as_f64().is_some_and(|v| v > 0.0), "{r}");
+        assert!(r["cpu_per_loop"].as_f64().unwrap() > 0.0, "{r}");
+    }
+    assert!(report["rows"].as_array().unwrap().is_empty(), "only the suite asked for runs");
+}
+
+#[test]
 fn bench_quick_every_path_delivers() {
     // Not serialised with the loops: it mostly waits (session set-up, paced sends) and judges
     // no timing, so it may share the machine with them.
