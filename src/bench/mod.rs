@@ -184,7 +184,11 @@ fn cases(suites: &[Suite], quick: bool) -> Vec<Case> {
                 push(&s, "bus, shared memory", frame(Transport::Bus, true, rate));
                 // The link `up` and `eval` give the loop's processes: the shared-memory
                 // descriptor crosses a unix socket instead of TCP.
-                push(&s, "bus, shared memory, unix socket", CaseSpec { unix_socket: true, ..frame(Transport::Bus, true, rate) });
+                push(
+                    &s,
+                    "bus, shared memory, unix socket",
+                    CaseSpec { unix_socket: true, ..frame(Transport::Bus, true, rate) },
+                );
                 push(&s, "bus, TCP (shm off)", frame(Transport::Bus, false, rate));
                 push(&s, "raw zenoh, TCP (shm off)", frame(Transport::Zenoh, false, rate));
                 push(&s, "raw zenoh, implicit shm", frame(Transport::Zenoh, true, rate));

@@ -80,7 +80,8 @@ async fn side_by_side(n: usize, duration_s: f64) -> Result<ScaleRow> {
     let cpu_before = children_cpu_s();
     let mut runs = Vec::new();
     for i in 0..n {
-        let network = Network::Isolated { topics: None, namespace: format!("bench-scale-{}-{n}-{i}", std::process::id()) };
+        let network =
+            Network::Isolated { topics: None, namespace: format!("bench-scale-{}-{n}-{i}", std::process::id()) };
         let run = LoopRun::open(spec.clone(), network, &logs.join(format!("{n}-{i}")), "bench-scale").await?;
         let watch = LatencyWatch::start(run.bus(), true).await?;
         runs.push((run, watch));

@@ -261,10 +261,8 @@ pub(crate) async fn run_one(
     drop(recorder);
     let sim = lp.sim_report();
     let inputs = lp.inputs();
-    let (acc_busy_s, detect_busy_s) = (
-        lp.acc_report().map_or(0.0, |a| a.busy_s),
-        lp.detect_report().ok().flatten().map_or(0.0, |d| d.busy_s),
-    );
+    let (acc_busy_s, detect_busy_s) =
+        (lp.acc_report().map_or(0.0, |a| a.busy_s), lp.detect_report().ok().flatten().map_or(0.0, |d| d.busy_s));
     lp.close().await;
     let wall_s = opened.elapsed().as_secs_f64();
     if progress.sim_ended.is_none() && progress.died.is_empty() {

@@ -26,8 +26,8 @@ use super::child::{free_ports, sibling_binary, Child};
 use super::{CLOSE_TIMEOUT, DEFAULT_RUST_LOG, NODE_POLL, NODE_START_TIMEOUT, SETTLE, STOP_GRACE};
 use crate::acc::node::AccStats;
 use crate::acc::PerceptionSource;
-use crate::perception::node::DetectStats;
 use crate::config::{ConnectArgs, FaultProfile, DEFAULT_ZENOH_CONFIG};
+use crate::perception::node::DetectStats;
 use crate::sim::SimReport;
 use crate::Bus;
 
@@ -211,7 +211,13 @@ impl Endpoints {
                 let dir = std::env::temp_dir().join(format!("slipstream-{}-{run}", std::process::id()));
                 std::fs::create_dir_all(&dir).with_context(|| format!("create {}", dir.display()))?;
                 let sock = |name: &str| format!("unixsock-stream/{}", dir.join(format!("{name}.sock")).display());
-                Ok(Endpoints { observer: sock("observer"), acc: sock(ACC), detect: sock(DETECT), sim: sock(SIM), dir: Some(dir) })
+                Ok(Endpoints {
+                    observer: sock("observer"),
+                    acc: sock(ACC),
+                    detect: sock(DETECT),
+                    sim: sock(SIM),
+                    dir: Some(dir),
+                })
             }
         }
     }

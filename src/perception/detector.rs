@@ -272,7 +272,8 @@ impl Detector {
         }
         // Components of at least three pixels in root order: (root, first column, offset of
         // its columns in `cols`).
-        let mut kept: Vec<(u32, u32, u32)> = extent.iter().filter(|e| e.1 .2 >= 3).map(|(&r, e)| (r, e.0, e.1)).collect();
+        let mut kept: Vec<(u32, u32, u32)> =
+            extent.iter().filter(|e| e.1 .2 >= 3).map(|(&r, e)| (r, e.0, e.1)).collect();
         kept.sort_unstable();
         let mut len = 0;
         let kept: Vec<(u32, u32, usize)> = kept

@@ -379,9 +379,13 @@ fn eval_acc_runs_every_scenario_as_separate_processes_without_a_collision() {
             // in the whole run; the detector worked only with the camera.
             let t = &r["time"];
             let f = |v: &serde_json::Value| v.as_f64().unwrap();
-            let shares: f64 = ["physics_s", "render_s", "publish_s", "awaiting_s", "pacing_s"].iter().map(|k| f(&t["sim"][k])).sum();
+            let shares: f64 =
+                ["physics_s", "render_s", "publish_s", "awaiting_s", "pacing_s"].iter().map(|k| f(&t["sim"][k])).sum();
             assert!(f(&t["sim"]["physics_s"]) > 0.0 && f(&t["sim"]["render_s"]) > 0.0, "{name}: {t}");
-            assert!(shares <= f(&t["sim_wall_s"]) * 1.01 + 0.01 && f(&t["sim_wall_s"]) <= f(&t["wall_s"]), "{name}: {t}");
+            assert!(
+                shares <= f(&t["sim_wall_s"]) * 1.01 + 0.01 && f(&t["sim_wall_s"]) <= f(&t["wall_s"]),
+                "{name}: {t}"
+            );
             assert_eq!(f(&t["detect_busy_s"]) > 0.0, perception == "camera", "{name}: {t}");
             let m = &r["metrics"];
             assert_eq!(m["collisions"], 0, "{perception} {name}: collision");

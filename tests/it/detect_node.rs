@@ -66,7 +66,13 @@ async fn the_detector_node_reports_the_lead_matched_to_ground_truth_by_time() {
     let mut scenario = Scenario::find("steady-follow").unwrap();
     scenario.duration_s = 3.0;
     let settings = SimSettings { mode: Mode::Realtime, ..SimSettings::default() };
-    within!(slipstream::sim::run(&sim, World::new(scenario, 1, settings.physics_hz), &settings, std::future::pending())).unwrap();
+    within!(slipstream::sim::run(
+        &sim,
+        World::new(scenario, 1, settings.physics_hz),
+        &settings,
+        std::future::pending()
+    ))
+    .unwrap();
     tokio::time::sleep(Duration::from_millis(500)).await;
     let _ = stop_tx.send(());
     let (stats, _bus) = within!(detector).unwrap();
