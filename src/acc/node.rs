@@ -382,25 +382,25 @@ async fn await_perception(st: &mut State, perception: &PerceptionSub, wait_ms: u
         }
         perception.arrivals().wait(left, || perception.arrivals().since(t_ns)).await;
     }
-    if !lockstep {
-        st.stats.perception_waits_timed_out += 1;
-        if let Some(more) = st.wait_log.ready() {
-            tracing::info!(
-                t_s,
-                waited_ms = wait_ms,
-                suppressed = more,
-                "the perception of this step's frame came later than perception_wait_ms; answered with the one before"
-            );
-        }
-        return;
-    }
-    st.stats.lockstep_waits_timed_out += 1;
-    if let Some(more) = st.wait_log.ready() {
+    let counter = match lockstep {
+        true => &mut st.stats.lockstep_waits_timed_out,
+        false => &mut st.stats.perception_waits_timed_out,
+    };
+    *counter += 1;
+    let Some(more) = st.wait_log.ready() else { return };
+    if lockstep {
         tracing::warn!(
             t_s,
             waited_ms = wait_ms,
             suppressed = more,
             "lockstep: no perception for the frame at this step; answering with what there is (is the detector running?)"
+        );
+    } else {
+        tracing::info!(
+            t_s,
+            waited_ms = wait_ms,
+            suppressed = more,
+            "the perception of this step's frame came later than perception_wait_ms; answered with the one before"
         );
     }
 }
