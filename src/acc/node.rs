@@ -294,8 +294,13 @@ async fn answer_speed(st: &mut State, inputs: &Inputs, settings: &AccSettings, s
     let seen_any = inputs.perception.arrivals().since(0);
     // The answer waits for the perception of the frame taken at this step: always in lockstep
     // (the run must not depend on timing), briefly otherwise (the loop reacts to the frame
-    // now rather than at the next speed message).
-    let wait_ms = if settings.lockstep { settings.lockstep_wait_ms } else { settings.perception_wait_ms };
+    // now rather than at the next speed message), and not at all in realtime once the
+    // detector is known gone (nothing will come; each frame step would lose the wait).
+    let wait_ms = match settings.lockstep {
+        true => settings.lockstep_wait_ms,
+        false if !inputs.detector_alive() => 0,
+        false => settings.perception_wait_ms,
+    };
     if wait_ms > 0 && st.frame_expected_at(t_s, seen_any) && !st.has_perception_at(t_s) {
         let waiting = Instant::now();
         await_perception(st, &inputs.perception, wait_ms, t_ns, settings.lockstep).await;

@@ -6,6 +6,7 @@ use std::process::{Command, Output};
 use std::time::{Duration, Instant};
 
 use crate::common;
+use slipstream::acc::node::AccStats;
 use slipstream::acc::{AccSettings, PerceptionSource};
 use slipstream::msg::{
     AccMode, AccStatus, AccWarning, BoundingBox2d, ControlCommand, Detection, Detections, GroundTruthObject,
@@ -16,7 +17,7 @@ use slipstream::{topics, Bus, TopicMap};
 /// A loopback session pair: the ACC on one bus, the test's simulator stand-in on the other.
 async fn acc_and_sim(
     settings: AccSettings,
-) -> (tokio::task::JoinHandle<()>, tokio::sync::oneshot::Sender<()>, Bus, String) {
+) -> (tokio::task::JoinHandle<AccStats>, tokio::sync::oneshot::Sender<()>, Bus, String) {
     let (s1, ep) = common::listening_session().await;
     let s2 = common::connected_session(&ep).await;
     let acc_bus = Bus::from_session(s1, TopicMap::default(), "acc").await.unwrap();
@@ -27,7 +28,7 @@ async fn acc_and_sim(
             let _ = stop_rx.await;
         })
         .await
-        .unwrap();
+        .unwrap()
     });
     (task, stop_tx, sim_bus, ep)
 }
@@ -277,6 +278,10 @@ async fn a_vanished_detector_is_perception_lost() {
             Bus::from_session(common::connected_session(&ep).await, TopicMap::default(), "detect").await.unwrap();
         let detections = detect_bus.publisher(topics::PERCEPTION_OBJECTS).await.unwrap();
         assert!(detections.wait_for_subscriber(common::TIMEOUT).await);
+        // Frames at 20 Hz (every fifth step), so the ACC knows which steps bring one.
+        let info_pub = sim_bus.publisher(topics::CAMERA_FRONT_INFO).await.unwrap();
+        let info = slipstream::sim::SimSettings::default().camera_info(slipstream::msg::ImageEncoding::Rgb8);
+        info_pub.put(0, &info).unwrap();
         let mut sim = FakeSim::new(&sim_bus).await;
         let detect_step = |step: u64| Detections {
             frame_seq: step / 5,
@@ -304,17 +309,26 @@ async fn a_vanished_detector_is_perception_lost() {
         // The detector's process ends: its liveliness token goes, the ACC says so at once.
         detect_bus.close().await.unwrap();
         let deadline = Instant::now() + Duration::from_secs(10);
+        let mut frame_steps_until_lost = 0;
         loop {
             sim.run(10, false).await;
+            frame_steps_until_lost += 2;
             let lost = drain(&statuses).iter().any(|s| s.msg.warnings.contains(&AccWarning::PerceptionLost));
             if lost {
                 break;
             }
             assert!(Instant::now() < deadline, "no PerceptionLost within 10 s");
         }
+        // From then on a frame step's answer does not wait for perception that cannot come.
+        sim.run(100, false).await;
 
         stop.send(()).unwrap();
-        task.await.unwrap();
+        let stats = task.await.unwrap();
+        assert!(
+            stats.perception_waits_timed_out <= frame_steps_until_lost + 4,
+            "{} waits ran out; {frame_steps_until_lost} frame steps came before the detector was known gone (20 after)",
+            stats.perception_waits_timed_out
+        );
     });
 }
 
