@@ -19,7 +19,7 @@ use zenoh::Wait;
 use super::spec::{Background, CaseSpec, Payload, RecvReport, SendReport, TcpBuffer, Transport};
 use crate::bus::Bus;
 use crate::config::TopicMap;
-use crate::msg::{wall_clock_ns, ImageEncoding, Speed};
+use crate::msg::{wall_clock_ns, ControlCommand, ImageEncoding, Speed};
 use crate::topics;
 
 const RAW_HEADER: usize = 16;
@@ -82,7 +82,7 @@ impl Collector {
 /// shared memory, transport and socket-buffer choices.
 /// The default config on exactly these loopback endpoints: no rendezvous, no gossip, and the
 /// listener bound before the session opens returns.
-pub fn loopback_config(listen: Option<&str>, connect: Option<&str>) -> Result<zenoh::Config> {
+pub fn loopback_config(listen: Option<&str>, connect: &[String]) -> Result<zenoh::Config> {
     let mut c = zenoh::Config::from_json5(crate::config::DEFAULT_ZENOH_CONFIG)
         .map_err(|e| anyhow::anyhow!("default config: {e}"))?;
     let set = |c: &mut zenoh::Config, k: &str, v: &str| c.insert_json5(k, v).map_err(|e| anyhow::anyhow!("{k}: {e}"));
@@ -92,13 +92,18 @@ pub fn loopback_config(listen: Option<&str>, connect: Option<&str>) -> Result<ze
     set(&mut c, "listen/timeout_ms", "0")?;
     set(&mut c, "listen/exit_on_failure", "true")?;
     set(&mut c, "listen/endpoints", &serde_json::to_string(&listen.into_iter().collect::<Vec<_>>())?)?;
-    set(&mut c, "connect/endpoints", &serde_json::to_string(&connect.into_iter().collect::<Vec<_>>())?)?;
+    set(&mut c, "connect/endpoints", &serde_json::to_string(connect)?)?;
     Ok(c)
 }
 
-pub fn peer_config(spec: &CaseSpec, listen: Option<&str>, connect: Option<&str>) -> Result<zenoh::Config> {
+/// A bench peer's config: listening on `listen` (a receiver in peer mode) or connecting to
+/// `connect` (a sender; or, with `via_router`, either side as the router's client).
+pub fn peer_config(spec: &CaseSpec, listen: Option<&str>, connect: &[String]) -> Result<zenoh::Config> {
     let mut c = loopback_config(listen, connect)?;
     let set = |c: &mut zenoh::Config, k: &str, v: &str| c.insert_json5(k, v).map_err(|e| anyhow::anyhow!("{k}: {e}"));
+    if spec.via_router {
+        set(&mut c, "mode", "\"client\"")?;
+    }
     set(&mut c, "transport/shared_memory/enabled", if spec.shm { "true" } else { "false" })?;
     match spec.tcp_buffer {
         TcpBuffer::Default => {}
@@ -128,7 +133,11 @@ pub fn peer_topics(spec: &CaseSpec) -> Result<TopicMap> {
         format!(r#"topics: {{ "vehicle/speed": {flat}, "camera/front": {flat} }},"#)
     };
     let text = format!("{{ {topics} camera: {{ shared_memory: {} }} }}", spec.shm);
-    Ok(TopicMap::from_json5(&text, "bench case")?)
+    let map = TopicMap::from_json5(&text, "bench case")?;
+    Ok(match &spec.namespace {
+        Some(ns) => map.with_namespace(ns)?,
+        None => map,
+    })
 }
 
 /// What a receiver keeps alive until the report: sessions, subscribers, reader threads.
@@ -139,8 +148,11 @@ struct Receiving {
 }
 
 /// Receiver: prints `READY <endpoint>`, collects until stdin closes (or a hard limit), then
-/// prints `RESULT <json>`.
-pub async fn run_receiver(spec: CaseSpec) -> Result<()> {
+/// prints `RESULT <json>`. `router`: the router's endpoint when the case goes through one.
+pub async fn run_receiver(spec: CaseSpec, router: Option<String>) -> Result<()> {
+    if spec.via_router != router.is_some() {
+        bail!("a case through a router needs the router's endpoint (--endpoint), and only such a case");
+    }
     if spec.transport != Transport::Bus && spec.background.is_some() {
         bail!("background frames are measured through the bus only");
     }
@@ -150,8 +162,8 @@ pub async fn run_receiver(spec: CaseSpec) -> Result<()> {
     let endpoint = match spec.transport {
         Transport::Udp => receive_udp(&col, &stop, &mut receiving)?,
         Transport::Tcp => receive_tcp(&col, &stop, &mut receiving)?,
-        Transport::Zenoh => receive_zenoh(&spec, &col, &mut receiving).await?,
-        Transport::Bus => receive_bus(&spec, &col, &stop, &mut receiving).await?,
+        Transport::Zenoh => receive_zenoh(&spec, router.as_deref(), &col, &mut receiving).await?,
+        Transport::Bus => receive_bus(&spec, router.as_deref(), &col, &stop, &mut receiving).await?,
         Transport::SeedPythonUdp => anyhow::bail!("the seed's peers are the Python script, not bench-peer"),
     };
     println!("READY {endpoint}");
@@ -228,9 +240,8 @@ fn receive_tcp(col: &Arc<Collector>, stop: &Arc<AtomicBool>, r: &mut Receiving) 
 }
 
 /// Raw Zenoh: a callback subscriber on the case's key.
-async fn receive_zenoh(spec: &CaseSpec, col: &Arc<Collector>, r: &mut Receiving) -> Result<String> {
-    let session =
-        zenoh::open(peer_config(spec, Some(&listen_endpoint(spec)), None)?).await.map_err(anyhow::Error::msg)?;
+async fn receive_zenoh(spec: &CaseSpec, router: Option<&str>, col: &Arc<Collector>, r: &mut Receiving) -> Result<String> {
+    let session = zenoh::open(receiver_config(spec, router)?).await.map_err(anyhow::Error::msg)?;
     let key = if matches!(spec.payload, Payload::Speed) { SPEED_KEY } else { FRAME_KEY };
     let c = col.clone();
     let sub = session
@@ -247,35 +258,63 @@ async fn receive_zenoh(spec: &CaseSpec, col: &Arc<Collector>, r: &mut Receiving)
         })
         .await
         .map_err(anyhow::Error::msg)?;
-    let ep = first_locator(&session).await?;
+    let ep = receiver_endpoint(&session, router).await?;
     r.keep.push(Box::new(sub));
     r.keep.push(Box::new(session));
     Ok(ep)
+}
+
+/// A receiver listens on an endpoint of its own, or is the router's client.
+fn receiver_config(spec: &CaseSpec, router: Option<&str>) -> Result<zenoh::Config> {
+    match router {
+        Some(r) => peer_config(spec, None, &[r.to_string()]),
+        None => peer_config(spec, Some(&listen_endpoint(spec)), &[]),
+    }
+}
+
+/// What the receiver's READY line gives the sender: where to connect (the router's clients
+/// both connect to the router).
+async fn receiver_endpoint(session: &zenoh::Session, router: Option<&str>) -> Result<String> {
+    match router {
+        Some(r) => Ok(r.to_string()),
+        None => first_locator(session).await,
+    }
 }
 
 /// The bus: speed by a callback subscriber; frames by a callback (throughput) or by the
 /// application's latest-only reader (latency, background load).
 async fn receive_bus(
     spec: &CaseSpec,
+    router: Option<&str>,
     col: &Arc<Collector>,
     stop: &Arc<AtomicBool>,
     r: &mut Receiving,
 ) -> Result<String> {
-    let session =
-        zenoh::open(peer_config(spec, Some(&listen_endpoint(spec)), None)?).await.map_err(anyhow::Error::msg)?;
-    let ep = first_locator(&session).await?;
-    let bus = Arc::new(Bus::from_session(session, peer_topics(spec)?, "bench-recv").await?);
+    let session = zenoh::open(receiver_config(spec, router)?).await.map_err(anyhow::Error::msg)?;
+    let ep = receiver_endpoint(&session, router).await?;
+    // A name of its own: the sender counts the receivers alive before it starts.
+    let node = format!("{RECEIVER_NODE}-{}", std::process::id());
+    let bus = Arc::new(Bus::from_session(session, peer_topics(spec)?, &node).await?);
     if matches!(spec.payload, Payload::Speed) {
+        let answer = match spec.control_echo {
+            true => Some(control_echo(&bus, stop, r).await?),
+            false => None,
+        };
         let c = col.clone();
         let sub = bus
-            .subscribe_with(topics::VEHICLE_SPEED, move |r| c.record(r.header.seq, r.header.stamp_pub_ns, 0))
+            .subscribe_with(topics::VEHICLE_SPEED, move |r| {
+                c.record(r.header.seq, r.header.stamp_pub_ns, 0);
+                if let Some(tx) = &answer {
+                    let _ = tx.send(r.header.stamp_sim_ns);
+                }
+            })
             .await?;
         r.keep.push(Box::new(sub));
     }
     let frames_measured = matches!(spec.payload, Payload::Frame { .. });
-    if frames_measured && spec.rate_hz.is_none() {
-        // Throughput: count frames where raw zenoh does, in the receive callback (validated,
-        // zero-copy), touching the last byte.
+    if frames_measured && (spec.rate_hz.is_none() || spec.callback_reader) {
+        // Throughput (or a latency case that asks for it): count frames where raw zenoh
+        // does, in the receive callback (validated, zero-copy), touching the last byte.
         let c = col.clone();
         let sub = bus
             .subscribe_frames_with(crate::topics::CAMERA_FRONT, move |s| {
@@ -311,6 +350,31 @@ async fn receive_bus(
     }
     r.keep.push(Box::new(bus));
     Ok(ep)
+}
+
+/// The receivers' node names start with this (then `-<pid>`).
+const RECEIVER_NODE: &str = "bench-recv";
+
+/// A controller's answer to each speed message: a vehicle/control command published by a
+/// thread of its own (as a node's control loop would, not from Zenoh's callback), stamped
+/// with the speed message's simulation time. Returns where the callback hands over.
+async fn control_echo(
+    bus: &Bus,
+    stop: &Arc<AtomicBool>,
+    r: &mut Receiving,
+) -> Result<std::sync::mpsc::Sender<u64>> {
+    let publisher = bus.publisher(topics::VEHICLE_CONTROL).await?;
+    let (tx, rx) = std::sync::mpsc::channel::<u64>();
+    let stop = stop.clone();
+    r.threads.push(std::thread::spawn(move || {
+        let command = ControlCommand { throttle: 0.2, ..ControlCommand::NEUTRAL };
+        while !stop.load(Ordering::Relaxed) {
+            if let Ok(stamp_sim_ns) = rx.recv_timeout(Duration::from_millis(50)) {
+                let _ = publisher.put(stamp_sim_ns, &command);
+            }
+        }
+    }));
+    Ok(tx)
 }
 
 fn read_fully(stream: &mut impl Read, buf: &mut [u8], stop: &AtomicBool) -> std::io::Result<()> {
@@ -389,7 +453,8 @@ const DRAIN: Duration = Duration::from_millis(300);
 
 /// Sender: connects to `endpoint`, sends the measured stream (and background frames), prints
 /// `SENT <json>`.
-pub async fn run_sender(spec: CaseSpec, endpoint: String) -> Result<()> {
+pub async fn run_sender(spec: CaseSpec, endpoints: Vec<String>) -> Result<()> {
+    let endpoint = endpoints.first().cloned().context("a sender needs an endpoint")?;
     // The sending time a case allows counts from its first message, once the receiver is
     // matched: a session that is slow to connect on a loaded machine does not eat it.
     let max = Duration::from_secs_f64(spec.max_duration_s);
@@ -401,8 +466,8 @@ pub async fn run_sender(spec: CaseSpec, endpoint: String) -> Result<()> {
         Transport::Tcp => {
             SendReport { sent: send_tcp(&spec, &endpoint, Instant::now() + max)?, ..SendReport::default() }
         }
-        Transport::Zenoh => SendReport { sent: send_zenoh(&spec, &endpoint, max).await?, ..SendReport::default() },
-        Transport::Bus => send_bus(&spec, &endpoint, max).await?,
+        Transport::Zenoh => SendReport { sent: send_zenoh(&spec, &endpoints, max).await?, ..SendReport::default() },
+        Transport::Bus => send_bus(&spec, &endpoints, max).await?,
         Transport::SeedPythonUdp => anyhow::bail!("the seed's peers are the Python script, not bench-peer"),
     };
     report.elapsed_s = started.elapsed().as_secs_f64();
@@ -443,8 +508,8 @@ fn send_tcp(spec: &CaseSpec, endpoint: &str, deadline: Instant) -> Result<u64> {
     Ok(sent)
 }
 
-async fn send_zenoh(spec: &CaseSpec, endpoint: &str, max: Duration) -> Result<u64> {
-    let session = zenoh::open(peer_config(spec, None, Some(endpoint))?).await.map_err(anyhow::Error::msg)?;
+async fn send_zenoh(spec: &CaseSpec, endpoints: &[String], max: Duration) -> Result<u64> {
+    let session = zenoh::open(peer_config(spec, None, endpoints)?).await.map_err(anyhow::Error::msg)?;
     let (key, topic, frame) = match spec.payload {
         Payload::Speed => (SPEED_KEY, topics::Topic::VehicleSpeed, None),
         Payload::Frame { .. } => {
@@ -482,11 +547,23 @@ async fn send_zenoh(spec: &CaseSpec, endpoint: &str, max: Duration) -> Result<u6
     Ok(sent)
 }
 
-async fn send_bus(spec: &CaseSpec, endpoint: &str, max: Duration) -> Result<SendReport> {
+async fn send_bus(spec: &CaseSpec, endpoints: &[String], max: Duration) -> Result<SendReport> {
     // Background frames stop with the measured stream; this only bounds them if it hangs.
     let guard = Instant::now() + max + MATCH_WAIT;
-    let bus = Bus::open(peer_config(spec, None, Some(endpoint))?, peer_topics(spec)?, "bench-send").await?;
+    let bus = Bus::open(peer_config(spec, None, endpoints)?, peer_topics(spec)?, "bench-send").await?;
+    wait_receivers(&bus, spec.subscribers).await?;
     let bus = Arc::new(bus);
+    let control = Arc::new(Collector::default());
+    let _control_sub = match spec.control_echo {
+        true => {
+            let c = control.clone();
+            Some(
+                bus.subscribe_with(topics::VEHICLE_CONTROL, move |r| c.record(r.header.seq, r.header.stamp_pub_ns, 0))
+                    .await?,
+            )
+        }
+        false => None,
+    };
     let done = Arc::new(AtomicBool::new(false));
     let background = spec.background.map(|bg| {
         let (bus, done) = (bus.clone(), done.clone());
@@ -502,10 +579,12 @@ async fn send_bus(spec: &CaseSpec, endpoint: &str, max: Duration) -> Result<Send
             let (pacer, deadline) = (Pacer::new(spec.rate_hz), Instant::now() + max);
             // Paced on a blocking thread: a sleeping pacer must not hold a runtime worker.
             let count = spec.count;
+            let first = Instant::now();
             report.sent = tokio::task::spawn_blocking(move || {
                 pacer.run(count, deadline, |i| Ok(publisher.put(i * 10_000_000, &Speed { speed_mps: 20.0 }).is_ok()))
             })
             .await??;
+            report.span_s = first.elapsed().as_secs_f64();
         }
         Payload::Frame { width, height } => {
             let publisher = bus.frame_publisher(crate::topics::CAMERA_FRONT).await?;
@@ -514,6 +593,7 @@ async fn send_bus(spec: &CaseSpec, endpoint: &str, max: Duration) -> Result<Send
             }
             let (pacer, deadline) = (Pacer::new(spec.rate_hz), Instant::now() + max);
             let len = (width * height * 3) as usize;
+            let first = Instant::now();
             report.sent = pacer.run(spec.count, deadline, |i| {
                 // The renderer would write every pixel here; the bench writes one byte so
                 // that only transport costs are compared.
@@ -521,6 +601,7 @@ async fn send_bus(spec: &CaseSpec, endpoint: &str, max: Duration) -> Result<Send
                     .put_with(i * 50_000_000, width, height, ImageEncoding::Rgb8, len, |px| px[len - 1] = i as u8)?;
                 Ok(sent.is_some())
             })?;
+            report.span_s = first.elapsed().as_secs_f64();
         }
     }
     done.store(true, Ordering::Relaxed);
@@ -528,6 +609,10 @@ async fn send_bus(spec: &CaseSpec, endpoint: &str, max: Duration) -> Result<Send
         report.background_sent = bg.await??;
     }
     tokio::time::sleep(DRAIN).await;
+    let answers = control.report();
+    report.control_received = answers.received;
+    report.control_latencies_ns = answers.latencies_ns;
+    drop(_control_sub);
     if let Ok(bus) = Arc::try_unwrap(bus) {
         bus.close().await?;
     }
@@ -559,6 +644,28 @@ async fn send_background(bus: Arc<Bus>, bg: Background, done: Arc<AtomicBool>, d
 
 /// How long a sender waits for its receiver to match.
 const MATCH_WAIT: Duration = Duration::from_secs(10);
+
+/// Waits until `n` receivers are alive (their liveliness tokens, seen directly or through a
+/// router), then a moment more so their subscriptions, declared before their tokens, are in
+/// place on every path: a case with several receivers starts when all of them listen.
+async fn wait_receivers(bus: &Bus, n: usize) -> Result<()> {
+    if n <= 1 {
+        return Ok(());
+    }
+    let deadline = Instant::now() + MATCH_WAIT;
+    loop {
+        let alive = bus.nodes_alive().await?.iter().filter(|name| name.starts_with(RECEIVER_NODE)).count();
+        if alive >= n {
+            break;
+        }
+        if Instant::now() > deadline {
+            bail!("{alive} of {n} receivers alive after {MATCH_WAIT:?}");
+        }
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+    tokio::time::sleep(Duration::from_millis(200)).await;
+    Ok(())
+}
 
 async fn wait_matching(publisher: &zenoh::pubsub::Publisher<'_>) -> Result<()> {
     let deadline = Instant::now() + MATCH_WAIT;

@@ -71,6 +71,28 @@ pub struct CaseSpec {
     #[serde(default)]
     pub unix_socket: bool,
     pub background: Option<Background>,
+    /// Both sides are Zenoh clients of a router (`slipstream router` on loopback, given to
+    /// both as the endpoint): every message crosses the router.
+    #[serde(default)]
+    pub via_router: bool,
+    /// Every key under this namespace (one vehicle among several on one router).
+    #[serde(default)]
+    pub namespace: Option<String>,
+    /// The receiver answers each speed message with a vehicle/control command, as a
+    /// controller would; the sender receives the commands and reports their latency.
+    #[serde(default)]
+    pub control_echo: bool,
+    /// Frames at a fixed rate are read in Zenoh's receive callback instead of by the
+    /// application's latest-only reader on its own task: measures that reader's hand-off.
+    #[serde(default)]
+    pub callback_reader: bool,
+    /// Receivers of the measured stream: the sender waits for all of them before it starts.
+    #[serde(default = "one")]
+    pub subscribers: usize,
+}
+
+fn one() -> usize {
+    1
 }
 
 /// The receiver's report.
@@ -93,6 +115,16 @@ pub struct RecvReport {
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct SendReport {
     pub sent: u64,
+    /// From start (session open included) to the last message, s.
     pub elapsed_s: f64,
+    /// From the first measured message to the last, s (the bus sender only; else 0).
+    #[serde(default)]
+    pub span_s: f64,
     pub background_sent: u64,
+    /// With `control_echo`: the receiver's commands that came back.
+    #[serde(default)]
+    pub control_received: u64,
+    /// ... and their one-way latency (command published -> received here), ns.
+    #[serde(default)]
+    pub control_latencies_ns: Vec<i64>,
 }

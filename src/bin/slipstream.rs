@@ -110,8 +110,9 @@ enum Command {
         role: String,
         #[arg(long)]
         spec: String,
+        /// The receiver's endpoint(s) for a sender; the router's for a receiver through one
         #[arg(long)]
-        endpoint: Option<String>,
+        endpoint: Vec<String>,
     },
 }
 
@@ -290,10 +291,9 @@ fn run(cli: Cli) -> Result<ExitCode> {
             let spec: CaseSpec = serde_json::from_str(&spec).context("bench-peer: parse --spec")?;
             let rt = tokio::runtime::Runtime::new()?;
             done(rt.block_on(async move {
-                match (role.as_str(), endpoint) {
-                    ("send", Some(ep)) => bench::run_sender(spec, ep).await,
-                    ("send", None) => anyhow::bail!("bench-peer send needs --endpoint"),
-                    _ => bench::run_receiver(spec).await,
+                match role.as_str() {
+                    "send" => bench::run_sender(spec, endpoint).await,
+                    _ => bench::run_receiver(spec, endpoint.into_iter().next()).await,
                 }
             }))
         }

@@ -144,6 +144,38 @@ fn bench_quick_every_path_delivers() {
         }
     }
     assert!(!report["ratios"].as_array().unwrap().is_empty());
+
+    // f. Fan-out: every subscriber of every path got frames, in shared memory only on the
+    // shared-memory path (a router's clients get copies over TCP).
+    let fanout = report["fanout"].as_array().unwrap();
+    let counts = |path: &str| -> Vec<u64> {
+        fanout.iter().filter(|r| r["path"] == path).map(|r| r["subscribers"].as_u64().unwrap()).collect()
+    };
+    assert_eq!(counts("shared-memory"), [1, 2]);
+    assert_eq!(counts("router"), [1, 2]);
+    for r in fanout {
+        assert!(r["per_subscriber_min"].as_f64().is_some_and(|v| v > 0.0), "a subscriber got nothing: {r}");
+        assert!(r["p50_us"].as_f64().is_some(), "{r}");
+        let shm = r["shared_memory_share"].as_f64().unwrap();
+        if r["path"] == "shared-memory" {
+            assert!(shm > 0.5, "{r}");
+        } else {
+            assert_eq!(shm, 0.0, "{r}");
+        }
+    }
+    // g. The router: the direct baseline, then 1 and 2 vehicles through the router; speed went
+    // one way and control came back, and what the router adds is reported against the baseline.
+    let router = report["router"].as_array().unwrap();
+    let paths: Vec<(bool, u64)> =
+        router.iter().map(|r| (r["via_router"].as_bool().unwrap(), r["vehicles"].as_u64().unwrap())).collect();
+    assert_eq!(paths, [(false, 1), (true, 1), (true, 2)]);
+    for r in router {
+        assert!(r["messages_per_s"].as_f64().unwrap() > 0.0, "{r}");
+        assert!(r["speed_p50_us"].as_f64().is_some() && r["control_p50_us"].as_f64().is_some(), "{r}");
+        let via = r["via_router"].as_bool().unwrap();
+        assert_eq!(r["added_p50_us"].as_f64().is_some(), via, "{r}");
+        assert_eq!(r["router_cpu_percent"].as_f64().is_some(), via, "{r}");
+    }
 }
 
 #[test]
