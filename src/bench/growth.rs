@@ -120,6 +120,7 @@ fn fanout_spec(path: FanoutPath, subscribers: usize, rate_hz: Option<f64>, quick
         namespace: None,
         control_echo: false,
         callback_reader: false,
+        peer_exe: None,
         subscribers,
     }
 }

@@ -79,6 +79,11 @@ pub struct BenchArgs {
     /// router: how many vehicles, in turn
     #[arg(long, value_delimiter = ',', default_value = "1,2,4,8,16")]
     pub vehicles: Vec<usize>,
+    /// speed: also run the bus rows with the peers of another slipstream build, side by side
+    /// with this one's, e.g. --with-build uring=/tmp/uring/release/slipstream (built with
+    /// `cargo build --release --features uring`); repeatable
+    #[arg(long, value_name = "LABEL=PATH")]
+    pub with_build: Vec<String>,
     /// Also draw how the cost grows (scale, fanout, router: whichever ran) into this PNG
     #[arg(long, value_name = "FILE")]
     pub plot: Option<std::path::PathBuf>,
@@ -148,11 +153,33 @@ fn speed_spec(transport: Transport, count: u64) -> CaseSpec {
         namespace: None,
         control_echo: false,
         callback_reader: false,
+        peer_exe: None,
         subscribers: 1,
     }
 }
 
-fn cases(suites: &[Suite], quick: bool) -> Vec<Case> {
+/// Another build's binary, by label (`--with-build LABEL=PATH`).
+struct OtherBuild {
+    label: String,
+    exe: String,
+}
+
+fn other_builds(args: &[String]) -> Result<Vec<OtherBuild>> {
+    args.iter()
+        .map(|a| {
+            let (label, exe) = a
+                .split_once('=')
+                .with_context(|| format!("--with-build {a}: write LABEL=PATH, e.g. uring=/tmp/uring/release/slipstream"))?;
+            anyhow::ensure!(
+                std::path::Path::new(exe).is_file(),
+                "--with-build {a}: no file at {exe} (build it, e.g. CARGO_TARGET_DIR=/tmp/uring cargo build --release --features uring)"
+            );
+            Ok(OtherBuild { label: label.to_string(), exe: exe.to_string() })
+        })
+        .collect()
+}
+
+fn cases(suites: &[Suite], quick: bool, builds: &[OtherBuild]) -> Vec<Case> {
     let mut out = Vec::new();
     let speed_n = if quick { 50 } else { 500 };
     let mut push =
@@ -186,6 +213,15 @@ fn cases(suites: &[Suite], quick: bool) -> Vec<Case> {
             "bus, lowlatency transport, unix socket",
             CaseSpec { lowlatency: true, unix_socket: true, ..speed_spec(Transport::Bus, speed_n) },
         );
+        for b in builds {
+            let other = |spec: CaseSpec| CaseSpec { peer_exe: Some(b.exe.clone()), ..spec };
+            push(s, &format!("bus, {}", b.label), other(speed_spec(Transport::Bus, speed_n)));
+            push(
+                s,
+                &format!("bus, unix socket, {}", b.label),
+                other(CaseSpec { unix_socket: true, ..speed_spec(Transport::Bus, speed_n) }),
+            );
+        }
     }
     if suites.contains(&Suite::Frames) {
         for (w, h) in [(640u32, 480u32), (1280, 720)] {
@@ -215,6 +251,7 @@ fn cases(suites: &[Suite], quick: bool) -> Vec<Case> {
                 namespace: None,
                 control_echo: false,
                 callback_reader: false,
+                peer_exe: None,
                 subscribers: 1,
             };
             for (phase, rate) in [("throughput", None), ("latency @20 Hz", Some(20.0))] {
@@ -253,7 +290,7 @@ fn cases(suites: &[Suite], quick: bool) -> Vec<Case> {
         let loaded = |rate: Option<f64>, qos: bool, shm: bool| CaseSpec {
             qos,
             shm,
-            background: Some(Background { width: 640, height: 480, rate_hz: rate }),
+            background: Some(Background { width: 640, height: 480, rate_hz: rate, nice: 0 }),
             ..speed_spec(Transport::Bus, n)
         };
         let s = "c. bus speed 100 Hz under 640x480 frames";
@@ -263,6 +300,11 @@ fn cases(suites: &[Suite], quick: bool) -> Vec<Case> {
         push(s, "frames saturating, QoS, TCP", loaded(None, true, false));
         push(s, "frames saturating, QoS off, TCP", loaded(None, false, false));
         push(s, "frames saturating, QoS, shm", loaded(None, true, true));
+        push(s, "frames saturating, QoS, shm, frame thread at nice 10", {
+            let mut spec = loaded(None, true, true);
+            spec.background = spec.background.map(|b| Background { nice: 10, ..b });
+            spec
+        });
         push(
             s,
             "frames saturating, QoS, TCP, kernel socket buffers",
@@ -327,7 +369,11 @@ fn spawn_peer(role: &str, spec: &CaseSpec, endpoints: &[String]) -> Result<Peer>
         c.arg(seed_peer_script()?);
         c
     } else {
-        let mut c = Command::new(std::env::current_exe().context("find the slipstream binary")?);
+        let exe = match &spec.peer_exe {
+            Some(exe) => std::path::PathBuf::from(exe),
+            None => std::env::current_exe().context("find the slipstream binary")?,
+        };
+        let mut c = Command::new(exe);
         c.arg("bench-peer");
         c
     };
@@ -523,7 +569,8 @@ pub fn run(args: &BenchArgs) -> Result<BenchReport> {
         args.suites.clone()
     };
     let repeat = if args.quick { 1 } else { args.repeat.max(1) };
-    let all = cases(&suites, args.quick);
+    let builds = other_builds(&args.with_build)?;
+    let all = cases(&suites, args.quick, &builds);
     let mut rows = Vec::new();
     let total = all.len() * repeat;
     let mut done = 0;
@@ -564,7 +611,7 @@ pub fn run(args: &BenchArgs) -> Result<BenchReport> {
         });
     }
     remove_seed_script();
-    let ratios = ratios(&rows);
+    let ratios = ratios(&rows, &builds);
     let sim = if suites.contains(&Suite::Sim) { sim::run(args.quick, repeat)? } else { Vec::new() };
     let scale = match suites.contains(&Suite::Scale) {
         true if args.quick => scale::run(&[1, 2], 3.0)?,
@@ -606,7 +653,7 @@ fn find<'a>(rows: &'a [Row], suite_prefix: &str, path: &str) -> Option<&'a Row> 
     rows.iter().find(|r| r.suite.starts_with(suite_prefix) && r.path == path)
 }
 
-fn ratios(rows: &[Row]) -> Vec<Ratio> {
+fn ratios(rows: &[Row], builds: &[OtherBuild]) -> Vec<Ratio> {
     let mut out = Vec::new();
     let mut ratio = |what: String, a: Option<f64>, b: Option<f64>, aim: &str| {
         if let (Some(a), Some(b)) = (a, b) {
@@ -639,6 +686,22 @@ fn ratios(rows: &[Row]) -> Vec<Ratio> {
         "<= 2",
     );
     ratio("speed p50: bus / raw zenoh".into(), p50("a.", "bus"), p50("a.", "raw zenoh"), "<= 1.1");
+    for b in builds {
+        let l = &b.label;
+        ratio(format!("speed p50: bus, {l} / bus"), p50("a.", &format!("bus, {l}")), p50("a.", "bus"), "-");
+        ratio(
+            format!("speed p50: bus, unix socket, {l} / bus, unix socket"),
+            p50("a.", &format!("bus, unix socket, {l}")),
+            p50("a.", "bus, unix socket"),
+            "-",
+        );
+        ratio(
+            format!("speed p50: bus, unix socket, {l} / seed Python UDP"),
+            p50("a.", &format!("bus, unix socket, {l}")),
+            p50("a.", "seed: Python UDP"),
+            "< 1",
+        );
+    }
     ratio("speed p50: bus / raw TCP".into(), p50("a.", "bus"), p50("a.", "raw TCP"), "-");
     ratio("speed p99: bus / raw UDP".into(), p99("a.", "bus"), p99("a.", "raw UDP"), "-");
     ratio(
@@ -692,6 +755,7 @@ fn ratios(rows: &[Row]) -> Vec<Ratio> {
         "frames saturating, QoS off, TCP",
         "frames saturating, QoS, TCP, kernel socket buffers",
         "frames saturating, QoS, shm",
+        "frames saturating, QoS, shm, frame thread at nice 10",
     ] {
         ratio(format!("speed p99 {p} / unloaded"), p99(c, p), p99(c, "unloaded"), "<= 3 (with QoS)");
     }

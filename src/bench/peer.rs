@@ -623,6 +623,11 @@ async fn send_background(bus: Arc<Bus>, bg: Background, done: Arc<AtomicBool>, d
     let publisher = bus.frame_publisher(crate::topics::CAMERA_FRONT).await?;
     let len = (bg.width * bg.height * 3) as usize;
     tokio::task::spawn_blocking(move || {
+        if bg.nice != 0 {
+            // SAFETY: setpriority on this thread's own id (Linux: a thread is a process id).
+            let rc = unsafe { libc::setpriority(libc::PRIO_PROCESS, libc::gettid() as libc::id_t, bg.nice) };
+            anyhow::ensure!(rc == 0, "setpriority {}: {}", bg.nice, std::io::Error::last_os_error());
+        }
         let pacer = Pacer::new(bg.rate_hz);
         let mut sent = 0u64;
         let mut i = 0u64;

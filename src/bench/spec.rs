@@ -34,6 +34,10 @@ pub struct Background {
     pub height: u32,
     /// None: as fast as the publisher can.
     pub rate_hz: Option<f64>,
+    /// The frame-publishing thread's nice value (0: as every other thread): what lowering
+    /// a frame source's priority does for the real-time path on a busy machine.
+    #[serde(default)]
+    pub nice: i32,
 }
 
 /// TCP socket buffer sizes (so_sndbuf, so_rcvbuf) of Zenoh's links.
@@ -86,6 +90,10 @@ pub struct CaseSpec {
     /// application's latest-only reader on its own task: measures that reader's hand-off.
     #[serde(default)]
     pub callback_reader: bool,
+    /// Run both peers from this slipstream binary instead of the running one (another build,
+    /// e.g. with Zenoh's io_uring receive path: `bench --with-build`).
+    #[serde(default)]
+    pub peer_exe: Option<String>,
     /// Receivers of the measured stream: the sender waits for all of them before it starts.
     #[serde(default = "one")]
     pub subscribers: usize,
