@@ -58,8 +58,10 @@ pub struct FanoutRow {
     /// One-way latency at 20 Hz: the median subscriber's p50, the largest p99.
     pub p50_us: Option<f64>,
     pub p99_us: Option<f64>,
-    /// Frames sent at 20 Hz that some subscriber never got (all subscribers together).
+    /// Frames sent at 20 Hz that some subscriber never got (all subscribers together)...
     pub lost: f64,
+    /// ... of which its latest-only reader skipped (they arrived; a newer one came first).
+    pub skipped: f64,
     /// Frames that arrived in shared memory, as a share of all received at 20 Hz.
     pub shared_memory_share: f64,
 }
@@ -181,6 +183,7 @@ pub fn fanout(counts: &[usize], quick: bool, repeat: usize) -> Result<Vec<Fanout
                 p50_us: l(&|x| x.p50),
                 p99_us: l(&|x| x.p99),
                 lost: l(&|x| Some(x.lost)).unwrap_or(0.0),
+                skipped: l(&|x| Some(x.skipped)).unwrap_or(0.0),
                 shared_memory_share: l(&|x| Some(x.shm_share)).unwrap_or(0.0),
             });
         }
@@ -217,6 +220,7 @@ struct Latency {
     p50: Option<f64>,
     p99: Option<f64>,
     lost: f64,
+    skipped: f64,
     shm_share: f64,
 }
 
@@ -227,6 +231,7 @@ fn latency_figures(sent: &SendReport, recvs: &[RecvReport]) -> Latency {
         p50: median(per.iter().map(|p| p.0)),
         p99: per.iter().filter_map(|p| p.1).reduce(f64::max),
         lost: recvs.iter().map(|r| sent.sent.saturating_sub(r.received) as f64).sum(),
+        skipped: recvs.iter().map(|r| r.skipped as f64).sum(),
         shm_share: recvs.iter().map(|r| r.shared_memory).sum::<u64>() as f64 / received.max(1) as f64,
     }
 }
@@ -323,12 +328,12 @@ pub fn markdown(fanout: &[FanoutRow], router: &[RouterRow]) -> String {
     let mut s = String::new();
     if !fanout.is_empty() {
         s.push_str(&format!(
-            "\n### f. camera fan-out: {}x{} RGB frames to N subscribers\n\nThroughput: the publisher sends as fast as it can; latency: at {FANOUT_RATE_HZ} Hz.\n\n| path | subscribers | published frames/s | frames/s per subscriber (slowest) | (median) | slowest got | delivered MB/s | p50 us | p99 us | lost | in shm |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
+            "\n### f. camera fan-out: {}x{} RGB frames to N subscribers\n\nThroughput: the publisher sends as fast as it can; latency: at {FANOUT_RATE_HZ} Hz.\n\n| path | subscribers | published frames/s | frames/s per subscriber (slowest) | (median) | slowest got | delivered MB/s | p50 us | p99 us | lost (skipped by the reader) | in shm |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
             FANOUT_FRAME.0, FANOUT_FRAME.1
         ));
         for r in fanout {
             s.push_str(&format!(
-                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.0} | {:.0} % |\n",
+                "| {} | {} | {} | {} | {} | {} | {} | {} | {} | {:.0} ({:.0}) | {:.0} % |\n",
                 r.path.name(),
                 r.subscribers,
                 fmt_opt(r.published_per_s, 0),
@@ -339,6 +344,7 @@ pub fn markdown(fanout: &[FanoutRow], router: &[RouterRow]) -> String {
                 fmt_opt(r.p50_us, 0),
                 fmt_opt(r.p99_us, 0),
                 r.lost,
+                r.skipped,
                 r.shared_memory_share * 100.0,
             ));
         }
@@ -377,6 +383,7 @@ mod tests {
             span_s,
             background_received: 0,
             shared_memory: 0,
+            skipped: 0,
         }
     }
 

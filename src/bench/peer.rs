@@ -49,6 +49,7 @@ struct Collector {
     first_last: Mutex<Option<(Instant, Instant)>>,
     background: AtomicU64,
     shm: AtomicU64,
+    skipped: AtomicU64,
 }
 
 impl Collector {
@@ -73,6 +74,7 @@ impl Collector {
             span_s: self.first_last.lock().map_or(0.0, |(f, l)| l.duration_since(f).as_secs_f64()),
             background_received: self.background.load(Ordering::Relaxed),
             shared_memory: self.shm.load(Ordering::Relaxed),
+            skipped: self.skipped.load(Ordering::Relaxed),
         }
     }
 }
@@ -145,6 +147,8 @@ pub fn peer_topics(spec: &CaseSpec) -> Result<TopicMap> {
 struct Receiving {
     keep: Vec<Box<dyn std::any::Any + Send>>,
     threads: Vec<std::thread::JoinHandle<()>>,
+    /// Run when collecting ends, before the report.
+    on_stop: Vec<Box<dyn FnOnce() + Send>>,
 }
 
 /// Receiver: prints `READY <endpoint>`, collects until stdin closes (or a hard limit), then
@@ -181,6 +185,9 @@ pub async fn run_receiver(spec: CaseSpec, router: Option<String>) -> Result<()> 
     stop.store(true, Ordering::Relaxed);
     for t in receiving.threads {
         let _ = t.join();
+    }
+    for f in receiving.on_stop {
+        f();
     }
     let report = col.report();
     drop(receiving.keep);
@@ -332,6 +339,11 @@ async fn receive_bus(
         // FrameSubscriber read by its own task.
         let sub = bus.frame_subscriber(crate::topics::CAMERA_FRONT).await?;
         let (c, stop, measured) = (col.clone(), stop.clone(), frames_measured);
+        let skipped = col.clone();
+        let stats = sub.stats().clone();
+        r.on_stop.push(Box::new(move || {
+            skipped.skipped.store(stats.snapshot().skipped, Ordering::Relaxed);
+        }));
         tokio::spawn(async move {
             while !stop.load(Ordering::Relaxed) {
                 let Some(s) = sub.recv_timeout(Duration::from_millis(100)).await else { continue };

@@ -117,6 +117,10 @@ pub struct RecvReport {
     pub background_received: u64,
     /// Frames delivered in shared memory.
     pub shared_memory: u64,
+    /// Frames that arrived but that the latest-only reader skipped (a newer one came before
+    /// it read them): counted in `received`'s shortfall, not lost in transport.
+    #[serde(default)]
+    pub skipped: u64,
 }
 
 /// The sender's report.
