@@ -123,6 +123,8 @@ fn fanout_spec(path: FanoutPath, subscribers: usize, rate_hz: Option<f64>, quick
         control_echo: false,
         callback_reader: false,
         peer_exe: None,
+        zenoh_cfg: Vec::new(),
+        pin_cpu: None,
         subscribers,
     }
 }

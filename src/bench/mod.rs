@@ -154,6 +154,8 @@ fn speed_spec(transport: Transport, count: u64) -> CaseSpec {
         control_echo: false,
         callback_reader: false,
         peer_exe: None,
+        zenoh_cfg: Vec::new(),
+        pin_cpu: None,
         subscribers: 1,
     }
 }
@@ -213,6 +215,15 @@ fn cases(suites: &[Suite], quick: bool, builds: &[OtherBuild]) -> Vec<Case> {
             "bus, lowlatency transport, unix socket",
             CaseSpec { lowlatency: true, unix_socket: true, ..speed_spec(Transport::Bus, speed_n) },
         );
+        // Issue 17's other leads for the speed path. (Batching off, `transport/link/tx/queue/
+        // batching/enabled: false`, is not a row: Zenoh 1.10 then closes the transport before
+        // the peers match, "Unable to push non droppable network message".)
+        push(
+            s,
+            "bus, kernel socket buffers",
+            CaseSpec { tcp_buffer: TcpBuffer::Kernel, ..speed_spec(Transport::Bus, speed_n) },
+        );
+        push(s, "bus, both peers on one core", CaseSpec { pin_cpu: Some(0), ..speed_spec(Transport::Bus, speed_n) });
         for b in builds {
             let other = |spec: CaseSpec| CaseSpec { peer_exe: Some(b.exe.clone()), ..spec };
             push(s, &format!("bus, {}", b.label), other(speed_spec(Transport::Bus, speed_n)));
@@ -252,6 +263,8 @@ fn cases(suites: &[Suite], quick: bool, builds: &[OtherBuild]) -> Vec<Case> {
                 control_echo: false,
                 callback_reader: false,
                 peer_exe: None,
+                zenoh_cfg: Vec::new(),
+                pin_cpu: None,
                 subscribers: 1,
             };
             for (phase, rate) in [("throughput", None), ("latency @20 Hz", Some(20.0))] {
@@ -388,6 +401,21 @@ fn spawn_peer(role: &str, spec: &CaseSpec, endpoints: &[String]) -> Result<Peer>
     };
     // Peers log warnings only (SLIPSTREAM_BENCH_LOG overrides): progress is the parent's job.
     cmd.env("RUST_LOG", std::env::var("SLIPSTREAM_BENCH_LOG").unwrap_or_else(|_| "warn,zenoh=error".into()));
+    if let Some(cpu) = spec.pin_cpu {
+        use std::os::unix::process::CommandExt;
+        // SAFETY: between fork and exec only async-signal-safe calls: sched_setaffinity on
+        // the child itself, with a set built on its stack.
+        unsafe {
+            cmd.pre_exec(move || {
+                let mut set: libc::cpu_set_t = std::mem::zeroed();
+                libc::CPU_SET(cpu, &mut set);
+                match libc::sched_setaffinity(0, std::mem::size_of::<libc::cpu_set_t>(), &set) {
+                    0 => Ok(()),
+                    _ => Err(std::io::Error::last_os_error()),
+                }
+            });
+        }
+    }
     cmd.stdin(Stdio::piped()).stdout(Stdio::piped()).stderr(Stdio::inherit());
     Ok(Peer(cmd.spawn().context("spawn bench peer")?))
 }
@@ -703,6 +731,9 @@ fn ratios(rows: &[Row], builds: &[OtherBuild]) -> Vec<Ratio> {
         );
     }
     ratio("speed p50: bus / raw TCP".into(), p50("a.", "bus"), p50("a.", "raw TCP"), "-");
+    for lead in ["bus, kernel socket buffers", "bus, both peers on one core"] {
+        ratio(format!("speed p50: {lead} / bus"), p50("a.", lead), p50("a.", "bus"), "-");
+    }
     ratio("speed p99: bus / raw UDP".into(), p99("a.", "bus"), p99("a.", "raw UDP"), "-");
     ratio(
         "speed p50: bus, zenoh's runtime / raw zenoh, zenoh's runtime".into(),

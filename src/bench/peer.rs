@@ -118,6 +118,9 @@ pub fn peer_config(spec: &CaseSpec, listen: Option<&str>, connect: &[String]) ->
             set(&mut c, "transport/link/tcp/so_rcvbuf", &b.to_string())?;
         }
     }
+    for (key, value) in &spec.zenoh_cfg {
+        set(&mut c, key, value)?;
+    }
     if spec.lowlatency {
         set(&mut c, "transport/unicast/lowlatency", "true")?;
         set(&mut c, "transport/unicast/qos/enabled", "false")?;
