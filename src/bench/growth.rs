@@ -12,7 +12,7 @@
 use anyhow::{Context, Result};
 use serde::Serialize;
 
-use super::spec::{CaseSpec, Payload, RecvReport, SendReport, TcpBuffer, Transport};
+use super::spec::{CaseSpec, RecvReport, SendReport, Transport};
 use super::{median, run_groups, RouterProcess};
 
 /// The frame size of the fan-out suite (the default camera's).
@@ -96,36 +96,13 @@ fn p50_p99(ns: &[i64]) -> (Option<f64>, Option<f64>) {
 }
 
 fn fanout_spec(path: FanoutPath, subscribers: usize, rate_hz: Option<f64>, quick: bool) -> CaseSpec {
-    let (width, height) = FANOUT_FRAME;
+    let shm = path == FanoutPath::SharedMemory;
     CaseSpec {
-        transport: Transport::Bus,
-        payload: Payload::Frame { width, height },
-        count: match (rate_hz, quick) {
-            (Some(_), true) => 10,
-            (Some(_), false) => 60,
-            (None, _) => 20_000,
-        },
-        rate_hz,
-        max_duration_s: match (rate_hz, quick) {
-            (Some(_), _) => 20.0,
-            (None, true) => 1.0,
-            (None, false) => 3.0,
-        },
-        qos: true,
-        shm: path == FanoutPath::SharedMemory,
-        lowlatency: false,
-        runtime: None,
-        tcp_buffer: TcpBuffer::Default,
-        unix_socket: path == FanoutPath::SharedMemory,
-        background: None,
+        // Shared memory between peers on one host over unix sockets, as `up` links its nodes.
+        unix_socket: shm,
         via_router: path == FanoutPath::Router,
-        namespace: None,
-        control_echo: false,
-        callback_reader: false,
-        peer_exe: None,
-        zenoh_cfg: Vec::new(),
-        pin_cpu: None,
         subscribers,
+        ..super::frame_spec(Transport::Bus, FANOUT_FRAME, shm, rate_hz, quick)
     }
 }
 

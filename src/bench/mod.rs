@@ -181,6 +181,28 @@ fn other_builds(args: &[String]) -> Result<Vec<OtherBuild>> {
         .collect()
 }
 
+/// Frames of `size` at `rate_hz` (a latency case: 60 frames) or as fast as the sender can
+/// (throughput: up to 3 s), from one sender to one receiver.
+fn frame_spec(transport: Transport, (width, height): (u32, u32), shm: bool, rate_hz: Option<f64>, quick: bool) -> CaseSpec {
+    CaseSpec {
+        payload: Payload::Frame { width, height },
+        count: match (rate_hz, quick) {
+            (Some(_), true) => 10,
+            (Some(_), false) => 60,
+            (None, true) => 200,
+            (None, false) => 20_000,
+        },
+        rate_hz,
+        max_duration_s: match (rate_hz, quick) {
+            (Some(_), _) => 20.0,
+            (None, true) => 1.0,
+            (None, false) => 3.0,
+        },
+        shm,
+        ..speed_spec(transport, 0)
+    }
+}
+
 fn cases(suites: &[Suite], quick: bool, builds: &[OtherBuild]) -> Vec<Case> {
     let mut out = Vec::new();
     let speed_n = if quick { 50 } else { 500 };
@@ -236,37 +258,7 @@ fn cases(suites: &[Suite], quick: bool, builds: &[OtherBuild]) -> Vec<Case> {
     }
     if suites.contains(&Suite::Frames) {
         for (w, h) in [(640u32, 480u32), (1280, 720)] {
-            let frame = |transport, shm, rate_hz: Option<f64>| CaseSpec {
-                transport,
-                payload: Payload::Frame { width: w, height: h },
-                count: match (rate_hz, quick) {
-                    (Some(_), true) => 10,
-                    (Some(_), false) => 60,
-                    (None, true) => 200,
-                    (None, false) => 20_000,
-                },
-                rate_hz,
-                max_duration_s: match (rate_hz, quick) {
-                    (Some(_), _) => 20.0,
-                    (None, true) => 1.0,
-                    (None, false) => 3.0,
-                },
-                qos: true,
-                shm,
-                lowlatency: false,
-                runtime: None,
-                tcp_buffer: TcpBuffer::Default,
-                unix_socket: false,
-                background: None,
-                via_router: false,
-                namespace: None,
-                control_echo: false,
-                callback_reader: false,
-                peer_exe: None,
-                zenoh_cfg: Vec::new(),
-                pin_cpu: None,
-                subscribers: 1,
-            };
+            let frame = |transport, shm, rate_hz: Option<f64>| frame_spec(transport, (w, h), shm, rate_hz, quick);
             for (phase, rate) in [("throughput", None), ("latency @20 Hz", Some(20.0))] {
                 let s = format!("b. {w}x{h} RGB frames, {phase}");
                 push(&s, "bus, shared memory", frame(Transport::Bus, true, rate));
