@@ -130,17 +130,18 @@ pub fn fanout(counts: &[usize], quick: bool, repeat: usize) -> Result<Vec<Fanout
         for &n in counts {
             let mut throughput = Vec::new();
             let mut latency = Vec::new();
+            // One sender and its n receivers, as fast as possible (None) or at a rate.
+            let one = |rate_hz: Option<f64>| -> Result<(SendReport, Vec<RecvReport>)> {
+                let spec = fanout_spec(path, n, rate_hz, quick);
+                let (groups, _) =
+                    run_once(std::slice::from_ref(&spec)).with_context(|| format!("fan-out {} x{n}", path.name()))?;
+                groups.into_iter().next().context("one group")
+            };
             for run in 0..repeat {
                 eprint!("[fan-out] {} x{n}, run {} ... ", path.name(), run + 1);
-                let spec = fanout_spec(path, n, None, quick);
-                let (groups, _) =
-                    run_once(std::slice::from_ref(&spec)).with_context(|| format!("fan-out {} x{n}", path.name()))?;
-                let (sent, recvs) = groups.into_iter().next().context("one group")?;
+                let (sent, recvs) = one(None)?;
                 throughput.push(throughput_figures(&sent, &recvs));
-                let spec = fanout_spec(path, n, Some(FANOUT_RATE_HZ), quick);
-                let (groups, _) =
-                    run_once(std::slice::from_ref(&spec)).with_context(|| format!("fan-out {} x{n}", path.name()))?;
-                let (sent, recvs) = groups.into_iter().next().context("one group")?;
+                let (sent, recvs) = one(Some(FANOUT_RATE_HZ))?;
                 let l = latency_figures(&sent, &recvs);
                 eprintln!(
                     "{} frames/s each (slowest), p50 {} us",

@@ -154,7 +154,6 @@ fn speed_spec(transport: Transport, count: u64) -> CaseSpec {
         control_echo: false,
         callback_reader: false,
         peer_exe: None,
-        zenoh_cfg: Vec::new(),
         pin_cpu: None,
         subscribers: 1,
     }
@@ -183,7 +182,13 @@ fn other_builds(args: &[String]) -> Result<Vec<OtherBuild>> {
 
 /// Frames of `size` at `rate_hz` (a latency case: 60 frames) or as fast as the sender can
 /// (throughput: up to 3 s), from one sender to one receiver.
-fn frame_spec(transport: Transport, (width, height): (u32, u32), shm: bool, rate_hz: Option<f64>, quick: bool) -> CaseSpec {
+fn frame_spec(
+    transport: Transport,
+    (width, height): (u32, u32),
+    shm: bool,
+    rate_hz: Option<f64>,
+    quick: bool,
+) -> CaseSpec {
     CaseSpec {
         payload: Payload::Frame { width, height },
         count: match (rate_hz, quick) {
@@ -368,6 +373,12 @@ fn remove_seed_script() {
     }
 }
 
+/// The bench's child processes log warnings only (SLIPSTREAM_BENCH_LOG overrides): progress
+/// is the parent's job.
+fn child_log_filter() -> String {
+    std::env::var("SLIPSTREAM_BENCH_LOG").unwrap_or_else(|_| "warn,zenoh=error".into())
+}
+
 fn spawn_peer(role: &str, spec: &CaseSpec, endpoints: &[String]) -> Result<Peer> {
     let mut cmd = if spec.transport == Transport::SeedPythonUdp {
         let mut c = Command::new(PYTHON);
@@ -391,8 +402,7 @@ fn spawn_peer(role: &str, spec: &CaseSpec, endpoints: &[String]) -> Result<Peer>
         Some(r) => cmd.env("ZENOH_RUNTIME", r),
         None => cmd.env_remove("ZENOH_RUNTIME"),
     };
-    // Peers log warnings only (SLIPSTREAM_BENCH_LOG overrides): progress is the parent's job.
-    cmd.env("RUST_LOG", std::env::var("SLIPSTREAM_BENCH_LOG").unwrap_or_else(|_| "warn,zenoh=error".into()));
+    cmd.env("RUST_LOG", child_log_filter());
     if let Some(cpu) = spec.pin_cpu {
         use std::os::unix::process::CommandExt;
         // SAFETY: between fork and exec only async-signal-safe calls: sched_setaffinity on
@@ -497,7 +507,7 @@ impl RouterProcess {
         cmd.args(["router", "-l", "tcp/127.0.0.1:0", "--no-multicast-scouting"]);
         // The router's own thread layout (`slipstream router` as users run it).
         cmd.env_remove("ZENOH_RUNTIME");
-        cmd.env("RUST_LOG", std::env::var("SLIPSTREAM_BENCH_LOG").unwrap_or_else(|_| "warn,zenoh=error".into()));
+        cmd.env("RUST_LOG", child_log_filter());
         cmd.stdin(Stdio::null()).stdout(Stdio::piped()).stderr(Stdio::inherit());
         let mut process = Peer(cmd.spawn().context("start slipstream router")?);
         let mut out = BufReader::new(process.0.stdout.take().context("router stdout")?);
@@ -699,12 +709,7 @@ fn ratios(rows: &[Row], builds: &[OtherBuild]) -> Vec<Ratio> {
         p50("a.", "seed: Python UDP"),
         "< 1",
     );
-    ratio(
-        "speed p50: bus, unix socket / raw UDP".into(),
-        p50("a.", "bus, unix socket"),
-        p50("a.", "raw UDP"),
-        "<= 2",
-    );
+    ratio("speed p50: bus, unix socket / raw UDP".into(), p50("a.", "bus, unix socket"), p50("a.", "raw UDP"), "<= 2");
     ratio("speed p50: bus / raw zenoh".into(), p50("a.", "bus"), p50("a.", "raw zenoh"), "<= 1.1");
     for b in builds {
         let l = &b.label;

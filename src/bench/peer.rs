@@ -118,9 +118,6 @@ pub fn peer_config(spec: &CaseSpec, listen: Option<&str>, connect: &[String]) ->
             set(&mut c, "transport/link/tcp/so_rcvbuf", &b.to_string())?;
         }
     }
-    for (key, value) in &spec.zenoh_cfg {
-        set(&mut c, key, value)?;
-    }
     if spec.lowlatency {
         set(&mut c, "transport/unicast/lowlatency", "true")?;
         set(&mut c, "transport/unicast/qos/enabled", "false")?;
@@ -250,7 +247,12 @@ fn receive_tcp(col: &Arc<Collector>, stop: &Arc<AtomicBool>, r: &mut Receiving) 
 }
 
 /// Raw Zenoh: a callback subscriber on the case's key.
-async fn receive_zenoh(spec: &CaseSpec, router: Option<&str>, col: &Arc<Collector>, r: &mut Receiving) -> Result<String> {
+async fn receive_zenoh(
+    spec: &CaseSpec,
+    router: Option<&str>,
+    col: &Arc<Collector>,
+    r: &mut Receiving,
+) -> Result<String> {
     let session = zenoh::open(receiver_config(spec, router)?).await.map_err(anyhow::Error::msg)?;
     let key = if matches!(spec.payload, Payload::Speed) { SPEED_KEY } else { FRAME_KEY };
     let c = col.clone();
@@ -373,11 +375,7 @@ const RECEIVER_NODE: &str = "bench-recv";
 /// A controller's answer to each speed message: a vehicle/control command published by a
 /// thread of its own (as a node's control loop would, not from Zenoh's callback), stamped
 /// with the speed message's simulation time. Returns where the callback hands over.
-async fn control_echo(
-    bus: &Bus,
-    stop: &Arc<AtomicBool>,
-    r: &mut Receiving,
-) -> Result<std::sync::mpsc::Sender<u64>> {
+async fn control_echo(bus: &Bus, stop: &Arc<AtomicBool>, r: &mut Receiving) -> Result<std::sync::mpsc::Sender<u64>> {
     let publisher = bus.publisher(topics::VEHICLE_CONTROL).await?;
     let (tx, rx) = std::sync::mpsc::channel::<u64>();
     let stop = stop.clone();
@@ -569,7 +567,7 @@ async fn send_bus(spec: &CaseSpec, endpoints: &[String], max: Duration) -> Resul
     wait_receivers(&bus, spec.subscribers).await?;
     let bus = Arc::new(bus);
     let control = Arc::new(Collector::default());
-    let _control_sub = match spec.control_echo {
+    let control_sub = match spec.control_echo {
         true => {
             let c = control.clone();
             Some(
@@ -627,7 +625,7 @@ async fn send_bus(spec: &CaseSpec, endpoints: &[String], max: Duration) -> Resul
     let answers = control.report();
     report.control_received = answers.received;
     report.control_latencies_ns = answers.latencies_ns;
-    drop(_control_sub);
+    drop(control_sub);
     if let Ok(bus) = Arc::try_unwrap(bus) {
         bus.close().await?;
     }
@@ -666,8 +664,9 @@ async fn send_background(bus: Arc<Bus>, bg: Background, done: Arc<AtomicBool>, d
 const MATCH_WAIT: Duration = Duration::from_secs(10);
 
 /// Waits until `n` receivers are alive (their liveliness tokens, seen directly or through a
-/// router), then a moment more so their subscriptions, declared before their tokens, are in
-/// place on every path: a case with several receivers starts when all of them listen.
+/// router), then a moment more for their subscriptions (declared before each printed READY,
+/// after its token) to reach this session on every path: a case with several receivers
+/// starts when all of them listen.
 async fn wait_receivers(bus: &Bus, n: usize) -> Result<()> {
     if n <= 1 {
         return Ok(());

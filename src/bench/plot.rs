@@ -51,7 +51,12 @@ pub fn growth(report: &BenchReport, path: &Path) -> Result<()> {
     }
     if !report.fanout.is_empty() {
         let pts = |p: FanoutPath, f: &dyn Fn(&super::growth::FanoutRow) -> Option<f64>| -> Vec<(f64, f64)> {
-            report.fanout.iter().filter(|r| r.path == p).filter_map(|r| f(r).map(|v| (r.subscribers as f64, v))).collect()
+            report
+                .fanout
+                .iter()
+                .filter(|r| r.path == p)
+                .filter_map(|r| f(r).map(|v| (r.subscribers as f64, v)))
+                .collect()
         };
         let (shm, router) = (FanoutPath::SharedMemory, FanoutPath::Router);
         rows.push([

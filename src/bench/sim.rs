@@ -154,7 +154,8 @@ fn memcpy_ms(width: u32, height: u32, copies: usize) -> f64 {
 async fn fast_rtf(scenario: &str, sim_s: f64) -> Result<f64> {
     let sim_session = zenoh::open(loopback_config(Some("tcp/127.0.0.1:0"), &[])?).await.map_err(anyhow::Error::msg)?;
     let ep = sim_session.info().locators().await.first().context("sim session has no locator")?.to_string();
-    let sub_session = zenoh::open(loopback_config(None, std::slice::from_ref(&ep))?).await.map_err(anyhow::Error::msg)?;
+    let sub_session =
+        zenoh::open(loopback_config(None, std::slice::from_ref(&ep))?).await.map_err(anyhow::Error::msg)?;
     let topics = crate::TopicMap::default();
     let sim_bus = crate::Bus::from_session(sim_session, topics.clone(), "bench-sim").await?;
     let sub_bus = crate::Bus::from_session(sub_session, topics, "bench-viewer").await?;

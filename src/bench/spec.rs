@@ -94,9 +94,6 @@ pub struct CaseSpec {
     /// e.g. with Zenoh's io_uring receive path: `bench --with-build`).
     #[serde(default)]
     pub peer_exe: Option<String>,
-    /// More Zenoh config keys for both peers (key, JSON5 value), e.g. batching off.
-    #[serde(default)]
-    pub zenoh_cfg: Vec<(String, String)>,
     /// Both peers' processes pinned to this CPU (every thread: the hand-offs stay on one core).
     #[serde(default)]
     pub pin_cpu: Option<usize>,
