@@ -298,6 +298,9 @@ const SETTLE_S: f64 = 1.0;
 const HARD_BRAKING_MARGIN_MPS2: f64 = 1.0;
 /// A lead slower than this is stopping or stopped, not braking hard from speed.
 const HARD_BRAKING_MIN_SPEED_MPS: f64 = 2.0;
+/// A short TTC starts an emergency only when the ego brakes less than the threat needs by more
+/// than the jerk limit adds in this long.
+const UNDER_BRAKING_S: f64 = 0.25;
 /// Below this speed the ego counts as standing.
 const STANDSTILL_MPS: f64 = 0.2;
 /// Brake held at standstill.
@@ -335,6 +338,18 @@ pub struct Controller {
     /// The throttle of the last step: while stale, never more than this.
     last_throttle: f64,
     emergency: bool,
+    /// The nearest vehicle that is in the ego's lane by the entry test while the lead stays
+    /// the lead only by the stay-in-lane hysteresis (a lead moving out): what it reveals
+    /// counts for the threat at once, not once the lead has left.
+    next_in_lane: Option<Revealed>,
+}
+
+/// A vehicle in the lane beyond a lead that is leaving it, as last measured.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Revealed {
+    stamp_s: f64,
+    gap_m: f64,
+    relative_speed_mps: f64,
 }
 
 /// The threat a lead poses now.
@@ -343,6 +358,23 @@ pub struct Threat {
     pub ttc_s: Option<f64>,
     /// Deceleration (positive) that keeps THREAT_MARGIN_M to the lead.
     pub needed_decel_mps2: f64,
+    /// What it was computed from: the gap less THREAT_MARGIN_M, the lead's speed and
+    /// acceleration.
+    pub room_m: f64,
+    pub lead_speed_mps: f64,
+    pub lead_accel_mps2: f64,
+}
+
+impl Threat {
+    /// The worse of two threats: the shorter TTC and the larger need.
+    fn or_worse(&self, other: &Threat) -> Threat {
+        let ttc_s = match (self.ttc_s, other.ttc_s) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        };
+        let worse = if other.needed_decel_mps2 > self.needed_decel_mps2 { other } else { self };
+        Threat { ttc_s, ..*worse }
+    }
 }
 
 /// Time to collision and the deceleration that still avoids one, from the gap, the speeds and
@@ -354,22 +386,29 @@ pub fn threat(gap_m: f64, ego_speed_mps: f64, lead_speed_mps: f64, lead_accel_mp
     let lead_decel = (-lead_accel_mps2).max(0.0);
     // Both keep braking until the speeds match: the relative motion decides.
     let matching = if closing > 0.0 { lead_decel + closing * closing / (2.0 * room) } else { 0.0 };
+    let lead_speed = lead_speed_mps.max(0.0);
+    let of = |needed_decel_mps2: f64| Threat {
+        ttc_s,
+        needed_decel_mps2,
+        room_m: gap_m - THREAT_MARGIN_M,
+        lead_speed_mps: lead_speed,
+        lead_accel_mps2,
+    };
     if lead_accel_mps2 >= LEAD_BRAKING_MPS2 {
-        return Threat { ttc_s, needed_decel_mps2: matching };
+        return of(matching);
     }
     // A braking lead: does it stop before the speeds would match?
     let lead_stops_first = closing <= 0.0 || {
         let t_match = closing / (matching - lead_decel).max(1e-6);
         lead_speed_mps - lead_decel * t_match <= 0.0
     };
-    let needed = if lead_stops_first {
+    if lead_stops_first {
         // Then stop behind where it stops (v_L^2 / 2|a_L| on).
-        let lead_stop = lead_speed_mps.max(0.0).powi(2) / (2.0 * lead_decel);
-        ego_speed_mps.powi(2) / (2.0 * (room + lead_stop))
+        let lead_stop = lead_speed.powi(2) / (2.0 * lead_decel);
+        of(ego_speed_mps.powi(2) / (2.0 * (room + lead_stop)))
     } else {
-        matching
-    };
-    Threat { ttc_s, needed_decel_mps2: needed }
+        of(matching)
+    }
 }
 
 impl Controller {
@@ -409,6 +448,7 @@ impl Controller {
             integral: 0.0,
             last_throttle: 0.0,
             emergency: false,
+            next_in_lane: None,
         }
     }
 
@@ -483,6 +523,8 @@ impl Controller {
         let lane = &self.s.lane;
         let current = self.lead.map(|l| l.id);
         let mut best: Option<(u32, f64, f64)> = None;
+        // The nearest by the entry test alone (no hysteresis for the current lead).
+        let mut entering: Option<(u32, f64, f64)> = None;
         for o in &frame.objects {
             let off = match &lane_ahead {
                 Some(l) => l.offset_m(o.distance_m, o.lateral_m),
@@ -513,13 +555,23 @@ impl Controller {
             // Lateral speed counts once a track has a few frames behind it.
             let predicted = if track.seen >= 4 { off + track.lateral_rate_mps * lane.lateral_lookahead_s } else { off };
             let limit = if current == Some(o.id) { lane.stay_in_lane_m } else { lane.in_lane_m };
-            if off.abs().min(predicted.abs()) >= limit {
+            let off = off.abs().min(predicted.abs());
+            if off >= limit {
                 continue;
             }
             if best.is_none_or(|b| gap < b.1) {
                 best = Some((o.id, gap, o.relative_speed_mps));
             }
+            if off < lane.in_lane_m && entering.is_none_or(|b| gap < b.1) {
+                entering = Some((o.id, gap, o.relative_speed_mps));
+            }
         }
+        self.next_in_lane = match (best, entering) {
+            (Some(b), Some(e)) if e.0 != b.0 => {
+                Some(Revealed { stamp_s: frame.stamp_s, gap_m: e.1, relative_speed_mps: e.2 })
+            }
+            _ => None,
+        };
         self.tracks.retain(|_, t| frame.stamp_s - t.stamp_s < 2.0);
         let Some((id, gap, rel)) = best else {
             if current.is_some() {
@@ -566,8 +618,16 @@ impl Controller {
             settled: f.settled(),
         });
         let desired_gap = self.s.standstill_m + self.time_gap_s * v;
-        let threat = lead.map(|l| threat(l.gap_m, v, l.speed_mps, l.accel_mps2));
-        if threat.is_some_and(|t| self.warns(&t)) {
+        let revealed = self.next_in_lane.filter(|_| lead.is_some()).map(|r| {
+            let rel = r.relative_speed_mps;
+            let gap = r.gap_m + rel * (ego.t_s - r.stamp_s).max(0.0);
+            threat(gap, v, (v + rel).max(0.0), 0.0)
+        });
+        let threat = lead.map(|l| threat(l.gap_m, v, l.speed_mps, l.accel_mps2)).map(|t| match revealed {
+            Some(r) => t.or_worse(&r),
+            None => t,
+        });
+        if threat.is_some_and(|t| self.warns(&t, v)) {
             warnings.push(AccWarning::ForwardCollision);
         }
 
@@ -622,10 +682,44 @@ impl Controller {
 
     /// The forward-collision warning: TTC below its threshold, or closing within
     /// release_ttc_s with more braking needed than comfort allows.
-    fn warns(&self, t: &Threat) -> bool {
+    fn warns(&self, t: &Threat, v: f64) -> bool {
         let ttc = t.ttc_s.unwrap_or(f64::INFINITY);
-        let e = &self.s.emergency;
-        ttc < e.warn_ttc_s || (t.needed_decel_mps2 > self.s.limits.decel_mps2 && ttc < e.release_ttc_s)
+        ttc < self.s.emergency.warn_ttc_s || self.beyond_comfort(t, v)
+    }
+
+    /// Closing within release_ttc_s, with more braking needed than comfort allows at this
+    /// speed and more than comfort braking from here on can give: from the deceleration asked
+    /// now, at the jerk limit, up to the limit of each speed on the way down (which grows as
+    /// the speed falls: a stop from 30 m/s 150 m ahead peaks near 4.9 m/s2 at 6 m/s).
+    fn beyond_comfort(&self, t: &Threat, v: f64) -> bool {
+        let ttc = t.ttc_s.unwrap_or(f64::INFINITY);
+        ttc < self.s.emergency.release_ttc_s
+            && t.needed_decel_mps2 > self.s.limits.decel_at(v)
+            && !self.comfort_avoids(t, v)
+    }
+
+    /// Whether braking within the comfort limits from now on (the command ramping at the jerk
+    /// limit to each speed's limit) keeps the threat's room, with the lead going on at its
+    /// speed and deceleration to a stop. Simulated in 20 ms steps.
+    fn comfort_avoids(&self, t: &Threat, v: f64) -> bool {
+        const DT: f64 = 0.02;
+        let lim = &self.s.limits;
+        let lead_a = t.lead_accel_mps2.min(0.0);
+        let (mut gap, mut v, mut a, mut lead_v) = (t.room_m, v, self.accel_cmd.min(0.0), t.lead_speed_mps);
+        // 60 s of braking stops from any speed the ACC allows.
+        for _ in 0..3000 {
+            if gap < 0.0 {
+                return false;
+            }
+            if v <= 0.0 || (v <= lead_v && (lead_a == 0.0 || lead_v == 0.0)) {
+                return true;
+            }
+            a = (a - lim.jerk_mps3 * DT).max(-lim.decel_at(v));
+            v = (v + a * DT).max(0.0);
+            lead_v = (lead_v + lead_a * DT).max(0.0);
+            gap += (lead_v - v) * DT;
+        }
+        true
     }
 
     /// Enters emergency braking when a collision is imminent (TTC below the threshold, or
@@ -640,9 +734,14 @@ impl Controller {
         };
         let (e, lim) = (&self.s.emergency, &self.s.limits);
         let ttc = t.ttc_s.unwrap_or(f64::INFINITY);
-        let beyond_comfort = t.needed_decel_mps2 > lim.decel_mps2 && ttc < e.release_ttc_s;
+        let beyond_comfort = self.beyond_comfort(t, v);
         let hard_and_needed = hard_lead && t.needed_decel_mps2 > NEEDED_GUARD_MPS2;
-        if !self.emergency && (ttc < e.brake_ttc_s || beyond_comfort || hard_and_needed) {
+        // A short TTC alone is no emergency while the ego already brakes about as hard as the
+        // threat needs: in a planned stop the TTC (at constant speeds) falls below any
+        // threshold as the car comes to rest behind the lead.
+        let behind_need = t.needed_decel_mps2 > -self.accel_cmd + UNDER_BRAKING_S * lim.jerk_mps3;
+        let closing_fast = ttc < e.brake_ttc_s && behind_need;
+        if !self.emergency && (closing_fast || beyond_comfort || hard_and_needed) {
             tracing::warn!(t_s, ttc_s = ttc, needed_decel_mps2 = t.needed_decel_mps2, hard_lead, "emergency braking");
             self.emergency = true;
         } else if self.emergency
@@ -679,7 +778,8 @@ impl Controller {
         dt: f64,
     ) -> (AccMode, f64) {
         let (g, lim) = (&self.s.gains, &self.s.limits);
-        let cruise = (g.cruise_per_s * (self.set_speed_mps - v)).clamp(-lim.decel_mps2, lim.accel_mps2);
+        let decel = lim.decel_at(v);
+        let cruise = (g.cruise_per_s * (self.set_speed_mps - v)).clamp(-decel, lim.accel_mps2);
         let follow = lead.map(|l| {
             let law = g.gap_per_s2 * (l.gap_m - desired_gap) + g.speed_per_s * (l.speed_mps - v);
             // Never less braking than avoiding a collision needs, once it matters: a lead easing
@@ -697,7 +797,7 @@ impl Controller {
             Some(f) if f < cruise => (AccMode::Follow, f),
             _ => (AccMode::Speed, cruise),
         };
-        let target = target.clamp(-lim.decel_mps2, lim.accel_mps2);
+        let target = target.clamp(-decel, lim.accel_mps2);
         let step = lim.jerk_mps3 * dt;
         (mode, target.clamp(self.accel_cmd - step, self.accel_cmd + step))
     }

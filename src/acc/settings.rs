@@ -62,8 +62,31 @@ pub struct AccSettings {
 #[serde(deny_unknown_fields)]
 pub struct Limits {
     pub accel_mps2: f64,
+    /// The comfort deceleration at COMFORT_HIGH_SPEED_MPS and above.
     pub decel_mps2: f64,
+    /// The comfort deceleration at COMFORT_LOW_SPEED_MPS and below (linear between).
+    pub low_speed_decel_mps2: f64,
     pub jerk_mps3: f64,
+}
+
+impl Limits {
+    /// The comfort deceleration at speed `v`.
+    pub fn decel_at(&self, v_mps: f64) -> f64 {
+        comfort_decel_at(v_mps, self.decel_mps2, self.low_speed_decel_mps2)
+    }
+}
+
+/// Full-speed-range ACC (ISO 22179, and ISO 15622's FSRA type) lets the comfort deceleration
+/// grow as the speed falls: `high` at this speed and above...
+pub const COMFORT_HIGH_SPEED_MPS: f64 = 20.0;
+/// ...`low` (the larger) at this speed and below, linear between.
+pub const COMFORT_LOW_SPEED_MPS: f64 = 5.0;
+
+/// The comfort deceleration at speed `v`: `high` at COMFORT_HIGH_SPEED_MPS and above, `low` at
+/// COMFORT_LOW_SPEED_MPS and below, linear between.
+pub fn comfort_decel_at(v_mps: f64, high: f64, low: f64) -> f64 {
+    let f = ((COMFORT_HIGH_SPEED_MPS - v_mps) / (COMFORT_HIGH_SPEED_MPS - COMFORT_LOW_SPEED_MPS)).clamp(0.0, 1.0);
+    high + (low - high) * f
 }
 
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -195,6 +218,7 @@ impl AccSettings {
         for (key, v) in [
             ("limits.accel_mps2", l.accel_mps2),
             ("limits.decel_mps2", l.decel_mps2),
+            ("limits.low_speed_decel_mps2", l.low_speed_decel_mps2),
             ("limits.jerk_mps3", l.jerk_mps3),
         ] {
             if !positive(v) {
@@ -206,6 +230,16 @@ impl AccSettings {
                 "limits.decel_mps2",
                 format!("{} is not below the vehicle's {} m/s2", l.decel_mps2, self.vehicle.max_brake_decel_mps2),
                 "keep the comfort limit below vehicle.max_brake_decel_mps2 (emergencies use the rest)",
+            );
+        }
+        if !(l.decel_mps2..self.vehicle.max_brake_decel_mps2).contains(&l.low_speed_decel_mps2) {
+            return err(
+                "limits.low_speed_decel_mps2",
+                format!(
+                    "{} is not between limits.decel_mps2 ({}) and the vehicle's {} m/s2",
+                    l.low_speed_decel_mps2, l.decel_mps2, self.vehicle.max_brake_decel_mps2
+                ),
+                "use a value from limits.decel_mps2 up to below vehicle.max_brake_decel_mps2 (ISO 22179: 5)",
             );
         }
         let g = &self.gains;

@@ -410,3 +410,80 @@ fn with_the_road_map_the_lead_is_in_the_ego_lane_round_a_bend() {
     assert_eq!(lead_of(true), Some(2), "on the map: the car in the ego's lane");
     assert_eq!(lead_of(false), Some(1), "on the yaw rate alone: the car on the straight-ahead line");
 }
+
+/// Drives the point-mass ego at 30 m/s toward a car standing `gap0_m` ahead; returns, per
+/// step, (gap, speed, output).
+fn approach_a_standing_car(gap0_m: f64) -> Vec<(f64, f64, Output)> {
+    let mut c = Controller::new(AccSettings { set_speed_mps: 30.0, ..truth() });
+    let (mut t, mut v, mut gap) = (0.0, 30.0, gap0_m);
+    let mut out = Vec::new();
+    while t < 20.0 {
+        if ((t / DT).round() as i64) % 5 == 0 {
+            c.perceive(&frame(t, vec![obj(3, gap, 0.0, -v)]), &ego(t, v));
+        }
+        let o = c.step(&ego(t, v), &[]);
+        v = (v + o.status.target_accel_mps2 * DT).max(0.0);
+        gap -= v * DT;
+        out.push((gap, v, o));
+        t += DT;
+    }
+    out
+}
+
+#[test]
+fn a_car_standing_150_m_ahead_at_30_mps_is_stopped_for_within_the_comfort_limits() {
+    // From 30 m/s the jerk-limited ramp to 3.5 m/s2 and braking at 3.5 need ~152 m: the stop
+    // fits only because comfort allows more as the speed falls (5 m/s2 at 5 m/s, ISO 22179),
+    // and the TTC falling below 1.8 s as the car comes to rest behind it is no emergency.
+    let limits = truth().limits;
+    let run = approach_a_standing_car(150.0);
+    let mut prev = 0.0;
+    for (gap, v, o) in &run {
+        assert_ne!(o.status.mode, AccMode::Emergency, "at gap {gap:.1} m, {v:.1} m/s");
+        let a = o.status.target_accel_mps2;
+        assert!(-a <= limits.decel_at(*v) + 1e-9, "{a:.2} m/s2 at {v:.1} m/s");
+        assert!((a - prev).abs() <= limits.jerk_mps3 * DT + 1e-9, "jerk {:.2} at {v:.1} m/s", (a - prev) / DT);
+        prev = a;
+    }
+    let (gap, v, _) = run.last().unwrap();
+    assert!(*v < 0.2 && *gap >= 2.0, "ends at {v:.2} m/s, {gap:.1} m behind");
+    // Nearer, comfort cannot do it: an emergency, and no collision.
+    let run = approach_a_standing_car(110.0);
+    assert!(run.iter().any(|(_, _, o)| o.status.mode == AccMode::Emergency));
+    assert!(run.iter().all(|(gap, _, _)| *gap > 0.0));
+}
+
+#[test]
+fn the_comfort_limit_grows_as_the_speed_falls() {
+    let l = truth().limits;
+    assert_eq!((l.decel_at(30.0), l.decel_at(20.0)), (3.5, 3.5));
+    assert!((l.decel_at(12.5) - 4.25).abs() < 1e-9);
+    assert_eq!((l.decel_at(5.0), l.decel_at(0.0)), (5.0, 5.0));
+    let e = AccSettings::parse("{ limits: { low_speed_decel_mps2: 3.0 } }", "acc.json5").unwrap_err();
+    assert_eq!(e.key, "limits.low_speed_decel_mps2");
+}
+
+#[test]
+fn a_car_revealed_by_a_lead_moving_out_is_braked_for_while_the_lead_is_still_the_lead() {
+    // The lead (id 1) at the ego's speed moves out: at 1.8 m off the lane's centre it stays the
+    // lead (stay_in_lane_m 2.0) but would not be taken anew (in_lane_m 1.6). Behind it a car
+    // stands 140 m ahead in the lane.
+    let mut c = Controller::new(AccSettings { set_speed_mps: 30.0, ..truth() });
+    let (mut t, v) = (0.0, 30.0);
+    while t < 2.0 {
+        c.perceive(&frame(t, vec![obj(1, 54.0, 0.0, 0.0)]), &ego(t, v));
+        c.step(&ego(t, v), &[]);
+        t += 0.05;
+    }
+    let mut braking = None;
+    for _ in 0..20 {
+        let objects = vec![obj(1, 54.0, -1.8, 0.0), obj(2, 140.0 - 30.0 * (t - 2.0), 0.0, -30.0)];
+        c.perceive(&frame(t, objects), &ego(t, v));
+        let o = c.step(&ego(t, v), &[]);
+        assert_eq!(o.status.lead.map(|l| l.id), Some(1), "the lead is still the one moving out");
+        braking = Some(o.status.target_accel_mps2);
+        t += 0.05;
+    }
+    let a = braking.unwrap();
+    assert!(a < -1.0, "target {a:.2} m/s2: the car it reveals needs ~3.3 m/s2");
+}

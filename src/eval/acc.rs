@@ -341,11 +341,14 @@ pub fn markdown(report: &AccReport) -> String {
         ));
     }
     out.push_str(&format!(
-        "\nAims: no collision; in steady following time-gap RMS error <= {} s and acceleration within {} m/s2 of the lead's; a scenario's own minimum gap (expect.min_gap_m); accel <= {}, decel <= {} m/s2 (+{:.0}% tolerance) and jerk <= {} m/s3 outside emergencies, at speed; no unwarranted emergency, no phantom braking (beyond 1 m/s2 with nothing in the lane within twice the time gap), no standstill with nothing ahead. Traffic collisions and the answer to a lead braking beyond the comfort limit (until the ACC asks for 90% of what stopping behind it needs; aim {} s) are reported, not judged.\n",
+        "\nAims: no collision; in steady following time-gap RMS error <= {} s and acceleration within {} m/s2 of the lead's; a scenario's own minimum gap (expect.min_gap_m); accel <= {}, decel <= {} m/s2 at {} m/s and above rising to {} at {} m/s and below (+{:.0}% tolerance) and jerk <= {} m/s3 outside emergencies, at speed; no unwarranted emergency, no phantom braking (beyond 1 m/s2 with nothing in the lane within twice the time gap), no standstill with nothing ahead. Traffic collisions and the answer to a lead braking beyond the comfort limit (until the ACC asks for 90% of what stopping behind it needs; aim {} s) are reported, not judged.\n",
         aims::TIME_GAP_RMS_S,
         aims::MAX_ACCEL_SWING_MPS2,
         aims::MAX_ACCEL_MPS2,
         aims::MAX_DECEL_MPS2,
+        crate::acc::settings::COMFORT_HIGH_SPEED_MPS,
+        aims::MAX_DECEL_LOW_SPEED_MPS2,
+        crate::acc::settings::COMFORT_LOW_SPEED_MPS,
         aims::COMFORT_TOLERANCE * 100.0,
         aims::MAX_JERK_MPS3,
         aims::HARD_BRAKING_RESPONSE_S,

@@ -5,6 +5,7 @@ use serde::Serialize;
 
 use super::fmt_opt;
 use super::trace::{Sample, Trace, TruthLead};
+use crate::acc::settings::{comfort_decel_at, COMFORT_HIGH_SPEED_MPS, COMFORT_LOW_SPEED_MPS};
 use crate::msg::AccMode;
 
 /// The aims of issue 5 (docs/control.md).
@@ -14,7 +15,10 @@ pub mod aims {
     /// the lead's.
     pub const MAX_ACCEL_SWING_MPS2: f64 = 0.3;
     pub const MAX_ACCEL_MPS2: f64 = 2.0;
+    /// Comfort deceleration at 20 m/s and above; it grows linearly to MAX_DECEL_LOW_SPEED_MPS2
+    /// at 5 m/s and below (full-speed-range ACC, ISO 22179).
     pub const MAX_DECEL_MPS2: f64 = 3.5;
+    pub const MAX_DECEL_LOW_SPEED_MPS2: f64 = 5.0;
     pub const MAX_JERK_MPS3: f64 = 2.5;
     /// A lead braking beyond the comfort limit is answered within this long (issue 16). Reported
     /// in every run, not yet judged: the camera ACC answers in about 0.9 s (docs/control.md).
@@ -92,6 +96,8 @@ pub struct Metrics {
     pub max_accel_mps2: f64,
     /// Outside emergencies and at speed.
     pub max_decel_mps2: f64,
+    /// The same as a share of the comfort limit at the speed it happened (1: at the limit).
+    pub max_decel_share: f64,
     pub max_jerk_mps3: f64,
     pub emergency_s: f64,
     pub max_decel_in_emergency_mps2: f64,
@@ -127,6 +133,7 @@ struct Tally {
     speed_errors: Vec<f64>,
     max_accel: f64,
     max_decel: f64,
+    max_decel_share: f64,
     max_jerk: f64,
     max_em_decel: f64,
     /// Start of the current stretch with the same truth lead, and of the current stretch in
@@ -386,6 +393,8 @@ impl Tally {
         }
         self.max_accel = self.max_accel.max(x.accel_mps2);
         self.max_decel = self.max_decel.max(-x.accel_mps2);
+        let limit = comfort_decel_at(x.speed_mps, aims::MAX_DECEL_MPS2, aims::MAX_DECEL_LOW_SPEED_MPS2);
+        self.max_decel_share = self.max_decel_share.max(-x.accel_mps2 / limit);
         if i >= jerk_lag
             && s[i - jerk_lag].speed_mps >= COMFORT_MIN_SPEED_MPS
             && s[i - jerk_lag].t_s - s[0].t_s >= HANDOVER_S
@@ -431,7 +440,18 @@ impl Tally {
             });
         }
         checks.push(comfort("max accel outside emergencies (m/s2)", self.max_accel, aims::MAX_ACCEL_MPS2));
-        checks.push(comfort("max decel outside emergencies (m/s2)", self.max_decel, aims::MAX_DECEL_MPS2));
+        checks.push(Check {
+            name: format!(
+                "max decel outside emergencies, x the comfort limit at its speed ({} m/s2 from {} m/s, {} at {} m/s and below)",
+                aims::MAX_DECEL_MPS2,
+                COMFORT_HIGH_SPEED_MPS,
+                aims::MAX_DECEL_LOW_SPEED_MPS2,
+                COMFORT_LOW_SPEED_MPS
+            ),
+            value: Some(self.max_decel_share),
+            aim: format!("<= 1 (+{:.0}%)", aims::COMFORT_TOLERANCE * 100.0),
+            pass: self.max_decel_share <= tol,
+        });
         // Jerk is judged strictly: the controller's own limit sits below the aim, with room for
         // the vehicle's response.
         checks.push(Check {
@@ -514,6 +534,7 @@ impl Metrics {
             steady_speed_s: tally.speed_errors.len() as f64 * dt,
             max_accel_mps2: tally.max_accel,
             max_decel_mps2: tally.max_decel,
+            max_decel_share: tally.max_decel_share,
             max_jerk_mps3: tally.max_jerk,
             emergency_s: emergency_times.len() as f64 * dt,
             max_decel_in_emergency_mps2: tally.max_em_decel,
@@ -559,6 +580,19 @@ mod tests {
 
     fn failed(m: &Metrics) -> Vec<&str> {
         m.checks.iter().filter(|c| !c.pass).map(|c| c.name.as_str()).collect()
+    }
+
+    #[test]
+    fn deceleration_is_judged_against_the_comfort_limit_of_its_speed() {
+        // 4.5 m/s2 for a car 20 m ahead: within comfort at 8 m/s (limit 4.7), not at 25 m/s (3.5).
+        let braking = |t: f64| if (10.0..11.0).contains(&t) { -4.5 } else { 0.0 };
+        let at = |v: f64| Metrics::of(&trace(20.0, |t| (v, braking(t), AccMode::Follow, Some((20.0, 0.0)))));
+        let (slow, fast) = (at(8.0), at(25.0));
+        assert_eq!((slow.max_decel_mps2, fast.max_decel_mps2), (4.5, 4.5));
+        assert!((slow.max_decel_share - 4.5 / 4.7).abs() < 1e-9, "{}", slow.max_decel_share);
+        let decel_failed = |m: &Metrics| failed(m).iter().any(|c| c.starts_with("max decel outside emergencies"));
+        assert!(!decel_failed(&slow), "{:?}", failed(&slow));
+        assert!(decel_failed(&fast), "{:?}", failed(&fast));
     }
 
     #[test]
