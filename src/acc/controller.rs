@@ -24,6 +24,8 @@ pub struct Object {
     pub lateral_m: f64,
     /// Object speed minus ego speed along ego x (negative: closing in).
     pub relative_speed_mps: f64,
+    /// Its brake lights are on.
+    pub brake_lights: bool,
 }
 
 /// The objects of one camera frame.
@@ -44,6 +46,7 @@ impl PerceptionFrame {
                 distance_m: d.distance_m,
                 lateral_m: d.lateral_offset_m,
                 relative_speed_mps: d.relative_speed_mps,
+                brake_lights: d.brake_lights,
             })
             .collect();
         PerceptionFrame { stamp_s, objects }
@@ -60,6 +63,7 @@ impl PerceptionFrame {
                 distance_m: o.position_in_ego_m[0],
                 lateral_m: o.position_in_ego_m[1],
                 relative_speed_mps: o.velocity_in_ego_mps[0],
+                brake_lights: o.brake_lights,
             })
             .collect();
         PerceptionFrame { stamp_s, objects }
@@ -165,6 +169,8 @@ struct LeadFilter {
     since_s: f64,
     /// Until then the lead counts as manoeuvring: its speed is followed closely.
     manoeuvre_until_s: f64,
+    /// Its brake lights were on in the last frame.
+    brake_lights: bool,
 }
 
 impl LeadFilter {
@@ -182,6 +188,7 @@ impl LeadFilter {
             drift: 0.0,
             since_s: t_s,
             manoeuvre_until_s: t_s,
+            brake_lights: false,
         }
     }
 
@@ -200,13 +207,30 @@ impl LeadFilter {
         self.drift += MANOEUVRE_DRIFT_GAIN * (nu - self.drift);
         if self.settled() && self.drift.abs() > MANOEUVRE_DRIFT {
             tracing::debug!(id = self.id, t_s = self.t_s, drift = self.drift, "lead manoeuvre");
-            self.p[(2, 2)] += MANOEUVRE_ACCEL_SIGMA_MPS2 * MANOEUVRE_ACCEL_SIGMA_MPS2;
-            self.p[(1, 1)] += (MANOEUVRE_ACCEL_SIGMA_MPS2 * MANOEUVRE_WINDOW_S).powi(2);
-            self.drift = 0.0;
-            self.manoeuvre_until_s = self.t_s + MANOEUVRE_HOLD_S;
+            self.manoeuvre();
         }
         let sigma = if self.t_s < self.manoeuvre_until_s { sigma } else { sigma.max(steady_sigma) };
         self.update(1, z, sigma);
+    }
+
+    /// The lead changed what it does: the acceleration's uncertainty (and the speed's that
+    /// builds over a window of it) is opened up and its speed followed closely for a while.
+    fn manoeuvre(&mut self) {
+        self.p[(2, 2)] += MANOEUVRE_ACCEL_SIGMA_MPS2 * MANOEUVRE_ACCEL_SIGMA_MPS2;
+        self.p[(1, 1)] += (MANOEUVRE_ACCEL_SIGMA_MPS2 * MANOEUVRE_WINDOW_S).powi(2);
+        self.drift = 0.0;
+        self.manoeuvre_until_s = self.t_s + MANOEUVRE_HOLD_S;
+    }
+
+    /// The lead's brake lights in a frame: coming on, they start a manoeuvre at once (the
+    /// pedal is pressed before the deceleration builds, and before the speed innovations
+    /// could say so).
+    fn brake_lights(&mut self, on: bool) {
+        if on && !self.brake_lights && self.settled() {
+            tracing::debug!(id = self.id, t_s = self.t_s, "lead brake lights on");
+            self.manoeuvre();
+        }
+        self.brake_lights = on;
     }
 
     /// Moves the estimate to `t_s` with the ego at `ego_speed_mps`.
@@ -215,6 +239,13 @@ impl LeadFilter {
         if dt <= 0.0 {
             return;
         }
+        // A lead whose brake lights came on builds its deceleration: for the manoeuvre's
+        // hold its acceleration may change as fast as a brake application makes it.
+        let jerk_sigma = if self.brake_lights && self.t_s < self.manoeuvre_until_s {
+            jerk_sigma.max(BRAKING_JERK_SIGMA_MPS3)
+        } else {
+            jerk_sigma
+        };
         self.t_s = t_s;
         let f = Matrix3::new(1.0, dt, dt * dt / 2.0, 0.0, 1.0, dt, 0.0, 0.0, 1.0);
         self.x = f * self.x;
@@ -288,6 +319,9 @@ const MANOEUVRE_DRIFT_GAIN: f64 = 0.5;
 const MANOEUVRE_DRIFT: f64 = 2.0;
 const MANOEUVRE_ACCEL_SIGMA_MPS2: f64 = 6.0;
 const MANOEUVRE_WINDOW_S: f64 = 0.1;
+/// The lead's jerk (white-noise sigma) for MANOEUVRE_HOLD_S after its brake lights came on: a
+/// brake application builds deceleration at some 10 m/s3, far beyond the steady model's.
+const BRAKING_JERK_SIGMA_MPS3: f64 = 10.0;
 /// How long after a manoeuvre the lead's speed is followed closely.
 const MANOEUVRE_HOLD_S: f64 = 1.0;
 /// A lead is judged on its acceleration (manoeuvres, braking hard) once followed this long.
@@ -523,6 +557,7 @@ impl Controller {
         let lane = &self.s.lane;
         let current = self.lead.map(|l| l.id);
         let mut best: Option<(u32, f64, f64)> = None;
+        let mut best_lights = false;
         // The nearest by the entry test alone (no hysteresis for the current lead).
         let mut entering: Option<(u32, f64, f64)> = None;
         for o in &frame.objects {
@@ -561,6 +596,7 @@ impl Controller {
             }
             if best.is_none_or(|b| gap < b.1) {
                 best = Some((o.id, gap, o.relative_speed_mps));
+                best_lights = o.brake_lights;
             }
             if off < lane.in_lane_m && entering.is_none_or(|b| gap < b.1) {
                 entering = Some((o.id, gap, o.relative_speed_mps));
@@ -585,6 +621,7 @@ impl Controller {
         match &mut self.lead {
             Some(f) if f.id == id => {
                 f.predict(t, ego.speed_mps, n.jerk_sigma_mps3);
+                f.brake_lights(best_lights);
                 f.update(0, gap, n.gap_sigma(gap));
                 f.update_speed(ego.speed_mps + rel, n.speed_sigma(gap), n.speed_steady_mps);
             }

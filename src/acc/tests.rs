@@ -18,7 +18,7 @@ fn ego(t_s: f64, speed_mps: f64) -> EgoNow {
 
 fn obj(id: u32, gap_m: f64, lateral_m: f64, relative_speed_mps: f64) -> Object {
     // distance is from the rear axle: the default front overhang is 3.65 m.
-    Object { id, distance_m: gap_m + 3.65, lateral_m, relative_speed_mps }
+    Object { id, distance_m: gap_m + 3.65, lateral_m, relative_speed_mps, brake_lights: false }
 }
 
 fn frame(t_s: f64, objects: Vec<Object>) -> PerceptionFrame {
@@ -395,8 +395,14 @@ fn with_the_road_map_the_lead_is_in_the_ego_lane_round_a_bend() {
     let (next_lane, own_lane) = (in_ego(450.0, 0), in_ego(480.0, 1));
     assert!(next_lane.1.abs() < 1.6, "the next lane's car lies on the straight-ahead line: {next_lane:?}");
     let objects = vec![
-        Object { id: 1, distance_m: next_lane.0, lateral_m: next_lane.1, relative_speed_mps: -25.0 },
-        Object { id: 2, distance_m: own_lane.0, lateral_m: own_lane.1, relative_speed_mps: -25.0 },
+        Object {
+            id: 1,
+            distance_m: next_lane.0,
+            lateral_m: next_lane.1,
+            relative_speed_mps: -25.0,
+            brake_lights: false,
+        },
+        Object { id: 2, distance_m: own_lane.0, lateral_m: own_lane.1, relative_speed_mps: -25.0, brake_lights: false },
     ];
     let lead_of = |map: bool| {
         let mut c = Controller::new(truth());
@@ -486,4 +492,36 @@ fn a_car_revealed_by_a_lead_moving_out_is_braked_for_while_the_lead_is_still_the
     }
     let a = braking.unwrap();
     assert!(a < -1.0, "target {a:.2} m/s2: the car it reveals needs ~3.3 m/s2");
+}
+
+/// Brake lights: a lead building up to 7 m/s2 (at 10 m/s3) measured as a camera tracker does
+/// (its relative speed a first-order lag of 0.2 s behind the truth) is answered sooner when its
+/// brake lights are seen coming on with the pedal: the estimate opens up at once and follows a
+/// deceleration that builds fast.
+#[test]
+fn brake_lights_coming_on_speed_the_answer_to_a_hard_braking_lead() {
+    let answer = |lights: bool| {
+        let mut c = Controller::new(AccSettings { set_speed_mps: 32.0, ..AccSettings::default() });
+        let t_brake = 10.0;
+        let lead_accel = |t: f64| if t > t_brake { (-10.0 * (t - t_brake)).max(-7.0) } else { 0.0 };
+        let (mut t, mut v, mut gap, mut lead_v, mut measured_rel) = (0.0, 30.0, 59.0, 30.0, 0.0);
+        while t < 14.0 {
+            measured_rel += (lead_v - v - measured_rel) * DT / 0.2;
+            if ((t / DT).round() as i64) % 5 == 0 {
+                let o = Object { brake_lights: lights && t > t_brake, ..obj(1, gap, 0.0, measured_rel) };
+                c.perceive(&frame(t, vec![o]), &ego(t, v));
+            }
+            let out = c.step(&ego(t, v), &[]);
+            if out.status.mode == AccMode::Emergency {
+                return t - t_brake;
+            }
+            v = (v + out.status.target_accel_mps2 * DT).max(0.0);
+            lead_v = (lead_v + lead_accel(t) * DT).max(0.0);
+            gap += (lead_v - v) * DT;
+            t += DT;
+        }
+        panic!("no answer (lights {lights})");
+    };
+    let (with, without) = (answer(true), answer(false));
+    assert!(with + 0.1 <= without, "answered {with:.2} s after the pedal with the lights seen, {without:.2} s without");
 }

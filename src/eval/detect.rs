@@ -65,6 +65,34 @@ pub struct MatchError {
     pub relative_speed_abs_mps: Option<f64>,
 }
 
+/// Brake lights over matched detections.
+#[derive(Debug, Clone, Copy, Default, Serialize)]
+pub struct BrakeLightCounts {
+    pub lit: u64,
+    pub lit_seen: u64,
+    pub unlit: u64,
+    pub unlit_seen_lit: u64,
+}
+
+impl BrakeLightCounts {
+    fn add(&mut self, truth: bool, seen: bool) {
+        if truth {
+            self.lit += 1;
+            self.lit_seen += seen as u64;
+        } else {
+            self.unlit += 1;
+            self.unlit_seen_lit += seen as u64;
+        }
+    }
+
+    fn merge(&mut self, o: BrakeLightCounts) {
+        self.lit += o.lit;
+        self.lit_seen += o.lit_seen;
+        self.unlit += o.unlit;
+        self.unlit_seen_lit += o.unlit_seen_lit;
+    }
+}
+
 /// Counts and errors accumulated over frames.
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct Tally {
@@ -78,6 +106,9 @@ pub struct Tally {
     pub far_eligible: u64,
     pub far_found: u64,
     pub errors: Vec<MatchError>,
+    /// Matched vehicles by their true brake lights: lit, how many of those seen lit; unlit,
+    /// how many of those seen lit.
+    pub brake_lights: BrakeLightCounts,
     /// Times a ground-truth vehicle's matched track id changed.
     pub id_switches: u64,
     #[serde(skip)]
@@ -116,6 +147,7 @@ impl Tally {
             self.true_positives += 1;
             let o = in_view[j];
             let d = &dets[i];
+            self.brake_lights.add(o.brake_lights, d.brake_lights);
             let previous = self.last_track_of.insert(o.id, d.track_id);
             self.id_switches += previous.is_some_and(|p| p != d.track_id) as u64;
             // Relative speed is judged once the same track has held the vehicle for a frame.
@@ -246,6 +278,7 @@ pub struct ScenarioScore {
     /// (median, p90) of |relative speed error|, m/s.
     pub relative_speed_error_mps: Option<(f64, f64)>,
     pub id_switches: u64,
+    pub brake_lights: BrakeLightCounts,
 }
 
 impl ScenarioScore {
@@ -271,6 +304,7 @@ impl ScenarioScore {
             lateral_error_m: t.lateral_error(),
             relative_speed_error_mps: t.relative_speed_error(),
             id_switches: t.id_switches,
+            brake_lights: t.brake_lights,
         }
     }
 }
@@ -308,6 +342,7 @@ impl Tally {
         self.far_found += other.far_found;
         self.errors.extend(other.errors);
         self.id_switches += other.id_switches;
+        self.brake_lights.merge(other.brake_lights);
     }
 }
 
@@ -316,11 +351,11 @@ pub fn markdown(report: &DetectReport) -> String {
     let pct =
         |e: Option<(f64, f64)>| e.map_or("-".to_string(), |(m, p)| format!("{:.1}% / {:.1}%", m * 100.0, p * 100.0));
     let mut s = String::from(
-        "| scenario | frames | precision | recall to 60 m (found/eligible) | recall 60-150/200 m, full view | dist. err. 0-20 m | 20-40 m | 40-60 m | 60-150 m | 150+ m | lateral err. m | rel. speed err. m/s | id switches |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| scenario | frames | precision | recall to 60 m (found/eligible) | recall 60-150/200 m, full view | dist. err. 0-20 m | 20-40 m | 40-60 m | 60-150 m | 150+ m | lateral err. m | rel. speed err. m/s | id switches | brake lights: lit seen lit, unlit seen lit |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in report.scenarios.iter().chain(std::iter::once(&report.overall)) {
         s.push_str(&format!(
-            "| {} | {} | {:.3} | {:.3} ({}/{}) | {} | {} | {} | {} | {} | {} | {} | {} | {} |\n",
+            "| {} | {} | {:.3} | {:.3} ({}/{}) | {} | {} | {} | {} | {} | {} | {} | {} | {} | {}/{}, {}/{} |\n",
             r.scenario,
             r.frames,
             r.precision,
@@ -336,6 +371,10 @@ pub fn markdown(report: &DetectReport) -> String {
             r.lateral_error_m.map_or("-".into(), |(m, p)| format!("{m:.2} / {p:.2}")),
             r.relative_speed_error_mps.map_or("-".into(), |(m, p)| format!("{m:.2} / {p:.2}")),
             r.id_switches,
+            r.brake_lights.lit_seen,
+            r.brake_lights.lit,
+            r.brake_lights.unlit_seen_lit,
+            r.brake_lights.unlit,
         ));
     }
     s.push_str("\nErrors: median / p90 over matched detections (relative speed: tracks seen twice or more).\n");
@@ -482,6 +521,46 @@ mod rendered {
         let mut rig =
             crate::perception::CameraRig::new(cameras.front.info(), cameras.narrow_info(), DetectorParams::default());
         (rig.detect(&cameras.front.rgb, cameras.narrow_rgb()), ground_truth(&world, &vis))
+    }
+
+    /// Brake lights: a vehicle ahead (its driver braking from 0.2 s on) is seen with its lamps
+    /// lit after half a second and unlit before, near through the front camera and far
+    /// through the narrow one, for every class; a red car cruising is not braking.
+    #[test]
+    fn brake_lights_are_seen_lit_only_while_the_vehicle_brakes() {
+        let lights_at = |class: &str, lane: i32, gap: f64, color: &str, t_s: f64| {
+            let text = format!(
+                "{{ name: 't', duration_s: 10, seed: 3, variation: {{ gap_m: 0, speed_mps: 0 }}, ego: {{ lane: 1, speed_mps: 20 }}, traffic: [{{ lane: {lane}, gap_m: {gap}, speed_mps: 20, class: '{class}'{color}, actions: [{{ at_s: 0.2, speed_mps: 0, accel_mps2: 4 }}] }}] }}"
+            );
+            let mut world = World::new(Scenario::parse(&text, "test").unwrap(), 3, 100);
+            while (world.time_ns() as f64) < t_s * 1e9 {
+                world.step(crate::sim::world::EgoInput::Cruise);
+            }
+            let truth = world.vehicles()[1].brake_lights;
+            let mut cameras = crate::sim::cameras::Cameras::new(&SimSettings::default(), &world);
+            cameras.draw(&world);
+            let mut rig = crate::perception::CameraRig::new(
+                cameras.front.info(),
+                cameras.narrow_info(),
+                DetectorParams::default(),
+            );
+            let dets = rig.detect(&cameras.front.rgb, cameras.narrow_rgb());
+            let what = format!("{class}{color} in lane {lane}, {gap} m, at {t_s} s");
+            assert_eq!(dets.len(), 1, "{what}: {dets:?}");
+            (truth, dets[0].brake_lights)
+        };
+        for (class, lane, gap) in [
+            ("car", 1, 15.0),
+            ("car", 0, 40.0),
+            ("car", 1, 120.0),
+            ("van", 1, 60.0),
+            ("truck", 1, 150.0),
+            ("motorcycle", 1, 30.0),
+        ] {
+            assert_eq!(lights_at(class, lane, gap, "", 0.1), (false, false), "{class} at {gap} m cruising");
+            assert_eq!(lights_at(class, lane, gap, "", 0.7), (true, true), "{class} at {gap} m braking");
+        }
+        assert_eq!(lights_at("car", 1, 20.0, ", color: [230, 20, 20]", 0.1), (false, false), "a red car");
     }
 
     /// Long range through the narrow camera: cars to 150 m and trucks to 200 m, in the ego's

@@ -60,6 +60,8 @@ pub struct GroundTruthObject {
     pub bbox: Option<BoundingBox2d>,
     /// Fraction of the object's projected area not hidden by nearer objects or the image edge.
     pub visible_fraction: f32,
+    /// Its brake lights are on (the brake pedal is pressed).
+    pub brake_lights: bool,
 }
 
 /// objects: ground truth, stamped with the same simulation time as the camera frame it
@@ -98,6 +100,8 @@ pub struct Detection {
     pub lateral_offset_m: f64,
     /// Object speed minus ego speed along ego x (negative: closing in).
     pub relative_speed_mps: f64,
+    /// Its brake lights are seen lit in this frame.
+    pub brake_lights: bool,
 }
 
 /// perception/objects: detections from one camera frame. The header's `stamp_sim_ns` is the
@@ -136,6 +140,7 @@ pub(super) fn example_ground_truth() -> GroundTruthObjects {
             velocity_in_ego_mps: [-2.5, 0.0, 0.0],
             bbox: Some(BoundingBox2d { u_min_px: 300.0, v_min_px: 230.0, u_max_px: 340.0, v_max_px: 262.0 }),
             visible_fraction: 1.0,
+            brake_lights: true,
         }],
     }
 }
@@ -152,6 +157,7 @@ pub(crate) fn example_detections() -> Detections {
             distance_m: 27.5,
             lateral_offset_m: 0.125,
             relative_speed_mps: -2.5,
+            brake_lights: true,
         }],
     }
 }

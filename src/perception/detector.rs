@@ -13,6 +13,9 @@
 //!    narrow or too low for a vehicle at that distance is rejected.
 //! 5. A candidate lying inside the box of a nearer one (a dark window, a black car's body) is
 //!    part of it and suppressed.
+//! 6. Brake lights: lit lamps are a saturated red brighter than any sunlit paint (red near
+//!    full scale, green and blue far below it); such pixels low in the vehicle's box, on both
+//!    sides of its middle (a motorcycle: anywhere), mean its brake lights are on.
 //!
 //! It reads only pixels and the camera info: no ground truth, no palette.
 
@@ -70,7 +73,24 @@ pub struct FrameDetection {
     pub height_m: f64,
     pub width_m: f64,
     pub confidence: f32,
+    /// Its brake lights are lit in this frame.
+    pub brake_lights: bool,
 }
+
+/// A lit lamp's pixel: red at least this, and this much above green and above blue. A tail
+/// light that is off, or a red body in sunlight, stays below (the brightest sunlit face of a
+/// pure red body has its red only at full scale with green and blue near 0: such a body would
+/// read as braking; no scenario colour comes near).
+const LIT_RED_MIN: u8 = 235;
+const LIT_RED_OVER_GB: i32 = 150;
+/// Lit pixels in a motorcycle's box that mean its brake light is on (other vehicles need one on
+/// each side; a lamp 150 m ahead covers ~8 pixels in the narrow camera, 50 m ahead ~6 in the
+/// front one).
+const LIT_LAMP_MIN_PX: u32 = 2;
+
+/// Stop lamps are looked for up to this height above the ground (regulations put them between
+/// about 0.35 and 1.5 m; the simulator's cars have theirs at 0.6-0.8 m, vans' to 1.2 m).
+const LAMPS_MAX_HEIGHT_M: f64 = 1.3;
 
 /// Largest step of the contact row between neighbouring columns of one vehicle, pixels.
 const JUMP_PX: i64 = 3;
@@ -444,6 +464,18 @@ impl Detector {
             (false, true) => self.camera.lateral_at(bu0 as f64, edge_v, contact.x) - half_width,
             _ => contact.y,
         };
+        // Stop lamps sit at most LAMPS_MAX_HEIGHT_M above the ground, one on each side (a
+        // motorcycle's single lamp in the middle): a lamp of a vehicle beside or beyond this
+        // one, showing at one edge of its box, does not light it.
+        let lamps_top = (contact_v - LAMPS_MAX_HEIGHT_M * px_per_m).floor().max(top as f64) as usize;
+        let rows = lamps_top..=c.v1 as usize;
+        // Cut by the image's side, the other lamp may be out of view.
+        let brake_lights = if class == ObjectClass::Motorcycle || !whole {
+            lit_pixels(rgb, w, u0..=u1, rows) >= LIT_LAMP_MIN_PX
+        } else {
+            let mid = (u0 + u1) / 2;
+            lit_pixels(rgb, w, u0..=mid, rows.clone()) >= 1 && lit_pixels(rgb, w, mid + 1..=u1, rows) >= 1
+        };
         Ok(FrameDetection {
             bbox: BoundingBox2d {
                 u_min_px: u0 as f32,
@@ -458,6 +490,7 @@ impl Detector {
             height_m,
             width_m,
             confidence,
+            brake_lights,
         })
     }
 
@@ -583,6 +616,24 @@ impl Detector {
 /// Neighbouring columns (column, lowest row, highest row) where a thin band meets a tall dark
 /// region a step lower: a far vehicle's contact band touching a nearer one's dark body or
 /// glass in the image, not one band (a wheel at a band's side ends on the band's row).
+/// Pixels of a lit lamp (LIT_RED_MIN, LIT_RED_OVER_GB) in the given columns and rows.
+fn lit_pixels(
+    rgb: &[u8],
+    w: usize,
+    columns: std::ops::RangeInclusive<usize>,
+    rows: std::ops::RangeInclusive<usize>,
+) -> u32 {
+    let mut n = 0;
+    for v in rows {
+        let row = &rgb[v * w * 3..(v + 1) * w * 3];
+        for px in row[columns.start() * 3..(columns.end() + 1).min(w) * 3].chunks_exact(3) {
+            let (r, g, b) = (px[0], px[1] as i32, px[2] as i32);
+            n += u32::from(r >= LIT_RED_MIN && r as i32 - g.max(b) >= LIT_RED_OVER_GB);
+        }
+    }
+    n
+}
+
 fn thin_meets_tall(a: (u32, u32, u32), b: (u32, u32, u32)) -> bool {
     let (ta, tb) = (a.1 - a.2 + 1, b.1 - b.2 + 1);
     a.1.abs_diff(b.1) >= 2 && ta.max(tb) >= TALL_RATIO * ta.min(tb)

@@ -94,6 +94,8 @@ fn fuse(
             (Some(_), false) => continue,
             (Some(i), true) => {
                 n.bbox = to_image_of(wide, narrow, &n);
+                // Lamps seen lit by either camera are lit.
+                n.brake_lights |= out[i].brake_lights;
                 out[i] = n;
             }
             (None, _) => {
@@ -157,6 +159,7 @@ mod tests {
             height_m: 1.5,
             width_m: 1.8,
             confidence: 1.0,
+            brake_lights: false,
         }
     }
 

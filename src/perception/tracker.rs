@@ -138,6 +138,7 @@ impl Tracker {
                 distance_m: t.distance_m(),
                 lateral_offset_m: t.lateral_m,
                 relative_speed_mps: if t.hits >= 2 { t.relative_speed_mps() } else { 0.0 },
+                brake_lights: d.brake_lights,
             });
         }
         self.tracks.retain(|t| t_s - t.last_seen_s <= MAX_COAST_S);
@@ -159,6 +160,7 @@ mod tests {
             height_m: 1.4,
             width_m: 1.8,
             confidence: 0.9,
+            brake_lights: false,
         }
     }
 

@@ -36,6 +36,7 @@ fn object(ego: &VehicleView, v: &VehicleView, visibility: &[ObjectVisibility]) -
         velocity_in_ego_mps: [relative_velocity.x, relative_velocity.y, 0.0],
         bbox: vis.and_then(|o| o.bbox),
         visible_fraction: vis.map_or(0.0, |o| o.visible_fraction),
+        brake_lights: v.brake_lights,
     }
 }
 

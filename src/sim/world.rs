@@ -45,7 +45,13 @@ pub struct VehicleView {
     pub s_m: f64,
     pub d_m: f64,
     pub lane: i32,
+    /// Its brake lights are on: the brake pedal is pressed beyond BRAKE_LIGHT_PEDAL.
+    pub brake_lights: bool,
 }
+
+/// Brake pedal (0..1) beyond which a vehicle's brake lights come on: about 0.3 m/s2 of a
+/// car's 9 m/s2, so that a driver's lightest touch lights them and coasting does not.
+pub const BRAKE_LIGHT_PEDAL: f64 = 0.03;
 
 impl VehicleView {
     pub fn forward_speed_mps(&self) -> f64 {
@@ -132,6 +138,8 @@ struct Body {
     driver: Option<TrafficDriver>,
     /// Throttle and brake as applied: the commanded ones through the actuator lag.
     applied: Actuation,
+    /// The brake as commanded (the pedal): the brake lights follow it, not the lagging brake.
+    pedal_brake: f64,
 }
 
 /// The world and its clock.
@@ -190,7 +198,7 @@ impl Placing<'_> {
         // Starting at speed: the throttle that holds it is already applied.
         let (throttle, brake) = actuate_acceleration(&params, speed, 0.0);
         let applied = Actuation { throttle, brake, steer: 0.0 };
-        self.bodies.push(Body { id, class, params, color, body, driver, applied });
+        self.bodies.push(Body { id, class, params, color, body, driver, applied, pedal_brake: 0.0 });
     }
 
     /// The scenario's scripted traffic: start gaps and speeds vary a little with the seed.
@@ -312,6 +320,7 @@ impl World {
                     s_m: s,
                     d_m: d,
                     lane: self.road.lane_at(d),
+                    brake_lights: b.pedal_brake > BRAKE_LIGHT_PEDAL,
                 }
             })
             .collect()
@@ -455,6 +464,7 @@ impl World {
             let lag = b.params.actuator_lag_s;
             b.applied.throttle = lag_toward(b.applied.throttle, act.throttle.clamp(0.0, 1.0), lag, dt);
             b.applied.brake = lag_toward(b.applied.brake, act.brake.clamp(0.0, 1.0), lag, dt);
+            b.pedal_brake = act.brake.clamp(0.0, 1.0);
             b.applied.steer = act.steer;
             let state = self.physics.state(b.body);
             let wrench = forces(&b.params, &state, &b.applied, dt);

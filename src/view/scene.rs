@@ -407,6 +407,7 @@ mod tests {
             velocity_in_ego_mps: [-2.0, 0.0, 0.0],
             bbox,
             visible_fraction: 1.0,
+            brake_lights: false,
         }
     }
 
@@ -422,6 +423,7 @@ mod tests {
             distance_m: 27.4,
             lateral_offset_m: 0.0,
             relative_speed_mps: -1.0,
+            brake_lights: false,
         };
         let detections =
             Detections { frame_seq: 3, frame_stamp_pub_ns: 5_250_000_000, detections: vec![det(1), det(2)] };

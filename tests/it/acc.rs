@@ -66,6 +66,7 @@ fn lead_truth(step: u64, gap_m: f64) -> GroundTruthObjects {
             velocity_in_ego_mps: [0.0, 0.0, 0.0],
             bbox: None,
             visible_fraction: 1.0,
+            brake_lights: false,
         }],
     }
 }
@@ -294,6 +295,7 @@ async fn a_vanished_detector_is_perception_lost() {
                 distance_m: 43.65,
                 lateral_offset_m: 0.1,
                 relative_speed_mps: 0.0,
+                brake_lights: false,
             }],
         };
         for _ in 0..40 {

@@ -113,6 +113,7 @@ impl Gen {
             velocity_in_ego_mps: self.v3(),
             bbox: self.opt(Gen::bbox),
             visible_fraction: self.f32(0.0, 1.0),
+            brake_lights: self.bool(),
         }
     }
     fn detection(&mut self) -> Detection {
@@ -124,6 +125,7 @@ impl Gen {
             distance_m: self.f64(0.0, 200.0),
             lateral_offset_m: self.f64(-10.0, 10.0),
             relative_speed_mps: self.f64(-40.0, 40.0),
+            brake_lights: self.bool(),
         }
     }
     fn event(&mut self) -> SimEvent {

@@ -12,11 +12,12 @@ import pytest
 from conftest import ROOT
 
 from slipstream_client import decode
+from slipstream_client.wire import WIRE_VERSION
 
 mcap_reader = pytest.importorskip("mcap.reader", reason="scripts/test.sh installs the mcap package")
 from mcap.stream_reader import StreamReader  # noqa: E402
 
-WIRE = "slipstream/v2"
+WIRE = f"slipstream/v{WIRE_VERSION}"
 
 
 def read_all(path):
@@ -103,7 +104,7 @@ def test_up_record_is_read_whole_by_an_independent_reader(lockstep_run):
     seen = {row["key"] for row in up["topics"]}
     assert seen == set(channels), (seen, set(channels))
     assert channels["camera/front"]["messages"] > 50
-    assert int(info["wire_version"]) == 2 and info["namespace"] == ""
+    assert int(info["wire_version"]) == WIRE_VERSION and info["namespace"] == ""
 
 
 def test_a_cut_recording_reads_up_to_its_last_chunk(slipstream_bin, sim_bin, free_port, tmp_path):

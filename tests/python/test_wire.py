@@ -6,6 +6,7 @@ import subprocess
 import pytest
 
 from slipstream_client import WireError, decode, encode
+from slipstream_client.wire import WIRE_VERSION
 
 
 @pytest.fixture(scope="module")
@@ -38,7 +39,9 @@ def test_decoded_values_are_the_documented_ones(examples):
     car = gt["objects"][0]
     assert (car["id"], car["class"], car["lane"]) == (3, "Car", 1)
     assert car["position_in_ego_m"] == [27.75, 0.0, 0.0]
-    assert car["bbox"]["u_max_px"] == 340.0
+    assert car["bbox"]["u_max_px"] == 340.0 and car["brake_lights"] is True
+    detection = decode(examples["Detections"])[2]["detections"][0]
+    assert (detection["relative_speed_mps"], detection["brake_lights"]) == (-2.5, True)
     state = decode(examples["VehicleState"])[2]
     assert state["position_in_world_m"] == [31.25, -1.75, 0.0] and state["applied"]["answers_step"] == 124
     assert decode(examples["SimEvent"])[2]["kind"] == {"variant": "Collision", "other_id": 3, "relative_speed_mps": 4.5}
@@ -65,7 +68,7 @@ def test_python_encodes_what_rust_documents():
     header = {"seq": 1, "stamp_sim_ns": 0, "stamp_pub_ns": 5}
     # -1 as i32 is zigzag 1; 300 as varint is ac 02.
     state_lane = encode("Speed", header, {"speed_mps": 1.0})
-    assert state_lane[:5] == bytes([2, 1, 1, 0, 5])
+    assert state_lane[:5] == bytes([WIRE_VERSION, 1, 1, 0, 5]) and WIRE_VERSION == 3
     event = encode("SimEvent", header, {"kind": {"variant": "ControlTimeout", "late": ["acc"]}})
     assert event[5:] == bytes([3, 1, 3]) + b"acc"
     assert decode(event)[2]["kind"]["late"] == ["acc"]

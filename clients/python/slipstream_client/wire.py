@@ -1,4 +1,4 @@
-"""slipstream wire format (version 2) in pure Python, written from docs/wire-format.md alone.
+"""slipstream wire format (version 3) in pure Python, written from docs/wire-format.md alone.
 
 decode(payload) -> (kind_name, header, body) and encode(kind_name, header, body) -> bytes.
 Bodies are dicts keyed by the field names of the doc; enums are their variant names
@@ -9,7 +9,7 @@ Decoding is strict, like the Rust side: any malformed payload raises WireError.
 import struct
 import threading
 
-WIRE_VERSION = 2
+WIRE_VERSION = 3
 
 
 class WireError(ValueError):
@@ -64,12 +64,12 @@ STRUCTS = {
         ("id", "u32"), ("class", OBJECT_CLASS), ("size_m", VEC3), ("lane", "i32"), ("position_in_world_m", VEC3),
         ("yaw_in_world_rad", "f64"), ("velocity_in_world_mps", VEC3), ("position_in_ego_m", VEC3),
         ("yaw_in_ego_rad", "f64"), ("velocity_in_ego_mps", VEC3), ("bbox", ("opt", ("struct", "BoundingBox2d"))),
-        ("visible_fraction", "f32"),
+        ("visible_fraction", "f32"), ("brake_lights", "bool"),
     ],
     "GroundTruthObjects": [("step", "u64"), ("objects", ("seq", ("struct", "GroundTruthObject")))],
     "Detection": [
         ("track_id", "u32"), ("class", OBJECT_CLASS), ("bbox", ("struct", "BoundingBox2d")), ("confidence", "f32"),
-        ("distance_m", "f64"), ("lateral_offset_m", "f64"), ("relative_speed_mps", "f64"),
+        ("distance_m", "f64"), ("lateral_offset_m", "f64"), ("relative_speed_mps", "f64"), ("brake_lights", "bool"),
     ],
     "Detections": [("frame_seq", "u64"), ("frame_stamp_pub_ns", "u64"), ("detections", ("seq", ("struct", "Detection")))],
     "SimClock": [("step", "u64"), ("real_time_factor", "f32"), ("mode", ("enum", ["Realtime", "Fast", "Lockstep"])), ("physics_hz", "f64")],

@@ -14,6 +14,9 @@ pub const SHADOW: [u8; 3] = [42, 42, 46];
 const GLASS: [u8; 3] = [38, 50, 62];
 const TYRE: [u8; 3] = [22, 22, 22];
 const TAIL_LIGHT: [u8; 3] = [205, 25, 25];
+/// Tail lights when braking: they emit, so the sun's shading does not dim them (no lit body
+/// face reaches this red: its red is at most 255 x the light, with green and blue far below).
+pub const BRAKE_LIGHT: [u8; 3] = [255, 42, 30];
 /// A rider's clothing.
 const RIDER: [u8; 3] = [48, 50, 58];
 const TRIM: [u8; 3] = [35, 35, 38];
@@ -114,6 +117,8 @@ pub struct Face {
     pub corners: [Point3<f64>; 4],
     pub normal: Vector3<f64>,
     pub color: [u8; 3],
+    /// A lamp that is on: drawn in its own colour, not shaded.
+    pub emissive: bool,
 }
 
 impl Face {
@@ -124,6 +129,9 @@ impl Face {
 
     /// The colour lit by a fixed sun, for a body turned by `yaw_rad`.
     pub fn shaded(&self, yaw_rad: f64) -> [u8; 3] {
+        if self.emissive {
+            return self.color;
+        }
         let sun = Vector3::new(-0.35, 0.45, 0.82).normalize();
         let (sin, cos) = yaw_rad.sin_cos();
         let n = Vector3::new(
@@ -156,7 +164,7 @@ fn cuboid(out: &mut Vec<Face>, min: [f64; 3], max: [f64; 3], colors: BoxColors) 
     let [x1, y1, z1] = max;
     let p = Point3::new;
     let mut face = |corners, normal: [f64; 3], color| {
-        out.push(Face { corners, normal: Vector3::from(normal), color });
+        out.push(Face { corners, normal: Vector3::from(normal), color, emissive: false });
     };
     face([p(x1, y0, z0), p(x1, y1, z0), p(x1, y1, z1), p(x1, y0, z1)], [1.0, 0.0, 0.0], colors.front);
     face([p(x0, y1, z0), p(x0, y0, z0), p(x0, y0, z1), p(x0, y1, z1)], [-1.0, 0.0, 0.0], colors.rear);
@@ -218,18 +226,27 @@ pub fn vehicle_faces(v: &VehicleView) -> Vec<Face> {
             cuboid(&mut faces, [x - r, ya.min(yb), 0.0], [x + r, ya.max(yb), 2.0 * r], BoxColors::all(TYRE));
         }
     }
-    // Tail lights on the rear face.
+    // Tail lights on the rear face, lit when braking.
     let light_z = if v.class == ObjectClass::Truck { [0.55, 0.85] } else { [height * 0.42, height * 0.54] };
     for side in [-1.0, 1.0] {
         let (ya, yb) = (side * (hw - 0.45), side * (hw - 0.08));
-        cuboid(
+        tail_light(
             &mut faces,
+            v.brake_lights,
             [rear - 0.03, ya.min(yb), light_z[0]],
             [rear + 0.01, ya.max(yb), light_z[1]],
-            BoxColors::all(TAIL_LIGHT),
         );
     }
     faces
+}
+
+/// A tail light as a box; on (braking), it emits BRAKE_LIGHT.
+fn tail_light(out: &mut Vec<Face>, on: bool, min: [f64; 3], max: [f64; 3]) {
+    let from = out.len();
+    cuboid(out, min, max, BoxColors::all(if on { BRAKE_LIGHT } else { TAIL_LIGHT }));
+    for f in &mut out[from..] {
+        f.emissive = on;
+    }
 }
 
 /// A motorcycle and its rider as boxes: two wheels in line, the machine between them, the
@@ -247,6 +264,6 @@ fn motorcycle_faces(v: &VehicleView) -> Vec<Face> {
     cuboid(&mut faces, [rear + 0.15, -0.22, 0.3], [front - 0.3, 0.22, 0.85], BoxColors::all(v.color));
     cuboid(&mut faces, [0.2, -0.25, 0.85], [0.75, 0.25, height - 0.28], BoxColors::all(RIDER));
     cuboid(&mut faces, [0.33, -0.14, height - 0.28], [0.63, 0.14, height], BoxColors::all(v.color));
-    cuboid(&mut faces, [rear - 0.03, -0.1, 0.68], [rear + 0.01, 0.1, 0.8], BoxColors::all(TAIL_LIGHT));
+    tail_light(&mut faces, v.brake_lights, [rear - 0.03, -0.1, 0.68], [rear + 0.01, 0.1, 0.8]);
     faces
 }
