@@ -10,7 +10,7 @@
 
 use nalgebra::Vector2;
 
-pub use crate::msg::{Curve, RoadSpec};
+pub use crate::msg::{Curve, LaneEnd, RoadSpec};
 
 /// Spacing of the precomputed centre-line samples.
 const SAMPLE_M: f64 = 0.5;
@@ -72,6 +72,23 @@ impl Road {
             return -1;
         }
         ((from_right / self.spec.lane_width_m) as i32).min(self.spec.lanes as i32 - 1)
+    }
+
+    /// Where `lane` ends, if it does.
+    pub fn lane_end(&self, lane: u32) -> Option<&LaneEnd> {
+        self.spec.lane_ends.iter().find(|e| e.lane == lane)
+    }
+
+    /// The share of `lane`'s width open at `s`: 1 before its taper, falling to 0 at its end.
+    pub fn lane_open(&self, lane: u32, s: f64) -> f64 {
+        self.lane_end(lane).map_or(1.0, |e| ((e.end_m - s) / e.taper_m).clamp(0.0, 1.0))
+    }
+
+    /// The road's right and left edges at `s` (lateral offsets): an outer lane that ends
+    /// moves its edge in over the taper.
+    pub fn edges_d(&self, s: f64) -> (f64, f64) {
+        let (hw, w, last) = (self.half_width_m(), self.spec.lane_width_m, self.spec.lanes.saturating_sub(1));
+        (-hw + (1.0 - self.lane_open(0, s)) * w, hw - (1.0 - self.lane_open(last, s)) * w)
     }
 
     /// Centre-line point and heading at `s`; beyond the ends the line goes on straight.

@@ -28,7 +28,7 @@ pub use any::{decode_json, peek_kind};
 pub use camera::{encode_jpeg, frame_prefix, CameraFrame, CameraFrameRef, CameraInfo, ImageEncoding};
 pub use codec::{decode, decode_header, encode, encode_into, DecodeError, Stamped};
 pub use objects::{BoundingBox2d, Detection, Detections, GroundTruthObject, GroundTruthObjects, ObjectClass};
-pub use road::{Curve, RoadSpec};
+pub use road::{Curve, LaneEnd, RoadSpec};
 pub use sim::{due, SimClock, SimEvent, SimEventKind, SimMode};
 pub use vehicle::{ControlCommand, ControlTiming, Speed, VehicleState};
 /// Example messages of docs/wire-format.md, for tests elsewhere in the crate.
@@ -199,6 +199,7 @@ pub fn examples() -> Vec<(MessageKind, Vec<u8>)> {
                     lane_width_m: 3.5,
                     length_m: 4000.0,
                     curves: vec![Curve { start_m: 300.0, length_m: 350.0, radius_m: 600.0 }],
+                    lane_ends: vec![LaneEnd { lane: 0, end_m: 900.0, taper_m: 120.0 }],
                 },
             ),
         ),

@@ -17,6 +17,24 @@ pub struct Curve {
     pub radius_m: f64,
 }
 
+/// An outer lane that ends: full width until `end_m - taper_m`, narrowing to nothing at
+/// `end_m` (its outer edge moving in), gone beyond. Traffic in it merges before the end.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LaneEnd {
+    /// 0 (the rightmost) or the leftmost lane.
+    pub lane: u32,
+    pub end_m: f64,
+    #[serde(default = "LaneEnd::default_taper_m")]
+    pub taper_m: f64,
+}
+
+impl LaneEnd {
+    fn default_taper_m() -> f64 {
+        120.0
+    }
+}
+
 /// The road as a scenario describes it.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -25,11 +43,13 @@ pub struct RoadSpec {
     pub lane_width_m: f64,
     pub length_m: f64,
     pub curves: Vec<Curve>,
+    /// Outer lanes that end (at most one end per lane).
+    pub lane_ends: Vec<LaneEnd>,
 }
 
 impl Default for RoadSpec {
     fn default() -> Self {
-        RoadSpec { lanes: 3, lane_width_m: 3.5, length_m: 4000.0, curves: Vec::new() }
+        RoadSpec { lanes: 3, lane_width_m: 3.5, length_m: 4000.0, curves: Vec::new(), lane_ends: Vec::new() }
     }
 }
 
@@ -61,6 +81,26 @@ impl RoadSpec {
                     "start_m must be >= 0 and length_m > 0".into(),
                     "see docs/simulator.md (scenario format)",
                 );
+            }
+        }
+        for (i, e) in self.lane_ends.iter().enumerate() {
+            let key = |k: &str| format!("road.lane_ends[{i}]{k}");
+            if self.lanes < 2 || (e.lane != 0 && e.lane != self.lanes - 1) {
+                return bad(
+                    &key(".lane"),
+                    format!("lane {} is not an outer lane of a {}-lane road", e.lane, self.lanes),
+                    "end lane 0 (rightmost) or the leftmost lane, on a road of 2 lanes or more",
+                );
+            }
+            if !(e.taper_m >= 20.0 && e.taper_m.is_finite() && e.end_m >= e.taper_m && e.end_m <= self.length_m) {
+                return bad(
+                    &key(""),
+                    format!("end_m {} and taper_m {}", e.end_m, e.taper_m),
+                    "use taper_m >= 20 m and taper_m <= end_m <= road.length_m",
+                );
+            }
+            if self.lane_ends[..i].iter().any(|o| o.lane == e.lane) {
+                return bad(&key(".lane"), format!("lane {} ends twice", e.lane), "give each lane one end");
             }
         }
         None

@@ -45,6 +45,10 @@ const FOLLOW_STANDSTILL_M: f64 = 4.0;
 pub const LANE_CHANGE_SAFE_DECEL_MPS2: f64 = 2.0;
 /// ... and no bumper comes closer than this.
 const LANE_CHANGE_MIN_GAP_M: f64 = 3.0;
+/// A driver in a lane that ends moves over from this far before its taper begins, when the
+/// gap beside is safe (looking again every step); until it has, it stops short of the taper's
+/// middle as behind a standing vehicle.
+const MERGE_AHEAD_M: f64 = 250.0;
 
 /// The acceleration traffic asks for behind a lead `gap_m` ahead (bumper to bumper).
 fn follow_accel(speed_mps: f64, lead_gap_m: f64, lead_speed_mps: f64) -> f64 {
@@ -276,6 +280,20 @@ impl TrafficDriver {
         }
     }
 
+    /// In a lane that ends, within MERGE_AHEAD_M of its taper: the lane beside it when the
+    /// gap there is safe. A vehicle that stands (target speed 0) stays where it is.
+    fn merge_before_end(&mut self, road: &Road, me: &Observation, t_s: f64, others: &[Neighbour]) {
+        let Some(end) = road.lane_end(self.lane) else { return };
+        if self.cruise.target_mps <= 0.5 || me.s_m < end.end_m - end.taper_m - MERGE_AHEAD_M {
+            return;
+        }
+        let inward = if self.lane == 0 { 1 } else { self.lane - 1 };
+        if others.iter().find(|o| o.id == me.id).is_some_and(|m| safe_to_enter(m, inward, others)) {
+            self.offset_m = 0.0;
+            self.change_lane(road, me, inward, t_s, 4.0);
+        }
+    }
+
     /// This step's actuation.
     #[allow(clippy::too_many_arguments)]
     pub fn drive(
@@ -291,7 +309,16 @@ impl TrafficDriver {
     ) -> Actuation {
         self.start_actions(road, me, t_s, gap_to_ego_m);
         self.wander(road, me, t_s, others);
-        let lead = if self.follow { lead } else { None };
+        self.merge_before_end(road, me, t_s, others);
+        let mut lead = if self.follow { lead } else { None };
+        // Not over yet: the lane's end stands ahead (stop short of the taper's middle).
+        if let Some(end) = road.lane_end(self.lane) {
+            let front = me.s_m + params.size_m[0] - params.rear_overhang_m;
+            let gap_m = end.end_m - end.taper_m / 2.0 - front;
+            if lead.is_none_or(|l| gap_m < l.gap_m) {
+                lead = Some(Lead { gap_m, speed_mps: 0.0 });
+            }
+        }
         let (throttle, brake) = self.cruise.longitudinal(params, me.speed_mps, lead, dt_s);
         // During a lane change the pursued point is where the change should have the vehicle
         // once it gets there (the lookahead's time ahead): so the move takes its duration_s,

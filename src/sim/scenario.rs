@@ -23,6 +23,7 @@ pub const BUILT_IN: &[(&str, &str)] = &[
     ("curve-follow", include_str!("../../scenarios/curve-follow.json5")),
     ("stopped-car-on-shoulder", include_str!("../../scenarios/stopped-car-on-shoulder.json5")),
     ("bend-with-stopped-cars", include_str!("../../scenarios/bend-with-stopped-cars.json5")),
+    ("lane-ends-at-bend", include_str!("../../scenarios/lane-ends-at-bend.json5")),
     ("bend-stopped-car-in-lane", include_str!("../../scenarios/bend-stopped-car-in-lane.json5")),
     ("passing-trucks", include_str!("../../scenarios/passing-trucks.json5")),
     ("truck-reveals-stopped-car", include_str!("../../scenarios/truck-reveals-stopped-car.json5")),
@@ -347,6 +348,13 @@ impl Scenario {
         if self.ego.lane >= lanes {
             return err("ego.lane", format!("lane {} does not exist on a {lanes}-lane road", self.ego.lane), &lane_fix);
         }
+        if let Some(end) = self.road.lane_ends.iter().find(|e| e.lane == self.ego.lane) {
+            return err(
+                "ego.lane",
+                format!("lane {} ends at {} m and the ego keeps its lane", end.lane, end.end_m),
+                "start the ego in a lane that goes on (traffic in the ending lane merges)",
+            );
+        }
         if !speed_ok(self.ego.speed_mps) {
             return err("ego.speed_mps", format!("{} m/s", self.ego.speed_mps), "use 0 to 70 m/s");
         }
@@ -506,6 +514,20 @@ mod tests {
         let e = Scenario::parse(&off, "my.json5").unwrap_err();
         assert_eq!(e.key, "traffic[0].offset_m", "{e}");
         assert!(e.fix.contains("4.75"), "{e}");
+
+        let ends = |ends: &str| fine.replacen("ego:", &format!("road: {{ lane_ends: [{ends}] }}, ego:"), 1);
+        let e = Scenario::parse(&ends("{ lane: 1, end_m: 500 }"), "my.json5").unwrap_err();
+        assert_eq!(e.key, "road.lane_ends[0].lane", "{e}");
+        let e = Scenario::parse(&ends("{ lane: 0, end_m: 50, taper_m: 100 }"), "my.json5").unwrap_err();
+        assert_eq!(e.key, "road.lane_ends[0]", "{e}");
+        let e = Scenario::parse(&ends("{ lane: 2, end_m: 500 }, { lane: 2, end_m: 900 }"), "my.json5").unwrap_err();
+        assert!(e.problem.contains("ends twice"), "{e}");
+        let e =
+            Scenario::parse(&ends("{ lane: 2, end_m: 500 }").replace("ego: { lane: 1", "ego: { lane: 2"), "my.json5")
+                .unwrap_err();
+        assert_eq!(e.key, "ego.lane", "{e}");
+        let ok = Scenario::parse(&ends("{ lane: 0, end_m: 500 }"), "my.json5").unwrap();
+        assert_eq!(ok.road.lane_ends[0].taper_m, 120.0);
 
         let e = Scenario::parse("{ name: ", "my.json5").unwrap_err();
         assert!(e.problem.starts_with("not valid JSON5"), "{e}");

@@ -222,20 +222,28 @@ pub fn vehicles(
 }
 
 /// The road around `s_m` (the ego's distance along it): the lane boundaries as lines, the
-/// road's edges solid white, the lane dividers grey.
+/// road's edges solid white (moving in over a lane's taper where it ends), the lane dividers
+/// grey.
 pub fn road_update(stamp_ns: u64, road: &Road, s_m: f64) -> SceneUpdate {
     let n = ((ROAD_BEHIND_M + ROAD_AHEAD_M) / ROAD_STEP_M) as usize + 1;
     let lanes = road.lanes();
     let lines = (0..=lanes)
         .map(|i| {
             let d = i as f64 * road.lane_width_m() - road.half_width_m();
+            let edge = i == 0 || i == lanes;
             let points = (0..n)
                 .map(|k| {
-                    let p: Vector2<f64> = road.to_world(s_m - ROAD_BEHIND_M + k as f64 * ROAD_STEP_M, d);
+                    let s = s_m - ROAD_BEHIND_M + k as f64 * ROAD_STEP_M;
+                    // The edges move in where an outer lane ends.
+                    let d = match (i == 0, i == lanes) {
+                        (true, _) => road.edges_d(s).0,
+                        (_, true) => road.edges_d(s).1,
+                        _ => d,
+                    };
+                    let p: Vector2<f64> = road.to_world(s, d);
                     Point3 { x: p.x, y: p.y, z: 0.02 }
                 })
                 .collect();
-            let edge = i == 0 || i == lanes;
             LinePrimitive {
                 r#type: line_primitive::Type::LineStrip as i32,
                 pose: Some(Pose { position: Some(Vector3::default()), orientation: Some(yaw_quaternion(0.0)) }),

@@ -248,3 +248,43 @@ fn weaving_traffic_accepts_only_safe_gaps() {
         assert_eq!(w.traffic_collisions(), 0, "seed {seed}: traffic crashed into traffic");
     }
 }
+
+/// A lane that ends: traffic in it moves over before the taper when the gap beside is safe;
+/// when it is not (a column beside it), it stops in the taper and goes once there is room; a
+/// vehicle standing in it stays. The road's edge moves in over the taper.
+#[test]
+fn traffic_in_a_lane_that_ends_merges_before_its_end_or_waits() {
+    let mut w = world(
+        "{ name: 'merge', duration_s: 120, seed: 2, road: { lane_ends: [ { lane: 0, end_m: 600, taper_m: 150 } ] },
+           ego: { lane: 2, speed_mps: 0 },
+           traffic: [
+             { lane: 0, gap_m: 400, speed_mps: 10 },
+             { lane: 0, gap_m: 500, speed_mps: 0 },
+             // A column beside it at its speed, too tight to enter: no safe gap until it has passed.
+             { lane: 1, gap_m: 340, speed_mps: 10 }, { lane: 1, gap_m: 352, speed_mps: 10 }, { lane: 1, gap_m: 364, speed_mps: 10 },
+             { lane: 1, gap_m: 376, speed_mps: 10 }, { lane: 1, gap_m: 388, speed_mps: 10 }, { lane: 1, gap_m: 400, speed_mps: 10 },
+             { lane: 1, gap_m: 412, speed_mps: 10 }, { lane: 1, gap_m: 424, speed_mps: 10 },
+           ] }",
+    );
+    let (mut max_s_in_lane_0, mut waited) = (0.0f64, false);
+    for _ in 0..(60 * HZ) {
+        let events = w.step(EgoInput::Cruise);
+        assert!(events.collisions.is_empty(), "{:?}", events.collisions);
+        let v = w.vehicles()[1];
+        if v.lane == 0 {
+            max_s_in_lane_0 = max_s_in_lane_0.max(v.s_front_m());
+            waited |= v.forward_speed_mps() < 0.5;
+        }
+    }
+    let (merger, standing) = (w.vehicles()[1], w.vehicles()[2]);
+    assert_eq!(merger.lane, 1, "it moved over: {merger:?}");
+    // It aims to stop at the taper's middle (525 m); the traffic's linear following law
+    // overshoots a few metres: within the taper's first two thirds.
+    assert!(max_s_in_lane_0 < 600.0 - 50.0, "in the ending lane up to {max_s_in_lane_0:.1} m");
+    assert!(waited, "the column beside left no gap: it waited at the end");
+    assert_eq!(standing.lane, 0, "a standing vehicle stays");
+    let road = w.road();
+    assert_eq!(road.edges_d(300.0), (-5.25, 5.25));
+    assert!((road.edges_d(525.0).0 - (-5.25 + 1.75)).abs() < 1e-9);
+    assert_eq!(road.edges_d(700.0).0, -1.75);
+}

@@ -28,7 +28,8 @@ def test_decoded_values_are_the_documented_ones(examples):
     assert decode(examples["Speed"])[2] == {"speed_mps": 27.5}
     assert decode(examples["RoadMap"])[2] == {
         "lanes": 3, "lane_width_m": 3.5, "length_m": 4000.0,
-        "curves": [{"start_m": 300.0, "length_m": 350.0, "radius_m": 600.0}]}
+        "curves": [{"start_m": 300.0, "length_m": 350.0, "radius_m": 600.0}],
+        "lane_ends": [{"lane": 0, "end_m": 900.0, "taper_m": 120.0}]}
     control = decode(examples["ControlCommand"])[2]
     assert control == {"throttle": 0.25, "brake": 0.0, "steer": -0.5, "answers_step": 125,
                        "perception_stamp_pub_ns": 1_700_000_000_100_000_000}

@@ -82,7 +82,11 @@ STRUCTS = {
     ],
     "AccCommand": [("enable", ("opt", "bool")), ("set_speed_mps", ("opt", "f64")), ("time_gap_s", ("opt", "f64"))],
     "Curve": [("start_m", "f64"), ("length_m", "f64"), ("radius_m", "f64")],
-    "RoadMap": [("lanes", "u32"), ("lane_width_m", "f64"), ("length_m", "f64"), ("curves", ("seq", ("struct", "Curve")))],
+    "LaneEnd": [("lane", "u32"), ("end_m", "f64"), ("taper_m", "f64")],
+    "RoadMap": [
+        ("lanes", "u32"), ("lane_width_m", "f64"), ("length_m", "f64"), ("curves", ("seq", ("struct", "Curve"))),
+        ("lane_ends", ("seq", ("struct", "LaneEnd"))),
+    ],
 }
 
 VARIANTS = {

@@ -65,19 +65,20 @@ pub fn ground(road: &Road, ego: &VehicleView) -> Vec<GroundQuad> {
         sections.push(s);
         s += if s < ego.s_m + 60.0 { 2.0 } else { 5.0 };
     }
-    let edge = road.half_width_m() + SHOULDER_M;
+    // The edges move in where an outer lane ends (over its taper).
     for pair in sections.windows(2).rev() {
         let (a, b) = (pair[0], pair[1]);
+        let ((ra, la), (rb, lb)) = (road.edges_d(a), road.edges_d(b));
         quads.push(GroundQuad {
-            corners: [at(a, -edge), at(b, -edge), at(b, edge), at(a, edge)],
+            corners: [at(a, ra - SHOULDER_M), at(b, rb - SHOULDER_M), at(b, lb + SHOULDER_M), at(a, la + SHOULDER_M)],
             color: ASPHALT,
             smooth: false,
         });
     }
-    let line = |s0: f64, s1: f64, d: f64| {
+    let line = |s0: f64, s1: f64, d0: f64, d1: f64| {
         let h = MARKING_WIDTH_M / 2.0;
         GroundQuad {
-            corners: [at(s0, d - h), at(s1, d - h), at(s1, d + h), at(s0, d + h)],
+            corners: [at(s0, d0 - h), at(s1, d1 - h), at(s1, d1 + h), at(s0, d0 + h)],
             color: MARKING,
             smooth: true,
         }
@@ -85,8 +86,9 @@ pub fn ground(road: &Road, ego: &VehicleView) -> Vec<GroundQuad> {
     let hw = road.half_width_m();
     // Solid edge lines.
     for pair in sections.windows(2).rev().filter(|p| p[0] < ego.s_m + MARKINGS_AHEAD_M) {
-        quads.push(line(pair[0], pair[1], -hw + MARKING_WIDTH_M));
-        quads.push(line(pair[0], pair[1], hw - MARKING_WIDTH_M));
+        let ((ra, la), (rb, lb)) = (road.edges_d(pair[0]), road.edges_d(pair[1]));
+        quads.push(line(pair[0], pair[1], ra + MARKING_WIDTH_M, rb + MARKING_WIDTH_M));
+        quads.push(line(pair[0], pair[1], la - MARKING_WIDTH_M, lb - MARKING_WIDTH_M));
     }
     // Dashed lane separators, fixed to the road.
     let first = ((ego.s_m - 20.0) / DASH_PERIOD_M).floor() as i64;
@@ -94,8 +96,15 @@ pub fn ground(road: &Road, ego: &VehicleView) -> Vec<GroundQuad> {
     for k in (first..=last).rev() {
         let s0 = k as f64 * DASH_PERIOD_M;
         for lane in 1..road.lanes() {
+            // The line beside a lane that ends stops where its taper begins.
+            let ending = [lane - 1, lane]
+                .into_iter()
+                .any(|l| road.lane_end(l).is_some_and(|e| s0 + DASH_M > e.end_m - e.taper_m));
+            if ending {
+                continue;
+            }
             let d = -hw + lane as f64 * road.lane_width_m();
-            quads.push(line(s0, s0 + DASH_M, d));
+            quads.push(line(s0, s0 + DASH_M, d, d));
         }
     }
     quads
