@@ -352,7 +352,7 @@ impl Scenario {
             return err(
                 "ego.lane",
                 format!("lane {} ends at {} m and the ego keeps its lane", end.lane, end.end_m),
-                "start the ego in a lane that goes on (traffic in the ending lane merges)",
+                "start the ego in a lane that goes on; traffic in the ending lane merges",
             );
         }
         if !speed_ok(self.ego.speed_mps) {
