@@ -76,7 +76,7 @@ impl Road {
 
     /// Where `lane` ends, if it does.
     pub fn lane_end(&self, lane: u32) -> Option<&LaneEnd> {
-        self.spec.lane_ends.iter().find(|e| e.lane == lane)
+        self.spec.lane_end(lane)
     }
 
     /// The share of `lane`'s width open at `s`: 1 before its taper, falling to 0 at its end.

@@ -660,10 +660,8 @@ impl Controller {
             let gap = r.gap_m + rel * (ego.t_s - r.stamp_s).max(0.0);
             threat(gap, v, (v + rel).max(0.0), 0.0)
         });
-        let threat = lead.map(|l| threat(l.gap_m, v, l.speed_mps, l.accel_mps2)).map(|t| match revealed {
-            Some(r) => t.or_worse(&r),
-            None => t,
-        });
+        let threat =
+            lead.map(|l| threat(l.gap_m, v, l.speed_mps, l.accel_mps2)).map(|t| revealed.map_or(t, |r| t.or_worse(&r)));
         if threat.is_some_and(|t| self.warns(&t, v)) {
             warnings.push(AccWarning::ForwardCollision);
         }

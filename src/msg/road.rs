@@ -54,6 +54,11 @@ impl Default for RoadSpec {
 }
 
 impl RoadSpec {
+    /// Where `lane` ends, if it does.
+    pub fn lane_end(&self, lane: u32) -> Option<&LaneEnd> {
+        self.lane_ends.iter().find(|e| e.lane == lane)
+    }
+
     /// The limits a scenario's road must keep (docs/simulator.md): the first one off, as
     /// (key, problem, fix).
     pub fn invalid(&self) -> Option<(String, String, String)> {

@@ -348,7 +348,7 @@ impl Scenario {
         if self.ego.lane >= lanes {
             return err("ego.lane", format!("lane {} does not exist on a {lanes}-lane road", self.ego.lane), &lane_fix);
         }
-        if let Some(end) = self.road.lane_ends.iter().find(|e| e.lane == self.ego.lane) {
+        if let Some(end) = self.road.lane_end(self.ego.lane) {
             return err(
                 "ego.lane",
                 format!("lane {} ends at {} m and the ego keeps its lane", end.lane, end.end_m),
