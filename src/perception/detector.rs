@@ -115,6 +115,10 @@ const MOTORCYCLE_MAX_WIDTH_M: f64 = 1.2;
 /// luminance (on average) are the thin band of one vehicle joining its wheels.
 const BRIDGE_RATIO: f32 = 0.9;
 
+/// The most road a vehicle's body shows beneath it between its wheels, metres (a truck's rear
+/// under-ride bar; a car's is 0.2-0.3 m).
+const GROUND_CLEARANCE_M: f64 = 1.0;
+
 /// A dark region this many times as tall as the band beside it is something else.
 const TALL_RATIO: u32 = 4;
 
@@ -356,8 +360,10 @@ impl Detector {
     /// Far away the band under a vehicle is thinner than a row: blended with the road, it is
     /// no longer darker than the threshold, and only the wheels at its sides are. Two
     /// components on the same contact row are one vehicle's when the pixels between them on
-    /// that row are darker than the road (the thin band) and together they are no wider than a
-    /// vehicle at their distance (two vehicles side by side are a lane apart: wider).
+    /// that row are darker than the road (the thin band), or on a row above it within a
+    /// vehicle's ground clearance (the band fell between rows and the road under the body
+    /// shows between the wheels), and together they are no wider than a vehicle at their
+    /// distance (two vehicles side by side are a lane apart: wider).
     fn join_split_bands(&self, w: usize, road: u8, mut components: Vec<Component>) -> Vec<Component> {
         let origin_x = self.camera.origin_in_body().x;
         let bridge = road as f32 * BRIDGE_RATIO;
@@ -380,7 +386,9 @@ impl Detector {
                     let gap = &row[a.u1 as usize + 1..b.u0 as usize];
                     gap.iter().map(|&l| l as f32).sum::<f32>() / gap.len() as f32
                 };
-                let darkest = between(v1).min(between(v1.saturating_sub(1)));
+                let clearance_rows = (GROUND_CLEARANCE_M * px_per_m).ceil() as u32 + 1;
+                let darkest =
+                    (0..=clearance_rows.min(v1)).map(|up| between(v1 - up)).fold(f32::INFINITY, f32::min);
                 (darkest < bridge).then_some(j)
             });
             match partner {
@@ -504,17 +512,22 @@ impl Detector {
     }
 
     /// The rear edge's columns (its end columns left out: they hold background too) with the
-    /// lowest dark row of each.
+    /// lowest dark row of each, where that row is the edge's lowest or one above: far away the
+    /// shadow under a vehicle is thinner than a row and can fall between rows, and then the
+    /// columns between the wheels see the road under the body and end rows higher, at the
+    /// body's lower edge (at 150 m three rows are 25 m).
     fn edge_columns(&self, w: usize, h: usize, c: &Component) -> Vec<(usize, usize)> {
         let luma = |u: usize, v: usize| self.luma[v * w + u];
         let (u0, u1) = if c.flat_u1 >= c.flat_u0 + 3 { (c.flat_u0 + 1, c.flat_u1 - 1) } else { (c.flat_u0, c.flat_u1) };
         let top = (c.v1 as usize).saturating_sub(FLAT_PX as usize + 1);
-        (u0 as usize..=u1 as usize)
+        let columns: Vec<(usize, usize)> = (u0 as usize..=u1 as usize)
             .filter_map(|u| {
                 (top..=(c.v1 as usize).min(h - 1)).rev().find(|&v| luma(u, v) < self.dark).map(|lo| (u, lo))
             })
             .filter(|&(_, lo)| lo + 3 < h)
-            .collect()
+            .collect();
+        let lowest = columns.iter().map(|&(_, lo)| lo).max().unwrap_or(0);
+        columns.into_iter().filter(|&(_, lo)| lo + 1 >= lowest).collect()
     }
 
     /// The road's luminance just below a contact edge (the median of the two rows under it).
