@@ -38,7 +38,7 @@ pub(crate) use {acc::example_status, camera::example_info, objects::example_dete
 use serde::{Deserialize, Serialize};
 
 /// Version of the envelope and of every message layout. A decoder refuses any other value.
-pub const WIRE_VERSION: u8 = 3;
+pub const WIRE_VERSION: u8 = 4;
 
 /// Bytes before the header: version and kind.
 pub const PREAMBLE_LEN: usize = 2;

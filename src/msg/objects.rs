@@ -100,6 +100,11 @@ pub struct Detection {
     pub lateral_offset_m: f64,
     /// Object speed minus ego speed along ego x (negative: closing in).
     pub relative_speed_mps: f64,
+    /// The expected error (one standard deviation) of `distance_m` and of
+    /// `relative_speed_mps`, as the tracker estimates them: a new track's speed is unknown
+    /// (tens of m/s) until a few frames have measured it, and far ranges are coarser.
+    pub distance_sigma_m: f64,
+    pub relative_speed_sigma_mps: f64,
     /// Its brake lights are seen lit in this frame.
     pub brake_lights: bool,
 }
@@ -117,10 +122,18 @@ pub struct Detections {
 impl Message for Detections {
     const KIND: MessageKind = MessageKind::Detections;
     fn check(&self) -> Result<(), String> {
-        match self.detections.iter().find(|d| !(0.0..=1.0).contains(&d.confidence)) {
-            Some(d) => Err(format!("track {}: confidence {} is outside 0..1", d.track_id, d.confidence)),
-            None => Ok(()),
+        for d in &self.detections {
+            if !(0.0..=1.0).contains(&d.confidence) {
+                return Err(format!("track {}: confidence {} is outside 0..1", d.track_id, d.confidence));
+            }
+            if !(d.distance_sigma_m >= 0.0 && d.relative_speed_sigma_mps >= 0.0) {
+                return Err(format!(
+                    "track {}: standard deviations must be 0 or more (distance {}, relative speed {})",
+                    d.track_id, d.distance_sigma_m, d.relative_speed_sigma_mps
+                ));
+            }
         }
+        Ok(())
     }
 }
 
@@ -157,6 +170,8 @@ pub(crate) fn example_detections() -> Detections {
             distance_m: 27.5,
             lateral_offset_m: 0.125,
             relative_speed_mps: -2.5,
+            distance_sigma_m: 0.25,
+            relative_speed_sigma_mps: 0.5,
             brake_lights: true,
         }],
     }

@@ -8,6 +8,9 @@ use crate::msg::{BoundingBox2d, Detection, ObjectClass};
 
 /// Acceleration noise of the constant-velocity model, m/s2 (a lead can brake hard).
 const ACCEL_NOISE_MPS2: f64 = 8.0;
+/// A new track's relative speed: unknown, anything from a vehicle as fast as the ego to one
+/// standing (closing at motorway speed) or oncoming.
+const NEW_TRACK_SPEED_SIGMA_MPS: f64 = 30.0;
 /// A track not seen for this long is dropped.
 const MAX_COAST_S: f64 = 0.5;
 
@@ -32,6 +35,11 @@ impl Track {
 
     pub fn relative_speed_mps(&self) -> f64 {
         self.x[1]
+    }
+
+    /// The standard deviations of the distance and of the relative speed.
+    pub fn sigmas(&self) -> (f64, f64) {
+        (self.p[(0, 0)].max(0.0).sqrt(), self.p[(1, 1)].max(0.0).sqrt())
     }
 
     fn predict(&mut self, dt: f64) {
@@ -116,7 +124,7 @@ impl Tracker {
                     self.tracks.push(Track {
                         id: self.next_id,
                         x: Vector2::new(d.distance_m, 0.0),
-                        p: Matrix2::new(1.0, 0.0, 0.0, 100.0),
+                        p: Matrix2::new(d.distance_sigma_m.powi(2), 0.0, 0.0, NEW_TRACK_SPEED_SIGMA_MPS.powi(2)),
                         lateral_m: d.lateral_offset_m,
                         bbox: d.bbox,
                         class: d.class,
@@ -128,8 +136,10 @@ impl Tracker {
                 }
             };
             let t = &self.tracks[j];
-            // A new track's speed is unknown: its confidence is lowered until seen again.
+            // A new track's speed is unknown (its sigma says how much): its confidence is
+            // lowered until seen again.
             let settle = if t.hits >= 3 { 1.0 } else { 0.6 };
+            let (distance_sigma_m, relative_speed_sigma_mps) = t.sigmas();
             out.push(Detection {
                 track_id: t.id,
                 class: t.class,
@@ -137,7 +147,9 @@ impl Tracker {
                 confidence: (d.confidence * settle).clamp(0.0, 1.0),
                 distance_m: t.distance_m(),
                 lateral_offset_m: t.lateral_m,
-                relative_speed_mps: if t.hits >= 2 { t.relative_speed_mps() } else { 0.0 },
+                relative_speed_mps: t.relative_speed_mps(),
+                distance_sigma_m,
+                relative_speed_sigma_mps,
                 brake_lights: d.brake_lights,
             });
         }
@@ -177,6 +189,26 @@ mod tests {
         assert_eq!(last[0].track_id, 1);
         assert!((last[0].relative_speed_mps + 4.0).abs() < 0.6, "{:?}", last[0]);
         assert!((last[0].distance_m - (40.0 - 4.0 * 1.95)).abs() < 0.5, "{:?}", last[0]);
+    }
+
+    #[test]
+    fn a_new_tracks_speed_is_reported_unknown_until_frames_have_measured_it() {
+        // A car standing 150 m ahead of the ego at 30 m/s: ranges 1.5 m apart from frame to
+        // frame, each good to the detector's sigma.
+        let mut tracker = Tracker::new();
+        let mut sigmas = Vec::new();
+        let mut last = Vec::new();
+        for k in 0..20 {
+            let t = k as f64 * 0.05;
+            let noise = if k % 2 == 0 { 0.3 } else { -0.3 };
+            last = tracker.update(&[det(150.0 - 30.0 * t + noise, 300.0)], t);
+            sigmas.push(last[0].relative_speed_sigma_mps);
+        }
+        assert_eq!(sigmas[0], NEW_TRACK_SPEED_SIGMA_MPS, "nothing measured yet");
+        assert!(sigmas[1] > 10.0, "two ranges 1.5 m apart with 0.65 m noise: {:.1}", sigmas[1]);
+        assert!(sigmas.windows(2).take(8).all(|w| w[1] < w[0]), "shrinks as frames come: {sigmas:.1?}");
+        assert!(sigmas[19] < 3.0 && (last[0].relative_speed_mps + 30.0).abs() < 3.0, "{:?}", last[0]);
+        assert!(last[0].distance_sigma_m > 0.0 && last[0].distance_sigma_m < 0.65, "better than one range: {:?}", last[0]);
     }
 
     #[test]

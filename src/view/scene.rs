@@ -431,6 +431,8 @@ mod tests {
             distance_m: 27.4,
             lateral_offset_m: 0.0,
             relative_speed_mps: -1.0,
+            distance_sigma_m: 0.1,
+            relative_speed_sigma_mps: 0.2,
             brake_lights: false,
         };
         let detections =

@@ -295,6 +295,8 @@ async fn a_vanished_detector_is_perception_lost() {
                 distance_m: 43.65,
                 lateral_offset_m: 0.1,
                 relative_speed_mps: 0.0,
+                distance_sigma_m: 0.2,
+                relative_speed_sigma_mps: 0.3,
                 brake_lights: false,
             }],
         };

@@ -125,6 +125,8 @@ impl Gen {
             distance_m: self.f64(0.0, 200.0),
             lateral_offset_m: self.f64(-10.0, 10.0),
             relative_speed_mps: self.f64(-40.0, 40.0),
+            distance_sigma_m: self.f64(0.0, 5.0),
+            relative_speed_sigma_mps: self.f64(0.0, 30.0),
             brake_lights: self.bool(),
         }
     }
@@ -370,6 +372,22 @@ fn errors_say_what_was_wrong() {
     let over = encode(&h, &ControlCommand { throttle: 1.5, ..ControlCommand::NEUTRAL });
     let e = decode::<ControlCommand>(&over).unwrap_err();
     assert!(e.to_string().contains("throttle 1.5"), "{e}");
+    // A detection whose relative speed has a negative standard deviation.
+    let detection = Detection {
+        track_id: 4,
+        class: ObjectClass::Car,
+        bbox: BoundingBox2d { u_min_px: 300.0, v_min_px: 220.0, u_max_px: 340.0, v_max_px: 250.0 },
+        confidence: 0.9,
+        distance_m: 43.6,
+        lateral_offset_m: 0.1,
+        relative_speed_mps: -1.0,
+        distance_sigma_m: 0.2,
+        relative_speed_sigma_mps: -0.5,
+        brake_lights: false,
+    };
+    let detections = Detections { frame_seq: 1, frame_stamp_pub_ns: 0, detections: vec![detection] };
+    let e = decode::<Detections>(&encode(&h, &detections)).unwrap_err();
+    assert!(e.to_string().contains("standard deviations must be 0 or more"), "{e}");
 }
 
 #[test]

@@ -43,6 +43,7 @@ def test_decoded_values_are_the_documented_ones(examples):
     assert car["bbox"]["u_max_px"] == 340.0 and car["brake_lights"] is True
     detection = decode(examples["Detections"])[2]["detections"][0]
     assert (detection["relative_speed_mps"], detection["brake_lights"]) == (-2.5, True)
+    assert (detection["distance_sigma_m"], detection["relative_speed_sigma_mps"]) == (0.25, 0.5)
     state = decode(examples["VehicleState"])[2]
     assert state["position_in_world_m"] == [31.25, -1.75, 0.0] and state["applied"]["answers_step"] == 124
     assert decode(examples["SimEvent"])[2]["kind"] == {"variant": "Collision", "other_id": 3, "relative_speed_mps": 4.5}
@@ -69,7 +70,7 @@ def test_python_encodes_what_rust_documents():
     header = {"seq": 1, "stamp_sim_ns": 0, "stamp_pub_ns": 5}
     # -1 as i32 is zigzag 1; 300 as varint is ac 02.
     state_lane = encode("Speed", header, {"speed_mps": 1.0})
-    assert state_lane[:5] == bytes([WIRE_VERSION, 1, 1, 0, 5]) and WIRE_VERSION == 3
+    assert state_lane[:5] == bytes([WIRE_VERSION, 1, 1, 0, 5]) and WIRE_VERSION == 4
     event = encode("SimEvent", header, {"kind": {"variant": "ControlTimeout", "late": ["acc"]}})
     assert event[5:] == bytes([3, 1, 3]) + b"acc"
     assert decode(event)[2]["kind"]["late"] == ["acc"]

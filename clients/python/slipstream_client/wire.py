@@ -9,7 +9,7 @@ Decoding is strict, like the Rust side: any malformed payload raises WireError.
 import struct
 import threading
 
-WIRE_VERSION = 3
+WIRE_VERSION = 4
 
 
 class WireError(ValueError):
@@ -69,7 +69,8 @@ STRUCTS = {
     "GroundTruthObjects": [("step", "u64"), ("objects", ("seq", ("struct", "GroundTruthObject")))],
     "Detection": [
         ("track_id", "u32"), ("class", OBJECT_CLASS), ("bbox", ("struct", "BoundingBox2d")), ("confidence", "f32"),
-        ("distance_m", "f64"), ("lateral_offset_m", "f64"), ("relative_speed_mps", "f64"), ("brake_lights", "bool"),
+        ("distance_m", "f64"), ("lateral_offset_m", "f64"), ("relative_speed_mps", "f64"),
+        ("distance_sigma_m", "f64"), ("relative_speed_sigma_mps", "f64"), ("brake_lights", "bool"),
     ],
     "Detections": [("frame_seq", "u64"), ("frame_stamp_pub_ns", "u64"), ("detections", ("seq", ("struct", "Detection")))],
     "SimClock": [("step", "u64"), ("real_time_factor", "f32"), ("mode", ("enum", ["Realtime", "Fast", "Lockstep"])), ("physics_hz", "f64")],
