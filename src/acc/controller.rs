@@ -24,6 +24,8 @@ pub struct Object {
     pub lateral_m: f64,
     /// Object speed minus ego speed along ego x (negative: closing in).
     pub relative_speed_mps: f64,
+    /// Its expected error as perception reports it (0: exact, as ground truth).
+    pub relative_speed_sigma_mps: f64,
     /// Its brake lights are on.
     pub brake_lights: bool,
 }
@@ -46,6 +48,7 @@ impl PerceptionFrame {
                 distance_m: d.distance_m,
                 lateral_m: d.lateral_offset_m,
                 relative_speed_mps: d.relative_speed_mps,
+                relative_speed_sigma_mps: d.relative_speed_sigma_mps,
                 brake_lights: d.brake_lights,
             })
             .collect();
@@ -63,6 +66,7 @@ impl PerceptionFrame {
                 distance_m: o.position_in_ego_m[0],
                 lateral_m: o.position_in_ego_m[1],
                 relative_speed_mps: o.velocity_in_ego_mps[0],
+                relative_speed_sigma_mps: 0.0,
                 brake_lights: o.brake_lights,
             })
             .collect();
@@ -171,13 +175,15 @@ struct LeadFilter {
     manoeuvre_until_s: f64,
     /// Its brake lights were on in the last frame.
     brake_lights: bool,
+    /// The frame it was last measured in.
+    seen_s: f64,
 }
 
 impl LeadFilter {
-    fn new(id: u32, t_s: f64, gap_m: f64, lead_speed_mps: f64, n: &Noise) -> Self {
+    fn new(id: u32, t_s: f64, gap_m: f64, lead_speed_mps: f64, speed_sigma_mps: f64, n: &Noise) -> Self {
         let p = Matrix3::from_diagonal(&Vector3::new(
             n.gap_sigma(gap_m).powi(2),
-            n.speed_sigma(gap_m).max(n.speed_steady_mps).powi(2),
+            speed_sigma_mps.max(n.speed_steady_mps).powi(2),
             4.0,
         ));
         LeadFilter {
@@ -189,6 +195,7 @@ impl LeadFilter {
             since_s: t_s,
             manoeuvre_until_s: t_s,
             brake_lights: false,
+            seen_s: t_s,
         }
     }
 
@@ -209,7 +216,7 @@ impl LeadFilter {
             tracing::debug!(id = self.id, t_s = self.t_s, drift = self.drift, "lead manoeuvre");
             self.manoeuvre();
         }
-        let sigma = if self.t_s < self.manoeuvre_until_s { sigma } else { sigma.max(steady_sigma) };
+        let sigma = if self.t_s < self.manoeuvre_until_s || !self.settled() { sigma } else { sigma.max(steady_sigma) };
         self.update(1, z, sigma);
     }
 
@@ -322,6 +329,11 @@ const MANOEUVRE_WINDOW_S: f64 = 0.1;
 /// The lead's jerk (white-noise sigma) for MANOEUVRE_HOLD_S after its brake lights came on: a
 /// brake application builds deceleration at some 10 m/s3, far beyond the steady model's.
 const BRAKING_JERK_SIGMA_MPS3: f64 = 10.0;
+/// While a new lead's speed is still being measured, comfort braking plans for it being this
+/// many of its standard deviations slower.
+const UNMEASURED_SIGMAS: f64 = 2.0;
+/// How long a lead missing from perception's frames is kept, predicted.
+const LEAD_COAST_S: f64 = 0.3;
 /// How long after a manoeuvre the lead's speed is followed closely.
 const MANOEUVRE_HOLD_S: f64 = 1.0;
 /// A lead is judged on its acceleration (manoeuvres, braking hard) once followed this long.
@@ -350,6 +362,8 @@ struct LeadNow {
     gap_m: f64,
     speed_mps: f64,
     accel_mps2: f64,
+    /// The speed estimate's standard deviation.
+    speed_sigma_mps: f64,
     settled: bool,
 }
 
@@ -556,10 +570,10 @@ impl Controller {
         let lane_ahead = LaneAhead::find(self.road.as_ref(), &mut self.road_s_m, ego);
         let lane = &self.s.lane;
         let current = self.lead.map(|l| l.id);
-        let mut best: Option<(u32, f64, f64)> = None;
-        let mut best_lights = false;
-        // The nearest by the entry test alone (no hysteresis for the current lead).
-        let mut entering: Option<(u32, f64, f64)> = None;
+        // The nearest in the lane, and the nearest by the entry test alone (no hysteresis for
+        // the current lead), with their gaps.
+        let mut best: Option<(&Object, f64)> = None;
+        let mut entering: Option<(&Object, f64)> = None;
         for o in &frame.objects {
             let off = match &lane_ahead {
                 Some(l) => l.offset_m(o.distance_m, o.lateral_m),
@@ -595,21 +609,32 @@ impl Controller {
                 continue;
             }
             if best.is_none_or(|b| gap < b.1) {
-                best = Some((o.id, gap, o.relative_speed_mps));
-                best_lights = o.brake_lights;
+                best = Some((o, gap));
             }
             if off < lane.in_lane_m && entering.is_none_or(|b| gap < b.1) {
-                entering = Some((o.id, gap, o.relative_speed_mps));
+                entering = Some((o, gap));
             }
         }
         self.next_in_lane = match (best, entering) {
-            (Some(b), Some(e)) if e.0 != b.0 => {
-                Some(Revealed { stamp_s: frame.stamp_s, gap_m: e.1, relative_speed_mps: e.2 })
+            (Some((b, _)), Some((e, gap_m))) if e.id != b.id => {
+                Some(Revealed { stamp_s: frame.stamp_s, gap_m, relative_speed_mps: e.relative_speed_mps })
             }
             _ => None,
         };
         self.tracks.retain(|_, t| frame.stamp_s - t.stamp_s < 2.0);
-        let Some((id, gap, rel)) = best else {
+        // A lead missing from a frame (far away a detector misses one now and then) is kept,
+        // moving on as estimated, for LEAD_COAST_S unless a nearer vehicle is in the lane:
+        // taking it anew would lose its speed estimate, which takes tenths of a second to
+        // measure again at long range. A lead seen outside the lane is let go at once.
+        let missed = self.lead.filter(|f| {
+            !frame.objects.iter().any(|o| o.id == f.id)
+                && frame.stamp_s - f.seen_s < LEAD_COAST_S
+                && best.is_none_or(|b| b.1 > f.x[0])
+        });
+        if missed.is_some() {
+            return;
+        }
+        let Some((o, gap)) = best else {
             if current.is_some() {
                 tracing::debug!(from = ?current, "lead lost");
             }
@@ -618,16 +643,25 @@ impl Controller {
         };
         let n = self.noise;
         let t = ego.t_s.max(frame.stamp_s);
+        let speed = ego.speed_mps + o.relative_speed_mps;
+        // The speed's noise is the model's for this range; while a lead is new, perception's
+        // own estimate when larger: a new track's speed is a guess until a few frames have
+        // measured it (tens of m/s at first, far away). Later the tracker's estimate of its
+        // own error stays above how much its speed actually varies from frame to frame.
+        let new_track_sigma = |settled: bool| if settled { 0.0 } else { o.relative_speed_sigma_mps };
         match &mut self.lead {
-            Some(f) if f.id == id => {
+            Some(f) if f.id == o.id => {
                 f.predict(t, ego.speed_mps, n.jerk_sigma_mps3);
-                f.brake_lights(best_lights);
+                f.brake_lights(o.brake_lights);
+                f.seen_s = frame.stamp_s;
                 f.update(0, gap, n.gap_sigma(gap));
-                f.update_speed(ego.speed_mps + rel, n.speed_sigma(gap), n.speed_steady_mps);
+                let sigma = n.speed_sigma(gap).max(new_track_sigma(f.settled()));
+                f.update_speed(speed, sigma, n.speed_steady_mps);
             }
             _ => {
-                tracing::debug!(from = ?current, to = id, "lead changed");
-                self.lead = Some(LeadFilter::new(id, t, gap, (ego.speed_mps + rel).max(0.0), &n));
+                tracing::debug!(from = ?current, to = o.id, "lead changed");
+                let sigma = n.speed_sigma(gap).max(new_track_sigma(false));
+                self.lead = Some(LeadFilter::new(o.id, t, gap, speed.max(0.0), sigma, &n));
             }
         }
     }
@@ -652,6 +686,7 @@ impl Controller {
             gap_m: f.x[0],
             speed_mps: f.x[1].max(0.0),
             accel_mps2: f.x[2],
+            speed_sigma_mps: f.p[(1, 1)].max(0.0).sqrt(),
             settled: f.settled(),
         });
         let desired_gap = self.s.standstill_m + self.time_gap_s * v;
@@ -686,7 +721,21 @@ impl Controller {
             self.update_emergency(threat.as_ref(), hard, v, ego.t_s);
             match threat.filter(|_| self.emergency) {
                 Some(t) => (AccMode::Emergency, -self.emergency_decel(&t, hard)),
-                None => self.comfort_target(v, lead, threat.as_ref(), desired_gap, dt),
+                None => {
+                    // A new lead's speed is still being measured (far ahead, a camera needs a
+                    // few tenths of a second): comfort braking plans for it being slower by
+                    // UNMEASURED_SIGMAS of its uncertainty, so a standing car seen at the edge
+                    // of range is braked for from the first frames, not once its speed is
+                    // known. An emergency still needs the estimate itself.
+                    let guard = match lead.filter(|l| !l.settled) {
+                        Some(l) => threat.map(|t| {
+                            let slower = self::threat(l.gap_m, v, (l.speed_mps - UNMEASURED_SIGMAS * l.speed_sigma_mps).max(0.0), l.accel_mps2);
+                            t.or_worse(&slower)
+                        }),
+                        None => threat,
+                    };
+                    self.comfort_target(v, lead, guard.as_ref(), desired_gap, dt)
+                }
             }
         };
         // The actuators lag: ask for the target plus lag x its rate of change, so the applied

@@ -18,7 +18,7 @@ fn ego(t_s: f64, speed_mps: f64) -> EgoNow {
 
 fn obj(id: u32, gap_m: f64, lateral_m: f64, relative_speed_mps: f64) -> Object {
     // distance is from the rear axle: the default front overhang is 3.65 m.
-    Object { id, distance_m: gap_m + 3.65, lateral_m, relative_speed_mps, brake_lights: false }
+    Object { id, distance_m: gap_m + 3.65, lateral_m, relative_speed_mps, relative_speed_sigma_mps: 0.0, brake_lights: false }
 }
 
 fn frame(t_s: f64, objects: Vec<Object>) -> PerceptionFrame {
@@ -395,14 +395,8 @@ fn with_the_road_map_the_lead_is_in_the_ego_lane_round_a_bend() {
     let (next_lane, own_lane) = (in_ego(450.0, 0), in_ego(480.0, 1));
     assert!(next_lane.1.abs() < 1.6, "the next lane's car lies on the straight-ahead line: {next_lane:?}");
     let objects = vec![
-        Object {
-            id: 1,
-            distance_m: next_lane.0,
-            lateral_m: next_lane.1,
-            relative_speed_mps: -25.0,
-            brake_lights: false,
-        },
-        Object { id: 2, distance_m: own_lane.0, lateral_m: own_lane.1, relative_speed_mps: -25.0, brake_lights: false },
+        Object { id: 1, distance_m: next_lane.0, lateral_m: next_lane.1, ..obj(1, 0.0, 0.0, -25.0) },
+        Object { id: 2, distance_m: own_lane.0, lateral_m: own_lane.1, ..obj(2, 0.0, 0.0, -25.0) },
     ];
     let lead_of = |map: bool| {
         let mut c = Controller::new(truth());
@@ -524,4 +518,62 @@ fn brake_lights_coming_on_speed_the_answer_to_a_hard_braking_lead() {
     };
     let (with, without) = (answer(true), answer(false));
     assert!(with + 0.1 <= without, "answered {with:.2} s after the pedal with the lights seen, {without:.2} s without");
+}
+
+/// A car standing 150 m ahead at 30 m/s, as a camera tracker reports a new track: its first
+/// report carries no speed (0 relative, sigma 30 m/s), the next ones are rough (far ranges
+/// differ by less than their noise from frame to frame) and say how rough. Returns the time
+/// braking starts and whether an emergency came, with and without the reported sigmas.
+fn first_seen_standing_at_150_m(report_sigma: bool) -> (Option<f64>, bool) {
+    let mut c = Controller::new(AccSettings { set_speed_mps: 30.0, ..AccSettings::default() });
+    let (mut t, mut v, mut gap) = (0.0, 30.0, 150.0);
+    let (mut k, mut braking_from, mut emergency) = (0usize, None, false);
+    // (relative speed, its sigma) of the first frames; later the truth with sigma 3 m/s.
+    let early = [(0.0, 30.0), (-8.4, 17.0), (-8.7, 8.5), (-24.0, 6.0), (-27.0, 4.5)];
+    while t < 20.0 {
+        if ((t / DT).round() as i64) % 5 == 0 {
+            let (rel, sigma) = early.get(k).copied().unwrap_or((-v, 3.0));
+            let o = Object { relative_speed_sigma_mps: if report_sigma { sigma } else { 0.0 }, ..obj(3, gap, 0.0, rel) };
+            c.perceive(&frame(t, vec![o]), &ego(t, v));
+            k += 1;
+        }
+        let o = c.step(&ego(t, v), &[]);
+        if o.status.target_accel_mps2 < 0.0 && braking_from.is_none() {
+            braking_from = Some(t);
+        }
+        emergency |= o.status.mode == AccMode::Emergency;
+        v = (v + o.status.target_accel_mps2 * DT).max(0.0);
+        gap -= v * DT;
+        t += DT;
+    }
+    assert!(gap > 0.0 && v < 0.2, "ends {gap:.1} m behind at {v:.2} m/s");
+    (braking_from, emergency)
+}
+
+#[test]
+fn a_new_leads_unmeasured_speed_is_planned_for_as_slower_so_braking_starts_at_once() {
+    let (from, emergency) = first_seen_standing_at_150_m(true);
+    assert!(from.is_some_and(|t| t < 0.1), "braking from {from:?} s");
+    assert!(!emergency, "an emergency with comfort braking from the first frames");
+    // The same speeds taken at the range model's word (a few m/s) start it later.
+    let (from, _) = first_seen_standing_at_150_m(false);
+    assert!(from.is_some_and(|t| t >= 0.15), "braking from {from:?} s without the sigmas");
+}
+
+#[test]
+fn a_lead_missing_from_a_frame_or_two_keeps_its_estimate_and_is_let_go_later() {
+    // A lead at 20 m/s, 80 m ahead of the ego at 25 m/s, followed for 2 s.
+    let mut c = Controller::new(AccSettings { set_speed_mps: 25.0, ..truth() });
+    let lead = |t: f64| vec![obj(7, 80.0 - 5.0 * t, 0.0, -5.0)];
+    drive(&mut c, 0.0, 25.0, 2.0, lead);
+    let speed_of = |o: &Output| o.status.lead.map(|l| l.relative_speed_mps);
+    let before = speed_of(&c.step(&ego(2.0, 25.0), &[]));
+    // Two frames without it (0.1 s): the same lead, its speed kept, not re-measured from 0.
+    let run = drive(&mut c, 2.0, 25.0, 0.1, |_| vec![]);
+    let kept = speed_of(&run.last().unwrap().2);
+    assert!(kept.zip(before).is_some_and(|(k, b)| (k - b).abs() < 0.1), "{before:?} -> {kept:?}");
+    assert!(run.iter().all(|(_, _, o)| o.status.lead.is_some_and(|l| l.id == 7)));
+    // Missing for longer than the coast: gone.
+    let run = drive(&mut c, 2.1, 25.0, 0.5, |_| vec![]);
+    assert!(run.last().unwrap().2.status.lead.is_none());
 }
