@@ -27,6 +27,7 @@ pub const BUILT_IN: &[(&str, &str)] = &[
     ("bend-stopped-car-in-lane", include_str!("../../scenarios/bend-stopped-car-in-lane.json5")),
     ("passing-trucks", include_str!("../../scenarios/passing-trucks.json5")),
     ("truck-reveals-stopped-car", include_str!("../../scenarios/truck-reveals-stopped-car.json5")),
+    ("car-standing-at-150-m", include_str!("../../scenarios/car-standing-at-150-m.json5")),
     ("motorcycles", include_str!("../../scenarios/motorcycles.json5")),
     ("open-road", include_str!("../../scenarios/open-road.json5")),
 ];
