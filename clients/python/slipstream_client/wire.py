@@ -1,4 +1,4 @@
-"""slipstream wire format (version 3) in pure Python, written from docs/wire-format.md alone.
+"""slipstream wire format (version 4) in pure Python, written from docs/wire-format.md alone.
 
 decode(payload) -> (kind_name, header, body) and encode(kind_name, header, body) -> bytes.
 Bodies are dicts keyed by the field names of the doc; enums are their variant names
