@@ -201,6 +201,17 @@ pub struct FramePublisher {
 /// is gone loses it.
 const SHM_LINGER: std::time::Duration = std::time::Duration::from_secs(2);
 
+/// Set (under the write lock) once the process exits. Zenoh's shared-memory cleanup runs as
+/// the process exits, from an exit handler; a lingering pool touched after it panics. Ours,
+/// registered after Zenoh's (its cleanup is registered when the first pool is made) and so
+/// run before it, waits for any linger thread inside a pool call to leave it; the threads then
+/// let go of their pools without another call (that cleanup unlinks the segments).
+static EXITING: std::sync::RwLock<bool> = std::sync::RwLock::new(false);
+
+extern "C" fn stop_lingering() {
+    *EXITING.write().unwrap_or_else(|e| e.into_inner()) = true;
+}
+
 impl Drop for FramePublisher {
     /// The pool lives on (in a thread of its own) until every buffer in it is back or
     /// SHM_LINGER has passed: dropped at once, it took the last frame or two of a run with it
@@ -208,12 +219,27 @@ impl Drop for FramePublisher {
     /// every frame timed out now and then).
     fn drop(&mut self) {
         let Some(shm) = self.shm.take() else { return };
+        static ON_EXIT: std::sync::Once = std::sync::Once::new();
+        // SAFETY: registers a function without arguments that only takes a lock.
+        ON_EXIT.call_once(|| unsafe {
+            libc::atexit(stop_lingering);
+        });
         let pool = self.camera.shm_pool_mib << 20;
         let linger = move || {
             let deadline = std::time::Instant::now() + SHM_LINGER;
-            while std::time::Instant::now() < deadline && shm.available() < pool {
-                std::thread::sleep(std::time::Duration::from_millis(20));
+            loop {
+                let exiting = EXITING.read().unwrap_or_else(|e| e.into_inner());
+                if *exiting {
+                    std::mem::forget(shm);
+                    return;
+                }
+                if std::time::Instant::now() >= deadline || shm.available() >= pool {
+                    drop(shm);
+                    return;
+                }
                 shm.garbage_collect();
+                drop(exiting);
+                std::thread::sleep(std::time::Duration::from_millis(20));
             }
         };
         if let Err(e) = std::thread::Builder::new().name("shm-linger".into()).spawn(linger) {
