@@ -726,11 +726,14 @@ impl Controller {
                     // few tenths of a second): comfort braking plans for it being slower by
                     // UNMEASURED_SIGMAS of its uncertainty, so a standing car seen at the edge
                     // of range is braked for from the first frames, not once its speed is
-                    // known. An emergency still needs the estimate itself.
+                    // known. Only where comfort braking could cope with that case: a car
+                    // cutting in near, its speed not yet measured, is no standing car to brake
+                    // hard for. An emergency still needs the estimate itself.
                     let guard = match lead.filter(|l| !l.settled) {
                         Some(l) => threat.map(|t| {
-                            let slower = self::threat(l.gap_m, v, (l.speed_mps - UNMEASURED_SIGMAS * l.speed_sigma_mps).max(0.0), l.accel_mps2);
-                            t.or_worse(&slower)
+                            let slower_mps = (l.speed_mps - UNMEASURED_SIGMAS * l.speed_sigma_mps).max(0.0);
+                            let slower = self::threat(l.gap_m, v, slower_mps, l.accel_mps2);
+                            if slower.needed_decel_mps2 <= self.s.limits.decel_at(v) { t.or_worse(&slower) } else { t }
                         }),
                         None => threat,
                     };

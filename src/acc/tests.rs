@@ -577,3 +577,18 @@ fn a_lead_missing_from_a_frame_or_two_keeps_its_estimate_and_is_let_go_later() {
     let run = drive(&mut c, 2.1, 25.0, 0.5, |_| vec![]);
     assert!(run.last().unwrap().2.status.lead.is_none());
 }
+
+#[test]
+fn a_new_lead_near_at_the_egos_speed_draws_no_braking_while_its_speed_is_unmeasured() {
+    // A car merging 32 m ahead at the ego's 25 m/s (time gap 1 s: the desired gap is 30 m).
+    // Taken as standing it would need 10 m/s2: no case for comfort braking to plan for, and
+    // the estimate itself needs nothing.
+    let mut c = Controller::new(AccSettings { set_speed_mps: 25.0, time_gap_s: 1.0, ..AccSettings::default() });
+    let sigmas = [30.0, 2.5, 1.5, 1.0, 0.8, 0.6];
+    let run = drive(&mut c, 0.0, 25.0, 0.3, |t| {
+        let sigma = sigmas[((t / 0.05).round() as usize).min(sigmas.len() - 1)];
+        vec![Object { relative_speed_sigma_mps: sigma, ..obj(4, 32.0, 0.0, 0.0) }]
+    });
+    let hardest = run.iter().map(|(_, _, o)| o.status.target_accel_mps2).fold(f64::INFINITY, f64::min);
+    assert!(hardest > -0.05, "braked to {hardest:.2} m/s2 for a lead at its own speed");
+}
