@@ -644,10 +644,10 @@ impl Controller {
         let n = self.noise;
         let t = ego.t_s.max(frame.stamp_s);
         let speed = ego.speed_mps + o.relative_speed_mps;
-        // The speed's noise is the model's for this range; while a lead is new, perception's
-        // own estimate when larger: a new track's speed is a guess until a few frames have
-        // measured it (tens of m/s at first, far away). Later the tracker's estimate of its
-        // own error stays above how much its speed actually varies from frame to frame.
+        // The speed's noise is the model's for this range (the figures the ride was tuned
+        // with); while a lead is new, perception's own estimate when larger: a new track's
+        // speed is a guess until a few frames have measured it (tens of m/s at first, far
+        // away).
         let new_track_sigma = |settled: bool| if settled { 0.0 } else { o.relative_speed_sigma_mps };
         match &mut self.lead {
             Some(f) if f.id == o.id => {
