@@ -648,20 +648,19 @@ impl Controller {
         // with); while a lead is new, perception's own estimate when larger: a new track's
         // speed is a guess until a few frames have measured it (tens of m/s at first, far
         // away).
-        let new_track_sigma = |settled: bool| if settled { 0.0 } else { o.relative_speed_sigma_mps };
+        let speed_sigma =
+            |settled: bool| n.speed_sigma(gap).max(if settled { 0.0 } else { o.relative_speed_sigma_mps });
         match &mut self.lead {
             Some(f) if f.id == o.id => {
                 f.predict(t, ego.speed_mps, n.jerk_sigma_mps3);
                 f.brake_lights(o.brake_lights);
                 f.seen_s = frame.stamp_s;
                 f.update(0, gap, n.gap_sigma(gap));
-                let sigma = n.speed_sigma(gap).max(new_track_sigma(f.settled()));
-                f.update_speed(speed, sigma, n.speed_steady_mps);
+                f.update_speed(speed, speed_sigma(f.settled()), n.speed_steady_mps);
             }
             _ => {
                 tracing::debug!(from = ?current, to = o.id, "lead changed");
-                let sigma = n.speed_sigma(gap).max(new_track_sigma(false));
-                self.lead = Some(LeadFilter::new(o.id, t, gap, speed.max(0.0), sigma, &n));
+                self.lead = Some(LeadFilter::new(o.id, t, gap, speed.max(0.0), speed_sigma(false), &n));
             }
         }
     }
@@ -733,7 +732,11 @@ impl Controller {
                         Some(l) => threat.map(|t| {
                             let slower_mps = (l.speed_mps - UNMEASURED_SIGMAS * l.speed_sigma_mps).max(0.0);
                             let slower = self::threat(l.gap_m, v, slower_mps, l.accel_mps2);
-                            if slower.needed_decel_mps2 <= self.s.limits.decel_at(v) { t.or_worse(&slower) } else { t }
+                            if slower.needed_decel_mps2 <= self.s.limits.decel_at(v) {
+                                t.or_worse(&slower)
+                            } else {
+                                t
+                            }
                         }),
                         None => threat,
                     };

@@ -18,7 +18,14 @@ fn ego(t_s: f64, speed_mps: f64) -> EgoNow {
 
 fn obj(id: u32, gap_m: f64, lateral_m: f64, relative_speed_mps: f64) -> Object {
     // distance is from the rear axle: the default front overhang is 3.65 m.
-    Object { id, distance_m: gap_m + 3.65, lateral_m, relative_speed_mps, relative_speed_sigma_mps: 0.0, brake_lights: false }
+    Object {
+        id,
+        distance_m: gap_m + 3.65,
+        lateral_m,
+        relative_speed_mps,
+        relative_speed_sigma_mps: 0.0,
+        brake_lights: false,
+    }
 }
 
 fn frame(t_s: f64, objects: Vec<Object>) -> PerceptionFrame {
@@ -533,7 +540,8 @@ fn first_seen_standing_at_150_m(report_sigma: bool) -> (Option<f64>, bool) {
     while t < 20.0 {
         if ((t / DT).round() as i64) % 5 == 0 {
             let (rel, sigma) = early.get(k).copied().unwrap_or((-v, 3.0));
-            let o = Object { relative_speed_sigma_mps: if report_sigma { sigma } else { 0.0 }, ..obj(3, gap, 0.0, rel) };
+            let o =
+                Object { relative_speed_sigma_mps: if report_sigma { sigma } else { 0.0 }, ..obj(3, gap, 0.0, rel) };
             c.perceive(&frame(t, vec![o]), &ego(t, v));
             k += 1;
         }

@@ -387,8 +387,7 @@ impl Detector {
                     gap.iter().map(|&l| l as f32).sum::<f32>() / gap.len() as f32
                 };
                 let clearance_rows = (GROUND_CLEARANCE_M * px_per_m).ceil() as u32 + 1;
-                let darkest =
-                    (0..=clearance_rows.min(v1)).map(|up| between(v1 - up)).fold(f32::INFINITY, f32::min);
+                let darkest = (0..=clearance_rows.min(v1)).map(|up| between(v1 - up)).fold(f32::INFINITY, f32::min);
                 (darkest < bridge).then_some(j)
             });
             match partner {

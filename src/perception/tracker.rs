@@ -208,7 +208,11 @@ mod tests {
         assert!(sigmas[1] > 10.0, "two ranges 1.5 m apart with 0.65 m noise: {:.1}", sigmas[1]);
         assert!(sigmas.windows(2).take(8).all(|w| w[1] < w[0]), "shrinks as frames come: {sigmas:.1?}");
         assert!(sigmas[19] < 3.0 && (last[0].relative_speed_mps + 30.0).abs() < 3.0, "{:?}", last[0]);
-        assert!(last[0].distance_sigma_m > 0.0 && last[0].distance_sigma_m < 0.65, "better than one range: {:?}", last[0]);
+        assert!(
+            last[0].distance_sigma_m > 0.0 && last[0].distance_sigma_m < 0.65,
+            "better than one range: {:?}",
+            last[0]
+        );
     }
 
     #[test]

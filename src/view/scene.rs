@@ -235,10 +235,12 @@ pub fn road_update(stamp_ns: u64, road: &Road, s_m: f64) -> SceneUpdate {
                 .map(|k| {
                     let s = s_m - ROAD_BEHIND_M + k as f64 * ROAD_STEP_M;
                     // The edges move in where an outer lane ends.
-                    let d = match (i == 0, i == lanes) {
-                        (true, _) => road.edges_d(s).0,
-                        (_, true) => road.edges_d(s).1,
-                        _ => d,
+                    let d = if i == 0 {
+                        road.edges_d(s).0
+                    } else if i == lanes {
+                        road.edges_d(s).1
+                    } else {
+                        d
                     };
                     let p: Vector2<f64> = road.to_world(s, d);
                     Point3 { x: p.x, y: p.y, z: 0.02 }
