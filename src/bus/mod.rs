@@ -5,6 +5,7 @@
 //! QoS the topic map gives, declares the node's liveliness token, and keeps statistics for
 //! every subscription.
 
+mod exit;
 pub mod faults;
 mod follow;
 mod publisher;
@@ -13,6 +14,7 @@ mod subscriber;
 
 use std::sync::Arc;
 
+pub use exit::ZenohThreads;
 pub use faults::NodeClock;
 pub use follow::{Following, FOLLOW_SWITCH_AFTER};
 pub use publisher::{FramePublisher, FrameSent, Publisher};
@@ -56,6 +58,7 @@ pub struct Bus {
     /// The statistics of every subscription declared here (reported with faults on).
     inputs: Arc<parking_lot::Mutex<Vec<std::sync::Weak<TopicStats>>>>,
     _token: zenoh::liveliness::LivelinessToken,
+    _open: exit::OpenBus,
 }
 
 impl Bus {
@@ -97,6 +100,7 @@ impl Bus {
             clock: Arc::new(NodeClock::default()),
             inputs: Arc::default(),
             _token: token,
+            _open: exit::OpenBus::new(),
         })
     }
 
