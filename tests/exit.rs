@@ -17,9 +17,7 @@ fn zenoh_threads() -> Vec<String> {
         .unwrap()
         .filter_map(|t| std::fs::read_to_string(t.ok()?.path().join("comm")).ok())
         .map(|name| name.trim().to_string())
-        .filter(|name| {
-            ["app-", "acc-", "tx-", "rx-", "net-"].iter().any(|pool| name.starts_with(pool))
-        })
+        .filter(|name| ["app-", "acc-", "tx-", "rx-", "net-"].iter().any(|pool| name.starts_with(pool)))
         .collect()
 }
 
