@@ -54,7 +54,8 @@ pub struct GroundTruthObject {
     /// Centre of the object's rear face in the ego body frame.
     pub position_in_ego_m: Vec3,
     pub yaw_in_ego_rad: f64,
-    /// Velocity relative to the ego, in the ego body frame.
+    /// Velocity relative to the ego, in the ego body frame: the rate of change of
+    /// `position_in_ego_m` (the frame turns with the ego, as a sensor's range rate sees it).
     pub velocity_in_ego_mps: Vec3,
     /// Box in the camera image, None when outside the image.
     pub bbox: Option<BoundingBox2d>,
