@@ -32,8 +32,6 @@ struct Cli {
 }
 
 fn main() -> Result<()> {
-    // Dropped last: Zenoh's threads stop before the exit handlers run (src/bus/exit.rs).
-    let _zenoh = slipstream::bus::ZenohThreads::stop_at_end_of_main();
     slipstream::cli::apply_zenoh_runtime_default();
     let cli = Cli::parse();
     slipstream::cli::init_tracing();

@@ -173,8 +173,6 @@ where
 }
 
 fn main() -> ExitCode {
-    // Dropped last: Zenoh's threads stop before the exit handlers run (src/bus/exit.rs).
-    let _zenoh = slipstream::bus::ZenohThreads::stop_at_end_of_main();
     let cli = Cli::parse();
     // A router forwards what it receives: its receive path must not share the tx pool, or a
     // message of several batches (a raw camera frame) waits for the threads busy receiving it

@@ -5,7 +5,6 @@
 //! QoS the topic map gives, declares the node's liveliness token, and keeps statistics for
 //! every subscription.
 
-mod exit;
 pub mod faults;
 mod follow;
 mod publisher;
@@ -14,7 +13,6 @@ mod subscriber;
 
 use std::sync::Arc;
 
-pub use exit::ZenohThreads;
 pub use faults::NodeClock;
 pub use follow::{Following, FOLLOW_SWITCH_AFTER};
 pub use publisher::{FramePublisher, FrameSent, Publisher};
@@ -58,7 +56,6 @@ pub struct Bus {
     /// The statistics of every subscription declared here (reported with faults on).
     inputs: Arc<parking_lot::Mutex<Vec<std::sync::Weak<TopicStats>>>>,
     _token: zenoh::liveliness::LivelinessToken,
-    _open: exit::OpenBus,
 }
 
 impl Bus {
@@ -100,7 +97,6 @@ impl Bus {
             clock: Arc::new(NodeClock::default()),
             inputs: Arc::default(),
             _token: token,
-            _open: exit::OpenBus::new(),
         })
     }
 
