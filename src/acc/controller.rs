@@ -334,6 +334,8 @@ const BRAKING_JERK_SIGMA_MPS3: f64 = 10.0;
 const UNMEASURED_SIGMAS: f64 = 2.0;
 /// How long a lead missing from perception's frames is kept, predicted.
 const LEAD_COAST_S: f64 = 0.3;
+/// A vehicle counts as beyond the lead from this far past it (not the lead seen twice).
+const BEYOND_LEAD_M: f64 = 3.0;
 /// How long after a manoeuvre the lead's speed is followed closely.
 const MANOEUVRE_HOLD_S: f64 = 1.0;
 /// A lead is judged on its acceleration (manoeuvres, braking hard) once followed this long.
@@ -407,12 +409,12 @@ pub struct Controller {
     last_throttle: f64,
     emergency: bool,
     /// The nearest vehicle that is in the ego's lane by the entry test while the lead stays
-    /// the lead only by the stay-in-lane hysteresis (a lead moving out): what it reveals
-    /// counts for the threat at once, not once the lead has left.
+    /// the lead only by the stay-in-lane hysteresis (a lead moving out), else the nearest in
+    /// the lane beyond the lead: it counts for the threat at once, not once the lead has left.
     next_in_lane: Option<Revealed>,
 }
 
-/// A vehicle in the lane beyond a lead that is leaving it, as last measured.
+/// A vehicle in the lane beyond the lead, or one a leaving lead reveals, as last measured.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Revealed {
     stamp_s: f64,
@@ -594,6 +596,7 @@ impl Controller {
         // the current lead), with their gaps.
         let mut best: Option<(&Object, f64)> = None;
         let mut entering: Option<(&Object, f64)> = None;
+        let mut in_lane: Vec<(&Object, f64)> = Vec::new();
         for o in &frame.objects {
             let off = match &lane_ahead {
                 Some(l) => l.offset_m(o.distance_m, o.lateral_m),
@@ -631,16 +634,30 @@ impl Controller {
             if best.is_none_or(|b| gap < b.1) {
                 best = Some((o, gap));
             }
-            if off < lane.in_lane_m && entering.is_none_or(|b| gap < b.1) {
-                entering = Some((o, gap));
+            if off < lane.in_lane_m {
+                in_lane.push((o, gap));
+                if entering.is_none_or(|b| gap < b.1) {
+                    entering = Some((o, gap));
+                }
             }
         }
+        // Beyond the lead, the nearest vehicle in the lane past it: the lead cannot drive
+        // through it, so it counts for the threat too. A truck standing beyond a van that
+        // moves out only at the last moment is braked for from when it is seen over the van,
+        // not once the van has gone (a warranted 1.5-1.9 s emergency before, in a scenario of
+        // our own). A vehicle beyond at the lead's speed or faster asks for nothing.
+        let beyond = best.and_then(|(b, lead_gap)| {
+            in_lane
+                .iter()
+                .filter(|(o, gap)| o.id != b.id && *gap > lead_gap + BEYOND_LEAD_M)
+                .min_by(|x, y| x.1.total_cmp(&y.1))
+                .copied()
+        });
         self.next_in_lane = match (best, entering) {
-            (Some((b, _)), Some((e, gap_m))) if e.id != b.id => {
-                Some(Revealed { stamp_s: frame.stamp_s, gap_m, relative_speed_mps: e.relative_speed_mps })
-            }
-            _ => None,
-        };
+            (Some((b, _)), Some(e)) if e.0.id != b.id => Some(e),
+            _ => beyond,
+        }
+        .map(|(o, gap_m)| Revealed { stamp_s: frame.stamp_s, gap_m, relative_speed_mps: o.relative_speed_mps });
         self.tracks.retain(|_, t| frame.stamp_s - t.stamp_s < 2.0);
         // A lead missing from a frame (far away a detector misses one now and then) is kept,
         // moving on as estimated, for LEAD_COAST_S unless a nearer vehicle is in the lane:

@@ -640,3 +640,27 @@ fn a_far_leads_acceleration_within_its_noise_draws_no_braking() {
         assert!(hardest > -0.5, "seed {seed}: braked at {hardest:.2} m/s2 for a lead holding its speed");
     }
 }
+
+/// A van 53.6 m ahead (the time gap) at the ego's 27 m/s and a truck standing 170 m ahead in the same lane,
+/// beyond it: the van cannot drive through the truck, so the truck counts for the threat
+/// while the van is still the lead, and braking starts at once (before, only once the van
+/// had moved out, with 1.5-1.9 s of emergency in a scenario of our own). The same truck
+/// driving at the van's speed draws no braking.
+#[test]
+fn a_vehicle_standing_beyond_the_lead_is_braked_for_while_the_lead_is_still_the_lead() {
+    for truck_speed in [0.0, 27.0] {
+        let mut c = Controller::new(AccSettings { set_speed_mps: 27.0, ..truth() });
+        let run = drive(&mut c, 0.0, 27.0, 3.0, |t| {
+            vec![obj(1, 53.6, 0.0, 0.0), obj(2, 170.0 - (27.0 - truck_speed) * t, 0.0, truck_speed - 27.0)]
+        });
+        let lead_ids: Vec<u32> = run.iter().filter_map(|(_, _, o)| o.status.lead.map(|l| l.id)).collect();
+        assert!(lead_ids.iter().all(|&id| id == 1), "the van stays the lead");
+        let hardest = run.iter().map(|(_, _, o)| o.status.target_accel_mps2).fold(f64::INFINITY, f64::min);
+        if truck_speed == 0.0 {
+            // Stopping 2 m short of 170 m from 27 m/s needs 729 / 336 = 2.2 m/s2.
+            assert!(hardest < -1.5, "braked only to {hardest:.2} m/s2 for a truck standing beyond the lead");
+        } else {
+            assert!(hardest > -0.1, "braked to {hardest:.2} m/s2 for a truck at the lead's speed");
+        }
+    }
+}
