@@ -595,7 +595,6 @@ impl Controller {
         // The nearest in the lane, and the nearest by the entry test alone (no hysteresis for
         // the current lead), with their gaps.
         let mut best: Option<(&Object, f64)> = None;
-        let mut entering: Option<(&Object, f64)> = None;
         let mut in_lane: Vec<(&Object, f64)> = Vec::new();
         for o in &frame.objects {
             let off = match &lane_ahead {
@@ -636,23 +635,18 @@ impl Controller {
             }
             if off < lane.in_lane_m {
                 in_lane.push((o, gap));
-                if entering.is_none_or(|b| gap < b.1) {
-                    entering = Some((o, gap));
-                }
             }
         }
+        let nearest = |beyond_m: f64| {
+            in_lane.iter().filter(|(_, gap)| *gap > beyond_m).min_by(|x, y| x.1.total_cmp(&y.1)).copied()
+        };
+        let entering = nearest(f64::NEG_INFINITY);
         // Beyond the lead, the nearest vehicle in the lane past it: the lead cannot drive
         // through it, so it counts for the threat too. A truck standing beyond a van that
         // moves out only at the last moment is braked for from when it is seen over the van,
         // not once the van has gone (a warranted 1.5-1.9 s emergency before, in a scenario of
         // our own). A vehicle beyond at the lead's speed or faster asks for nothing.
-        let beyond = best.and_then(|(b, lead_gap)| {
-            in_lane
-                .iter()
-                .filter(|(o, gap)| o.id != b.id && *gap > lead_gap + BEYOND_LEAD_M)
-                .min_by(|x, y| x.1.total_cmp(&y.1))
-                .copied()
-        });
+        let beyond = best.and_then(|(_, lead_gap)| nearest(lead_gap + BEYOND_LEAD_M));
         self.next_in_lane = match (best, entering) {
             (Some((b, _)), Some(e)) if e.0.id != b.id => Some(e),
             _ => beyond,
