@@ -131,6 +131,11 @@ enum EvalCommand {
         /// Print JSON instead of the table
         #[arg(long)]
         json: bool,
+        /// Simulator settings to measure with (the cameras: resolution, field of view, mount);
+        /// only the keys it changes are needed [default: config/sim.json5 when present, else
+        /// built-in]
+        #[arg(long, value_name = "FILE", env = "SLIPSTREAM_SIM_CONFIG")]
+        settings: Option<std::path::PathBuf>,
     },
     /// Adaptive cruise control: runs slipstream-sim (lockstep, fast), slipstream-detect and
     /// slipstream-acc as separate processes over Zenoh through each scenario and reports
@@ -256,10 +261,11 @@ fn run(cli: Cli) -> Result<ExitCode> {
             }
             Ok(ExitCode::SUCCESS)
         }
-        Command::Eval(EvalCommand::Detect { scenarios, seconds, json }) => {
+        Command::Eval(EvalCommand::Detect { scenarios, seconds, json, settings }) => {
             use slipstream::eval::detect;
             let names: Vec<String> = if scenarios.is_empty() { detect::standard() } else { scenarios };
-            let report = detect::evaluate(&names, seconds, &slipstream::sim::SimSettings::default())?;
+            let settings = slipstream::sim::SimSettings::load_or_default(settings.as_deref())?;
+            let report = detect::evaluate(&names, seconds, &settings)?;
             print_report(json, &report, detect::markdown)?;
             Ok(ExitCode::SUCCESS)
         }

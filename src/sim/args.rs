@@ -58,9 +58,7 @@ pub struct SimArgs {
 impl SimArgs {
     /// The settings file (or defaults) with the flags applied and checked.
     pub fn settings(&self) -> Result<SimSettings, ConfigError> {
-        let default_file = PathBuf::from(super::settings::DEFAULT_SIM_CONFIG_PATH);
-        let path = self.settings.clone().or_else(|| default_file.exists().then_some(default_file));
-        let mut s = SimSettings::load_or_default(path.as_deref())?;
+        let mut s = SimSettings::load_or_default(self.settings.as_deref())?;
         if let Some(mode) = &self.clock {
             s.mode = match mode.as_str() {
                 "fast" => Mode::Fast,

@@ -158,9 +158,13 @@ impl Default for SimSettings {
 }
 
 impl SimSettings {
-    /// Settings from a file, or the built-in defaults.
+    /// Settings from the file given, else from config/sim.json5 when the working directory
+    /// has one, else the built-in defaults.
     pub fn load_or_default(path: Option<&Path>) -> Result<SimSettings, ConfigError> {
-        let Some(path) = path else { return Ok(SimSettings::default()) };
+        let shipped = Path::new(DEFAULT_SIM_CONFIG_PATH);
+        let Some(path) = path.or_else(|| shipped.exists().then_some(shipped)) else {
+            return Ok(SimSettings::default());
+        };
         let (text, origin) = read_config(path)?;
         SimSettings::parse(&text, &origin)
     }
