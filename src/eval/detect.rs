@@ -512,8 +512,13 @@ mod rendered {
     /// Renders both default cameras at the start of a one-off scenario and runs the camera
     /// rig (front + narrow, fused) on them.
     fn rig_detect_in(traffic: &str, noise: f64) -> (Vec<FrameDetection>, crate::msg::GroundTruthObjects) {
+        rig_detect_on("{}", traffic, noise)
+    }
+
+    /// As `rig_detect_in`, on the given road (the scenario's `road` value).
+    fn rig_detect_on(road: &str, traffic: &str, noise: f64) -> (Vec<FrameDetection>, crate::msg::GroundTruthObjects) {
         let text = format!(
-            "{{ name: 't', duration_s: 10, seed: 3, variation: {{ gap_m: 0, speed_mps: 0 }}, noise: {{ camera_stddev: {noise} }}, ego: {{ lane: 1, speed_mps: 0 }}, traffic: [{traffic}] }}"
+            "{{ name: 't', duration_s: 10, seed: 3, road: {road}, variation: {{ gap_m: 0, speed_mps: 0 }}, noise: {{ camera_stddev: {noise} }}, ego: {{ lane: 1, speed_mps: 0 }}, traffic: [{traffic}] }}"
         );
         let world = World::new(Scenario::parse(&text, "test").unwrap(), 3, 100);
         let mut cameras = crate::sim::cameras::Cameras::new(&SimSettings::default(), &world);
@@ -590,6 +595,40 @@ mod rendered {
                 let what = format!("{class} in lane {lane}, {from}-{to} m");
                 assert!(found * 10 >= seen * 9, "{what}: found {found} of {seen}: {errors:?}");
                 assert!(errors.iter().all(|e| e.1.abs() < 0.03), "{what}: {errors:?}");
+            }
+        }
+    }
+
+    /// In a bend the vehicles ahead are turned from the line of sight: the camera sees a side
+    /// beside each rear, so the dark band under them is wider than any rear, and beside the
+    /// rear lies the body's overhang, not the background. Trucks, vans and cars round right
+    /// and left bends of 400 m (60-150 m ahead) and 250 m (60-105 m ahead: beyond, they leave
+    /// the narrow camera's view), in the ego's lane and the next, are found in at least 90% of
+    /// positions within 3% of their distance and 1 m of their place across (trucks were lost
+    /// from 80 m on before).
+    #[test]
+    fn vehicles_seen_from_the_side_in_a_bend_are_found_at_their_rear() {
+        for (radius, farthest) in [(-400.0, 150.0), (400.0, 150.0), (-250.0, 105.0), (250.0, 105.0)] {
+            let road = format!("{{ curves: [{{ start_m: 20, length_m: 400, radius_m: {radius} }}] }}");
+            for class in ["truck", "van", "car"] {
+                for lane in [1, if radius < 0.0 { 2 } else { 0 }] {
+                    let (mut seen, mut found, mut missed) = (0, 0, Vec::new());
+                    let mut gap = 60.0;
+                    while gap <= farthest {
+                        let (dets, truth) =
+                            rig_detect_on(&road, &format!("{{ lane: {lane}, gap_m: {gap}, speed_mps: 0, class: '{class}' }}"), 3.0);
+                        let [x, y, _] = truth.objects[0].position_in_ego_m;
+                        seen += 1;
+                        let placed = |d: &&FrameDetection| (d.lateral_offset_m - y).abs() < 1.0 && ((d.distance_m - x) / x).abs() < 0.03;
+                        match dets.iter().find(placed) {
+                            Some(_) => found += 1,
+                            None => missed.push((gap, x, y, dets.iter().map(|d| (d.distance_m, d.lateral_offset_m)).collect::<Vec<_>>())),
+                        }
+                        gap += 7.5;
+                    }
+                    let what = format!("{class} in lane {lane}, bend radius {radius} m");
+                    assert!(found * 10 >= seen * 9, "{what}: found {found} of {seen}; missed (gap, x, y, detections): {missed:?}");
+                }
             }
         }
     }

@@ -92,6 +92,9 @@ const LIT_LAMP_MIN_PX: u32 = 2;
 /// about 0.35 and 1.5 m; the simulator's cars have theirs at 0.6-0.8 m, vans' to 1.2 m).
 const LAMPS_MAX_HEIGHT_M: f64 = 1.3;
 
+/// Background beside a band is sampled this many columns outside it.
+const FLANK_PX: usize = 3;
+
 /// Largest step of the contact row between neighbouring columns of one vehicle, pixels.
 const JUMP_PX: i64 = 3;
 
@@ -125,6 +128,33 @@ const TALL_RATIO: u32 = 4;
 /// Rows within which a contact profile counts as flat.
 const FLAT_PX: u32 = 2;
 
+/// The widest band taken for a vehicle seen from behind and from one side (in a bend, or
+/// turning): a truck 9.5 m long turned 38 degrees from the line of sight shows this much.
+const MAX_OBLIQUE_WIDTH_M: f64 = 8.0;
+
+/// The widest band taken for one vehicle when its contact line does not show which side
+/// recedes (far away a side 10 m deep rises a row or two): a truck turned 15 degrees.
+const MAX_LEVEL_OBLIQUE_WIDTH_M: f64 = 5.0;
+
+/// How far a vehicle's body can reach beyond its wheels to the side, metres.
+const MAX_OVERHANG_M: f64 = 0.6;
+
+/// A band wider than this is more than a rear (a truck's 2.5 m and its shadow's margins):
+/// whether a side recedes beside it is looked for.
+const MAX_REAR_WIDTH_M: f64 = 2.9;
+
+/// Rows by which a band's contact edge must rise toward one end, over its outer quarter, more
+/// than toward the other, for that end to be a vehicle's side receding from its rear (a
+/// truck's side 150 m ahead, turned 10 degrees, rises about one row).
+const SIDE_RISE_PX: f64 = 0.3;
+
+/// Which way a vehicle's side, seen beside its rear, lies in the image.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Side {
+    Left,
+    Right,
+}
+
 /// A run of dark pixels on one row, and the component it belongs to.
 #[derive(Debug, Clone, Copy)]
 struct Run {
@@ -143,6 +173,10 @@ struct Component {
     /// Columns whose contact row is within FLAT_PX of the lowest.
     flat_u0: u32,
     flat_u1: u32,
+    /// The columns of the dark region it is part of that join it without a gap, where their
+    /// contact row is no lower than its own (u0..=u1 at least).
+    reach_u0: u32,
+    reach_u1: u32,
 }
 
 /// Reusable detector for one camera.
@@ -348,7 +382,32 @@ impl Detector {
                         let v1 = seg.iter().map(|c| c.1).max().unwrap_or(0);
                         let flat = seg.iter().filter(|c| c.1 + FLAT_PX >= v1);
                         let (fu0, fu1) = flat.fold((u32::MAX, 0), |(a, b), c| (a.min(c.0), b.max(c.0)));
-                        out.push(Component { u0: seg[0].0, u1: seg[seg.len() - 1].0, v1, flat_u0: fu0, flat_u1: fu1 });
+                        // Dark columns joined to it on either side that end higher: the body
+                        // over its wheels (a bumper, a chassis), split off by the jump.
+                        let above = |c: &(u32, u32, u32)| c.1 <= v1;
+                        let mut reach_u0 = seg[0].0;
+                        for j in (0..start).rev() {
+                            if merged[j].0 + 1 != reach_u0 || !above(&merged[j]) {
+                                break;
+                            }
+                            reach_u0 = merged[j].0;
+                        }
+                        let mut reach_u1 = seg[seg.len() - 1].0;
+                        for c in &merged[i..] {
+                            if c.0 != reach_u1 + 1 || !above(c) {
+                                break;
+                            }
+                            reach_u1 = c.0;
+                        }
+                        out.push(Component {
+                            u0: seg[0].0,
+                            u1: seg[seg.len() - 1].0,
+                            v1,
+                            flat_u0: fu0,
+                            flat_u1: fu1,
+                            reach_u0,
+                            reach_u1,
+                        });
                     }
                     start = i;
                 }
@@ -399,6 +458,8 @@ impl Detector {
                         v1: a.v1.max(b.v1),
                         flat_u0: a.flat_u0.min(b.flat_u0),
                         flat_u1: a.flat_u1.max(b.flat_u1),
+                        reach_u0: a.reach_u0.min(b.reach_u0),
+                        reach_u1: a.reach_u1.max(b.reach_u1),
                     };
                     // The joined band may join the next one too: look again from it.
                 }
@@ -427,17 +488,51 @@ impl Detector {
         let origin = self.camera.origin_in_body();
         let px_per_m = self.camera.info.fx_px / (contact.x - origin.x).max(0.5);
         let width_m = (bu1 - bu0 + 1) as f64 / px_per_m;
-        if width_m < p.min_width_m || width_m > p.max_width_m {
+        let (u0, u1) = (c.u0.min(bu0) as usize, c.u1.max(bu1) as usize);
+        let max_rows = (p.max_height_m * px_per_m) as usize;
+        let flanks = [u0.checked_sub(FLANK_PX), (u1 + FLANK_PX < w).then_some(u1 + FLANK_PX)];
+        let height_from = |flanks: [Option<usize>; 2]| -> Result<(usize, f64), String> {
+            let top = self.top_row(rgb, w, u0, u1, c.v1 as usize, max_rows, flanks).ok_or("nothing rises above the contact")?;
+            let height_m = (contact_v - top as f64) / px_per_m;
+            if height_m < p.min_height_m || height_m > p.max_height_m {
+                return Err(format!("height {height_m:.2} m"));
+            }
+            Ok((top, height_m))
+        };
+        // The background just beside the band can be the vehicle's own body where it overhangs
+        // its wheels (a truck's bumper, seen when the shadow under it is too thin to show):
+        // where dark columns of the same region adjoin the band, the height is measured beside
+        // them (as far as a body overhangs), and beside the band only if that fails.
+        let overhang_px = (MAX_OVERHANG_M * px_per_m).ceil() as u32;
+        let (r0, r1) = (c.reach_u0.max(u0 as u32 - overhang_px.min(u0 as u32)) as usize, c.reach_u1.min(u1 as u32 + overhang_px) as usize);
+        let outside_body = [r0.checked_sub(FLANK_PX), (r1 + FLANK_PX < w).then_some(r1 + FLANK_PX)];
+        // Seen from behind, the band is the rear's. A vehicle turned from the line of sight (in
+        // a bend) also shows one side, receding beside its rear: the band is wider than any
+        // rear, and the vehicle is placed by its rear's outer edge.
+        if width_m < p.min_width_m {
             return Err(format!("width {width_m:.2} m"));
         }
-        let (u0, u1) = (c.u0.min(bu0) as usize, c.u1.max(bu1) as usize);
-        let top = self
-            .top_row(rgb, w, u0, u1, c.v1 as usize, (p.max_height_m * px_per_m) as usize)
-            .ok_or("nothing rises above the contact")?;
-        let height_m = (contact_v - top as f64) / px_per_m;
-        if height_m < p.min_height_m || height_m > p.max_height_m {
-            return Err(format!("height {height_m:.2} m"));
+        let side = if width_m > MAX_REAR_WIDTH_M { self.receding_side(w, h, c) } else { None };
+        let oblique = if side.is_some() && width_m <= MAX_OBLIQUE_WIDTH_M {
+            side
+        } else if width_m <= p.max_width_m {
+            None
+        } else if width_m <= MAX_LEVEL_OBLIQUE_WIDTH_M {
+            // Placed by the band's centre: off by at most half the side's width.
+            None
+        } else {
+            return Err(format!("width {width_m:.2} m"));
+        };
+        // Last, beside the widest overhang a body can have (a van's box over its wheels, with
+        // no dark chassis under it to show where it ends).
+        let (o0, o1) = (u0.checked_sub(overhang_px as usize), (u1 + overhang_px as usize) as usize);
+        let beyond_overhang = [o0.and_then(|o| o.checked_sub(FLANK_PX)), (o1 + FLANK_PX < w).then_some(o1 + FLANK_PX)];
+        let (top, height_m) = if (r0, r1) != (u0, u1) {
+            height_from(outside_body).or_else(|_| height_from(flanks))
+        } else {
+            height_from(flanks)
         }
+        .or_else(|why| height_from(beyond_overhang).map_err(|_| why))?;
         // A band narrower than any car's, seen whole (not cut by the image's side), under
         // something as tall as a rider: a motorcycle.
         let whole = bu0 > 0 && (bu1 as usize) + 1 < w;
@@ -466,9 +561,12 @@ impl Detector {
         // part's, metres inside the vehicle's own, which would put a car of the next lane into
         // the ego's. Its inner side is measured: the centre lies half its class's width beyond.
         let half_width = VehicleParams::of_class(class).size_m[1] / 2.0;
-        let lateral_offset_m = match (bu0 == 0, bu1 as usize + 1 >= w) {
-            (true, false) => self.camera.lateral_at((bu1 + 1) as f64, edge_v, contact.x) + half_width,
-            (false, true) => self.camera.lateral_at(bu0 as f64, edge_v, contact.x) - half_width,
+        // Seen obliquely, the rear's outer edge is the band's end away from the side.
+        let lateral_offset_m = match (bu0 == 0, bu1 as usize + 1 >= w, oblique) {
+            (true, false, _) => self.camera.lateral_at((bu1 + 1) as f64, edge_v, contact.x) + half_width,
+            (false, true, _) => self.camera.lateral_at(bu0 as f64, edge_v, contact.x) - half_width,
+            (_, _, Some(Side::Left)) => self.camera.lateral_at((r1 + 1) as f64, edge_v, contact.x) + half_width,
+            (_, _, Some(Side::Right)) => self.camera.lateral_at(r0 as f64, edge_v, contact.x) - half_width,
             _ => contact.y,
         };
         // Stop lamps sit at most LAMPS_MAX_HEIGHT_M above the ground, one on each side (a
@@ -561,8 +659,14 @@ impl Detector {
     /// (a band a pixel or two thick at 50 m holds no whole pixel to measure it by). Averaged
     /// over the columns, pixel noise mostly cancels.
     fn contact_edge(&self, w: usize, h: usize, c: &Component) -> Option<f64> {
-        let columns = self.edge_columns(w, h, c);
-        let road = self.road_below(w, &columns)?;
+        let edges = self.fractional_edges(w, &self.edge_columns(w, h, c))?;
+        Some(edges.iter().sum::<f64>() / edges.len() as f64)
+    }
+
+    /// The contact edge in each of the given columns (column, lowest row holding band), to a
+    /// fraction of a row (`contact_edge`); None when it cannot be measured.
+    fn fractional_edges(&self, w: usize, columns: &[(usize, usize)]) -> Option<Vec<f64>> {
+        let road = self.road_below(w, columns)?;
         let band = road * self.band_ratio;
         if road - band < 8.0 {
             return None;
@@ -577,20 +681,53 @@ impl Detector {
             let weight = (below / 0.25).min(1.0);
             weight * (lo as f64 + 1.0 + below) + (1.0 - weight) * (lo as f64 + inner + below)
         };
-        let sum: f64 = columns.iter().map(|&(u, lo)| edge(u, lo)).sum();
-        Some(sum / columns.len() as f64)
+        Some(columns.iter().map(|&(u, lo)| edge(u, lo)).collect())
+    }
+
+    /// Which end of a band its contact edge rises toward, measured to a fraction of a row over
+    /// its outer quarters: a vehicle's side receding beside its rear (the rear's lower edge is
+    /// level across the road; the side's runs away from the camera). None when neither end
+    /// rises by SIDE_RISE_PX more than the other.
+    fn receding_side(&self, w: usize, h: usize, c: &Component) -> Option<Side> {
+        let top = (c.v1 as usize).saturating_sub(JUMP_PX as usize + 1);
+        let columns: Vec<(usize, usize)> = (c.u0 as usize..=c.u1 as usize)
+            .filter_map(|u| (top..=c.v1 as usize).rev().find(|&v| self.luma[v * w + u] < self.dark).map(|lo| (u, lo)))
+            .filter(|&(_, lo)| lo + 3 < h)
+            .collect();
+        if columns.len() < 8 {
+            return None;
+        }
+        let edges = self.fractional_edges(w, &columns)?;
+        let quarter = edges.len() / 4;
+        let mean = |e: &[f64]| e.iter().sum::<f64>() / e.len() as f64;
+        // Rows grow downward: the receding end's edge is the smaller.
+        let (left, right) = (mean(&edges[..quarter]), mean(&edges[edges.len() - quarter..]));
+        if left >= right + SIDE_RISE_PX {
+            Some(Side::Right)
+        } else if right >= left + SIDE_RISE_PX {
+            Some(Side::Left)
+        } else {
+            None
+        }
     }
 
     /// The highest row above `bottom` where the columns u0..=u1 still differ from the
     /// background just left and right of them; None when nothing rises above the contact.
-    fn top_row(&self, rgb: &[u8], w: usize, u0: usize, u1: usize, bottom: usize, max_rows: usize) -> Option<usize> {
+    fn top_row(
+        &self,
+        rgb: &[u8],
+        w: usize,
+        u0: usize,
+        u1: usize,
+        bottom: usize,
+        max_rows: usize,
+        flanks: [Option<usize>; 2],
+    ) -> Option<usize> {
         let px = |u: usize, v: usize| {
             let i = (v * w + u) * 3;
             [rgb[i] as i32, rgb[i + 1] as i32, rgb[i + 2] as i32]
         };
         let diff = |a: [i32; 3], b: [i32; 3]| (a[0] - b[0]).abs() + (a[1] - b[1]).abs() + (a[2] - b[2]).abs();
-        let flank = 3;
-        let (l, r) = (u0.checked_sub(flank), (u1 + flank < w).then_some(u1 + flank));
         let mut top = None;
         let mut misses = 0;
         // A vehicle can show background between its parts (the road seen under it, a body
@@ -598,7 +735,7 @@ impl Detector {
         let max_gap = (max_rows / 6).max(3);
         let lowest = bottom.saturating_sub(max_rows);
         for v in (lowest..=bottom).rev() {
-            let backgrounds: Vec<[i32; 3]> = [l, r].into_iter().flatten().map(|u| px(u, v)).collect();
+            let backgrounds: Vec<[i32; 3]> = flanks.into_iter().flatten().map(|u| px(u, v)).collect();
             if backgrounds.is_empty() {
                 return None;
             }
