@@ -578,7 +578,13 @@ impl Detector {
         let brake_lights = if class == ObjectClass::Motorcycle || !whole {
             lit_pixels(rgb, w, u0..=u1, rows) >= LIT_LAMP_MIN_PX
         } else {
-            let mid = (u0 + u1) / 2;
+            // Seen from the side as well, the lamps are either side of the rear's middle.
+            let rear_half_px = (half_width * px_per_m) as usize;
+            let mid = match oblique {
+                Some(Side::Right) => (r0 + rear_half_px).clamp(u0, u1 - 1),
+                Some(Side::Left) => (r1 + 1).saturating_sub(rear_half_px).clamp(u0, u1 - 1),
+                None => (u0 + u1) / 2,
+            };
             lit_pixels(rgb, w, u0..=mid, rows.clone()) >= 1 && lit_pixels(rgb, w, mid + 1..=u1, rows) >= 1
         };
         Ok(FrameDetection {
