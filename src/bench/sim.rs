@@ -109,7 +109,7 @@ fn detect_ms(frames: usize) -> Result<f64> {
 }
 
 /// Median milliseconds for a whole camera step of busy-traffic (noisy): both default cameras
-/// rendered (front 640x480, narrow 1152x432) and their vehicles detected and fused, as
+/// rendered (front 640x480, narrow 1152x320) and their vehicles detected and fused, as
 /// slipstream-sim and slipstream-detect share it per frame.
 fn cameras_ms(frames: usize) -> Result<f64> {
     let settings = SimSettings::default();
@@ -199,7 +199,7 @@ pub fn run(quick: bool, repeat: usize) -> Result<Vec<SimFigure>> {
     let vga = figure("render 640x480, busy-traffic", "ms/frame", "<= 5", &mut || render_ms(640, 480, frames))?;
     figure("render 1280x720, busy-traffic", "ms/frame", "-", &mut || render_ms(1280, 720, frames))?;
     figure("detect vehicles 640x480, busy-traffic (noisy)", "ms/frame", "<= 5", &mut || detect_ms(frames))?;
-    figure("render + detect, front 640x480 + narrow 1152x432, busy-traffic (noisy)", "ms/frame", "<= 5", &mut || {
+    figure("render + detect, front 640x480 + narrow 1152x320, busy-traffic (noisy)", "ms/frame", "<= 5", &mut || {
         cameras_ms(frames)
     })?;
     let copy = figure("memcpy of a 640x480 RGB frame (yardstick)", "ms", "-", &mut || {

@@ -255,7 +255,7 @@ mod tests {
     #[test]
     fn the_narrow_camera_is_on_by_default_can_be_turned_off_and_is_checked() {
         let on = SimSettings::default().narrow_camera_info(ImageEncoding::Rgb8).unwrap();
-        assert_eq!((on.width, on.height), (1152, 432));
+        assert_eq!((on.width, on.height), (1152, 320));
         // 3.3 times the front camera's focal length: a vehicle 3.3 times as many pixels wide.
         let front = SimSettings::default().camera_info(ImageEncoding::Rgb8);
         assert!((on.fx_px / front.fx_px - 3.30).abs() < 0.01, "{} / {}", on.fx_px, front.fx_px);
