@@ -7,7 +7,9 @@
 //!    the road's brightness, below the horizon, grouped into connected components.
 //! 3. A component's lowest row is the contact line, located to a fraction of a row from how
 //!    much of the band the pixels on its edge hold: its ground distance comes from the ray
-//!    through it (flat road), which gives the metres-per-pixel scale there.
+//!    through it (flat road), which gives the metres-per-pixel scale there. A band wider than a
+//!    rear whose edge rises toward one end is a rear and a side (a vehicle turned from the line
+//!    of sight, in a bend): placed by the rear's outer edge.
 //! 4. Above the contact line, the rows whose pixels differ from the background on both sides
 //!    (road or sky, sampled just outside the component) give the vehicle's height; a band too
 //!    narrow or too low for a vehicle at that distance is rejected.
@@ -581,8 +583,8 @@ impl Detector {
             // Seen from the side as well, the lamps are either side of the rear's middle.
             let rear_half_px = (half_width * px_per_m) as usize;
             let mid = match oblique {
-                Some(Side::Right) => (r0 + rear_half_px).clamp(u0, u1 - 1),
-                Some(Side::Left) => (r1 + 1).saturating_sub(rear_half_px).clamp(u0, u1 - 1),
+                Some(Side::Right) => (r0 + rear_half_px).min(u1 - 1).max(u0),
+                Some(Side::Left) => (r1 + 1).saturating_sub(rear_half_px).min(u1 - 1).max(u0),
                 None => (u0 + u1) / 2,
             };
             lit_pixels(rgb, w, u0..=mid, rows.clone()) >= 1 && lit_pixels(rgb, w, mid + 1..=u1, rows) >= 1
