@@ -79,6 +79,35 @@ fn a_bad_config_fails_with_file_key_and_fix() {
     assert!(err.contains("drop") && err.contains("block"), "names the allowed values: {err}");
 }
 
+/// `eval detect --settings` scores the cameras the file describes: without the narrow camera a
+/// car standing 150 m ahead is hardly found (the front camera sees it 7 px wide), with the
+/// shipped one it is; a bad file is a clear error naming it and the key.
+#[test]
+fn eval_detect_measures_the_camera_settings_it_is_given() {
+    let far_recall = |settings: Option<&std::path::Path>| {
+        let mut cmd = bin();
+        cmd.args(["eval", "detect", "--scenario", "car-standing-at-150-m", "--seconds", "3", "--json"]);
+        if let Some(f) = settings {
+            cmd.arg("--settings").arg(f);
+        }
+        let out = run(cmd, Duration::from_secs(120));
+        assert!(out.status.success(), "stderr: {}", String::from_utf8_lossy(&out.stderr));
+        let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+        report["overall"]["far_recall"].as_f64().unwrap()
+    };
+    let front_only = temp_file("front-only.json5", "{ narrow_camera: { enabled: false } }");
+    let (with_narrow, without) = (far_recall(None), far_recall(Some(&front_only)));
+    assert!(with_narrow >= 0.9 && without < 0.5, "with the narrow camera {with_narrow}, without {without}");
+
+    let bad = temp_file("narrow-bad.json5", "{ narrow_camera: { horizontal_fov_deg: 5 } }");
+    let mut cmd = bin();
+    cmd.args(["eval", "detect", "--seconds", "1", "--settings"]).arg(&bad);
+    let out = run(cmd, Duration::from_secs(60));
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("narrow-bad.json5") && err.contains("narrow_camera.horizontal_fov_deg"), "{err}");
+}
+
 /// The bench harness, quick: every path of every suite delivers, shared-memory paths use
 /// shared memory and the others do not. Latency and throughput are not judged here.
 #[test]
