@@ -492,9 +492,11 @@ impl Detector {
         let width_m = (bu1 - bu0 + 1) as f64 / px_per_m;
         let (u0, u1) = (c.u0.min(bu0) as usize, c.u1.max(bu1) as usize);
         let max_rows = (p.max_height_m * px_per_m) as usize;
-        let flanks = [u0.checked_sub(FLANK_PX), (u1 + FLANK_PX < w).then_some(u1 + FLANK_PX)];
+        // The background columns just outside a0..=a1, where the image has them.
+        let beside = |a0: usize, a1: usize| [a0.checked_sub(FLANK_PX), (a1 + FLANK_PX < w).then_some(a1 + FLANK_PX)];
+        let flanks = beside(u0, u1);
         let height_from = |flanks: [Option<usize>; 2]| -> Result<(usize, f64), String> {
-            let top = self.top_row(rgb, w, u0, u1, c.v1 as usize, max_rows, flanks).ok_or("nothing rises above the contact")?;
+            let top = self.top_row(rgb, w, (u0, u1), (c.v1 as usize, max_rows), flanks).ok_or("nothing rises above the contact")?;
             let height_m = (contact_v - top as f64) / px_per_m;
             if height_m < p.min_height_m || height_m > p.max_height_m {
                 return Err(format!("height {height_m:.2} m"));
@@ -506,8 +508,8 @@ impl Detector {
         // where dark columns of the same region adjoin the band, the height is measured beside
         // them (as far as a body overhangs), and beside the band only if that fails.
         let overhang_px = (MAX_OVERHANG_M * px_per_m).ceil() as u32;
-        let (r0, r1) = (c.reach_u0.max(u0 as u32 - overhang_px.min(u0 as u32)) as usize, c.reach_u1.min(u1 as u32 + overhang_px) as usize);
-        let outside_body = [r0.checked_sub(FLANK_PX), (r1 + FLANK_PX < w).then_some(r1 + FLANK_PX)];
+        let (r0, r1) = (c.reach_u0.max((u0 as u32).saturating_sub(overhang_px)) as usize, c.reach_u1.min(u1 as u32 + overhang_px) as usize);
+        let outside_body = beside(r0, r1);
         // Seen from behind, the band is the rear's. A vehicle turned from the line of sight (in
         // a bend) also shows one side, receding beside its rear: the band is wider than any
         // rear, and the vehicle is placed by its rear's outer edge.
@@ -527,8 +529,11 @@ impl Detector {
         };
         // Last, beside the widest overhang a body can have (a van's box over its wheels, with
         // no dark chassis under it to show where it ends).
-        let (o0, o1) = (u0.checked_sub(overhang_px as usize), (u1 + overhang_px as usize) as usize);
-        let beyond_overhang = [o0.and_then(|o| o.checked_sub(FLANK_PX)), (o1 + FLANK_PX < w).then_some(o1 + FLANK_PX)];
+        let beyond_overhang = match u0.checked_sub(overhang_px as usize) {
+            Some(o0) => beside(o0, u1 + overhang_px as usize),
+            // The image's side is within the overhang: no background on that side.
+            None => [None, beside(0, u1 + overhang_px as usize)[1]],
+        };
         let (top, height_m) = if (r0, r1) != (u0, u1) {
             height_from(outside_body).or_else(|_| height_from(flanks))
         } else {
@@ -622,17 +627,31 @@ impl Detector {
     /// columns between the wheels see the road under the body and end rows higher, at the
     /// body's lower edge (at 150 m three rows are 25 m).
     fn edge_columns(&self, w: usize, h: usize, c: &Component) -> Vec<(usize, usize)> {
-        let luma = |u: usize, v: usize| self.luma[v * w + u];
         let (u0, u1) = if c.flat_u1 >= c.flat_u0 + 3 { (c.flat_u0 + 1, c.flat_u1 - 1) } else { (c.flat_u0, c.flat_u1) };
-        let top = (c.v1 as usize).saturating_sub(FLAT_PX as usize + 1);
-        let columns: Vec<(usize, usize)> = (u0 as usize..=u1 as usize)
-            .filter_map(|u| {
-                (top..=(c.v1 as usize).min(h - 1)).rev().find(|&v| luma(u, v) < self.dark).map(|lo| (u, lo))
-            })
-            .filter(|&(_, lo)| lo + 3 < h)
-            .collect();
+        let columns = self.lowest_dark_rows(w, h, u0..=u1, c.v1, FLAT_PX + 1);
         let lowest = columns.iter().map(|&(_, lo)| lo).max().unwrap_or(0);
         columns.into_iter().filter(|&(_, lo)| lo + 1 >= lowest).collect()
+    }
+
+    /// (column, lowest dark row) for the columns given, looking from `bottom` up to `rows`
+    /// above it; columns without a dark pixel there, or too near the image's bottom for the
+    /// road below to be measured, are left out.
+    fn lowest_dark_rows(
+        &self,
+        w: usize,
+        h: usize,
+        columns: std::ops::RangeInclusive<u32>,
+        bottom: u32,
+        rows: u32,
+    ) -> Vec<(usize, usize)> {
+        let (top, bottom) = (bottom.saturating_sub(rows) as usize, (bottom as usize).min(h - 1));
+        columns
+            .filter_map(|u| {
+                let u = u as usize;
+                (top..=bottom).rev().find(|&v| self.luma[v * w + u] < self.dark).map(|lo| (u, lo))
+            })
+            .filter(|&(_, lo)| lo + 3 < h)
+            .collect()
     }
 
     /// The road's luminance just below a contact edge (the median of the two rows under it).
@@ -667,21 +686,22 @@ impl Detector {
     /// (a band a pixel or two thick at 50 m holds no whole pixel to measure it by). Averaged
     /// over the columns, pixel noise mostly cancels.
     fn contact_edge(&self, w: usize, h: usize, c: &Component) -> Option<f64> {
-        let edges = self.fractional_edges(w, &self.edge_columns(w, h, c))?;
-        Some(edges.iter().sum::<f64>() / edges.len() as f64)
+        let columns = self.edge_columns(w, h, c);
+        let sum: f64 = self.fractional_edges(w, &columns)?.sum();
+        Some(sum / columns.len() as f64)
     }
 
     /// The contact edge in each of the given columns (column, lowest row holding band), to a
     /// fraction of a row (`contact_edge`); None when it cannot be measured.
-    fn fractional_edges(&self, w: usize, columns: &[(usize, usize)]) -> Option<Vec<f64>> {
+    fn fractional_edges<'a>(&'a self, w: usize, columns: &'a [(usize, usize)]) -> Option<impl Iterator<Item = f64> + 'a> {
         let road = self.road_below(w, columns)?;
         let band = road * self.band_ratio;
         if road - band < 8.0 {
             return None;
         }
-        let luma = |u: usize, v: usize| self.luma[v * w + u];
-        let share = |l: u8| ((road - l as f32) / (road - band)).clamp(0.0, 1.0) as f64;
-        let edge = |u: usize, lo: usize| {
+        let luma = move |u: usize, v: usize| self.luma[v * w + u];
+        let share = move |l: u8| ((road - l as f32) / (road - band)).clamp(0.0, 1.0) as f64;
+        let edge = move |u: usize, lo: usize| {
             let (inner, below) = (share(luma(u, lo)), share(luma(u, lo + 1)));
             // With band in the row below, the edge is in that row, whatever the band's top does
             // in row `lo` (at 50 m the band is hardly more than a row thick); with none there,
@@ -689,7 +709,7 @@ impl Detector {
             let weight = (below / 0.25).min(1.0);
             weight * (lo as f64 + 1.0 + below) + (1.0 - weight) * (lo as f64 + inner + below)
         };
-        Some(columns.iter().map(|&(u, lo)| edge(u, lo)).collect())
+        Some(columns.iter().map(move |&(u, lo)| edge(u, lo)))
     }
 
     /// Which end of a band its contact edge rises toward, measured to a fraction of a row over
@@ -697,15 +717,11 @@ impl Detector {
     /// level across the road; the side's runs away from the camera). None when neither end
     /// rises by SIDE_RISE_PX more than the other.
     fn receding_side(&self, w: usize, h: usize, c: &Component) -> Option<Side> {
-        let top = (c.v1 as usize).saturating_sub(JUMP_PX as usize + 1);
-        let columns: Vec<(usize, usize)> = (c.u0 as usize..=c.u1 as usize)
-            .filter_map(|u| (top..=c.v1 as usize).rev().find(|&v| self.luma[v * w + u] < self.dark).map(|lo| (u, lo)))
-            .filter(|&(_, lo)| lo + 3 < h)
-            .collect();
+        let columns = self.lowest_dark_rows(w, h, c.u0..=c.u1, c.v1, JUMP_PX as u32 + 1);
         if columns.len() < 8 {
             return None;
         }
-        let edges = self.fractional_edges(w, &columns)?;
+        let edges: Vec<f64> = self.fractional_edges(w, &columns)?.collect();
         let quarter = edges.len() / 4;
         let mean = |e: &[f64]| e.iter().sum::<f64>() / e.len() as f64;
         // Rows grow downward: the receding end's edge is the smaller.
@@ -719,16 +735,15 @@ impl Detector {
         }
     }
 
-    /// The highest row above `bottom` where the columns u0..=u1 still differ from the
-    /// background just left and right of them; None when nothing rises above the contact.
+    /// The highest row above `bottom` (at most `max_rows` up) where the columns `u0..=u1`
+    /// still differ from the background in the `flanks` columns beside them; None when nothing
+    /// rises above the contact.
     fn top_row(
         &self,
         rgb: &[u8],
         w: usize,
-        u0: usize,
-        u1: usize,
-        bottom: usize,
-        max_rows: usize,
+        (u0, u1): (usize, usize),
+        (bottom, max_rows): (usize, usize),
         flanks: [Option<usize>; 2],
     ) -> Option<usize> {
         let px = |u: usize, v: usize| {
