@@ -294,6 +294,8 @@ struct Noise {
     /// Outside manoeuvres the speed is smoothed as if this noisy.
     speed_steady_mps: f64,
     jerk_sigma_mps3: f64,
+    /// How far the lead's estimated deceleration may overshoot the true one.
+    hard_braking_margin_mps2: f64,
 }
 
 impl Noise {
@@ -340,10 +342,11 @@ const BEYOND_LEAD_M: f64 = 3.0;
 const MANOEUVRE_HOLD_S: f64 = 1.0;
 /// A lead is judged on its acceleration (manoeuvres, braking hard) once followed this long.
 const SETTLE_S: f64 = 1.0;
-/// A lead counts as braking beyond comfort when its estimated deceleration exceeds the
-/// comfort limit by this much: the estimate overshoots a little when it re-learns a lead that
-/// brakes at just under the limit.
-const HARD_BRAKING_MARGIN_MPS2: f64 = 1.0;
+/// With ground truth a lead counts as braking beyond comfort when its estimated deceleration
+/// exceeds the comfort limit by this much (the camera's margin is a setting): the estimate
+/// converges on the true deceleration from below, so this only keeps a lead braking at the
+/// limit itself from flickering in and out.
+const GROUND_TRUTH_HARD_BRAKING_MARGIN_MPS2: f64 = 0.1;
 /// A lead slower than this is stopping or stopped, not braking hard from speed.
 const HARD_BRAKING_MIN_SPEED_MPS: f64 = 2.0;
 /// A short TTC starts an emergency only when the ego brakes less than the threat needs by more
@@ -491,6 +494,7 @@ impl Controller {
                 speed_per_m2: settings.estimator.speed_sigma_per_m2,
                 speed_steady_mps: settings.estimator.steady_speed_sigma_mps,
                 jerk_sigma_mps3: settings.estimator.lead_jerk_sigma_mps3,
+                hard_braking_margin_mps2: settings.estimator.hard_braking_margin_mps2,
             },
             // Exact measurements: the filter follows them.
             PerceptionSource::GroundTruth => Noise {
@@ -500,6 +504,7 @@ impl Controller {
                 speed_per_m2: 0.0,
                 speed_steady_mps: 0.05,
                 jerk_sigma_mps3: settings.estimator.lead_jerk_sigma_mps3,
+                hard_braking_margin_mps2: GROUND_TRUTH_HARD_BRAKING_MARGIN_MPS2,
             },
         };
         Controller {
@@ -721,6 +726,18 @@ impl Controller {
             brake_lights: f.brake_lights,
             settled: f.settled(),
         });
+        if let Some(l) = lead {
+            tracing::trace!(
+                t_s = ego.t_s,
+                gap_m = l.gap_m,
+                speed_mps = l.speed_mps,
+                accel_mps2 = l.accel_mps2,
+                accel_sigma_mps2 = l.accel_sigma_mps2,
+                brake_lights = l.brake_lights,
+                last_target_mps2 = self.accel_cmd,
+                "lead"
+            );
+        }
         let desired_gap = self.s.standstill_m + self.time_gap_s * v;
         let revealed = self.next_in_lane.filter(|_| lead.is_some()).map(|r| {
             let rel = r.relative_speed_mps;
@@ -749,7 +766,7 @@ impl Controller {
             let hard = lead.is_some_and(|l| {
                 l.settled
                     && l.speed_mps > HARD_BRAKING_MIN_SPEED_MPS
-                    && l.accel_mps2 < -self.s.limits.decel_mps2 - HARD_BRAKING_MARGIN_MPS2
+                    && l.accel_mps2 < -self.s.limits.decel_mps2 - self.noise.hard_braking_margin_mps2
             });
             self.update_emergency(threat.as_ref(), hard, v, ego.t_s);
             match threat.filter(|_| self.emergency) {

@@ -138,6 +138,16 @@ pub struct Estimator {
     #[serde(default)]
     pub steady_speed_sigma_mps: f64,
     pub lead_jerk_sigma_mps3: f64,
+    /// How far the lead's estimated deceleration may overshoot its true one (m/s2): a lead
+    /// counts as braking beyond the comfort limit (answered at once, in an emergency) when
+    /// its estimate is beyond the limit by more than this. Default 1.0, what the camera's
+    /// estimate reaches for leads braking at 3.0-3.5 m/s2; ground truth uses 0.1.
+    #[serde(default = "default_hard_braking_margin")]
+    pub hard_braking_margin_mps2: f64,
+}
+
+fn default_hard_braking_margin() -> f64 {
+    1.0
 }
 
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -310,6 +320,7 @@ impl AccSettings {
             ("estimator.gap_sigma_per_m2", e.gap_sigma_per_m2),
             ("estimator.speed_sigma_per_m2", e.speed_sigma_per_m2),
             ("estimator.steady_speed_sigma_mps", e.steady_speed_sigma_mps),
+            ("estimator.hard_braking_margin_mps2", e.hard_braking_margin_mps2),
         ] {
             if !(x.is_finite() && x >= 0.0) {
                 return err(key, format!("{x}"), "give a value >= 0");
