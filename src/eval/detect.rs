@@ -615,19 +615,32 @@ mod rendered {
                     let (mut seen, mut found, mut missed) = (0, 0, Vec::new());
                     let mut gap = 60.0;
                     while gap <= farthest {
-                        let (dets, truth) =
-                            rig_detect_on(&road, &format!("{{ lane: {lane}, gap_m: {gap}, speed_mps: 0, class: '{class}' }}"), 3.0);
+                        let (dets, truth) = rig_detect_on(
+                            &road,
+                            &format!("{{ lane: {lane}, gap_m: {gap}, speed_mps: 0, class: '{class}' }}"),
+                            3.0,
+                        );
                         let [x, y, _] = truth.objects[0].position_in_ego_m;
                         seen += 1;
-                        let placed = |d: &&FrameDetection| (d.lateral_offset_m - y).abs() < 1.0 && ((d.distance_m - x) / x).abs() < 0.03;
+                        let placed = |d: &&FrameDetection| {
+                            (d.lateral_offset_m - y).abs() < 1.0 && ((d.distance_m - x) / x).abs() < 0.03
+                        };
                         match dets.iter().find(placed) {
                             Some(_) => found += 1,
-                            None => missed.push((gap, x, y, dets.iter().map(|d| (d.distance_m, d.lateral_offset_m)).collect::<Vec<_>>())),
+                            None => missed.push((
+                                gap,
+                                x,
+                                y,
+                                dets.iter().map(|d| (d.distance_m, d.lateral_offset_m)).collect::<Vec<_>>(),
+                            )),
                         }
                         gap += 7.5;
                     }
                     let what = format!("{class} in lane {lane}, bend radius {radius} m");
-                    assert!(found * 10 >= seen * 9, "{what}: found {found} of {seen}; missed (gap, x, y, detections): {missed:?}");
+                    assert!(
+                        found * 10 >= seen * 9,
+                        "{what}: found {found} of {seen}; missed (gap, x, y, detections): {missed:?}"
+                    );
                 }
             }
         }

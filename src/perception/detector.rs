@@ -496,7 +496,9 @@ impl Detector {
         let beside = |a0: usize, a1: usize| [a0.checked_sub(FLANK_PX), (a1 + FLANK_PX < w).then_some(a1 + FLANK_PX)];
         let flanks = beside(u0, u1);
         let height_from = |flanks: [Option<usize>; 2]| -> Result<(usize, f64), String> {
-            let top = self.top_row(rgb, w, (u0, u1), (c.v1 as usize, max_rows), flanks).ok_or("nothing rises above the contact")?;
+            let top = self
+                .top_row(rgb, w, (u0, u1), (c.v1 as usize, max_rows), flanks)
+                .ok_or("nothing rises above the contact")?;
             let height_m = (contact_v - top as f64) / px_per_m;
             if height_m < p.min_height_m || height_m > p.max_height_m {
                 return Err(format!("height {height_m:.2} m"));
@@ -508,7 +510,10 @@ impl Detector {
         // where dark columns of the same region adjoin the band, the height is measured beside
         // them (as far as a body overhangs), and beside the band only if that fails.
         let overhang_px = (MAX_OVERHANG_M * px_per_m).ceil() as u32;
-        let (r0, r1) = (c.reach_u0.max((u0 as u32).saturating_sub(overhang_px)) as usize, c.reach_u1.min(u1 as u32 + overhang_px) as usize);
+        let (r0, r1) = (
+            c.reach_u0.max((u0 as u32).saturating_sub(overhang_px)) as usize,
+            c.reach_u1.min(u1 as u32 + overhang_px) as usize,
+        );
         let outside_body = beside(r0, r1);
         // Seen from behind, the band is the rear's. A vehicle turned from the line of sight (in
         // a bend) also shows one side, receding beside its rear: the band is wider than any
@@ -693,7 +698,11 @@ impl Detector {
 
     /// The contact edge in each of the given columns (column, lowest row holding band), to a
     /// fraction of a row (`contact_edge`); None when it cannot be measured.
-    fn fractional_edges<'a>(&'a self, w: usize, columns: &'a [(usize, usize)]) -> Option<impl Iterator<Item = f64> + 'a> {
+    fn fractional_edges<'a>(
+        &'a self,
+        w: usize,
+        columns: &'a [(usize, usize)],
+    ) -> Option<impl Iterator<Item = f64> + 'a> {
         let road = self.road_below(w, columns)?;
         let band = road * self.band_ratio;
         if road - band < 8.0 {

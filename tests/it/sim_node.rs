@@ -431,8 +431,13 @@ async fn another_process_receives_every_topic_at_its_rate() {
     let narrow = recorder.samples.lock().iter().find(|(k, _)| k == "camera/narrow").map(|(_, b)| b.clone()).unwrap();
     let narrow = msg::decode::<msg::CameraFrameRef>(&narrow).unwrap().msg;
     // As configured (config/sim.json5's narrow_camera), raw RGB8.
-    let want = SimSettings::default().narrow_camera_info(msg::ImageEncoding::Rgb8).expect("the narrow camera is on by default");
-    assert_eq!((narrow.width, narrow.height, narrow.data.len()), (want.width, want.height, (want.width * want.height * 3) as usize));
+    let want = SimSettings::default()
+        .narrow_camera_info(msg::ImageEncoding::Rgb8)
+        .expect("the narrow camera is on by default");
+    assert_eq!(
+        (narrow.width, narrow.height, narrow.data.len()),
+        (want.width, want.height, (want.width * want.height * 3) as usize)
+    );
     let events = recorder.events();
     assert!(matches!(&events.last().unwrap().kind, SimEventKind::ScenarioEnd { success: true, .. }), "{events:?}");
 }
