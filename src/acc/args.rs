@@ -2,8 +2,50 @@
 
 use std::path::PathBuf;
 
-use super::settings::{AccSettings, PerceptionSource, DEFAULT_ACC_CONFIG_PATH};
+use super::settings::{AccSettings, PerceptionSource, Vehicle, DEFAULT_ACC_CONFIG_PATH};
 use crate::config::ConfigError;
+use crate::msg::ObjectClass;
+use crate::vehicle::VehicleParams;
+
+/// The vehicle types the ACC can drive: the simulator's, by class.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum VehicleClass {
+    Car,
+    Van,
+    Truck,
+    Motorcycle,
+}
+
+impl VehicleClass {
+    pub fn name(self) -> &'static str {
+        match self {
+            VehicleClass::Car => "car",
+            VehicleClass::Van => "van",
+            VehicleClass::Truck => "truck",
+            VehicleClass::Motorcycle => "motorcycle",
+        }
+    }
+
+    pub fn params(self) -> VehicleParams {
+        VehicleParams::of_class(match self {
+            VehicleClass::Car => ObjectClass::Car,
+            VehicleClass::Van => ObjectClass::Van,
+            VehicleClass::Truck => ObjectClass::Truck,
+            VehicleClass::Motorcycle => ObjectClass::Motorcycle,
+        })
+    }
+}
+
+impl From<ObjectClass> for VehicleClass {
+    fn from(c: ObjectClass) -> Self {
+        match c {
+            ObjectClass::Van => VehicleClass::Van,
+            ObjectClass::Truck => VehicleClass::Truck,
+            ObjectClass::Motorcycle => VehicleClass::Motorcycle,
+            ObjectClass::Car | ObjectClass::Unknown => VehicleClass::Car,
+        }
+    }
+}
 
 #[derive(Debug, Clone, clap::Args)]
 pub struct AccArgs {
@@ -21,6 +63,11 @@ pub struct AccArgs {
     /// or ground-truth (the simulator's objects, to judge control apart from perception)
     #[arg(long, value_enum)]
     pub perception: Option<PerceptionSource>,
+    /// The vehicle it drives, one of the simulator's: its model for the low-level loop (mass,
+    /// power, brakes, actuator lag) and where its front is, from which gaps are measured.
+    /// Replaces the settings' vehicle section; `up` and `eval acc` pass the scenario's ego.
+    #[arg(long, value_enum, value_name = "CLASS")]
+    pub vehicle: Option<VehicleClass>,
     /// Answer each step only once the perception of that step's camera frame is in: a
     /// deterministic loop with `slipstream-sim --clock lockstep`
     #[arg(long)]
@@ -47,6 +94,9 @@ impl AccArgs {
         }
         if let Some(p) = self.perception {
             s.perception = p;
+        }
+        if let Some(v) = self.vehicle {
+            s.vehicle = Vehicle::of(&v.params());
         }
         s.lockstep |= self.lockstep;
         if self.disengaged {

@@ -20,6 +20,7 @@ pub mod controller;
 pub mod node;
 pub mod settings;
 
+pub use args::VehicleClass;
 pub use controller::{Controller, EgoNow, Object, PerceptionFrame, Pose};
 pub use settings::{AccSettings, PerceptionSource};
 

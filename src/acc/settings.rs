@@ -166,6 +166,20 @@ pub struct Vehicle {
 }
 
 impl Vehicle {
+    /// The model of a vehicle type: what the ACC drives (`slipstream-acc --vehicle`).
+    pub fn of(p: &VehicleParams) -> Vehicle {
+        Vehicle {
+            mass_kg: p.mass_kg,
+            max_drive_force_n: p.max_drive_force_n,
+            max_power_w: p.max_power_w,
+            max_brake_decel_mps2: p.max_brake_decel_mps2,
+            drag_area_m2: p.drag_area_m2,
+            rolling_coeff: p.rolling_coeff,
+            actuator_lag_s: p.actuator_lag_s,
+            front_overhang_from_origin_m: p.size_m[0] - p.rear_overhang_m,
+        }
+    }
+
     /// The model as the simulator's vehicle type (only the longitudinal numbers matter).
     pub fn params(&self) -> VehicleParams {
         VehicleParams {
@@ -366,6 +380,32 @@ mod tests {
         assert_eq!(s.time_gap_s, 2.2);
         assert_eq!(s.perception, PerceptionSource::GroundTruth);
         assert_eq!(s.limits, d.limits);
+    }
+
+    /// The shipped vehicle section is the simulator's car; `--vehicle` puts another type's
+    /// numbers in its place.
+    #[test]
+    fn the_shipped_vehicle_is_the_simulators_car_and_a_class_gives_its_own() {
+        use crate::acc::VehicleClass;
+        let (shipped, car) = (AccSettings::default().vehicle, Vehicle::of(&VehicleParams::CAR));
+        assert!((shipped.front_overhang_from_origin_m - car.front_overhang_from_origin_m).abs() < 1e-9);
+        assert_eq!(shipped, Vehicle { front_overhang_from_origin_m: shipped.front_overhang_from_origin_m, ..car });
+        let args = |extra: &[&str]| {
+            let mut argv = vec!["acc"];
+            argv.extend_from_slice(extra);
+            #[derive(clap::Parser)]
+            struct Cli {
+                #[command(flatten)]
+                acc: crate::acc::args::AccArgs,
+            }
+            <Cli as clap::Parser>::parse_from(argv).acc.settings().unwrap()
+        };
+        let truck = args(&["--vehicle", "truck"]).vehicle;
+        assert_eq!((truck.mass_kg, truck.max_brake_decel_mps2, truck.actuator_lag_s), (12_000.0, 6.5, 0.5));
+        assert!((truck.front_overhang_from_origin_m - 7.3).abs() < 1e-9);
+        let motorcycle = Vehicle::of(&VehicleClass::Motorcycle.params());
+        assert!((motorcycle.front_overhang_from_origin_m - 1.85).abs() < 1e-9);
+        assert_eq!(args(&[]).vehicle, AccSettings::default().vehicle);
     }
 
     #[test]

@@ -468,6 +468,9 @@ impl ResimReport {
 /// `dir`) and compares their outputs with the recorded ones.
 pub async fn run(path: &Path, connect: &ConnectArgs, dir: &Path, progress: &mut dyn FnMut(f64)) -> Result<ResimReport> {
     let recorded = tokio::task::block_in_place(|| Recorded::scan(path))?;
+    // The scenario's own time gap and vehicle, as `up` gave them; otherwise today's ACC
+    // settings decide (a changed settings file is what a re-simulation compares).
+    let scenario = recorded.scenario.as_deref().and_then(|name| crate::sim::Scenario::find(name).ok());
     let spec = LoopSpec {
         scenario: recorded.scenario.clone().unwrap_or_else(|| "replay".into()),
         duration_s: 0.0,
@@ -476,13 +479,8 @@ pub async fn run(path: &Path, connect: &ConnectArgs, dir: &Path, progress: &mut 
         set_speed_mps: recorded.set_speed_mps.ok_or_else(|| {
             anyhow!("{} has no acc/status: the ACC's set speed is unknown (record every key)", path.display())
         })?,
-        // The scenario's own time gap, as `up` gave it; otherwise today's ACC settings decide
-        // (a changed settings file is what a re-simulation compares).
-        time_gap_s: recorded
-            .scenario
-            .as_deref()
-            .and_then(|name| crate::sim::Scenario::find(name).ok())
-            .and_then(|s| s.ego.time_gap_s),
+        time_gap_s: scenario.as_ref().and_then(|s| s.ego.time_gap_s),
+        vehicle: scenario.as_ref().map(|s| crate::msg::ObjectClass::from(s.ego.class).into()),
         faults: None,
         link: Default::default(),
     };

@@ -25,7 +25,7 @@ use serde::Serialize;
 use super::child::{free_ports, sibling_binary, Child};
 use super::{CLOSE_TIMEOUT, DEFAULT_RUST_LOG, NODE_POLL, NODE_START_TIMEOUT, SETTLE, STOP_GRACE};
 use crate::acc::node::AccStats;
-use crate::acc::PerceptionSource;
+use crate::acc::{PerceptionSource, VehicleClass};
 use crate::config::{ConnectArgs, FaultProfile, DEFAULT_ZENOH_CONFIG};
 use crate::perception::node::DetectStats;
 use crate::sim::SimReport;
@@ -76,6 +76,8 @@ pub struct LoopSpec {
     pub set_speed_mps: f64,
     /// The ACC's time gap; None: its own setting.
     pub time_gap_s: Option<f64>,
+    /// The vehicle the ACC drives (the scenario's ego); None: its own setting.
+    pub vehicle: Option<VehicleClass>,
     /// Faults every node injects into what it receives (`--faults`); None: none.
     pub faults: Option<FaultProfile>,
     /// The links between the loop's processes (peer mode).
@@ -351,6 +353,9 @@ impl LoopRun {
         ];
         if let Some(h) = spec.time_gap_s {
             acc_args.extend(["--time-gap".into(), h.to_string()]);
+        }
+        if let Some(v) = spec.vehicle {
+            acc_args.extend(["--vehicle".into(), v.name().into()]);
         }
         if spec.clock == ClockMode::Lockstep {
             acc_args.push("--lockstep".into());

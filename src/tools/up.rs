@@ -61,8 +61,9 @@ pub struct UpArgs {
     /// End after this many simulated seconds instead of the scenario's own duration
     #[arg(long, value_parser = super::top::positive)]
     pub duration: Option<f64>,
-    /// Actuator lag for the string-stability bound, seconds [default: the simulated car's,
-    /// 0.3 s: its throttle and brake follow a command through a first-order lag]
+    /// Actuator lag for the string-stability bound, seconds [default: the scenario's ego's,
+    /// 0.3 s for a car (0.2-0.5 s by class): its throttle and brake follow a command through
+    /// a first-order lag]
     #[arg(long)]
     pub actuator_lag: Option<f64>,
     /// Print plain progress lines instead of the live view (the default when stderr is not a
@@ -346,6 +347,7 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
         perception: args.perception,
         set_speed_mps: scenario.ego.controller_set_speed_mps(),
         time_gap_s: scenario.ego.time_gap_s,
+        vehicle: Some(crate::msg::ObjectClass::from(scenario.ego.class).into()),
         faults: args.faults.profile()?,
         link: Default::default(),
     };
@@ -422,7 +424,12 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
         wall_time_s: wall,
         real_time_factor: sim_time_s / wall.max(1e-9),
         nodes,
-        latency: latency_report(&latency, args, rec.statuses.last().map(|s| s.msg.time_gap_s)),
+        latency: latency_report(
+            &latency,
+            args,
+            rec.statuses.last().map(|s| s.msg.time_gap_s),
+            VehicleParams::of_class(scenario.ego.class.into()).actuator_lag_s,
+        ),
         metrics: judged.metrics,
         topics: topics_seen,
         faults,
@@ -467,10 +474,11 @@ fn judged_outputs(
     Ok(plots)
 }
 
-fn latency_report(lat: &LoopLatency, args: &UpArgs, time_gap_s: Option<f64>) -> LatencyReport {
+/// `ego_lag_s`: the actuator lag of the scenario's ego, unless `--actuator-lag` says otherwise.
+fn latency_report(lat: &LoopLatency, args: &UpArgs, time_gap_s: Option<f64>, ego_lag_s: f64) -> LatencyReport {
     let hops = lat.stats(false);
     let delay = hops[WHOLE_LOOP].p99_ms.map(|ms| ms / 1e3);
-    let lag = args.actuator_lag.unwrap_or(VehicleParams::CAR.actuator_lag_s);
+    let lag = args.actuator_lag.unwrap_or(ego_lag_s);
     LatencyReport {
         loop_delay_p99_s: delay,
         actuator_lag_s: lag,

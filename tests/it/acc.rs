@@ -377,6 +377,42 @@ fn bad_settings_fail_with_file_key_and_fix() {
     assert!(err.contains("time_gap_s") && err.contains("0.8"), "{err}");
 }
 
+/// The ACC drives the vehicle the scenario gives the ego: a truck (12 t, 6.5 m/s2 brakes,
+/// 0.5 s lag, its front 7.3 m ahead of the rear axle) following a car that brakes to a stop
+/// stops behind it. Driven as the default car (3.65 m), it took the gap for 3.65 m longer than
+/// it was and ran into the car; a motorcycle ego driven as a car accelerated at 5 m/s2.
+#[test]
+fn eval_acc_drives_the_vehicle_its_scenario_gives_the_ego() {
+    let _serial = common::serial();
+    let dir = std::env::temp_dir().join(format!("slipstream-ego-class-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    for class in ["truck", "motorcycle"] {
+        let file = dir.join(format!("ego-{class}.json5"));
+        std::fs::write(
+            &file,
+            format!(
+                r#"{{ name: "ego-{class}", duration_s: 35, seed: 5,
+  ego: {{ lane: 1, speed_mps: 25, set_speed_mps: 27, class: "{class}" }},
+  traffic: [ {{ lane: 1, gap_m: 50, speed_mps: 25, actions: [ {{ at_s: 12, speed_mps: 0, accel_mps2: 4 }} ] }} ],
+  expect: {{ min_gap_m: 3 }} }}"#
+            ),
+        )
+        .unwrap();
+        let mut c = Command::new(env!("CARGO_BIN_EXE_slipstream"));
+        c.env_remove("RUST_LOG")
+            .args(["eval", "acc", "--json", "--perception", "ground-truth", "--scenario"])
+            .arg(&file);
+        let out = run(c, Duration::from_secs(300));
+        let report: serde_json::Value = serde_json::from_slice(&out.stdout)
+            .unwrap_or_else(|e| panic!("{class}: {e}: {}", String::from_utf8_lossy(&out.stderr)));
+        let m = &report["results"][0]["metrics"];
+        assert_eq!(m["collisions"], 0, "{class}: {m}");
+        assert!(m["min_gap_m"].as_f64().unwrap() >= 3.0, "{class}: {m}");
+        assert!(m["pass"].as_bool().unwrap(), "{class}: {}", m["checks"]);
+    }
+    std::fs::remove_dir_all(&dir).ok();
+}
+
 #[test]
 fn eval_acc_runs_every_scenario_as_separate_processes_without_a_collision() {
     let _serial = common::serial();
