@@ -308,6 +308,8 @@ impl Noise {
     }
 }
 
+/// The lane width the settings' in-lane limits are for.
+const SETTINGS_LANE_WIDTH_M: f64 = 3.5;
 /// Filter constant for the per-track lateral speed, per perception frame.
 const RATE_FILTER: f64 = 0.3;
 /// The fastest a vehicle moves sideways (a swerve; a lane change takes ~1 m/s). A larger
@@ -596,6 +598,10 @@ impl Controller {
         let kappa = Self::curvature(ego);
         let lane_ahead = LaneAhead::find(self.road.as_ref(), &mut self.road_s_m, ego);
         let lane = &self.s.lane;
+        // The limits are for a 3.5 m lane: on the map's lanes they move with its width (a car
+        // riding 1.8 m off the centre of a 5 m lane is in it).
+        let wider_m = lane_ahead.as_ref().map_or(0.0, |l| (l.road.lane_width_m() - SETTINGS_LANE_WIDTH_M) / 2.0);
+        let (in_lane_m, stay_in_lane_m) = (lane.in_lane_m + wider_m, lane.stay_in_lane_m + wider_m);
         let current = self.lead.map(|l| l.id);
         // The nearest in the lane, and the nearest by the entry test alone (no hysteresis for
         // the current lead), with their gaps.
@@ -630,7 +636,7 @@ impl Controller {
             }
             // Lateral speed counts once a track has a few frames behind it.
             let predicted = if track.seen >= 4 { off + track.lateral_rate_mps * lane.lateral_lookahead_s } else { off };
-            let limit = if current == Some(o.id) { lane.stay_in_lane_m } else { lane.in_lane_m };
+            let limit = if current == Some(o.id) { stay_in_lane_m } else { in_lane_m };
             let off = off.abs().min(predicted.abs());
             if off >= limit {
                 continue;
@@ -638,7 +644,7 @@ impl Controller {
             if best.is_none_or(|b| gap < b.1) {
                 best = Some((o, gap));
             }
-            if off < lane.in_lane_m {
+            if off < in_lane_m {
                 in_lane.push((o, gap));
             }
         }

@@ -423,6 +423,31 @@ fn with_the_road_map_the_lead_is_in_the_ego_lane_round_a_bend() {
     assert_eq!(lead_of(false), Some(1), "on the yaw rate alone: the car on the straight-ahead line");
 }
 
+/// The in-lane limits follow the map's lane width: a car riding 1.8 m off the ego lane's
+/// centre is in a 5 m lane (and the lead) but over the line of a 3.5 m one.
+#[test]
+fn the_lane_limits_follow_the_maps_lane_width() {
+    use crate::msg::RoadSpec;
+    use crate::road::Road;
+    let lead_at = |lane_width_m: f64, off_m: f64| {
+        let spec = RoadSpec { lane_width_m, ..RoadSpec::default() };
+        let road = Road::new(spec.clone());
+        let at = road.to_world(300.0, road.lane_center_d(1));
+        let pose = Pose { x_m: at.x, y_m: at.y, yaw_rad: road.center(300.0).1 };
+        let mut c = Controller::new(truth());
+        c.set_road(&spec);
+        let now = EgoNow { pose: Some(pose), ..ego(0.0, 25.0) };
+        c.perceive(&frame(0.0, vec![obj(1, 40.0, off_m, -5.0)]), &now);
+        c.step(&now, &[]).status.lead.map(|l| l.id)
+    };
+    assert_eq!(lead_at(5.0, 1.8), Some(1), "1.8 m off the centre of a 5 m lane");
+    assert_eq!(lead_at(5.0, -2.2), Some(1), "2.2 m off the centre of a 5 m lane");
+    assert_eq!(lead_at(3.5, 1.8), None, "1.8 m off the centre of a 3.5 m lane: over its line");
+    assert_eq!(lead_at(5.0, 2.6), None, "past the line of a 5 m lane");
+    assert_eq!(lead_at(2.8, 1.4), None, "past the line of a 2.8 m lane");
+    assert_eq!(lead_at(2.8, 1.0), Some(1), "inside a 2.8 m lane");
+}
+
 /// Drives the point-mass ego at 30 m/s toward a car standing `gap0_m` ahead; returns, per
 /// step, (gap, speed, output).
 fn approach_a_standing_car(gap0_m: f64) -> Vec<(f64, f64, Output)> {
