@@ -187,6 +187,8 @@ pub struct Detector {
     params: DetectorParams,
     horizon_v: f64,
     luma: Vec<u8>,
+    /// The frame smoothed, when it is noisy.
+    smooth: Vec<u8>,
     runs: Vec<Run>,
     parent: Vec<u32>,
     /// This frame's contact-dark threshold.
@@ -205,6 +207,7 @@ impl Detector {
             params,
             horizon_v,
             luma: Vec::new(),
+            smooth: Vec::new(),
             runs: Vec::new(),
             parent: Vec::new(),
             dark: 0,
@@ -222,14 +225,37 @@ impl Detector {
         if rgb.len() != w * h * 3 {
             return Vec::new();
         }
+        self.to_luma(rgb);
+        // A noisy sensor (low light, high gain): the frame is smoothed along its rows first,
+        // which leaves the contact row (the range) where it is. Only then: the copy costs
+        // about as much as the detection.
         let first_ground_row = (self.horizon_v.ceil().max(0.0) as usize + 1).min(h);
-        if first_ground_row + 4 >= h {
-            return Vec::new();
+        if first_ground_row + 4 < h && luma_noise(&self.luma, w, h, first_ground_row) > SMOOTH_ABOVE_NOISE {
+            let mut smooth = std::mem::take(&mut self.smooth);
+            smooth_rows(rgb, &mut smooth, w);
+            self.to_luma(&smooth);
+            let found = self.detect_in(&smooth);
+            self.smooth = smooth;
+            return found;
         }
-        self.luma.resize(w * h, 0);
+        self.detect_in(rgb)
+    }
+
+    /// The luma of an RGB8 frame.
+    fn to_luma(&mut self, rgb: &[u8]) {
+        self.luma.resize(rgb.len() / 3, 0);
         // Weights summing to 256 in 16 bits: the loop vectorises.
         for (y, p) in self.luma.iter_mut().zip(rgb.chunks_exact(3)) {
             *y = ((77 * p[0] as u16 + 150 * p[1] as u16 + 29 * p[2] as u16) >> 8) as u8;
+        }
+    }
+
+    /// [`Detector::detect`] on a frame whose luma is computed.
+    fn detect_in(&mut self, rgb: &[u8]) -> Vec<FrameDetection> {
+        let (w, h) = (self.camera.info.width as usize, self.camera.info.height as usize);
+        let first_ground_row = (self.horizon_v.ceil().max(0.0) as usize + 1).min(h);
+        if first_ground_row + 4 >= h {
+            return Vec::new();
         }
         let road = road_luma(&self.luma, w, h, first_ground_row);
         let dark = (road as f32 * self.params.dark_ratio) as u8;
@@ -835,6 +861,75 @@ fn median(mut xs: Vec<u8>) -> Option<f32> {
 }
 
 /// The road's luminance: the mode of the lower middle of the image.
+/// Above this luma noise (standard deviation, levels) rows are smoothed before thresholding:
+/// a camera with 9 levels of noise per channel (6 in luma) lost a third of the vehicles within
+/// 60 m, and at 12 (8 in luma) two thirds, their contact bands broken up by the noise and the
+/// road speckled with false dark pixels; the simulated cameras' default is 3 (2 in luma).
+const SMOOTH_ABOVE_NOISE: f32 = 4.0;
+/// Width of the smoothing window along a row, pixels (odd): noise / sqrt(5).
+const SMOOTH_WINDOW: usize = 5;
+
+/// The luma's noise (standard deviation, levels), from the lower ground's differences between
+/// horizontal neighbours: their median absolute value is 0.954 sigma for Gaussian noise, and
+/// edges (markings, vehicles) are too few to move the median.
+fn luma_noise(luma: &[u8], w: usize, h: usize, first_row: usize) -> f32 {
+    let mut hist = [0u32; 256];
+    let mut n = 0u32;
+    let start = (first_row + (h - first_row) / 3).min(h - 1);
+    for v in (start..h).step_by(3) {
+        let row = &luma[v * w..(v + 1) * w];
+        for u in (w / 8..w * 7 / 8).step_by(2) {
+            hist[row[u].abs_diff(row[u + 1]) as usize] += 1;
+            n += 1;
+        }
+    }
+    let mut seen = 0;
+    let median = hist.iter().position(|&c| {
+        seen += c;
+        2 * seen > n
+    });
+    median.map_or(0.0, |m| m as f32 / 0.954)
+}
+
+/// `rgb` with each row's channels replaced by their moving average over SMOOTH_WINDOW pixels
+/// (the window shrinks at the row's ends), into `out`. One pass per row, a running sum per
+/// channel; the full window divides by multiplying (x / 5 = x * 13108 >> 16 for x <= 1275).
+fn smooth_rows(rgb: &[u8], out: &mut Vec<u8>, w: usize) {
+    const R: usize = SMOOTH_WINDOW / 2;
+    const FULL: u32 = ((1 << 16) + SMOOTH_WINDOW as u32 - 1) / SMOOTH_WINDOW as u32;
+    out.resize(rgb.len(), 0);
+    if w <= SMOOTH_WINDOW {
+        out.copy_from_slice(rgb);
+        return;
+    }
+    for (src, dst) in rgb.chunks_exact(w * 3).zip(out.chunks_exact_mut(w * 3)) {
+        let mut sum = [0u32; 3];
+        for u in 0..R {
+            for c in 0..3 {
+                sum[c] += src[u * 3 + c] as u32;
+            }
+        }
+        for u in 0..w {
+            // The window is u - R ..= u + R, cut at the row's ends.
+            if u + R < w {
+                for c in 0..3 {
+                    sum[c] += src[(u + R) * 3 + c] as u32;
+                }
+            }
+            if u > R {
+                for c in 0..3 {
+                    sum[c] -= src[(u - R - 1) * 3 + c] as u32;
+                }
+            }
+            let n = (u + R).min(w - 1) + 1 - u.saturating_sub(R);
+            for c in 0..3 {
+                dst[u * 3 + c] =
+                    if n == SMOOTH_WINDOW { (sum[c] * FULL >> 16) as u8 } else { (sum[c] / n as u32) as u8 };
+            }
+        }
+    }
+}
+
 fn road_luma(luma: &[u8], w: usize, h: usize, first_row: usize) -> u8 {
     let mut hist = [0u32; 64];
     let start = (first_row + (h - first_row) / 3).min(h - 1);
