@@ -227,8 +227,8 @@ impl Detector {
         }
         self.to_luma(rgb);
         // A noisy sensor (low light, high gain): the frame is smoothed along its rows first,
-        // which leaves the contact row (the range) where it is. Only then: the copy costs
-        // about as much as the detection.
+        // which leaves the contact row (the range) where it is. Only then: the copy and the
+        // luma again cost about 1.4 ms a frame for both cameras (docs/perception.md).
         let first_ground_row = (self.horizon_v.ceil().max(0.0) as usize + 1).min(h);
         if first_ground_row + 4 < h && luma_noise(&self.luma, w, h, first_ground_row) > SMOOTH_ABOVE_NOISE {
             let mut smooth = std::mem::take(&mut self.smooth);
@@ -860,7 +860,6 @@ fn median(mut xs: Vec<u8>) -> Option<f32> {
     xs.get(xs.len() / 2).map(|&x| x as f32)
 }
 
-/// The road's luminance: the mode of the lower middle of the image.
 /// Above this luma noise (standard deviation, levels) rows are smoothed before thresholding:
 /// a camera with 9 levels of noise per channel (6 in luma) lost a third of the vehicles within
 /// 60 m, and at 12 (8 in luma) two thirds, their contact bands broken up by the noise and the
@@ -930,6 +929,7 @@ fn smooth_rows(rgb: &[u8], out: &mut Vec<u8>, w: usize) {
     }
 }
 
+/// The road's luminance: the mode of the lower middle of the image.
 fn road_luma(luma: &[u8], w: usize, h: usize, first_row: usize) -> u8 {
     let mut hist = [0u32; 64];
     let start = (first_row + (h - first_row) / 3).min(h - 1);
