@@ -27,12 +27,12 @@ impl VehicleClass {
     }
 
     pub fn params(self) -> VehicleParams {
-        VehicleParams::of_class(match self {
-            VehicleClass::Car => ObjectClass::Car,
-            VehicleClass::Van => ObjectClass::Van,
-            VehicleClass::Truck => ObjectClass::Truck,
-            VehicleClass::Motorcycle => ObjectClass::Motorcycle,
-        })
+        match self {
+            VehicleClass::Car => VehicleParams::CAR,
+            VehicleClass::Van => VehicleParams::VAN,
+            VehicleClass::Truck => VehicleParams::TRUCK,
+            VehicleClass::Motorcycle => VehicleParams::MOTORCYCLE,
+        }
     }
 }
 

@@ -225,20 +225,23 @@ impl Detector {
         if rgb.len() != w * h * 3 {
             return Vec::new();
         }
+        let first_ground_row = (self.horizon_v.ceil().max(0.0) as usize + 1).min(h);
+        if first_ground_row + 4 >= h {
+            return Vec::new();
+        }
         self.to_luma(rgb);
         // A noisy sensor (low light, high gain): the frame is smoothed along its rows first,
         // which leaves the contact row (the range) where it is. Only then: the copy and the
         // luma again cost about 1.4 ms a frame for both cameras (docs/perception.md).
-        let first_ground_row = (self.horizon_v.ceil().max(0.0) as usize + 1).min(h);
-        if first_ground_row + 4 < h && luma_noise(&self.luma, w, h, first_ground_row) > SMOOTH_ABOVE_NOISE {
+        if luma_noise(&self.luma, w, h, first_ground_row) > SMOOTH_ABOVE_NOISE {
             let mut smooth = std::mem::take(&mut self.smooth);
             smooth_rows(rgb, &mut smooth, w);
             self.to_luma(&smooth);
-            let found = self.detect_in(&smooth);
+            let found = self.detect_in(&smooth, first_ground_row);
             self.smooth = smooth;
             return found;
         }
-        self.detect_in(rgb)
+        self.detect_in(rgb, first_ground_row)
     }
 
     /// The luma of an RGB8 frame.
@@ -250,13 +253,9 @@ impl Detector {
         }
     }
 
-    /// [`Detector::detect`] on a frame whose luma is computed.
-    fn detect_in(&mut self, rgb: &[u8]) -> Vec<FrameDetection> {
+    /// [`Detector::detect`] on a frame whose luma is computed, below `first_ground_row`.
+    fn detect_in(&mut self, rgb: &[u8], first_ground_row: usize) -> Vec<FrameDetection> {
         let (w, h) = (self.camera.info.width as usize, self.camera.info.height as usize);
-        let first_ground_row = (self.horizon_v.ceil().max(0.0) as usize + 1).min(h);
-        if first_ground_row + 4 >= h {
-            return Vec::new();
-        }
         let road = road_luma(&self.luma, w, h, first_ground_row);
         let dark = (road as f32 * self.params.dark_ratio) as u8;
         self.dark = dark;
@@ -550,10 +549,9 @@ impl Detector {
         let side = if width_m > MAX_REAR_WIDTH_M { self.receding_side(w, h, c) } else { None };
         let oblique = if side.is_some() && width_m <= MAX_OBLIQUE_WIDTH_M {
             side
-        } else if width_m <= p.max_width_m {
-            None
-        } else if width_m <= MAX_LEVEL_OBLIQUE_WIDTH_M {
-            // Placed by the band's centre: off by at most half the side's width.
+        } else if width_m <= p.max_width_m.max(MAX_LEVEL_OBLIQUE_WIDTH_M) {
+            // A rear, or one with a side too level to show: placed by the band's centre (off by
+            // at most half the side's width).
             None
         } else {
             return Err(format!("width {width_m:.2} m"));
