@@ -232,7 +232,7 @@ impl Detector {
         self.to_luma(rgb);
         // A noisy sensor (low light, high gain): the frame is smoothed along its rows first,
         // which leaves the contact row (the range) where it is. Only then: the copy and the
-        // luma again cost about 1.4 ms a frame for both cameras (docs/perception.md).
+        // luma again cost about 2 ms a frame for both cameras (docs/perception.md).
         if luma_noise(&self.luma, w, h, first_ground_row) > SMOOTH_ABOVE_NOISE {
             let mut smooth = std::mem::take(&mut self.smooth);
             smooth_rows(rgb, &mut smooth, w);
