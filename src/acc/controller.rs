@@ -323,6 +323,11 @@ const THREAT_MARGIN_M: f64 = 2.0;
 const LEAD_BRAKING_MPS2: f64 = -0.5;
 /// The collision-avoidance guard on the follow law takes over above this needed deceleration.
 const NEEDED_GUARD_MPS2: f64 = 1.0;
+/// A threat farther than this many time gaps, not closing fast (matching its speed needs less
+/// than FAR_CLOSING_MPS2), is answered at most at FAR_DECEL_MPS2 (`Controller::far_cap_mps2`).
+const FAR_TIME_GAPS: f64 = 2.0;
+const FAR_CLOSING_MPS2: f64 = 0.5;
+const FAR_DECEL_MPS2: f64 = 0.8;
 /// Manoeuvre detection on the lead's speed: the fading average's gain per frame, the level
 /// that says the lead changed its acceleration, and the acceleration uncertainty (and the
 /// speed uncertainty that builds over a window of it) opened up then.
@@ -914,6 +919,24 @@ impl Controller {
         (1.5 * t.needed_decel_mps2).clamp(floor, vehicle_max)
     }
 
+    /// The most the guard brakes for a threat: a vehicle beyond twice the time gap that the
+    /// ego is not closing on fast (matching its speed short of the standstill distance needs
+    /// less than FAR_CLOSING_MPS2) is answered by easing off, at most FAR_DECEL_MPS2, however
+    /// it brakes. Such a lead braking for a moment 4 s ahead (following its own lead) drew
+    /// 1.6 m/s2 and then 1.45 m/s2 of acceleration again (phantom braking, in a scenario of
+    /// our own); one that keeps braking is soon near or closing fast, and braked for in full.
+    fn far_cap_mps2(&self, t: &Threat, v: f64) -> f64 {
+        let gap = t.room_m + THREAT_MARGIN_M;
+        let room = (gap - self.s.standstill_m).max(0.1);
+        let closing = (v - t.lead_speed_mps).max(0.0);
+        let far = gap > self.s.standstill_m + FAR_TIME_GAPS * self.time_gap_s * v;
+        if far && closing * closing / (2.0 * room) < FAR_CLOSING_MPS2 {
+            FAR_DECEL_MPS2
+        } else {
+            f64::INFINITY
+        }
+    }
+
     /// Speed or Follow mode within the comfort limits: the lower of the cruise law and the
     /// time-gap law, moved toward from the last command at most at the jerk limit.
     fn comfort_target(
@@ -933,7 +956,10 @@ impl Controller {
             // off a little (or the noise in its estimated deceleration) is the law's to answer;
             // below NEEDED_GUARD_MPS2 the guard made the car dip for nothing.
             let needed = threat.map_or(0.0, |t| t.needed_decel_mps2);
-            let mut a = if needed > NEEDED_GUARD_MPS2 { law.min(-needed) } else { law };
+            let mut a = match threat {
+                Some(t) if needed > NEEDED_GUARD_MPS2 => law.min(-needed.min(self.far_cap_mps2(t, v))),
+                _ => law,
+            };
             // At standstill: stay until the lead has moved off.
             if v < STANDSTILL_MPS && !(l.gap_m > self.s.standstill_m + 1.0 && l.speed_mps > 0.5) {
                 a = a.min(-0.5);
