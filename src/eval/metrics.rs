@@ -195,7 +195,7 @@ fn lead_accelerations(s: &[Sample], lag: usize) -> Vec<Option<f64>> {
 /// braking at `lead_accel_mps2` stops, or matches its speed short of it (the truth's view).
 fn needed_behind(tl: &TruthLead, ego_speed_mps: f64, lead_accel_mps2: f64) -> f64 {
     let room = (tl.gap_m - HARD_BRAKING_MARGIN_M).max(0.1);
-    let lead_speed = (ego_speed_mps + tl.relative_speed_mps).max(0.0);
+    let lead_speed = tl.speed_mps;
     if lead_accel_mps2 < -0.1 {
         let lead_stop = lead_speed * lead_speed / (2.0 * -lead_accel_mps2);
         ego_speed_mps * ego_speed_mps / (2.0 * (room + lead_stop))
@@ -267,13 +267,14 @@ impl Tally {
             // Settled behind a lead holding its speed: the ego's acceleration stays with the
             // lead's (a limit cycle shows here; following a lead's speed changes does not).
             // (The trace is judged whole: the lead must also hold its speed a little beyond now,
-            // so the onset of its next change, which the ego answers at once, is not counted.)
-            let ahead = s[i..]
-                .iter()
-                .take_while(|w| w.t_s <= x.t_s + SETTLED_AHEAD_S && w.truth.is_some_and(|t| t.id == tl.id));
-            let window = s[from..=i].iter().filter(|w| w.t_s >= x.t_s - SETTLED_S).chain(ahead);
+            // so the onset of its next change, which the ego answers at once, is not counted;
+            // nor is a lead about to leave the lane, whose next change is not seen: one
+            // speeding up as it moved out read as a 0.4 m/s2 swing.)
+            let mut ahead = s[i..].iter().take_while(|w| w.t_s <= x.t_s + SETTLED_AHEAD_S);
+            let stays = ahead.clone().all(|w| w.truth.is_some_and(|t| t.id == tl.id));
+            let window = s[from..=i].iter().filter(|w| w.t_s >= x.t_s - SETTLED_S).chain(ahead.by_ref());
             let (lo, hi) = window.map(lead_speed).fold((f64::MAX, f64::MIN), |(lo, hi), v| (lo.min(v), hi.max(v)));
-            let settled = x.t_s - s[from].t_s >= SETTLED_S + STEADY_S && hi - lo <= SETTLED_SPEED_BAND_MPS;
+            let settled = stays && x.t_s - s[from].t_s >= SETTLED_S + STEADY_S && hi - lo <= SETTLED_SPEED_BAND_MPS;
             if let Some(p) = s[from..i].iter().rev().find(|p| x.t_s - p.t_s >= LEAD_ACCEL_WINDOW_S).filter(|_| settled)
             {
                 let lead_accel = (lead_speed(x) - lead_speed(p)) / (x.t_s - p.t_s);
@@ -573,7 +574,12 @@ mod tests {
                     set_speed_mps: 30.0,
                     time_gap_s: 1.8,
                     acc_gap_m: truth.map(|t| t.0),
-                    truth: truth.map(|(gap_m, relative_speed_mps)| TruthLead { id: 1, gap_m, relative_speed_mps }),
+                    truth: truth.map(|(gap_m, relative_speed_mps)| TruthLead {
+                        id: 1,
+                        gap_m,
+                        relative_speed_mps,
+                        speed_mps: speed_mps + relative_speed_mps,
+                    }),
                 }
             })
             .collect();
@@ -649,6 +655,13 @@ mod tests {
         let calm = Metrics::of(&trace(60.0, cycling(0.05)));
         assert!(calm.max_accel_swing_mps2.is_some_and(|s| s < 0.1), "{:?}", calm.max_accel_swing_mps2);
         assert!(!failed(&calm).contains(&"acceleration swing in steady following (m/s2)"));
+        // A lead that speeds up as it moves out of the lane at 50.3 s: its change is not seen
+        // through, so the ego not following it is no swing.
+        let leaving = Metrics::of(&trace(60.0, |t| {
+            let lead = 25.0 + (t - 50.0).max(0.0);
+            (25.0, 0.0, AccMode::Follow, (t < 50.3).then_some((50.0, lead - 25.0)))
+        }));
+        assert!(leaving.max_accel_swing_mps2.is_some_and(|s| s < 0.05), "{:?}", leaving.max_accel_swing_mps2);
     }
 
     /// A lead at 30 m/s, 59 m ahead of an ego holding 30 m/s, braking at 7 m/s2 from t = 10 s;
