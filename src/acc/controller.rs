@@ -306,8 +306,18 @@ impl Noise {
     fn speed_sigma(&self, gap_m: f64) -> f64 {
         self.speed_base_mps + self.speed_per_m2 * gap_m.max(0.0).powi(2)
     }
+
+    /// The steady smoothing of the lead's speed at this gap: the setting's from
+    /// STEADY_FULL_GAP_M on, less nearer, with the square of the gap (as the range's error),
+    /// never below the measurement's own noise.
+    fn speed_steady(&self, gap_m: f64) -> f64 {
+        let share = (gap_m.max(0.0) / STEADY_FULL_GAP_M).powi(2).min(1.0);
+        (self.speed_steady_mps * share).max(self.speed_sigma(gap_m))
+    }
 }
 
+/// From this gap on the lead's speed is smoothed at the estimator's steady_speed_sigma_mps.
+const STEADY_FULL_GAP_M: f64 = 50.0;
 /// The lane width the settings' in-lane limits are for.
 const SETTINGS_LANE_WIDTH_M: f64 = 3.5;
 /// Filter constant for the per-track lateral speed, per perception frame.
@@ -703,7 +713,7 @@ impl Controller {
                 f.brake_lights(o.brake_lights);
                 f.seen_s = frame.stamp_s;
                 f.update(0, gap, n.gap_sigma(gap));
-                f.update_speed(speed, speed_sigma(f.settled()), n.speed_steady_mps);
+                f.update_speed(speed, speed_sigma(f.settled()), n.speed_steady(gap));
             }
             _ => {
                 tracing::debug!(from = ?current, to = o.id, "lead changed");

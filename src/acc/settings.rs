@@ -134,7 +134,7 @@ pub struct Estimator {
     #[serde(default)]
     pub speed_sigma_per_m2: f64,
     /// Outside a manoeuvre the relative speed is smoothed as if this noisy (a lead holding its
-    /// speed is followed calmly); default: no extra smoothing.
+    /// speed is followed calmly) from 50 m on, nearer less; default: no extra smoothing.
     #[serde(default)]
     pub steady_speed_sigma_mps: f64,
     pub lead_jerk_sigma_mps3: f64,
