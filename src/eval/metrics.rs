@@ -33,6 +33,9 @@ pub mod aims {
 
 /// How long a stretch must last before it counts as steady.
 const STEADY_S: f64 = 10.0;
+/// Following: the ego within this of the lead's speed, the lead's speed within this over
+/// STEADY_S.
+const FOLLOWING_BAND_MPS: f64 = 1.0;
 /// Samples this close (before, after) to an emergency belong to it.
 const EMERGENCY_MARGIN_S: (f64, f64) = (0.1, 1.5);
 /// Braking harder than this with nothing in the lane within twice the time gap (nor closing
@@ -231,7 +234,9 @@ fn ttc(tl: &TruthLead) -> Option<f64> {
 /// over the last STEADY_S of `stretch`, which ends at `now`, and the ego at its speed (within
 /// 1 m/s): closing on a car that stood still all along is an approach, not following.
 fn steady_lead(stretch: &[Sample], now: &Sample) -> bool {
-    if now.t_s - stretch[0].t_s < 2.0 * STEADY_S || now.truth.is_none_or(|t| t.relative_speed_mps.abs() >= 1.0) {
+    if now.t_s - stretch[0].t_s < 2.0 * STEADY_S
+        || now.truth.is_none_or(|t| t.relative_speed_mps.abs() >= FOLLOWING_BAND_MPS)
+    {
         return false;
     }
     let lead_speed = |w: &Sample| w.lead_speed_mps().unwrap_or(w.speed_mps);
@@ -240,7 +245,7 @@ fn steady_lead(stretch: &[Sample], now: &Sample) -> bool {
         .filter(|w| w.t_s >= now.t_s - STEADY_S)
         .map(lead_speed)
         .fold((f64::MAX, f64::MIN), |(lo, hi), v| (lo.min(v), hi.max(v)));
-    hi - lo < 1.0
+    hi - lo < FOLLOWING_BAND_MPS
 }
 
 impl Tally {
@@ -270,11 +275,17 @@ impl Tally {
             // so the onset of its next change, which the ego answers at once, is not counted;
             // nor is a lead about to leave the lane, whose next change is not seen: one
             // speeding up as it moved out read as a 0.4 m/s2 swing.)
+            // The ego too has kept to the lead's speed (within FOLLOWING_BAND_MPS) for SETTLED_S:
+            // the end of an approach from 30 to 20 m/s, easing at 0.3 m/s2 as the gap closes
+            // on the time gap, is not a swing.
             let mut ahead = s[i..].iter().take_while(|w| w.t_s <= x.t_s + SETTLED_AHEAD_S);
             let stays = ahead.clone().all(|w| w.truth.is_some_and(|t| t.id == tl.id));
-            let window = s[from..=i].iter().filter(|w| w.t_s >= x.t_s - SETTLED_S).chain(ahead.by_ref());
-            let (lo, hi) = window.map(lead_speed).fold((f64::MAX, f64::MIN), |(lo, hi), v| (lo.min(v), hi.max(v)));
-            let settled = stays && x.t_s - s[from].t_s >= SETTLED_S + STEADY_S && hi - lo <= SETTLED_SPEED_BAND_MPS;
+            let past = s[from..=i].iter().filter(|w| w.t_s >= x.t_s - SETTLED_S);
+            let kept = past.clone().all(|w| w.truth.is_some_and(|t| t.relative_speed_mps.abs() < FOLLOWING_BAND_MPS));
+            let (lo, hi) =
+                past.chain(ahead.by_ref()).map(lead_speed).fold((f64::MAX, f64::MIN), |(lo, hi), v| (lo.min(v), hi.max(v)));
+            let settled =
+                stays && kept && x.t_s - s[from].t_s >= SETTLED_S + STEADY_S && hi - lo <= SETTLED_SPEED_BAND_MPS;
             if let Some(p) = s[from..i].iter().rev().find(|p| x.t_s - p.t_s >= LEAD_ACCEL_WINDOW_S).filter(|_| settled)
             {
                 let lead_accel = (lead_speed(x) - lead_speed(p)) / (x.t_s - p.t_s);
@@ -662,6 +673,15 @@ mod tests {
             (25.0, 0.0, AccMode::Follow, (t < 50.3).then_some((50.0, lead - 25.0)))
         }));
         assert!(leaving.max_accel_swing_mps2.is_some_and(|s| s < 0.05), "{:?}", leaving.max_accel_swing_mps2);
+        // The end of an approach: from 30 m/s down to a lead's 20, easing off exponentially
+        // (3 s). Within 1 m/s of the lead from 36.9 s on at 0.33 m/s2: not yet settled.
+        let approach = Metrics::of(&trace(60.0, |t| {
+            let fade = (-(t - 30.0).max(0.0) / 3.0).exp();
+            let speed = 20.0 + 10.0 * fade;
+            let accel = if t > 30.0 { -10.0 / 3.0 * fade } else { 0.0 };
+            (speed, accel, AccMode::Follow, Some((60.0, 20.0 - speed)))
+        }));
+        assert!(approach.max_accel_swing_mps2.is_some_and(|s| s < 0.05), "{:?}", approach.max_accel_swing_mps2);
     }
 
     /// A lead at 30 m/s, 59 m ahead of an ego holding 30 m/s, braking at 7 m/s2 from t = 10 s;
