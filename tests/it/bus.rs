@@ -224,7 +224,9 @@ async fn malformed_payloads_are_counted_and_the_stream_goes_on() {
 
 #[tokio::test(flavor = "multi_thread")]
 async fn rate_limit_judges_simulation_time() {
-    let cfg = r#"{ topics: { "vehicle/speed": { max_rate_hz: 20 } } }"#;
+    // Blocking congestion control: the 20 messages go out back to back, and on a loaded
+    // machine dropping one (vehicle/speed's default) would be a loss this test does not judge.
+    let cfg = r#"{ topics: { "vehicle/speed": { max_rate_hz: 20, congestion_control: "block" } } }"#;
     let (a, b) = bus_pair(map(cfg), map(cfg)).await;
     let sub = b.subscriber(VEHICLE_SPEED).await.unwrap();
     let publisher = a.publisher(VEHICLE_SPEED).await.unwrap();
