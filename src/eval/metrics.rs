@@ -278,12 +278,12 @@ impl Tally {
             // The ego too has kept to the lead's speed (within FOLLOWING_BAND_MPS) for SETTLED_S:
             // the end of an approach from 30 to 20 m/s, easing at 0.3 m/s2 as the gap closes
             // on the time gap, is not a swing.
-            let mut ahead = s[i..].iter().take_while(|w| w.t_s <= x.t_s + SETTLED_AHEAD_S);
+            let ahead = s[i..].iter().take_while(|w| w.t_s <= x.t_s + SETTLED_AHEAD_S);
             let stays = ahead.clone().all(|w| w.truth.is_some_and(|t| t.id == tl.id));
             let past = s[from..=i].iter().filter(|w| w.t_s >= x.t_s - SETTLED_S);
             let kept = past.clone().all(|w| w.truth.is_some_and(|t| t.relative_speed_mps.abs() < FOLLOWING_BAND_MPS));
             let (lo, hi) =
-                past.chain(ahead.by_ref()).map(lead_speed).fold((f64::MAX, f64::MIN), |(lo, hi), v| (lo.min(v), hi.max(v)));
+                past.chain(ahead).map(lead_speed).fold((f64::MAX, f64::MIN), |(lo, hi), v| (lo.min(v), hi.max(v)));
             let settled =
                 stays && kept && x.t_s - s[from].t_s >= SETTLED_S + STEADY_S && hi - lo <= SETTLED_SPEED_BAND_MPS;
             if let Some(p) = s[from..i].iter().rev().find(|p| x.t_s - p.t_s >= LEAD_ACCEL_WINDOW_S).filter(|_| settled)

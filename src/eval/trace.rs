@@ -31,8 +31,8 @@ pub struct TruthLead {
     pub relative_speed_mps: f64,
     /// The lead's own speed. Judged on rather than the ego's speed plus the relative speed:
     /// objects come at the camera's rate and states at the speed messages', so that sum mixed
-    /// two instants and jittered by the ego's acceleration times the gap between them
-    /// (0.05 m/s at 1 m/s2 and 20 Hz), read as up to 0.4 m/s2 of lead acceleration.
+    /// two instants and jittered by the ego's acceleration times the gap between them (0.05 m/s
+    /// at 1 m/s2 and 20 Hz: 0.1 m/s2 of lead acceleration over the swing's 0.5 s window).
     pub speed_mps: f64,
 }
 
