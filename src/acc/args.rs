@@ -27,11 +27,17 @@ impl VehicleClass {
     }
 
     pub fn params(self) -> VehicleParams {
-        match self {
-            VehicleClass::Car => VehicleParams::CAR,
-            VehicleClass::Van => VehicleParams::VAN,
-            VehicleClass::Truck => VehicleParams::TRUCK,
-            VehicleClass::Motorcycle => VehicleParams::MOTORCYCLE,
+        VehicleParams::of_class(self.into())
+    }
+}
+
+impl From<VehicleClass> for ObjectClass {
+    fn from(c: VehicleClass) -> Self {
+        match c {
+            VehicleClass::Car => ObjectClass::Car,
+            VehicleClass::Van => ObjectClass::Van,
+            VehicleClass::Truck => ObjectClass::Truck,
+            VehicleClass::Motorcycle => ObjectClass::Motorcycle,
         }
     }
 }

@@ -73,7 +73,7 @@ async fn side_by_side(n: usize, duration_s: f64) -> Result<ScaleRow> {
         perception: PerceptionSource::Camera,
         set_speed_mps: scenario.ego.controller_set_speed_mps(),
         time_gap_s: scenario.ego.time_gap_s,
-        vehicle: Some(crate::msg::ObjectClass::from(scenario.ego.class).into()),
+        vehicle: Some(LoopSpec::vehicle_of(&scenario)),
         faults: None,
         link: LinkKind::Unix,
     };

@@ -234,7 +234,7 @@ pub(crate) async fn run_one(
         perception: args.perception,
         set_speed_mps: set_speed,
         time_gap_s: scenario.ego.time_gap_s,
-        vehicle: Some(crate::msg::ObjectClass::from(scenario.ego.class).into()),
+        vehicle: Some(LoopSpec::vehicle_of(&scenario)),
         faults,
         link: args.link,
     };

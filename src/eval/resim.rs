@@ -480,7 +480,7 @@ pub async fn run(path: &Path, connect: &ConnectArgs, dir: &Path, progress: &mut 
             anyhow!("{} has no acc/status: the ACC's set speed is unknown (record every key)", path.display())
         })?,
         time_gap_s: scenario.as_ref().and_then(|s| s.ego.time_gap_s),
-        vehicle: scenario.as_ref().map(|s| crate::msg::ObjectClass::from(s.ego.class).into()),
+        vehicle: scenario.as_ref().map(LoopSpec::vehicle_of),
         faults: None,
         link: Default::default(),
     };

@@ -85,6 +85,11 @@ pub struct LoopSpec {
 }
 
 impl LoopSpec {
+    /// The vehicle the ACC drives for a scenario: its ego's.
+    pub fn vehicle_of(scenario: &crate::sim::Scenario) -> VehicleClass {
+        crate::msg::ObjectClass::from(scenario.ego.class).into()
+    }
+
     /// Faults a node of this loop cannot take: in lockstep, every step waits for the ACC's
     /// answer to its speed message and for the detections of its frame, so speed and camera
     /// frames must arrive; their faults belong on what follows them.

@@ -217,7 +217,7 @@ pub fn run(args: &SoakArgs, connect: &crate::config::ConnectArgs) -> Result<Soak
         perception: args.perception,
         set_speed_mps: 30.0,
         time_gap_s: None,
-        vehicle: Some(crate::msg::ObjectClass::from(scenario.ego.class).into()),
+        vehicle: Some(LoopSpec::vehicle_of(&scenario)),
         faults: None,
         link: Default::default(),
     };

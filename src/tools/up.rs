@@ -347,7 +347,7 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
         perception: args.perception,
         set_speed_mps: scenario.ego.controller_set_speed_mps(),
         time_gap_s: scenario.ego.time_gap_s,
-        vehicle: Some(crate::msg::ObjectClass::from(scenario.ego.class).into()),
+        vehicle: Some(LoopSpec::vehicle_of(&scenario)),
         faults: args.faults.profile()?,
         link: Default::default(),
     };
