@@ -721,16 +721,25 @@ impl Detector {
     /// over the columns, pixel noise mostly cancels.
     fn contact_edge(&self, w: usize, h: usize, c: &Component) -> Option<f64> {
         let columns = self.edge_columns(w, h, c);
-        let sum: f64 = self.fractional_edges(w, &columns)?.sum();
-        Some(sum / columns.len() as f64)
+        let (sum, n) = self.fractional_edges(w, &columns, true)?.fold((0.0, 0), |(s, n), e| (s + e, n + 1));
+        Some(sum / n as f64)
     }
 
-    /// The contact edge in each of the given columns (column, lowest row holding band), to a
-    /// fraction of a row (`contact_edge`); None when it cannot be measured.
+    /// The contact edge in the given columns (column, lowest row holding band), to a fraction
+    /// of a row (`contact_edge`); None when it cannot be measured. With `skip_tyres`, columns
+    /// whose lowest row is darker than any shadow are left out: they end on a tyre, whose
+    /// lower edge says nothing of the band's within the row (it stays at the row's end, then
+    /// jumps a row; a motorcycle's rear tyre stands at its rear, 0.13 m ahead of the band's
+    /// edge, a car's far ones in its row from ~80 m). Only while a quarter of the columns hold
+    /// band filling their lowest row's top and reaching as low as the tyres: far away the band
+    /// is thinner than a row or falls between rows, and then the tyres' lower edge is the
+    /// better measure. A side's rise (`receding_side`) keeps them: its quarters are the band's
+    /// ends, where the tyres stand.
     fn fractional_edges<'a>(
         &'a self,
         w: usize,
         columns: &'a [(usize, usize)],
+        skip_tyres: bool,
     ) -> Option<impl Iterator<Item = f64> + 'a> {
         let road = self.road_below(w, columns)?;
         let band = road * self.band_ratio;
@@ -739,6 +748,22 @@ impl Detector {
         }
         let luma = move |u: usize, v: usize| self.luma[v * w + u];
         let share = move |l: u8| ((road - l as f32) / (road - band)).clamp(0.0, 1.0) as f64;
+        let darkest_band = road * MIN_BAND_RATIO;
+        let not_tyre = move |l: u8| l as f32 >= darkest_band;
+        let on_band = move |&&(u, lo): &&(usize, usize)| not_tyre(luma(u, lo));
+        // Band filling its lowest row's top (the row above holds band too, not a tyre, a
+        // quarter of it at least, well above pixel noise): the share there is the edge's
+        // place, not the band's thickness.
+        let thick = |u: usize, lo: usize| lo > 0 && not_tyre(luma(u, lo - 1)) && share(luma(u, lo - 1)) >= 0.25;
+        let (mut banded, mut band_lowest, mut tyre_lowest) = (0, 0, 0);
+        for c in columns {
+            if !on_band(&c) {
+                tyre_lowest = tyre_lowest.max(c.1);
+            } else if thick(c.0, c.1) {
+                (banded, band_lowest) = (banded + 1, band_lowest.max(c.1));
+            }
+        }
+        let tyres_left_out = skip_tyres && banded > 0 && banded * 4 >= columns.len() && band_lowest >= tyre_lowest;
         let edge = move |u: usize, lo: usize| {
             let (inner, below) = (share(luma(u, lo)), share(luma(u, lo + 1)));
             // With band in the row below, the edge is in that row, whatever the band's top does
@@ -747,7 +772,7 @@ impl Detector {
             let weight = (below / 0.25).min(1.0);
             weight * (lo as f64 + 1.0 + below) + (1.0 - weight) * (lo as f64 + inner + below)
         };
-        Some(columns.iter().map(move |&(u, lo)| edge(u, lo)))
+        Some(columns.iter().filter(move |c| !tyres_left_out || on_band(c)).map(move |&(u, lo)| edge(u, lo)))
     }
 
     /// Which end of a band its contact edge rises toward, measured to a fraction of a row over
@@ -759,7 +784,7 @@ impl Detector {
         if columns.len() < 8 {
             return None;
         }
-        let edges: Vec<f64> = self.fractional_edges(w, &columns)?.collect();
+        let edges: Vec<f64> = self.fractional_edges(w, &columns, false)?.collect();
         let quarter = edges.len() / 4;
         let mean = |e: &[f64]| e.iter().sum::<f64>() / e.len() as f64;
         // Rows grow downward: the receding end's edge is the smaller.
