@@ -6,6 +6,7 @@
 # runs `slipstream eval acc` on them (lockstep: deterministic) and prints, per perception,
 # a table of the answer (s; "-" where the lead never braked beyond the comfort limit) and the
 # emergency seconds (in brackets: the unwarranted emergencies). About 2 minutes on 2 cores. Needs a release build.
+# SEED_OFFSET=N adds N to every scenario's seed (the same sweep with other noise).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bin=target/release/slipstream
@@ -29,7 +30,7 @@ for class in "${classes[@]}"; do
   name: "$name",
   description: "A $class at $v m/s, 1.8 s ahead, brakes at $d m/s2 to $to m/s at t = 12 s.",
   duration_s: 22,
-  seed: $((v * 10 + ${d%.*})),
+  seed: $((v * 10 + ${d%.*} + ${SEED_OFFSET:-0})),
   ego: { lane: 1, speed_mps: $v, set_speed_mps: $((v + 3)), time_gap_s: 1.8 },
   traffic: [
     {

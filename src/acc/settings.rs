@@ -140,14 +140,14 @@ pub struct Estimator {
     pub lead_jerk_sigma_mps3: f64,
     /// How far the lead's estimated deceleration may overshoot its true one (m/s2): a lead
     /// counts as braking beyond the comfort limit (answered at once, in an emergency) when
-    /// its estimate is beyond the limit by more than this. Default 1.0, what the camera's
-    /// estimate reaches for leads braking at 3.0-3.5 m/s2; ground truth uses 0.1.
+    /// its estimate is beyond the limit by more than this. Default 0.7: the camera's estimate
+    /// overshoots by up to 0.5 for leads braking at 2.5-3.5 m/s2; ground truth uses 0.1.
     #[serde(default = "default_hard_braking_margin")]
     pub hard_braking_margin_mps2: f64,
 }
 
 fn default_hard_braking_margin() -> f64 {
-    1.0
+    0.7
 }
 
 #[derive(Debug, Clone, PartialEq, Deserialize)]
