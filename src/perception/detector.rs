@@ -848,9 +848,6 @@ impl Detector {
     }
 }
 
-/// Neighbouring columns (column, lowest row, highest row) where a thin band meets a tall dark
-/// region a step lower: a far vehicle's contact band touching a nearer one's dark body or
-/// glass in the image, not one band (a wheel at a band's side ends on the band's row).
 /// Pixels of a lit lamp (LIT_RED_MIN, LIT_RED_OVER_GB) in the given columns and rows.
 fn lit_pixels(
     rgb: &[u8],
@@ -869,6 +866,9 @@ fn lit_pixels(
     n
 }
 
+/// Neighbouring columns (column, lowest row, highest row) where a thin band meets a tall dark
+/// region a step lower: a far vehicle's contact band touching a nearer one's dark body or
+/// glass in the image, not one band (a wheel at a band's side ends on the band's row).
 fn thin_meets_tall(a: (u32, u32, u32), b: (u32, u32, u32)) -> bool {
     let (ta, tb) = (a.1 - a.2 + 1, b.1 - b.2 + 1);
     a.1.abs_diff(b.1) >= 2 && ta.max(tb) >= TALL_RATIO * ta.min(tb)
