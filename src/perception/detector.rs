@@ -755,15 +755,17 @@ impl Detector {
         // quarter of it at least, well above pixel noise): the share there is the edge's
         // place, not the band's thickness.
         let thick = |u: usize, lo: usize| lo > 0 && not_tyre(luma(u, lo - 1)) && share(luma(u, lo - 1)) >= 0.25;
-        let (mut banded, mut band_lowest, mut tyre_lowest) = (0, 0, 0);
-        for c in columns {
-            if !on_band(&c) {
-                tyre_lowest = tyre_lowest.max(c.1);
-            } else if thick(c.0, c.1) {
-                (banded, band_lowest) = (banded + 1, band_lowest.max(c.1));
+        let tyres_left_out = skip_tyres && {
+            let (mut banded, mut band_lowest, mut tyre_lowest) = (0, 0, 0);
+            for c in columns {
+                if !on_band(&c) {
+                    tyre_lowest = tyre_lowest.max(c.1);
+                } else if thick(c.0, c.1) {
+                    (banded, band_lowest) = (banded + 1, band_lowest.max(c.1));
+                }
             }
-        }
-        let tyres_left_out = skip_tyres && banded > 0 && banded * 4 >= columns.len() && band_lowest >= tyre_lowest;
+            banded > 0 && banded * 4 >= columns.len() && band_lowest >= tyre_lowest
+        };
         let edge = move |u: usize, lo: usize| {
             let (inner, below) = (share(luma(u, lo)), share(luma(u, lo + 1)));
             // With band in the row below, the edge is in that row, whatever the band's top does
