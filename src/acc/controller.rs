@@ -175,6 +175,10 @@ struct LeadFilter {
     manoeuvre_until_s: f64,
     /// Its brake lights were on in the last frame.
     brake_lights: bool,
+    /// When its brake lights came on, after being off for RELIT_S at least, on a lead not yet
+    /// seen slowing; when they were last seen lit.
+    lit_from_s: Option<f64>,
+    lit_last_s: f64,
     /// The frame it was last measured in.
     seen_s: f64,
 }
@@ -195,6 +199,8 @@ impl LeadFilter {
             since_s: t_s,
             manoeuvre_until_s: t_s,
             brake_lights: false,
+            lit_from_s: None,
+            lit_last_s: f64::NEG_INFINITY,
             seen_s: t_s,
         }
     }
@@ -236,8 +242,22 @@ impl LeadFilter {
         if on && !self.brake_lights && self.settled() {
             tracing::debug!(id = self.id, t_s = self.t_s, "lead brake lights on");
             self.manoeuvre();
+            // A brake application starting: not a frame or two of the lamps missed in a long
+            // one, nor the lamps of a lead already seen slowing (its deceleration is measured,
+            // the lamps add nothing to it).
+            if self.t_s - self.lit_last_s >= RELIT_S {
+                self.lit_from_s = (self.x[2] >= SLOWING_MPS2).then_some(self.t_s);
+            }
+        }
+        if on {
+            self.lit_last_s = self.t_s;
         }
         self.brake_lights = on;
+    }
+
+    /// How long ago the lead's brake lights came on, while they are on.
+    fn lit_for_s(&self) -> Option<f64> {
+        self.lit_from_s.filter(|_| self.brake_lights).map(|from| self.t_s - from)
     }
 
     /// Moves the estimate to `t_s` with the ego at `ego_speed_mps`.
@@ -348,6 +368,16 @@ const MANOEUVRE_WINDOW_S: f64 = 0.1;
 /// The lead's jerk (white-noise sigma) for MANOEUVRE_HOLD_S after its brake lights came on: a
 /// brake application builds deceleration at some 10 m/s3, far beyond the steady model's.
 const BRAKING_JERK_SIGMA_MPS3: f64 = 10.0;
+/// For this long after a lead's brake lights come on, before its speed can say how hard it
+/// brakes, comfort braking plans for it braking at the comfort limit (`Controller::step`).
+pub(super) const LIT_ANTICIPATION_S: f64 = 0.5;
+/// ...where a lead braking at the comfort limit would need at least this share of it.
+const LIT_NEED_SHARE: f64 = 0.4;
+/// Lamps seen lit again within this long of the last frame they were lit in are the same
+/// brake application (a frame or two of them missed).
+const RELIT_S: f64 = 0.5;
+/// A lead whose estimated acceleration is below this is seen slowing already.
+const SLOWING_MPS2: f64 = -0.3;
 /// While a new lead's speed is still being measured, comfort braking plans for it being this
 /// many of its standard deviations slower.
 const UNMEASURED_SIGMAS: f64 = 2.0;
@@ -390,6 +420,8 @@ struct LeadNow {
     accel_sigma_mps2: f64,
     /// Its brake lights are on.
     brake_lights: bool,
+    /// How long ago they came on (a settled lead's, while on).
+    lit_for_s: Option<f64>,
     settled: bool,
 }
 
@@ -745,6 +777,7 @@ impl Controller {
             speed_sigma_mps: f.p[(1, 1)].max(0.0).sqrt(),
             accel_sigma_mps2: f.p[(2, 2)].max(0.0).sqrt(),
             brake_lights: f.brake_lights,
+            lit_for_s: f.lit_for_s(),
             settled: f.settled(),
         });
         if let Some(l) = lead {
@@ -800,17 +833,39 @@ impl Controller {
                     // known. Only where comfort braking could cope with that case: a car
                     // cutting in near, its speed not yet measured, is no standing car to brake
                     // hard for. An emergency still needs the estimate itself.
-                    let guard = match lead.filter(|l| !l.settled) {
-                        Some(l) => threat.map(|t| {
+                    //
+                    // Likewise for LIT_ANTICIPATION_S after a lead's brake lights come on:
+                    // the lamps say the pedal is pressed, its speed says how hard only some
+                    // tenths of a second later (a camera's range moves by centimetres while
+                    // the deceleration builds). Comfort braking plans for the lead braking at
+                    // the comfort limit meanwhile, so the ego eases into braking with the lamps
+                    // instead of once the deceleration shows; the estimate decides after. Only
+                    // where such a brake would need much of the comfort braking (at speed, or
+                    // close): slow and far back, a late answer costs nothing, and braking for
+                    // every touch of the lead's pedal would cost the time gap.
+                    let decel = self.s.limits.decel_at(v);
+                    let worse_within_comfort = |t: Threat, worse: Threat| {
+                        if worse.needed_decel_mps2 <= decel {
+                            t.or_worse(&worse)
+                        } else {
+                            t
+                        }
+                    };
+                    let guard = match lead {
+                        Some(l) if !l.settled => threat.map(|t| {
                             let slower_mps = (l.speed_mps - UNMEASURED_SIGMAS * l.speed_sigma_mps).max(0.0);
-                            let slower = self::threat(l.gap_m, v, slower_mps, l.threat_accel());
-                            if slower.needed_decel_mps2 <= self.s.limits.decel_at(v) {
-                                t.or_worse(&slower)
+                            worse_within_comfort(t, self::threat(l.gap_m, v, slower_mps, l.threat_accel()))
+                        }),
+                        Some(l) if l.lit_for_s.is_some_and(|s| s < LIT_ANTICIPATION_S) => threat.map(|t| {
+                            let braking = l.threat_accel().min(-self.s.limits.decel_mps2);
+                            let hard = self::threat(l.gap_m, v, l.speed_mps, braking);
+                            if hard.needed_decel_mps2 >= LIT_NEED_SHARE * decel {
+                                worse_within_comfort(t, hard)
                             } else {
                                 t
                             }
                         }),
-                        None => threat,
+                        _ => threat,
                     };
                     self.comfort_target(v, lead, guard.as_ref(), desired_gap, dt)
                 }

@@ -557,6 +557,75 @@ fn brake_lights_coming_on_speed_the_answer_to_a_hard_braking_lead() {
     assert!(with + 0.1 <= without, "answered {with:.2} s after the pedal with the lights seen, {without:.2} s without");
 }
 
+/// The ACC's targets behind a lead at 30 m/s, 1.8 s ahead, that does `lead_accel(t)` (m/s2,
+/// its lamps lit while `lamps(t)`), measured as a camera tracker does (relative speed a
+/// first-order lag of 0.2 s behind the truth): (t, target).
+fn behind_a_slowing_lead(lamps: impl Fn(f64) -> bool, lead_accel: impl Fn(f64) -> f64) -> Vec<(f64, f64)> {
+    let mut c = Controller::new(AccSettings { set_speed_mps: 32.0, ..AccSettings::default() });
+    let (mut t, mut v, mut gap, mut lead_v, mut measured_rel) = (0.0, 30.0, 59.0, 30.0, 0.0);
+    let mut targets = Vec::new();
+    while t < 14.0 {
+        measured_rel += (lead_v - v - measured_rel) * DT / 0.2;
+        if ((t / DT).round() as i64) % 5 == 0 {
+            let o = Object { brake_lights: lamps(t), ..obj(1, gap, 0.0, measured_rel) };
+            c.perceive(&frame(t, vec![o]), &ego(t, v));
+        }
+        let a = c.step(&ego(t, v), &[]).status.target_accel_mps2;
+        targets.push((t, a));
+        v = (v + a * DT).max(0.0);
+        lead_v = (lead_v + lead_accel(t) * DT).max(0.0);
+        gap += (lead_v - v) * DT;
+        t += DT;
+    }
+    targets
+}
+
+/// A brake application's deceleration a first-order lag of 0.3 s behind the pedal, pressed at
+/// t = 10 s for `decel` m/s2.
+fn pressed_at_10_s(decel: f64) -> impl Fn(f64) -> f64 {
+    move |t: f64| if t > 10.0 { -decel * (1.0 - (-(t - 10.0) / 0.3).exp()) } else { 0.0 }
+}
+
+fn target_at(targets: &[(f64, f64)], t_s: f64) -> f64 {
+    targets.iter().find(|(t, _)| *t >= t_s).map(|(_, a)| *a).unwrap()
+}
+
+/// Brake lights coming on start comfort braking with the pedal, before the lead's speed could
+/// show how hard it brakes; a gentle brake costs no more than that start; lamps coming on on a
+/// lead already seen slowing add nothing.
+#[test]
+fn brake_lights_coming_on_start_comfort_braking_before_the_speed_shows_it() {
+    // A lead braking at 4 m/s2: 0.3 s after the pedal the ego brakes with the lamps, and not
+    // yet without them; 0.8 s after it asks for more with them.
+    let (pressed, never) = (|t: f64| t > 10.0, |_: f64| false);
+    let (with, without) =
+        (behind_a_slowing_lead(pressed, pressed_at_10_s(4.0)), behind_a_slowing_lead(never, pressed_at_10_s(4.0)));
+    let (a, b) = (target_at(&with, 10.3), target_at(&without, 10.3));
+    assert!(a < -0.4 && b > -0.2, "0.3 s after the pedal: {a:.2} m/s2 with the lamps, {b:.2} without");
+    let (a, b) = (target_at(&with, 10.8), target_at(&without, 10.8));
+    assert!(a < b - 0.5, "0.8 s after the pedal: {a:.2} m/s2 with the lamps, {b:.2} without");
+    // A lead braking at 0.5 m/s2: the start goes no deeper than the comfort ramp over
+    // LIT_ANTICIPATION_S, and 3 s on the ego brakes as without the lamps.
+    let gentle = behind_a_slowing_lead(pressed, pressed_at_10_s(0.5));
+    let deepest = gentle.iter().map(|(_, a)| *a).fold(0.0, f64::min);
+    let ramp = AccSettings::default().limits.jerk_mps3 * LIT_ANTICIPATION_S;
+    assert!(deepest > -ramp - 0.15, "deepest {deepest:.2} m/s2 for a lead at 0.5 (ramp {ramp:.2})");
+    let unlit = behind_a_slowing_lead(never, pressed_at_10_s(0.5));
+    let (a, b) = (target_at(&gentle, 13.5), target_at(&unlit, 13.5));
+    assert!((a - b).abs() < 0.3, "3.5 s after the pedal: {a:.2} m/s2 with the lamps, {b:.2} without");
+    // A lead slowing at 1 m/s2 from t = 6 s (engine braking, say) whose lamps come on 4 s
+    // later: braked for as without the lamps.
+    let slowing = |t: f64| if t > 6.0 { -1.0 * (1.0 - (-(t - 6.0) / 0.3).exp()) } else { 0.0 };
+    let (lit, unlit) = (behind_a_slowing_lead(pressed, slowing), behind_a_slowing_lead(never, slowing));
+    let deepest = |ts: &[(f64, f64)]| ts.iter().map(|(_, a)| *a).fold(0.0, f64::min);
+    assert!(
+        deepest(&lit) > deepest(&unlit) - 0.15,
+        "deepest {:.2} m/s2 with lamps lit late, {:.2} without",
+        deepest(&lit),
+        deepest(&unlit)
+    );
+}
+
 /// A car standing 150 m ahead at 30 m/s, as a camera tracker reports a new track: its first
 /// report carries no speed (0 relative, sigma 30 m/s), the next ones are rough (far ranges
 /// differ by less than their noise from frame to frame) and say how rough. Returns the time
