@@ -557,12 +557,13 @@ fn brake_lights_coming_on_speed_the_answer_to_a_hard_braking_lead() {
     assert!(with + 0.1 <= without, "answered {with:.2} s after the pedal with the lights seen, {without:.2} s without");
 }
 
-/// The ACC's targets behind a lead at 30 m/s, 1.8 s ahead, that does `lead_accel(t)` (m/s2,
-/// its lamps lit while `lamps(t)`), measured as a camera tracker does (relative speed a
+/// The ACC's targets behind a lead at `speed_mps`, at the 1.8 s gap, that does `lead_accel(t)`
+/// (m/s2, its lamps lit while `lamps(t)`), measured as a camera tracker does (relative speed a
 /// first-order lag of 0.2 s behind the truth): (t, target).
-fn behind_a_slowing_lead(lamps: impl Fn(f64) -> bool, lead_accel: impl Fn(f64) -> f64) -> Vec<(f64, f64)> {
-    let mut c = Controller::new(AccSettings { set_speed_mps: 32.0, ..AccSettings::default() });
-    let (mut t, mut v, mut gap, mut lead_v, mut measured_rel) = (0.0, 30.0, 59.0, 30.0, 0.0);
+fn behind_lead_at(speed_mps: f64, lamps: impl Fn(f64) -> bool, lead_accel: impl Fn(f64) -> f64) -> Vec<(f64, f64)> {
+    let mut c = Controller::new(AccSettings { set_speed_mps: speed_mps + 2.0, ..AccSettings::default() });
+    let (mut t, mut v, mut lead_v, mut measured_rel) = (0.0, speed_mps, speed_mps, 0.0);
+    let mut gap = 5.0 + 1.8 * speed_mps;
     let mut targets = Vec::new();
     while t < 14.0 {
         measured_rel += (lead_v - v - measured_rel) * DT / 0.2;
@@ -599,28 +600,38 @@ fn brake_lights_coming_on_start_comfort_braking_before_the_speed_shows_it() {
     // yet without them; 0.8 s after it asks for more with them.
     let (pressed, never) = (|t: f64| t > 10.0, |_: f64| false);
     let (with, without) =
-        (behind_a_slowing_lead(pressed, pressed_at_10_s(4.0)), behind_a_slowing_lead(never, pressed_at_10_s(4.0)));
+        (behind_lead_at(30.0, pressed, pressed_at_10_s(4.0)), behind_lead_at(30.0, never, pressed_at_10_s(4.0)));
     let (a, b) = (target_at(&with, 10.3), target_at(&without, 10.3));
     assert!(a < -0.4 && b > -0.2, "0.3 s after the pedal: {a:.2} m/s2 with the lamps, {b:.2} without");
     let (a, b) = (target_at(&with, 10.8), target_at(&without, 10.8));
     assert!(a < b - 0.5, "0.8 s after the pedal: {a:.2} m/s2 with the lamps, {b:.2} without");
     // A lead braking at 0.5 m/s2: the start goes no deeper than the comfort ramp over
     // LIT_ANTICIPATION_S, and 3 s on the ego brakes as without the lamps.
-    let gentle = behind_a_slowing_lead(pressed, pressed_at_10_s(0.5));
+    let gentle = behind_lead_at(30.0, pressed, pressed_at_10_s(0.5));
     let deepest = gentle.iter().map(|(_, a)| *a).fold(0.0, f64::min);
     let ramp = AccSettings::default().limits.jerk_mps3 * LIT_ANTICIPATION_S;
     assert!(deepest > -ramp - 0.15, "deepest {deepest:.2} m/s2 for a lead at 0.5 (ramp {ramp:.2})");
-    let unlit = behind_a_slowing_lead(never, pressed_at_10_s(0.5));
+    let unlit = behind_lead_at(30.0, never, pressed_at_10_s(0.5));
     let (a, b) = (target_at(&gentle, 13.5), target_at(&unlit, 13.5));
     assert!((a - b).abs() < 0.3, "3.5 s after the pedal: {a:.2} m/s2 with the lamps, {b:.2} without");
     // A lead slowing at 1 m/s2 from t = 6 s (engine braking, say) whose lamps come on 4 s
     // later: braked for as without the lamps.
     let slowing = |t: f64| if t > 6.0 { -1.0 * (1.0 - (-(t - 6.0) / 0.3).exp()) } else { 0.0 };
-    let (lit, unlit) = (behind_a_slowing_lead(pressed, slowing), behind_a_slowing_lead(never, slowing));
+    let (lit, unlit) = (behind_lead_at(30.0, pressed, slowing), behind_lead_at(30.0, never, slowing));
     let deepest = |ts: &[(f64, f64)]| ts.iter().map(|(_, a)| *a).fold(0.0, f64::min);
     assert!(
         deepest(&lit) > deepest(&unlit) - 0.15,
         "deepest {:.2} m/s2 with lamps lit late, {:.2} without",
+        deepest(&lit),
+        deepest(&unlit)
+    );
+    // In slow traffic (8 m/s) a brake at the comfort limit would need little: a touch of the
+    // pedal is braked for as without the lamps.
+    let (lit, unlit) =
+        (behind_lead_at(8.0, pressed, pressed_at_10_s(0.5)), behind_lead_at(8.0, never, pressed_at_10_s(0.5)));
+    assert!(
+        deepest(&lit) > deepest(&unlit) - 0.15,
+        "deepest {:.2} m/s2 with the lamps at 8 m/s, {:.2} without",
         deepest(&lit),
         deepest(&unlit)
     );
