@@ -1,4 +1,5 @@
-//! What every binary does before its work: Zenoh's runtime choice and logging.
+//! What every binary does before its work (Zenoh's runtime choice and logging) and after it
+//! (its error, said for a person).
 
 use tracing::field::{Field, Visit};
 use tracing::{Event, Metadata};
@@ -21,6 +22,30 @@ pub fn apply_zenoh_runtime_default() {
         // Single-threaded at this point of main: no other thread reads the environment.
         std::env::set_var("ZENOH_RUNTIME", ZENOH_RUNTIME_DEFAULT);
     }
+}
+
+/// The exit of a binary's `main`: its code, or on an error the error and each cause under it
+/// (see [`error_report`]) on stderr and exit code 1.
+pub fn exit_code(result: anyhow::Result<std::process::ExitCode>) -> std::process::ExitCode {
+    result.unwrap_or_else(|e| {
+        eprint!("{}", error_report(&e));
+        std::process::ExitCode::FAILURE
+    })
+}
+
+/// An error as a person reads it: `Error: ` and what failed, then a line per cause under it.
+/// No stack trace: RUST_BACKTRACE=1, often set for panics, made every bad config key and every
+/// missed aim print sixty lines of frames; RUST_LIB_BACKTRACE=1 adds the trace where it was
+/// captured (anyhow's switch for errors, as against panics).
+pub fn error_report(e: &anyhow::Error) -> String {
+    let mut out = format!("Error: {e}\n");
+    for cause in e.chain().skip(1) {
+        out.push_str(&format!("  caused by: {cause}\n"));
+    }
+    if std::env::var_os("RUST_LIB_BACKTRACE").is_some_and(|v| v != "0") {
+        out.push_str(&format!("\n{}\n", e.backtrace()));
+    }
+    out
 }
 
 /// Logs to stderr, filtered by RUST_LOG (default: info for slipstream, warnings for Zenoh and
@@ -85,7 +110,16 @@ impl<S> Filter<S> for RendezvousNoise {
 
 #[cfg(test)]
 mod tests {
-    use super::is_rendezvous_noise;
+    use super::{error_report, is_rendezvous_noise};
+
+    #[test]
+    fn an_error_is_reported_with_each_cause_on_a_line_of_its_own() {
+        let e = anyhow::anyhow!("no such file").context("read scenarios/x.json5").context("scenario `x`");
+        assert_eq!(
+            error_report(&e),
+            "Error: scenario `x`\n  caused by: read scenarios/x.json5\n  caused by: no such file\n"
+        );
+    }
 
     #[test]
     fn only_the_expected_zenoh_notes_are_noise() {

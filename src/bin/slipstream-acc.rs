@@ -36,7 +36,11 @@ struct Cli {
     json: bool,
 }
 
-fn main() -> Result<()> {
+fn main() -> std::process::ExitCode {
+    slipstream::cli::exit_code(run().map(|()| std::process::ExitCode::SUCCESS))
+}
+
+fn run() -> Result<()> {
     slipstream::cli::apply_zenoh_runtime_default();
     let cli = Cli::parse();
     slipstream::cli::init_tracing();

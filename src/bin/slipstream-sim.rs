@@ -31,7 +31,11 @@ struct Cli {
     sim: SimArgs,
 }
 
-fn main() -> Result<()> {
+fn main() -> std::process::ExitCode {
+    slipstream::cli::exit_code(run().map(|()| std::process::ExitCode::SUCCESS))
+}
+
+fn run() -> Result<()> {
     slipstream::cli::apply_zenoh_runtime_default();
     let cli = Cli::parse();
     slipstream::cli::init_tracing();

@@ -186,13 +186,7 @@ fn main() -> ExitCode {
         slipstream::cli::apply_zenoh_runtime_default();
     }
     slipstream::cli::init_tracing();
-    match run(cli) {
-        Ok(code) => code,
-        Err(e) => {
-            eprintln!("Error: {e:?}");
-            ExitCode::FAILURE
-        }
-    }
+    slipstream::cli::exit_code(run(cli))
 }
 
 fn run(cli: Cli) -> Result<ExitCode> {
