@@ -265,7 +265,13 @@ impl Tally {
             self.lead_since = Some((tl.id, i));
         }
         let from = self.lead_since.map_or(i, |(_, from)| from);
-        if x.mode == AccMode::Follow && x.speed_mps > 3.0 && steady_lead(&s[from..=i], x) {
+        // The ego too has kept to the lead's speed (within FOLLOWING_BAND_MPS) for SETTLED_S:
+        // the tail of an approach or of a catch-up is no following yet (after a lead moved off
+        // from a stop ahead of the ego, the gap still closing from 30 to 24 m at 1 m/s read as
+        // a 0.06-0.09 s time-gap error with both perceptions).
+        let past = s[from..=i].iter().filter(|w| w.t_s >= x.t_s - SETTLED_S);
+        let kept = past.clone().all(|w| w.truth.is_some_and(|t| t.relative_speed_mps.abs() < FOLLOWING_BAND_MPS));
+        if x.mode == AccMode::Follow && x.speed_mps > 3.0 && kept && steady_lead(&s[from..=i], x) {
             self.gap_errors.push((tl.gap_m - standstill_m) / x.speed_mps - x.time_gap_s);
             // The lead's acceleration over the last LEAD_ACCEL_WINDOW_S, against the ego's.
             let lead_speed = |w: &Sample| w.lead_speed_mps().unwrap_or(w.speed_mps);
@@ -275,17 +281,13 @@ impl Tally {
             // so the onset of its next change, which the ego answers at once, is not counted;
             // nor is a lead about to leave the lane, whose next change is not seen: one
             // speeding up as it moved out read as a 0.4 m/s2 swing.)
-            // The ego too has kept to the lead's speed (within FOLLOWING_BAND_MPS) for SETTLED_S:
-            // the end of an approach from 30 to 20 m/s, easing at 0.3 m/s2 as the gap closes
-            // on the time gap, is not a swing.
+            // With the ego kept to its speed (above): the end of an approach from 30 to 20 m/s,
+            // easing at 0.3 m/s2 as the gap closes on the time gap, is not a swing.
             let ahead = s[i..].iter().take_while(|w| w.t_s <= x.t_s + SETTLED_AHEAD_S);
             let stays = ahead.clone().all(|w| w.truth.is_some_and(|t| t.id == tl.id));
-            let past = s[from..=i].iter().filter(|w| w.t_s >= x.t_s - SETTLED_S);
-            let kept = past.clone().all(|w| w.truth.is_some_and(|t| t.relative_speed_mps.abs() < FOLLOWING_BAND_MPS));
             let (lo, hi) =
                 past.chain(ahead).map(lead_speed).fold((f64::MAX, f64::MIN), |(lo, hi), v| (lo.min(v), hi.max(v)));
-            let settled =
-                stays && kept && x.t_s - s[from].t_s >= SETTLED_S + STEADY_S && hi - lo <= SETTLED_SPEED_BAND_MPS;
+            let settled = stays && x.t_s - s[from].t_s >= SETTLED_S + STEADY_S && hi - lo <= SETTLED_SPEED_BAND_MPS;
             if let Some(p) = s[from..i].iter().rev().find(|p| x.t_s - p.t_s >= LEAD_ACCEL_WINDOW_S).filter(|_| settled)
             {
                 let lead_accel = (lead_speed(x) - lead_speed(p)) / (x.t_s - p.t_s);
@@ -647,6 +649,26 @@ mod tests {
         assert!(failed(&empty).contains(&"standstill with nothing ahead (s)"));
         let queue = Metrics::of(&trace(20.0, |_| (0.0, 0.0, AccMode::Follow, Some((6.0, 0.0)))));
         assert_eq!(queue.standstill_for_nothing_s, 0.0);
+    }
+
+    #[test]
+    fn the_time_gap_is_judged_once_the_ego_keeps_to_the_leads_speed() {
+        // A lead at 20 m/s held 4 m beyond the 1.8 s gap (0.2 s too far): the ego closes at
+        // 3 m/s until `caught_s`, then at 0.8 m/s (within the following band) to the end.
+        let run = |caught_s: f64, seconds: f64| {
+            Metrics::of(&trace(seconds, |t| {
+                let rel = if t < caught_s { -3.0 } else { -0.8 };
+                (20.0 - rel, 0.0, AccMode::Follow, Some((5.0 + 1.8 * (20.0 - rel) + 4.0, rel)))
+            }))
+        };
+        // Kept to its speed for 8 s: the tail of a catch-up, not judged.
+        let tail = run(22.0, 30.0);
+        assert_eq!(tail.time_gap_rms_error_s, None);
+        // For 18 s: following, 0.2 s off, which fails.
+        let kept = run(22.0, 40.0);
+        let e = kept.time_gap_rms_error_s.expect("judged");
+        assert!((e - 4.0 / 20.8).abs() < 0.01, "{e}");
+        assert!(failed(&kept).iter().any(|c| c.starts_with("time-gap RMS")), "{:?}", failed(&kept));
     }
 
     #[test]
