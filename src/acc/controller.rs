@@ -87,6 +87,46 @@ pub struct EgoNow {
     pub pose: Option<Pose>,
 }
 
+/// The ego's speed as the ACC uses it: vehicle/speed carried forward by the measured
+/// acceleration and pulled toward each new reading over EGO_SPEED_TAU_S (a complementary
+/// filter). A wheel-speed reading's noise would otherwise reach everything the ACC derives
+/// from the speed: with 0.05 m/s of it (busy-traffic's), a lead braking at 2.5 m/s2 was
+/// estimated anywhere between 0 and -4.1 from one 50 ms frame to the next with ground truth,
+/// and drew emergencies. Carried by the acceleration it does not lag a braking car. Without an
+/// acceleration (no vehicle/state yet) the reading is taken as it is; a jump beyond
+/// EGO_SPEED_RESET_MPS (a replay starting over, a reset vehicle) is too.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct EgoSpeedFilter {
+    last: Option<(f64, f64)>,
+}
+
+/// How long the filter takes to follow a reading (the noise it leaves is about a sixth of a
+/// 100 Hz reading's).
+const EGO_SPEED_TAU_S: f64 = 0.2;
+const EGO_SPEED_RESET_MPS: f64 = 2.0;
+
+impl EgoSpeedFilter {
+    /// The speed at `t_s` from the reading `measured_mps` and the acceleration measured since
+    /// the last reading, when there is one.
+    pub fn update(&mut self, t_s: f64, measured_mps: f64, accel_mps2: Option<f64>) -> f64 {
+        let v = match (self.last, accel_mps2) {
+            (Some((t0, v0)), Some(a)) if t_s > t0 => {
+                let dt = t_s - t0;
+                let predicted = v0 + a * dt;
+                if (measured_mps - predicted).abs() > EGO_SPEED_RESET_MPS {
+                    measured_mps
+                } else {
+                    (predicted + dt / (EGO_SPEED_TAU_S + dt) * (measured_mps - predicted)).max(0.0)
+                }
+            }
+            (Some((t0, v0)), Some(_)) if t_s == t0 => v0,
+            _ => measured_mps,
+        };
+        self.last = Some((t_s, v));
+        v
+    }
+}
+
 /// The ego's rear-axle position and heading in the road's frame (vehicle/state's world frame).
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct Pose {
@@ -396,6 +436,8 @@ const SETTLE_S: f64 = 1.0;
 const GROUND_TRUTH_HARD_BRAKING_MARGIN_MPS2: f64 = 0.1;
 /// A lead slower than this is stopping or stopped, not braking hard from speed.
 const HARD_BRAKING_MIN_SPEED_MPS: f64 = 2.0;
+/// A lead found braking hard counts so until it brakes less than the comfort limit by this.
+const HARD_BRAKING_RELEASE_MPS2: f64 = 0.5;
 /// A short TTC starts an emergency only when the ego brakes less than the threat needs by more
 /// than the jerk limit adds in this long.
 const UNDER_BRAKING_S: f64 = 0.25;
@@ -460,6 +502,8 @@ pub struct Controller {
     /// The throttle of the last step: while stale, never more than this.
     last_throttle: f64,
     emergency: bool,
+    /// The lead last found braking beyond the comfort limit, while it still is.
+    hard_lead: Option<u32>,
     /// The nearest vehicle that is in the ego's lane by the entry test while the lead stays
     /// the lead only by the stay-in-lane hysteresis (a lead moving out), else the nearest in
     /// the lane beyond the lead: it counts for the threat at once, not once the lead has left.
@@ -572,6 +616,7 @@ impl Controller {
             integral: 0.0,
             last_throttle: 0.0,
             emergency: false,
+            hard_lead: None,
             next_in_lane: None,
         }
     }
@@ -806,10 +851,10 @@ impl Controller {
         }
 
         let (mode, accel) = if !self.enabled {
-            self.emergency = false;
+            (self.emergency, self.hard_lead) = (false, None);
             (AccMode::Off, 0.0)
         } else if stale {
-            self.emergency = false;
+            (self.emergency, self.hard_lead) = (false, None);
             // From the last command to the stale deceleration within the jerk limit, from either
             // side: no jolt when perception drops out for a moment (a burst of lost frames),
             // whether the car was accelerating or braking harder than the stale deceleration.
@@ -817,11 +862,17 @@ impl Controller {
             (AccMode::Stale, (-self.s.stale.decel_mps2).clamp(from - step, from + step))
         } else {
             // A lead braking harder than comfort allows is answered at once, at what it takes.
-            let hard = lead.is_some_and(|l| {
-                l.settled
-                    && l.speed_mps > HARD_BRAKING_MIN_SPEED_MPS
-                    && l.accel_mps2 < -self.s.limits.decel_mps2 - self.noise.hard_braking_margin_mps2
+            // Once found so, it stays so until it brakes less than the comfort limit by
+            // HARD_BRAKING_RELEASE_MPS2: an estimate wandering about the threshold while the
+            // lead's deceleration builds made the emergency flicker in and out (with ground
+            // truth and a noisy speed reading, an emergency of 50 ms, over before the lead's
+            // deceleration had passed the limit, then another).
+            let hard = lead.filter(|l| l.settled && l.speed_mps > HARD_BRAKING_MIN_SPEED_MPS).is_some_and(|l| {
+                let limit = self.s.limits.decel_mps2;
+                l.accel_mps2 < -limit - self.noise.hard_braking_margin_mps2
+                    || (self.hard_lead == Some(l.id) && l.accel_mps2 < -limit + HARD_BRAKING_RELEASE_MPS2)
             });
+            self.hard_lead = lead.filter(|_| hard).map(|l| l.id);
             self.update_emergency(threat.as_ref(), hard, v, ego.t_s);
             match threat.filter(|_| self.emergency) {
                 Some(t) => (AccMode::Emergency, -self.emergency_decel(&t, hard)),

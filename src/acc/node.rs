@@ -16,7 +16,7 @@ use std::time::{Duration, Instant};
 
 use serde::Serialize;
 
-use super::controller::{Controller, EgoNow, Output, PerceptionFrame, Pose};
+use super::controller::{Controller, EgoNow, EgoSpeedFilter, Output, PerceptionFrame, Pose};
 use super::settings::{AccSettings, PerceptionSource};
 use crate::bus::{Arrivals, Bus, BusError, Following, NodeWatch, Received, StatsSnapshot, Subscriber};
 use crate::config::ConfigError;
@@ -126,6 +126,8 @@ impl Every {
 struct State {
     ctl: Controller,
     ego: EgoNow,
+    /// vehicle/speed smoothed with the measured acceleration: EgoNow's speed.
+    ego_speed: EgoSpeedFilter,
     /// The newest vehicle/state: its stamp and step.
     state: Option<(u64, u64)>,
     /// Physics rate learned from vehicle/state (steps per simulated second).
@@ -269,10 +271,13 @@ async fn answer_speed(st: &mut State, inputs: &Inputs, settings: &AccSettings, s
     let state = await_state(st, &inputs.state, t_ns, state_wait).await;
     let mut waited = waiting.elapsed();
     let answers_step = answers_step(st, t_ns);
+    let accel_mps2 = state.as_ref().map_or(st.ego.accel_mps2, |s| s.acceleration_in_body_mps2[0]);
+    // Measured once a vehicle/state has come (held from the last one when this step's is late).
+    let measured_accel = st.state.is_some().then_some(accel_mps2);
     st.ego = EgoNow {
         t_s,
-        speed_mps: speed.msg.speed_mps,
-        accel_mps2: state.as_ref().map_or(st.ego.accel_mps2, |s| s.acceleration_in_body_mps2[0]),
+        speed_mps: st.ego_speed.update(t_s, speed.msg.speed_mps, measured_accel),
+        accel_mps2,
         yaw_rate_radps: state.as_ref().map_or(st.ego.yaw_rate_radps, |s| s.yaw_rate_radps),
         pose: state.as_ref().map(Pose::of).or(st.ego.pose),
     };
@@ -416,6 +421,7 @@ impl State {
             speed_max_age: Duration::from_millis(settings.stale.speed_max_age_ms),
             ctl: Controller::new(settings),
             ego: EgoNow::default(),
+            ego_speed: EgoSpeedFilter::default(),
             state: None,
             physics_hz: None,
             perception_stamp_s: None,

@@ -533,14 +533,28 @@ fn behind_lead_at(
     lamps: impl Fn(f64) -> bool,
     lead_accel: impl Fn(f64) -> f64,
 ) -> Vec<(f64, f64, AccMode)> {
-    let mut c = Controller::new(AccSettings { set_speed_mps: speed_mps + 2.0, ..AccSettings::default() });
+    behind_lead_with(AccSettings::default(), speed_mps, lamps, lead_accel, |_| 0.0)
+}
+
+/// As [`behind_lead_at`] with other settings, and `noise(frame)` (m/s) added to each frame's
+/// relative speed.
+fn behind_lead_with(
+    settings: AccSettings,
+    speed_mps: f64,
+    lamps: impl Fn(f64) -> bool,
+    lead_accel: impl Fn(f64) -> f64,
+    noise: impl Fn(u64) -> f64,
+) -> Vec<(f64, f64, AccMode)> {
+    let mut c = Controller::new(AccSettings { set_speed_mps: speed_mps + 2.0, ..settings });
     let (mut t, mut v, mut lead_v, mut measured_rel) = (0.0, speed_mps, speed_mps, 0.0);
     let mut gap = 5.0 + 1.8 * speed_mps;
     let mut targets = Vec::new();
     while t < 14.0 {
         measured_rel += (lead_v - v - measured_rel) * DT / 0.2;
-        if ((t / DT).round() as i64) % 5 == 0 {
-            let o = Object { brake_lights: lamps(t), ..obj(1, gap, 0.0, measured_rel) };
+        let step = (t / DT).round() as u64;
+        if step % 5 == 0 {
+            let rel = measured_rel + noise(step / 5);
+            let o = Object { brake_lights: lamps(t), ..obj(1, gap, 0.0, rel) };
             c.perceive(&frame(t, vec![o]), &ego(t, v));
         }
         let status = c.step(&ego(t, v), &[]).status;
@@ -796,5 +810,48 @@ fn a_vehicle_standing_beyond_the_lead_is_braked_for_while_the_lead_is_still_the_
         } else {
             assert!(hardest > -0.1, "braked to {hardest:.2} m/s2 for a truck at the lead's speed");
         }
+    }
+}
+
+#[test]
+fn the_ego_speed_is_smoothed_with_the_acceleration_without_lagging_a_braking_car() {
+    // 100 Hz readings of a car braking at 3 m/s2 from 25 m/s, with +-0.1 m/s of noise (a
+    // deterministic sequence: uniform, standard deviation 0.058).
+    let noise = |i: u64| ((i.wrapping_mul(2654435761) % 1000) as f64 / 999.0 - 0.5) * 0.2;
+    let truth = |t: f64| 25.0 - 3.0 * t;
+    let (mut f, mut errors) = (EgoSpeedFilter::default(), Vec::new());
+    for i in 0..300 {
+        let t = i as f64 * 0.01;
+        let v = f.update(t, truth(t) + noise(i), Some(-3.0));
+        if t >= 1.0 {
+            errors.push(v - truth(t));
+        }
+    }
+    let mean = errors.iter().sum::<f64>() / errors.len() as f64;
+    let rms = (errors.iter().map(|e| e * e).sum::<f64>() / errors.len() as f64).sqrt();
+    assert!(mean.abs() < 0.01, "no lag: mean error {mean}");
+    assert!(rms < 0.02, "a third of the readings' noise at most: {rms}");
+
+    // Without an acceleration the reading is taken as it is; so is a jump of a reset vehicle.
+    let mut f = EgoSpeedFilter::default();
+    assert_eq!(f.update(0.0, 20.0, None), 20.0);
+    assert_eq!(f.update(0.01, 20.3, None), 20.3);
+    assert_eq!(f.update(0.02, 20.3, Some(0.0)), 20.3);
+    assert!((f.update(0.03, 20.4, Some(0.0)) - 20.3).abs() < 0.01, "a reading is smoothed");
+    assert_eq!(f.update(0.04, 5.0, Some(0.0)), 5.0, "a jump beyond 2 m/s is taken at once");
+}
+
+/// A lead found braking beyond the comfort limit stays so while it brakes near the limit: an
+/// estimate wandering about the threshold (a noisy speed reading) does not make the emergency
+/// flicker in and out while the lead's deceleration builds.
+#[test]
+fn an_emergency_for_a_hard_braking_lead_does_not_flicker_with_a_noisy_estimate() {
+    // +-0.05 m/s on every frame's relative speed (a deterministic sequence).
+    let noise = |i: u64| ((i.wrapping_mul(2654435761) % 1000) as f64 / 999.0 - 0.5) * 0.1;
+    for decel in [4.0, 5.0] {
+        let steps = behind_lead_with(truth(), 28.0, |t| t > 10.0, pressed_at_10_s(decel), noise);
+        let modes: Vec<bool> = steps.iter().map(|(_, _, m)| *m == AccMode::Emergency).collect();
+        let entries = modes.windows(2).filter(|w| !w[0] && w[1]).count();
+        assert_eq!(entries, 1, "a lead braking at {decel} m/s2: {entries} emergencies");
     }
 }
