@@ -758,14 +758,15 @@ fn a_far_leads_acceleration_within_its_noise_draws_no_braking() {
 /// A lead 110 m ahead at 27 m/s (beyond twice the 1.8 s gap) braking at 2 m/s2 for 1.5 s, as
 /// traffic does behind its own lead, draws easing off, not braking beyond 1 m/s2; the same
 /// brake 45 m ahead is braked for; a far lead that goes on braking to a stop is stopped for
-/// within the comfort limits.
+/// within the comfort limits; one braking harder (3 m/s2 for 3 s) is braked for at once, not
+/// eased off for until it is near.
 #[test]
 fn a_far_lead_braking_for_a_moment_draws_easing_off_and_one_braking_to_a_stop_a_stop() {
-    let run = |gap0: f64, brake_s: f64| {
+    let run_at = |gap0: f64, decel: f64, brake_s: f64| {
         let mut c = Controller::new(AccSettings { set_speed_mps: 27.0, ..truth() });
-        let lead_speed = |t: f64| (27.0 - 2.0 * (t - 2.0).clamp(0.0, brake_s)).max(0.0);
+        let lead_speed = |t: f64| (27.0 - decel * (t - 2.0).clamp(0.0, brake_s)).max(0.0);
         let (mut t, mut v, mut gap, mut hardest) = (0.0, 27.0, gap0, 0.0f64);
-        let mut min_gap = gap0;
+        let (mut min_gap, mut braked_at) = (gap0, None);
         while t < 40.0 {
             if ((t / DT).round() as i64) % 5 == 0 {
                 c.perceive(&frame(t, vec![obj(1, gap, 0.0, lead_speed(t) - v)]), &ego(t, v));
@@ -773,11 +774,18 @@ fn a_far_lead_braking_for_a_moment_draws_easing_off_and_one_braking_to_a_stop_a_
             let o = c.step(&ego(t, v), &[]);
             assert_ne!(o.status.mode, AccMode::Emergency, "gap0 {gap0}, braking {brake_s} s: emergency at {t:.2} s");
             hardest = hardest.min(o.status.target_accel_mps2);
+            if o.status.target_accel_mps2 < -1.0 {
+                braked_at = braked_at.or(Some(t));
+            }
             v = (v + o.status.target_accel_mps2 * DT).max(0.0);
             gap += (lead_speed(t) - v) * DT;
             min_gap = min_gap.min(gap);
             t += DT;
         }
+        (hardest, min_gap, v, braked_at)
+    };
+    let run = |gap0: f64, brake_s: f64| {
+        let (hardest, min_gap, v, _) = run_at(gap0, 2.0, brake_s);
         (hardest, min_gap, v)
     };
     let (far, _, _) = run(110.0, 1.5);
@@ -787,6 +795,9 @@ fn a_far_lead_braking_for_a_moment_draws_easing_off_and_one_braking_to_a_stop_a_
     let (stop, min_gap, v_end) = run(110.0, 20.0);
     assert!(v_end < 0.1 && min_gap > 4.0, "stopped at {v_end:.2} m/s, {min_gap:.1} m behind");
     assert!(stop > -3.5 && stop < -1.0, "braked at {stop:.2} m/s2 for a lead stopping 110 m ahead");
+    let (_, _, _, braked_at) = run_at(110.0, 3.0, 3.0);
+    let after = braked_at.expect("braked for a lead braking at 3 m/s2 110 m ahead") - 2.0;
+    assert!(after < 1.0, "braked beyond 1 m/s2 {after:.2} s after a lead 110 m ahead braked at 3 m/s2");
 }
 
 /// A van 53.6 m ahead (the time gap) at the ego's 27 m/s and a truck standing 170 m ahead in the same lane,

@@ -307,8 +307,9 @@ impl Tally {
             let closing = -tl.relative_speed_mps;
             // A lead braking beyond the comfort limit warrants an emergency when stopping behind
             // it needs real braking.
-            let hard = lead_accel
-                .is_some_and(|a| a < -aims::MAX_DECEL_MPS2 && needed_behind(&tl, x.speed_mps, a) > PHANTOM_DECEL_MPS2);
+            // What stopping behind a braking lead needs, were it to brake on to a stop.
+            let braking_need = lead_accel.filter(|a| *a < 0.0).map_or(0.0, |a| needed_behind(&tl, x.speed_mps, a));
+            let hard = lead_accel.is_some_and(|a| a < -aims::MAX_DECEL_MPS2) && braking_need > PHANTOM_DECEL_MPS2;
             if hard
                 || ttc(&tl).is_some_and(|t| t < WARRANTED_TTC_S)
                 || tl.gap_m < standstill_m + 0.5 * x.time_gap_s * x.speed_mps
@@ -317,10 +318,16 @@ impl Tally {
             }
             // Near enough to brake for: within twice the time gap, or closing so fast that
             // matching its speed short of the standstill distance needs real braking (a
-            // stopped car far ahead at motorway speed).
+            // stopped car far ahead at motorway speed), or braking so that stopping behind it
+            // would need real braking (a truck 120 m ahead at 30 m/s braking at 5 m/s2: its
+            // emergency was warranted, the braking in it and just before read as phantom; one
+            // 200 m ahead braking at 1 m/s2 needs 0.7 and is not braked for).
             let room = (tl.gap_m - standstill_m).max(0.1);
             let needed = if closing > 0.0 { closing * closing / (2.0 * room) } else { 0.0 };
-            if tl.gap_m <= standstill_m + 2.0 * x.time_gap_s * x.speed_mps || needed >= WARRANTED_BRAKING_MPS2 {
+            if braking_need > PHANTOM_DECEL_MPS2
+                || tl.gap_m <= standstill_m + 2.0 * x.time_gap_s * x.speed_mps
+                || needed >= WARRANTED_BRAKING_MPS2
+            {
                 f.last_near_t = Some(x.t_s);
             }
             if tl.gap_m <= standstill_m + STANDSTILL_CLEAR_M {
@@ -627,6 +634,17 @@ mod tests {
         let near = Metrics::of(&trace(30.0, |t| (25.0, braking(t), AccMode::Follow, Some((40.0, 0.0)))));
         let stopped = Metrics::of(&trace(30.0, |t| (25.0, braking(t), AccMode::Follow, Some((150.0, -25.0)))));
         assert_eq!((near.phantom_braking_s, stopped.phantom_braking_s), (0.0, 0.0));
+        // A lead beyond twice the time gap braking from t = 9 s: at 4 m/s2 120 m ahead,
+        // stopping behind it needs real braking; at 1 m/s2 200 m ahead, it does not.
+        let lead_braking = |gap: f64, decel: f64| {
+            Metrics::of(&trace(30.0, move |t| {
+                let rel = -decel * (t - 9.0).clamp(0.0, 3.0);
+                (25.0, braking(t), AccMode::Follow, Some((gap, rel)))
+            }))
+        };
+        assert_eq!(lead_braking(120.0, 4.0).phantom_braking_s, 0.0);
+        let gentle = lead_braking(200.0, 1.0).phantom_braking_s;
+        assert!((gentle - 2.0).abs() < 0.05, "{gentle}");
         // Slowing to a lower set speed is not phantom braking.
         let slowing = Metrics::of(&trace(30.0, |t| (35.0, braking(t), AccMode::Speed, None)));
         assert_eq!(slowing.phantom_braking_s, 0.0);
