@@ -552,7 +552,7 @@ fn behind_lead_with(
     while t < 14.0 {
         measured_rel += (lead_v - v - measured_rel) * DT / 0.2;
         let step = (t / DT).round() as u64;
-        if step % 5 == 0 {
+        if step.is_multiple_of(5) {
             let rel = measured_rel + noise(step / 5);
             let o = Object { brake_lights: lamps(t), ..obj(1, gap, 0.0, rel) };
             c.perceive(&frame(t, vec![o]), &ego(t, v));
