@@ -611,10 +611,10 @@ fn brake_lights_coming_on_start_comfort_braking_before_the_speed_shows_it() {
     assert!(a < b - 0.5, "0.8 s after the pedal: {a:.2} m/s2 with the lamps, {b:.2} without");
     // A lead braking at 0.5 m/s2: the start goes no deeper than the comfort ramp over
     // LIT_ANTICIPATION_S, and 3 s on the ego brakes as without the lamps.
+    let deepest = |ts: &[(f64, f64, AccMode)]| ts.iter().map(|(_, a, _)| *a).fold(0.0, f64::min);
     let gentle = behind_lead_at(30.0, pressed, pressed_at_10_s(0.5));
-    let deepest = gentle.iter().map(|(_, a, _)| *a).fold(0.0, f64::min);
-    let ramp = AccSettings::default().limits.jerk_mps3 * LIT_ANTICIPATION_S;
-    assert!(deepest > -ramp - 0.15, "deepest {deepest:.2} m/s2 for a lead at 0.5 (ramp {ramp:.2})");
+    let (gentle_deepest, ramp) = (deepest(&gentle), AccSettings::default().limits.jerk_mps3 * LIT_ANTICIPATION_S);
+    assert!(gentle_deepest > -ramp - 0.15, "deepest {gentle_deepest:.2} m/s2 for a lead at 0.5 (ramp {ramp:.2})");
     let unlit = behind_lead_at(30.0, never, pressed_at_10_s(0.5));
     let (a, b) = (target_at(&gentle, 13.5), target_at(&unlit, 13.5));
     assert!((a - b).abs() < 0.3, "3.5 s after the pedal: {a:.2} m/s2 with the lamps, {b:.2} without");
@@ -622,7 +622,6 @@ fn brake_lights_coming_on_start_comfort_braking_before_the_speed_shows_it() {
     // later: braked for as without the lamps.
     let slowing = |t: f64| if t > 6.0 { -1.0 * (1.0 - (-(t - 6.0) / 0.3).exp()) } else { 0.0 };
     let (lit, unlit) = (behind_lead_at(30.0, pressed, slowing), behind_lead_at(30.0, never, slowing));
-    let deepest = |ts: &[(f64, f64, AccMode)]| ts.iter().map(|(_, a, _)| *a).fold(0.0, f64::min);
     assert!(
         deepest(&lit) > deepest(&unlit) - 0.15,
         "deepest {:.2} m/s2 with lamps lit late, {:.2} without",
@@ -824,11 +823,16 @@ fn a_vehicle_standing_beyond_the_lead_is_braked_for_while_the_lead_is_still_the_
     }
 }
 
+/// The `i`th of a fixed sequence spread evenly over [-0.5, 0.5] (a multiplicative hash).
+fn spread(i: u64) -> f64 {
+    (i.wrapping_mul(2654435761) % 1000) as f64 / 999.0 - 0.5
+}
+
 #[test]
 fn the_ego_speed_is_smoothed_with_the_acceleration_without_lagging_a_braking_car() {
-    // 100 Hz readings of a car braking at 3 m/s2 from 25 m/s, with +-0.1 m/s of noise (a
-    // deterministic sequence: uniform, standard deviation 0.058).
-    let noise = |i: u64| ((i.wrapping_mul(2654435761) % 1000) as f64 / 999.0 - 0.5) * 0.2;
+    // 100 Hz readings of a car braking at 3 m/s2 from 25 m/s, with +-0.1 m/s of noise
+    // (standard deviation 0.058).
+    let noise = |i: u64| spread(i) * 0.2;
     let truth = |t: f64| 25.0 - 3.0 * t;
     let (mut f, mut errors) = (EgoSpeedFilter::default(), Vec::new());
     for i in 0..300 {
@@ -857,8 +861,8 @@ fn the_ego_speed_is_smoothed_with_the_acceleration_without_lagging_a_braking_car
 /// flicker in and out while the lead's deceleration builds.
 #[test]
 fn an_emergency_for_a_hard_braking_lead_does_not_flicker_with_a_noisy_estimate() {
-    // +-0.05 m/s on every frame's relative speed (a deterministic sequence).
-    let noise = |i: u64| ((i.wrapping_mul(2654435761) % 1000) as f64 / 999.0 - 0.5) * 0.1;
+    // +-0.05 m/s on every frame's relative speed.
+    let noise = |i: u64| spread(i) * 0.1;
     for decel in [4.0, 5.0] {
         let steps = behind_lead_with(truth(), 28.0, |t| t > 10.0, pressed_at_10_s(decel), noise);
         let modes: Vec<bool> = steps.iter().map(|(_, _, m)| *m == AccMode::Emergency).collect();

@@ -269,9 +269,10 @@ impl Tally {
         // the tail of an approach or of a catch-up is no following yet (after a lead moved off
         // from a stop ahead of the ego, the gap still closing from 30 to 24 m at 1 m/s read as
         // a 0.06-0.09 s time-gap error with both perceptions).
+        // (Scanned last: ten seconds of samples at each one.)
         let past = s[from..=i].iter().filter(|w| w.t_s >= x.t_s - SETTLED_S);
-        let kept = past.clone().all(|w| w.truth.is_some_and(|t| t.relative_speed_mps.abs() < FOLLOWING_BAND_MPS));
-        if x.mode == AccMode::Follow && x.speed_mps > 3.0 && kept && steady_lead(&s[from..=i], x) {
+        let kept = || past.clone().all(|w| w.truth.is_some_and(|t| t.relative_speed_mps.abs() < FOLLOWING_BAND_MPS));
+        if x.mode == AccMode::Follow && x.speed_mps > 3.0 && steady_lead(&s[from..=i], x) && kept() {
             self.gap_errors.push((tl.gap_m - standstill_m) / x.speed_mps - x.time_gap_s);
             // The lead's acceleration over the last LEAD_ACCEL_WINDOW_S, against the ego's.
             let lead_speed = |w: &Sample| w.lead_speed_mps().unwrap_or(w.speed_mps);
