@@ -870,3 +870,51 @@ fn an_emergency_for_a_hard_braking_lead_does_not_flicker_with_a_noisy_estimate()
         assert_eq!(entries, 1, "a lead braking at {decel} m/s2: {entries} emergencies");
     }
 }
+
+/// A car standing 175 m ahead of the ego at 25 m/s, as the detector reported it (a scenario
+/// of our own): a new track without speed at first (0 relative, sigma 30 m/s), then relative
+/// speeds that come down to 2 m/s short of the truth within 0.6 s and reach it a second
+/// later, as the ranges add up. That convergence is the measurement's, not the car braking:
+/// before, the filter's acceleration took it up (-4.2 m/s2 once the lead counted as settled,
+/// its speed still 5 m/s) and the ACC answered a hard-braking lead with an emergency 7.8 s
+/// from it.
+#[test]
+fn a_far_new_leads_converging_speed_is_not_read_as_hard_braking() {
+    let mut c = Controller::new(AccSettings { set_speed_mps: 25.0, ..AccSettings::default() });
+    let (mut t, mut v, mut gap) = (0.0, 25.0, 175.0);
+    let (mut k, mut emergency) = (0usize, false);
+    // (relative speed, its sigma) of the first frames (0.05 s apart).
+    let early = [
+        (0.0, 30.0),
+        (0.0, 18.0),
+        (0.0, 10.0),
+        (0.0, 7.1),
+        (-1.5, 5.0),
+        (-3.5, 3.9),
+        (-7.0, 3.0),
+        (-10.7, 2.5),
+        (-12.0, 2.2),
+        (-12.9, 1.9),
+        (-18.0, 1.7),
+        (-23.2, 1.5),
+    ];
+    while t < 6.0 {
+        if ((t / DT).round() as i64) % 5 == 0 {
+            let (rel, sigma) = early.get(k).copied().unwrap_or_else(|| {
+                // 2 m/s short of the truth until 1.3 s, then closing on it over a second.
+                let share = ((t - 1.3) / 1.0).clamp(0.0, 1.0);
+                (-(v - 2.0 * (1.0 - share)), 1.2)
+            });
+            let o = Object { relative_speed_sigma_mps: sigma, ..obj(5, gap, 0.0, rel) };
+            c.perceive(&frame(t, vec![o]), &ego(t, v));
+            k += 1;
+        }
+        let o = c.step(&ego(t, v), &[]);
+        emergency |= o.status.mode == AccMode::Emergency;
+        v = (v + o.status.target_accel_mps2 * DT).max(0.0);
+        gap -= v * DT;
+        t += DT;
+    }
+    assert!(!emergency, "an emergency for a car standing 175 m ahead while its speed was measured");
+    assert!(gap > 0.0, "ran into it");
+}
