@@ -415,10 +415,12 @@ const NEEDED_GUARD_MPS2: f64 = 1.0;
 const FAR_TIME_GAPS: f64 = 2.0;
 const FAR_CLOSING_MPS2: f64 = 0.5;
 const FAR_DECEL_MPS2: f64 = 0.8;
-/// Unless it is seen braking harder than this (with its lamps lit, or beyond the estimate's
-/// own noise): no touch of the brakes, and 120 m ahead at 30 m/s one braking at 5 m/s2 was
-/// answered 1.35 s after it passed the comfort limit.
-const FAR_BRAKING_MPS2: f64 = 2.0;
+/// Unless it is seen braking harder than this with its brake lights on: no touch of the
+/// brakes, and 120 m ahead at 30 m/s one braking at 5 m/s2 was answered 1.35 s after it passed
+/// the comfort limit. Its estimate alone is not enough that far: a new lead's speed still
+/// settling reads as braking (a car 170 m ahead at 22 m/s, -3.8 m/s2 for a second against a
+/// sigma of 1.4, drew 1.3 s of phantom braking at up to 1.9 m/s2).
+const FAR_BRAKING_MPS2: f64 = 2.5;
 /// Manoeuvre detection on the lead's speed: the fading average's gain per frame, the level
 /// that says the lead changed its acceleration, and the acceleration uncertainty (and the
 /// speed uncertainty that builds over a window of it) opened up then.
@@ -802,13 +804,11 @@ impl Controller {
         let t = ego.t_s.max(frame.stamp_s);
         let speed = ego.speed_mps + o.relative_speed_mps;
         // The speed's noise is the model's for this range (the figures the ride was tuned
-        // with); while a lead is new, perception's own estimate: a new track's speed is a
-        // guess until a few frames have measured it (tens of m/s at first, far away), and
-        // then better than the model says far away (1.5 m/s at 175 m with the narrow camera
-        // against the model's 6.4). Floored by the model, a car standing 175 m ahead was
-        // still taken for moving at 5 m/s 1.2 s after it was first seen.
+        // with); while a lead is new, perception's own estimate when larger: a new track's
+        // speed is a guess until a few frames have measured it (tens of m/s at first, far
+        // away).
         let speed_sigma =
-            |settled: bool| if settled { n.speed_sigma(gap) } else { o.relative_speed_sigma_mps.max(n.speed_base_mps) };
+            |settled: bool| n.speed_sigma(gap).max(if settled { 0.0 } else { o.relative_speed_sigma_mps });
         match &mut self.lead {
             Some(f) if f.id == o.id => {
                 f.predict(t, ego.speed_mps, n.jerk_sigma_mps3);
@@ -891,10 +891,13 @@ impl Controller {
             // HARD_BRAKING_RELEASE_MPS2: an estimate wandering about the threshold while the
             // lead's deceleration builds made the emergency flicker in and out (with ground
             // truth and a noisy speed reading, an emergency of 50 ms, over before the lead's
-            // deceleration had passed the limit, then another).
+            // deceleration had passed the limit, then another). Without its lamps lit, the
+            // estimate less one standard deviation must say so (`LeadNow::threat_accel`): a
+            // truck 160 m ahead in a bend, its speed read to +-3 m/s, was estimated at
+            // -6.4 m/s2 (sigma 5.1) for a moment and drew an emergency.
             let hard = lead.filter(|l| l.settled && l.speed_mps > HARD_BRAKING_MIN_SPEED_MPS).is_some_and(|l| {
                 let limit = self.s.limits.decel_mps2;
-                l.accel_mps2 < -limit - self.noise.hard_braking_margin_mps2
+                l.threat_accel() < -limit - self.noise.hard_braking_margin_mps2
                     || (self.hard_lead == Some(l.id) && l.accel_mps2 < -limit + HARD_BRAKING_RELEASE_MPS2)
             });
             self.hard_lead = lead.filter(|_| hard).map(|l| l.id);
@@ -1063,16 +1066,18 @@ impl Controller {
     /// The most the guard brakes for a threat: a vehicle beyond twice the time gap that the
     /// ego is not closing on fast (matching its speed short of the standstill distance needs
     /// less than FAR_CLOSING_MPS2) is answered by easing off, at most FAR_DECEL_MPS2, unless it
-    /// is seen braking harder than FAR_BRAKING_MPS2. Such a lead braking for a moment 4 s
+    /// is seen braking harder than FAR_BRAKING_MPS2 with its lamps lit. Such a lead braking for a moment 4 s
     /// ahead (following its own lead) drew 1.6 m/s2 and then 1.45 m/s2 of acceleration again
     /// (phantom braking, in a scenario of our own); one that keeps braking is soon near or
     /// closing fast, and braked for in full.
-    fn far_cap_mps2(&self, t: &Threat, v: f64) -> f64 {
+    fn far_cap_mps2(&self, t: &Threat, v: f64, lead: &LeadNow) -> f64 {
         let gap = t.room_m + THREAT_MARGIN_M;
         let room = (gap - self.s.standstill_m).max(0.1);
         let closing = (v - t.lead_speed_mps).max(0.0);
         let far = gap > self.s.standstill_m + FAR_TIME_GAPS * self.time_gap_s * v;
-        let easing = t.lead_accel_mps2 > -FAR_BRAKING_MPS2;
+        // The lead as estimated, not as the guard may plan for it (braking at the comfort limit
+        // while its lamps are new): planned for that far ahead, a touch of the pedal drew 1.3 m/s2.
+        let easing = !lead.brake_lights || lead.threat_accel() > -FAR_BRAKING_MPS2;
         if far && easing && closing * closing / (2.0 * room) < FAR_CLOSING_MPS2 {
             FAR_DECEL_MPS2
         } else {
@@ -1100,7 +1105,7 @@ impl Controller {
             // below NEEDED_GUARD_MPS2 the guard made the car dip for nothing.
             let needed = threat.map_or(0.0, |t| t.needed_decel_mps2);
             let mut a = match threat {
-                Some(t) if needed > NEEDED_GUARD_MPS2 => law.min(-needed.min(self.far_cap_mps2(t, v))),
+                Some(t) if needed > NEEDED_GUARD_MPS2 => law.min(-needed.min(self.far_cap_mps2(t, v, &l))),
                 _ => law,
             };
             // At standstill: stay until the lead has moved off.

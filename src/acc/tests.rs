@@ -768,7 +768,10 @@ fn a_far_lead_braking_for_a_moment_draws_easing_off_and_one_braking_to_a_stop_a_
         let (mut min_gap, mut braked_at) = (gap0, None);
         while t < 40.0 {
             if ((t / DT).round() as i64) % 5 == 0 {
-                c.perceive(&frame(t, vec![obj(1, gap, 0.0, lead_speed(t) - v)]), &ego(t, v));
+                // Its brake lights are on while it brakes.
+                let lit = t >= 2.0 && t < 2.0 + brake_s && lead_speed(t) > 0.0;
+                let o = Object { brake_lights: lit, ..obj(1, gap, 0.0, lead_speed(t) - v) };
+                c.perceive(&frame(t, vec![o]), &ego(t, v));
             }
             let o = c.step(&ego(t, v), &[]);
             assert_ne!(o.status.mode, AccMode::Emergency, "gap0 {gap0}, braking {brake_s} s: emergency at {t:.2} s");
