@@ -1065,11 +1065,11 @@ impl Controller {
 
     /// The most the guard brakes for a threat: a vehicle beyond twice the time gap that the
     /// ego is not closing on fast (matching its speed short of the standstill distance needs
-    /// less than FAR_CLOSING_MPS2) is answered by easing off, at most FAR_DECEL_MPS2, unless it
-    /// is seen braking harder than FAR_BRAKING_MPS2 with its lamps lit. Such a lead braking for a moment 4 s
-    /// ahead (following its own lead) drew 1.6 m/s2 and then 1.45 m/s2 of acceleration again
-    /// (phantom braking, in a scenario of our own); one that keeps braking is soon near or
-    /// closing fast, and braked for in full.
+    /// less than FAR_CLOSING_MPS2) is answered by easing off, at most FAR_DECEL_MPS2, unless
+    /// `lead` is seen braking harder than FAR_BRAKING_MPS2 with its lamps lit. Such a lead
+    /// braking for a moment 4 s ahead (following its own lead) drew 1.6 m/s2 and then 1.45 m/s2
+    /// of acceleration again (phantom braking, in a scenario of our own); one that keeps braking
+    /// is soon near or closing fast, and braked for in full.
     fn far_cap_mps2(&self, t: &Threat, v: f64, lead: &LeadNow) -> f64 {
         let gap = t.room_m + THREAT_MARGIN_M;
         let room = (gap - self.s.standstill_m).max(0.1);
