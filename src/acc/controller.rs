@@ -219,6 +219,8 @@ struct LeadFilter {
     /// seen slowing; when they were last seen lit.
     lit_from_s: Option<f64>,
     lit_last_s: f64,
+    /// Since when its brake lights have been lit in every frame, while they are.
+    lit_run_from_s: f64,
     /// The frame it was last measured in.
     seen_s: f64,
 }
@@ -241,6 +243,7 @@ impl LeadFilter {
             brake_lights: false,
             lit_from_s: None,
             lit_last_s: f64::NEG_INFINITY,
+            lit_run_from_s: t_s,
             seen_s: t_s,
         }
     }
@@ -296,20 +299,29 @@ impl LeadFilter {
     /// pedal is pressed before the deceleration builds, and before the speed innovations
     /// could say so).
     fn brake_lights(&mut self, on: bool) {
-        if on && !self.brake_lights && self.settled() {
+        // A brake application starting: not a frame or two of the lamps missed in a long one,
+        // nor a driver dabbing the pedal to hold a speed (lamps flickering every few frames: a
+        // car ending its braking 170 m ahead, each flash a new manoeuvre, had its speed followed
+        // at the range's noise for seconds and read as braking at 13 m/s2).
+        if on && !self.brake_lights && self.settled() && self.t_s - self.lit_last_s >= RELIT_S {
             tracing::debug!(id = self.id, t_s = self.t_s, "lead brake lights on");
             self.manoeuvre();
-            // A brake application starting: not a frame or two of the lamps missed in a long
-            // one, nor the lamps of a lead already seen slowing (its deceleration is measured,
-            // the lamps add nothing to it).
-            if self.t_s - self.lit_last_s >= RELIT_S {
-                self.lit_from_s = (self.x[2] >= SLOWING_MPS2).then_some(self.t_s);
-            }
+            // Not for the lamps of a lead already seen slowing: its deceleration is measured,
+            // the lamps add nothing to it.
+            self.lit_from_s = (self.x[2] >= SLOWING_MPS2).then_some(self.t_s);
+        }
+        if on && !self.brake_lights {
+            self.lit_run_from_s = self.t_s;
         }
         if on {
             self.lit_last_s = self.t_s;
         }
         self.brake_lights = on;
+    }
+
+    /// Its brake lights have been lit in every frame for LIT_HELD_S at least.
+    fn lit_held(&self) -> bool {
+        self.brake_lights && self.t_s - self.lit_run_from_s >= LIT_HELD_S - 1e-9
     }
 
     /// How long ago the lead's brake lights came on, while they are on.
@@ -436,6 +448,10 @@ const BRAKING_JERK_SIGMA_MPS3: f64 = 10.0;
 pub(super) const LIT_ANTICIPATION_S: f64 = 0.5;
 /// ...where a lead braking at the comfort limit would need at least this share of it.
 const LIT_NEED_SHARE: f64 = 0.4;
+/// Brake lights lit in every frame for this long are held on (`LeadNow::lit_held`): four
+/// frames at 20 Hz. Far away a detector misses lit lamps in a frame now and then (some 3%):
+/// such a miss costs this long again.
+const LIT_HELD_S: f64 = 0.15;
 /// Lamps seen lit again within this long of the last frame they were lit in are the same
 /// brake application (a frame or two of them missed).
 const RELIT_S: f64 = 0.5;
@@ -444,6 +460,9 @@ const SLOWING_MPS2: f64 = -0.3;
 /// While a new lead's speed is still being measured, comfort braking plans for it being this
 /// many of its standard deviations slower.
 const UNMEASURED_SIGMAS: f64 = 2.0;
+/// ...unless, were it that slow, the stop behind it after waiting until it is settled would need
+/// at most this share of the comfort limit: then it is braked for once measured.
+const UNSETTLED_WAIT_SHARE: f64 = 0.7;
 /// How long a lead missing from perception's frames is kept, predicted.
 const LEAD_COAST_S: f64 = 0.3;
 /// A vehicle counts as beyond the lead from this far past it (not the lead seen twice).
@@ -487,21 +506,28 @@ struct LeadNow {
     accel_sigma_mps2: f64,
     /// Its brake lights are on.
     brake_lights: bool,
+    /// ...and have been, frame after frame, for LIT_HELD_S at least: the pedal held, not dabbed.
+    lit_held: bool,
     /// How long ago they came on (a settled lead's, while on).
     lit_for_s: Option<f64>,
     settled: bool,
+    /// How long it has been the lead.
+    followed_s: f64,
 }
 
 impl LeadNow {
-    /// The acceleration the threat is judged on. With the lead's brake lights on, the
+    /// The acceleration the threat is judged on. With the lead's brake lights held on, the
     /// estimate as it is (the lights say it brakes); otherwise the estimate less one standard
     /// deviation toward zero. Far away a camera's ranges leave the estimate wandering within
     /// its uncertainty (-1.1 m/s2 against a sigma of 1.3 for a van 165 m ahead at constant
     /// speed), and taken as it was that drew comfort braking for a lead that did not brake;
     /// noise alone may also look like a manoeuvre to the drift test. The hard-braking rule
-    /// reads the estimate itself.
+    /// reads the estimate itself. A flash of the lamps vouches for nothing: 170 m ahead, a
+    /// car whose driver dabbed the pedal to hold a speed after braking flashed them for a
+    /// frame at a time while its speed, read to +-4 m/s, swung the estimate between +5 and
+    /// -4.7 m/s2, and the estimate as it was at a flash drew an emergency with a TTC of 17 s.
     fn threat_accel(&self) -> f64 {
-        if self.brake_lights {
+        if self.lit_held {
             return self.accel_mps2;
         }
         self.accel_mps2.signum() * (self.accel_mps2.abs() - self.accel_sigma_mps2).max(0.0)
@@ -847,8 +873,10 @@ impl Controller {
             speed_sigma_mps: f.p[(1, 1)].max(0.0).sqrt(),
             accel_sigma_mps2: f.p[(2, 2)].max(0.0).sqrt(),
             brake_lights: f.brake_lights,
+            lit_held: f.lit_held(),
             lit_for_s: f.lit_for_s(),
             settled: f.settled(),
+            followed_s: f.t_s - f.since_s,
         });
         if let Some(l) = lead {
             tracing::trace!(
@@ -931,10 +959,28 @@ impl Controller {
                         }
                     };
                     let guard = match lead {
-                        Some(l) if !l.settled => threat.map(|t| {
+                        Some(l) if !l.settled => {
                             let slower_mps = (l.speed_mps - UNMEASURED_SIGMAS * l.speed_sigma_mps).max(0.0);
-                            worse_within_comfort(t, self::threat(l.gap_m, v, slower_mps, l.threat_accel()))
-                        }),
+                            let slower = |gap_m: f64| self::threat(gap_m, v, slower_mps, l.threat_accel());
+                            // A new lead beyond twice the time gap is braked for before it is
+                            // settled only where waiting would cost comfort: were it that slow,
+                            // the room the wait takes must leave the stop well within the
+                            // comfort limit. Far away a lead may be no vehicle: in a bend, two cars standing in the lanes
+                            // either side 200 m ahead merged in the image into one in the ego's
+                            // lane for half a second, read as standing, and drew 1.2-1.4 m/s2
+                            // for nothing. The follow law still answers it, and an emergency
+                            // still reads the threat itself. Nearer, a new lead is most likely
+                            // what a vehicle moving out revealed, and waiting to brake for a
+                            // car standing there cost 3.1 -> 4.0 m/s2.
+                            let far = l.gap_m > self.s.standstill_m + FAR_TIME_GAPS * self.time_gap_s * v;
+                            let wait_s = (SETTLE_S - l.followed_s).max(0.0);
+                            let waited = slower(l.gap_m - (v - slower_mps).max(0.0) * wait_s);
+                            if far && waited.needed_decel_mps2 <= UNSETTLED_WAIT_SHARE * decel {
+                                revealed
+                            } else {
+                                threat.map(|t| worse_within_comfort(t, slower(l.gap_m)))
+                            }
+                        }
                         Some(l) if l.lit_for_s.is_some_and(|s| s < LIT_ANTICIPATION_S) => threat.map(|t| {
                             let braking = l.threat_accel().min(-self.s.limits.decel_mps2);
                             let hard = self::threat(l.gap_m, v, l.speed_mps, braking);

@@ -921,3 +921,49 @@ fn a_far_new_leads_converging_speed_is_not_read_as_hard_braking() {
     assert!(!emergency, "an emergency for a car standing 175 m ahead while its speed was measured");
     assert!(gap > 0.0, "ran into it");
 }
+
+/// Two cars standing in the lanes either side, 200 m ahead in a bend, merged in the camera's
+/// image into one in the ego's lane for half a second (a scenario of our own): a new lead,
+/// read as standing. Were it real, waiting the second until it is settled would leave a stop
+/// at 2.3 m/s2: nothing to brake for yet. Before, the guard planned for it at once and braked
+/// at up to 1.4 m/s2 for nothing.
+#[test]
+fn a_far_new_lead_is_braked_for_before_it_settles_only_where_waiting_would_cost_comfort() {
+    let mut c = Controller::new(AccSettings { set_speed_mps: 27.0, ..AccSettings::default() });
+    let sigmas = [30.0, 8.0, 4.0, 2.5, 2.0, 1.5];
+    let seen = |t: f64| {
+        let sigma = sigmas[((t / 0.05).round() as usize).min(sigmas.len() - 1)];
+        let rel = if t < 0.01 { 0.0 } else { -27.0 };
+        vec![Object { relative_speed_sigma_mps: sigma, ..obj(13, 198.0 - 27.0 * t, 0.0, rel) }]
+    };
+    let run = drive(&mut c, 0.0, 27.0, 0.5, seen);
+    let hardest = run.iter().map(|(_, _, o)| o.status.target_accel_mps2).fold(f64::INFINITY, f64::min);
+    assert!(hardest > -0.3, "braked at {hardest:.2} m/s2 for a lead 200 m ahead not yet settled");
+    // Gone again: nothing was lost by waiting.
+    let run = drive(&mut c, 0.5, 27.0, 1.0, |_| vec![]);
+    assert!(run.iter().all(|(_, _, o)| o.status.target_accel_mps2 > -0.3));
+    // The same car 150 m ahead at 30 m/s is braked for at once (waiting would cost 3.8 m/s2):
+    // `a_new_leads_unmeasured_speed_is_planned_for_as_slower_so_braking_starts_at_once`.
+}
+
+/// A car 170 m ahead at 20 m/s, the ego at 27 m/s: its speed read to +-4 m/s swings its
+/// estimated acceleration by several m/s2, and its driver, holding the speed after braking,
+/// flashes its brake lights for a frame now and then (a scenario of our own). Before, each
+/// flash started a manoeuvre (its speed followed at the range's noise) and the estimate at a
+/// flash, taken as true with the lamps lit, drew an emergency with a TTC of 17 s.
+#[test]
+fn brake_light_flashes_of_a_far_lead_do_not_make_its_noisy_estimate_a_hard_brake() {
+    let mut c = Controller::new(AccSettings { set_speed_mps: 27.0, ..AccSettings::default() });
+    // Settled first, lamps off, steady readings.
+    drive(&mut c, 0.0, 27.0, 2.0, |t| vec![obj(2, 170.0 - 7.0 * t, 0.0, -7.0)]);
+    // Then 4 s of swinging readings and a one-frame flash every 0.3-0.9 s.
+    let flashes = [2.05, 2.6, 2.95, 3.2, 3.55, 4.4, 4.65, 5.0, 5.9];
+    let run = drive(&mut c, 2.0, 27.0, 4.0, |t| {
+        let rel = -7.0 + 4.0 * (std::f64::consts::TAU * t / 1.1).sin();
+        let flash = flashes.iter().any(|f| (t - f).abs() < 0.01);
+        vec![Object { brake_lights: flash, ..obj(2, 170.0 - 7.0 * t, 0.0, rel) }]
+    });
+    assert!(run.iter().all(|(_, _, o)| o.status.mode != AccMode::Emergency), "an emergency 170 m behind a steady lead");
+    let hardest = run.iter().map(|(_, _, o)| o.status.target_accel_mps2).fold(f64::INFINITY, f64::min);
+    assert!(hardest > -1.0, "braked at {hardest:.2} m/s2 for a steady lead 170 m ahead");
+}
