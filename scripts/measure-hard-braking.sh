@@ -45,7 +45,7 @@ EOF
   done
 done
 
-for perception in camera ground-truth; do
+for perception in ${PERCEPTIONS:-camera ground-truth}; do
   "$bin" eval acc --perception "$perception" "${args[@]}" --logs "$out/logs-$perception" >"$out/$perception.md" 2>&1 || true
   echo
   echo "== $perception: answer s / emergency s (unwarranted), by the lead's deceleration"
