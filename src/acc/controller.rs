@@ -208,6 +208,9 @@ struct LeadFilter {
     /// Fading average of the normalised speed innovations: noise has both signs, a lead that
     /// starts (or stops) braking pushes it one way.
     drift: f64,
+    /// Fading mean square of the speed innovations while the lead is followed steadily (settled,
+    /// no manoeuvre, lamps off): how noisy its speed reads, measured (m2/s2).
+    speed_noise_var: f64,
     /// When this lead was first taken: a new track's speed still converges (the tracker starts
     /// it at the ego's), so manoeuvres count only after SETTLE_S.
     since_s: f64,
@@ -238,6 +241,7 @@ impl LeadFilter {
             x: Vector3::new(gap_m, lead_speed_mps, 0.0),
             p,
             drift: 0.0,
+            speed_noise_var: speed_sigma_mps.max(n.speed_sigma(gap_m)).powi(2),
             since_s: t_s,
             manoeuvre_until_s: t_s,
             brake_lights: false,
@@ -261,6 +265,9 @@ impl LeadFilter {
         // would hide the lead's first braking.
         let nu = (z - self.x[1]) / sigma;
         self.drift += MANOEUVRE_DRIFT_GAIN * (nu - self.drift);
+        if self.settled() && self.t_s >= self.manoeuvre_until_s && !self.brake_lights {
+            self.speed_noise_var += SPEED_NOISE_GAIN * ((z - self.x[1]).powi(2) - self.speed_noise_var);
+        }
         if self.settled() && self.drift.abs() > MANOEUVRE_DRIFT {
             tracing::debug!(id = self.id, t_s = self.t_s, drift = self.drift, "lead manoeuvre");
             self.manoeuvre();
@@ -433,6 +440,13 @@ const FAR_DECEL_MPS2: f64 = 0.8;
 /// settling reads as braking (a car 170 m ahead at 22 m/s, -3.8 m/s2 for a second against a
 /// sigma of 1.4, drew 1.3 s of phantom braking at up to 1.9 m/s2).
 const FAR_BRAKING_MPS2: f64 = 2.5;
+/// The gain per frame of the lead's measured speed noise (a fading mean square).
+const SPEED_NOISE_GAIN: f64 = 0.1;
+/// Brake lights vouch for the estimate of a lead whose speed reads within this (steady, before
+/// the lamps): an order of magnitude from either side of what was measured, 0.0003-0.08 m/s for
+/// cars, motorcycles and trucks 50-120 m ahead whose estimates followed their braking, 1.4 and
+/// 8.6 m/s for cars 143 and 176 m ahead whose estimates swung by 6 m/s2 and more.
+const LAMPS_VOUCH_NOISE_MPS: f64 = 0.5;
 /// Manoeuvre detection on the lead's speed: the fading average's gain per frame, the level
 /// that says the lead changed its acceleration, and the acceleration uncertainty (and the
 /// speed uncertainty that builds over a window of it) opened up then.
@@ -448,7 +462,7 @@ const BRAKING_JERK_SIGMA_MPS3: f64 = 10.0;
 pub(super) const LIT_ANTICIPATION_S: f64 = 0.5;
 /// ...where a lead braking at the comfort limit would need at least this share of it.
 const LIT_NEED_SHARE: f64 = 0.4;
-/// Brake lights lit in every frame for this long are held on (`LeadNow::lit_held`): four
+/// Brake lights lit in every frame for this long are held on (`LeadNow::lamps_vouch`): four
 /// frames at 20 Hz. Far away a detector misses lit lamps in a frame now and then (some 3%):
 /// such a miss costs this long again.
 const LIT_HELD_S: f64 = 0.15;
@@ -482,6 +496,9 @@ const GROUND_TRUTH_HARD_BRAKING_MARGIN_MPS2: f64 = 0.1;
 const HARD_BRAKING_MIN_SPEED_MPS: f64 = 2.0;
 /// A lead found braking hard counts so until it brakes less than the comfort limit by this.
 const HARD_BRAKING_RELEASE_MPS2: f64 = 0.5;
+/// An emergency brakes at this many times what the threat needs (below full_brake_ttc_s); for a
+/// lead braking hard it starts once that is more than NEEDED_GUARD_MPS2 this many times over.
+const HARD_LEAD_EMERGENCY_FACTOR: f64 = 1.5;
 /// A short TTC starts an emergency only when the ego brakes less than the threat needs by more
 /// than the jerk limit adds in this long.
 const UNDER_BRAKING_S: f64 = 0.25;
@@ -506,19 +523,23 @@ struct LeadNow {
     accel_sigma_mps2: f64,
     /// Its brake lights are on.
     brake_lights: bool,
-    /// ...and have been, frame after frame, for LIT_HELD_S at least: the pedal held, not dabbed.
-    lit_held: bool,
+    /// ...and vouch for its estimated acceleration: held on in every frame for LIT_HELD_S at
+    /// least (the pedal held, not dabbed), on a lead whose speed reads within
+    /// LAMPS_VOUCH_NOISE_MPS.
+    lamps_vouch: bool,
     /// How long ago they came on (a settled lead's, while on).
     lit_for_s: Option<f64>,
     settled: bool,
     /// How long it has been the lead.
     followed_s: f64,
+    /// How noisy its speed reads (`LeadFilter::speed_noise_var`).
+    speed_noise_mps: f64,
 }
 
 impl LeadNow {
-    /// The acceleration the threat is judged on. With the lead's brake lights held on, the
-    /// estimate as it is (the lights say it brakes); otherwise the estimate less one standard
-    /// deviation toward zero. Far away a camera's ranges leave the estimate wandering within
+    /// The acceleration the threat is judged on. Where the lead's brake lights vouch for it
+    /// (`lamps_vouch`), the estimate as it is (the lights say it brakes); otherwise the
+    /// estimate less one standard deviation toward zero. Far away a camera's ranges leave the estimate wandering within
     /// its uncertainty (-1.1 m/s2 against a sigma of 1.3 for a van 165 m ahead at constant
     /// speed), and taken as it was that drew comfort braking for a lead that did not brake;
     /// noise alone may also look like a manoeuvre to the drift test. The hard-braking rule
@@ -526,8 +547,11 @@ impl LeadNow {
     /// car whose driver dabbed the pedal to hold a speed after braking flashed them for a
     /// frame at a time while its speed, read to +-4 m/s, swung the estimate between +5 and
     /// -4.7 m/s2, and the estimate as it was at a flash drew an emergency with a TTC of 17 s.
+    /// Nor do lamps held on where the speed reads too coarsely: 143 m ahead, a car braking to
+    /// stop behind one standing was estimated at -6.6 m/s2 half a second after its pedal, which
+    /// drew a 5 s emergency at 1.2-1.6 m/s2 where stopping behind it needed 0.8.
     fn threat_accel(&self) -> f64 {
-        if self.lit_held {
+        if self.lamps_vouch {
             return self.accel_mps2;
         }
         self.accel_mps2.signum() * (self.accel_mps2.abs() - self.accel_sigma_mps2).max(0.0)
@@ -873,10 +897,11 @@ impl Controller {
             speed_sigma_mps: f.p[(1, 1)].max(0.0).sqrt(),
             accel_sigma_mps2: f.p[(2, 2)].max(0.0).sqrt(),
             brake_lights: f.brake_lights,
-            lit_held: f.lit_held(),
+            lamps_vouch: f.lit_held() && f.speed_noise_var.sqrt() <= LAMPS_VOUCH_NOISE_MPS,
             lit_for_s: f.lit_for_s(),
             settled: f.settled(),
             followed_s: f.t_s - f.since_s,
+            speed_noise_mps: f.speed_noise_var.sqrt(),
         });
         if let Some(l) = lead {
             tracing::trace!(
@@ -886,6 +911,7 @@ impl Controller {
                 accel_mps2 = l.accel_mps2,
                 accel_sigma_mps2 = l.accel_sigma_mps2,
                 brake_lights = l.brake_lights,
+                speed_noise_mps = l.speed_noise_mps,
                 last_target_mps2 = self.accel_cmd,
                 "lead"
             );
@@ -1077,7 +1103,11 @@ impl Controller {
         let (e, lim) = (&self.s.emergency, &self.s.limits);
         let ttc = t.ttc_s.unwrap_or(f64::INFINITY);
         let beyond_comfort = self.beyond_comfort(t, v);
-        let hard_and_needed = hard_lead && t.needed_decel_mps2 > NEEDED_GUARD_MPS2;
+        // Braking at 1.5 times a need near NEEDED_GUARD_MPS2 brakes beyond what a far lead
+        // needs (ground truth, a car 140 m ahead braking hard to stop behind one standing: 1.5
+        // m/s2 where 0.8-1.0 was needed, 0.9 s of phantom braking); the comfort guard answers
+        // such a need within 0.7 s, and the emergency ends when the need falls below it.
+        let hard_and_needed = hard_lead && t.needed_decel_mps2 > HARD_LEAD_EMERGENCY_FACTOR * NEEDED_GUARD_MPS2;
         // A short TTC alone is no emergency while the ego already brakes about as hard as the
         // threat needs: in a planned stop the TTC (at constant speeds) falls below any
         // threshold as the car comes to rest behind the lead.
@@ -1088,7 +1118,9 @@ impl Controller {
             self.emergency = true;
         } else if self.emergency
             && (v < STANDSTILL_MPS
-                || (!hard_lead && ttc > e.release_ttc_s && t.needed_decel_mps2 < 0.8 * lim.decel_mps2))
+                || ((!hard_lead || t.needed_decel_mps2 < NEEDED_GUARD_MPS2)
+                    && ttc > e.release_ttc_s
+                    && t.needed_decel_mps2 < 0.8 * lim.decel_mps2))
         {
             tracing::info!(t_s, ttc_s = ttc, "emergency over");
             self.emergency = false;
@@ -1106,7 +1138,7 @@ impl Controller {
             return vehicle_max;
         }
         let floor = if hard_lead && ttc >= self.s.emergency.brake_ttc_s { 0.0 } else { self.s.limits.decel_mps2 };
-        (1.5 * t.needed_decel_mps2).clamp(floor, vehicle_max)
+        (HARD_LEAD_EMERGENCY_FACTOR * t.needed_decel_mps2).clamp(floor, vehicle_max)
     }
 
     /// The most the guard brakes for a threat: a vehicle beyond twice the time gap that the
