@@ -479,6 +479,9 @@ const UNMEASURED_SIGMAS: f64 = 2.0;
 const UNSETTLED_WAIT_SHARE: f64 = 0.7;
 /// How long a lead missing from perception's frames is kept, predicted.
 const LEAD_COAST_S: f64 = 0.3;
+/// ...and a settled lead slower than STANDING_LEAD_MPS for this long.
+const STANDING_COAST_S: f64 = 2.0;
+const STANDING_LEAD_MPS: f64 = 1.0;
 /// A vehicle counts as beyond the lead from this far past it (not the lead seen twice).
 const BEYOND_LEAD_M: f64 = 3.0;
 /// How long after a manoeuvre the lead's speed is followed closely.
@@ -834,10 +837,15 @@ impl Controller {
         // A lead missing from a frame (far away a detector misses one now and then) is kept,
         // moving on as estimated, for LEAD_COAST_S unless a nearer vehicle is in the lane:
         // taking it anew would lose its speed estimate, which takes tenths of a second to
-        // measure again at long range. A lead seen outside the lane is let go at once.
+        // measure again at long range. A lead seen outside the lane is let go at once. A settled
+        // lead standing still is kept for STANDING_COAST_S: it cannot have driven off, only be
+        // hidden (just past a bend's exit, a car standing in the ego's lane went missing for
+        // 1.6 s at 100-137 m behind cars standing in the lanes either side; the ACC resumed its
+        // cruise meanwhile and, seeing it again, needed a 5 s emergency at up to 5.4 m/s2).
         let missed = self.lead.filter(|f| {
+            let coast_s = if f.settled() && f.x[1] < STANDING_LEAD_MPS { STANDING_COAST_S } else { LEAD_COAST_S };
             !frame.objects.iter().any(|o| o.id == f.id)
-                && frame.stamp_s - f.seen_s < LEAD_COAST_S
+                && frame.stamp_s - f.seen_s < coast_s
                 && best.is_none_or(|b| b.1 > f.x[0])
         });
         if missed.is_some() {

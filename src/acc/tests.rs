@@ -1031,3 +1031,32 @@ fn a_far_lead_braking_hard_whose_stop_needs_little_is_answered_within_comfort() 
     assert!(hardest < -1.0 && hardest > -1.6, "braked at {hardest:.2} m/s2 while the lead stopped (1.2 needed)");
     assert!(110.0 + lead_at(t) - ego_at > 2.0, "stopped behind it");
 }
+
+/// A car standing 170 m ahead of the ego at 25 m/s, braked for, then hidden from perception for
+/// 1.8 s (just past a bend's exit, behind cars standing in the lanes either side: a scenario of
+/// our own). Before, it was let go after 0.3 s, the ACC resumed its cruise, and seeing the car
+/// again at 100 m it needed a 5 s emergency.
+#[test]
+fn a_standing_lead_hidden_for_a_moment_is_still_braked_for() {
+    let mut c = Controller::new(AccSettings { set_speed_mps: 25.0, ..truth() });
+    let (mut t, mut v, mut gap) = (0.0, 25.0, 170.0);
+    let (mut emergency, mut hidden_max) = (false, f64::NEG_INFINITY);
+    while t < 25.0 {
+        let hidden = (3.0..4.8).contains(&t);
+        if ((t / DT).round() as i64) % 5 == 0 {
+            let objects = if hidden { vec![] } else { vec![obj(2, gap, 0.0, -v)] };
+            c.perceive(&frame(t, objects), &ego(t, v));
+        }
+        let o = c.step(&ego(t, v), &[]);
+        emergency |= o.status.mode == AccMode::Emergency;
+        if hidden {
+            hidden_max = hidden_max.max(o.status.target_accel_mps2);
+        }
+        v = (v + o.status.target_accel_mps2 * DT).max(0.0);
+        gap -= v * DT;
+        t += DT;
+    }
+    assert!(hidden_max < -1.0, "eased to {hidden_max:.2} m/s2 while the standing car was hidden");
+    assert!(!emergency, "an emergency for a car standing 170 m ahead");
+    assert!(gap > 2.0 && v < 0.2, "ends {gap:.1} m behind at {v:.2} m/s");
+}
