@@ -542,8 +542,8 @@ struct LeadNow {
 impl LeadNow {
     /// The acceleration the threat is judged on. Where the lead's brake lights vouch for it
     /// (`lamps_vouch`), the estimate as it is (the lights say it brakes); otherwise the
-    /// estimate less one standard deviation toward zero. Far away a camera's ranges leave the estimate wandering within
-    /// its uncertainty (-1.1 m/s2 against a sigma of 1.3 for a van 165 m ahead at constant
+    /// estimate less one standard deviation toward zero. Far away a camera's ranges leave the
+    /// estimate wandering within its uncertainty (-1.1 m/s2 against a sigma of 1.3 for a van 165 m ahead at constant
     /// speed), and taken as it was that drew comfort braking for a lead that did not brake;
     /// noise alone may also look like a manoeuvre to the drift test. The hard-braking rule
     /// reads the estimate itself. A flash of the lamps vouches for nothing: 170 m ahead, a
@@ -999,13 +999,14 @@ impl Controller {
                             // A new lead beyond twice the time gap is braked for before it is
                             // settled only where waiting would cost comfort: were it that slow,
                             // the room the wait takes must leave the stop well within the
-                            // comfort limit. Far away a lead may be no vehicle: in a bend, two cars standing in the lanes
-                            // either side 200 m ahead merged in the image into one in the ego's
-                            // lane for half a second, read as standing, and drew 1.2-1.4 m/s2
-                            // for nothing. The follow law still answers it, and an emergency
-                            // still reads the threat itself. Nearer, a new lead is most likely
-                            // what a vehicle moving out revealed, and waiting to brake for a
-                            // car standing there cost 3.1 -> 4.0 m/s2.
+                            // comfort limit. Far away a lead may be no vehicle: in a bend, two
+                            // cars standing in the lanes either side 200 m ahead merged in the
+                            // image into one in the ego's lane for half a second, read as
+                            // standing, and drew 1.2-1.4 m/s2 for nothing. The follow law still
+                            // answers it, and an emergency still reads the threat itself. The
+                            // price: a car standing far ahead is braked for up to a second
+                            // later and harder (cut-out-revealing-stopped-car 3.1 -> 4.0 m/s2,
+                            // within the limit at its speed). Nearer, nothing waits.
                             let far = l.gap_m > self.s.standstill_m + FAR_TIME_GAPS * self.time_gap_s * v;
                             let wait_s = (SETTLE_S - l.followed_s).max(0.0);
                             let waited = slower(l.gap_m - (v - slower_mps).max(0.0) * wait_s);
