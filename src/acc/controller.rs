@@ -326,9 +326,16 @@ impl LeadFilter {
         self.brake_lights = on;
     }
 
-    /// Its brake lights have been lit in every frame for LIT_HELD_S at least.
-    fn lit_held(&self) -> bool {
-        self.brake_lights && self.t_s - self.lit_run_from_s >= LIT_HELD_S - 1e-9
+    /// How noisy its speed reads (`speed_noise_var`), m/s.
+    fn speed_noise_mps(&self) -> f64 {
+        self.speed_noise_var.sqrt()
+    }
+
+    /// Its brake lights vouch for its estimated acceleration (`LeadNow::lamps_vouch`).
+    fn lamps_vouch(&self) -> bool {
+        self.brake_lights
+            && self.t_s - self.lit_run_from_s >= LIT_HELD_S - 1e-9
+            && self.speed_noise_mps() <= LAMPS_VOUCH_NOISE_MPS
     }
 
     /// How long ago the lead's brake lights came on, while they are on.
@@ -905,11 +912,11 @@ impl Controller {
             speed_sigma_mps: f.p[(1, 1)].max(0.0).sqrt(),
             accel_sigma_mps2: f.p[(2, 2)].max(0.0).sqrt(),
             brake_lights: f.brake_lights,
-            lamps_vouch: f.lit_held() && f.speed_noise_var.sqrt() <= LAMPS_VOUCH_NOISE_MPS,
+            lamps_vouch: f.lamps_vouch(),
             lit_for_s: f.lit_for_s(),
             settled: f.settled(),
             followed_s: f.t_s - f.since_s,
-            speed_noise_mps: f.speed_noise_var.sqrt(),
+            speed_noise_mps: f.speed_noise_mps(),
         });
         if let Some(l) = lead {
             tracing::trace!(

@@ -968,33 +968,45 @@ fn brake_light_flashes_of_a_far_lead_do_not_make_its_noisy_estimate_a_hard_brake
     assert!(hardest > -1.0, "braked at {hardest:.2} m/s2 for a steady lead 170 m ahead");
 }
 
+/// A lead `gap_m` ahead at `lead_mps` that brakes at `decel` m/s2 to a stop from `brake_at_s`
+/// on, its lamps lit from then, the ego at `ego_mps`; `noise(t)` (m/s) is added to each frame's
+/// relative speed. (t, gap, step output) at each step until `until_s`.
+fn lead_brakes_to_stop(
+    settings: AccSettings,
+    (gap_m, ego_mps, lead_mps): (f64, f64, f64),
+    (brake_at_s, decel): (f64, f64),
+    noise: impl Fn(f64) -> f64,
+    until_s: f64,
+) -> Vec<(f64, f64, Output)> {
+    let mut c = Controller::new(AccSettings { set_speed_mps: ego_mps, ..settings });
+    let (mut t, mut v, mut lead_v, mut gap) = (0.0, ego_mps, lead_mps, gap_m);
+    let mut out = Vec::new();
+    while t < until_s {
+        if ((t / DT).round() as i64) % 5 == 0 {
+            let o = Object { brake_lights: t >= brake_at_s, ..obj(1, gap, 0.0, lead_v - v + noise(t)) };
+            c.perceive(&frame(t, vec![o]), &ego(t, v));
+        }
+        let o = c.step(&ego(t, v), &[]);
+        v = (v + o.status.target_accel_mps2 * DT).max(0.0);
+        if t >= brake_at_s {
+            lead_v = (lead_v - decel * DT).max(0.0);
+        }
+        gap += (lead_v - v) * DT;
+        out.push((t, gap, o));
+        t += DT;
+    }
+    out
+}
+
 /// A car 143 m ahead at 26 m/s, the ego at 20 m/s, its speed read to +-2 m/s: its lamps come
 /// on and stay on as it brakes at 4 m/s2 to a stop behind a car standing further on (a scenario
 /// of our own). Stopping behind it needs 0.9 m/s2. Before, the lamps vouched for the swinging
 /// estimate (-6.6 m/s2 half a second after the pedal): a 5 s emergency at 1.2-1.6 m/s2.
 #[test]
 fn held_lamps_of_a_lead_whose_speed_reads_coarsely_do_not_vouch_for_its_estimate() {
-    let mut c = Controller::new(AccSettings { set_speed_mps: 20.0, ..AccSettings::default() });
     let noise = |t: f64| 2.0 * (std::f64::consts::TAU * t / 0.9).sin() + 1.5 * spread((t * 20.0).round() as u64);
-    let lead_speed = |t: f64| if t < 4.0 { 26.0 } else { (26.0 - 4.0 * (t - 4.0)).max(0.0) };
-    let lead_at = |t: f64| {
-        let tb = (t - 4.0).clamp(0.0, 6.5);
-        26.0 * t.min(4.0) + 26.0 * tb - 2.0 * tb * tb
-    };
-    let (mut t, mut v, mut ego_at) = (0.0, 20.0, 0.0);
-    let mut emergency = false;
-    while t < 10.0 {
-        if ((t / DT).round() as i64) % 5 == 0 {
-            let gap = 143.0 + lead_at(t) - ego_at;
-            let o = Object { brake_lights: t >= 4.0, ..obj(1, gap, 0.0, lead_speed(t) - v + noise(t)) };
-            c.perceive(&frame(t, vec![o]), &ego(t, v));
-        }
-        let o = c.step(&ego(t, v), &[]);
-        emergency |= o.status.mode == AccMode::Emergency;
-        v = (v + o.status.target_accel_mps2 * DT).max(0.0);
-        ego_at += v * DT;
-        t += DT;
-    }
+    let run = lead_brakes_to_stop(AccSettings::default(), (143.0, 20.0, 26.0), (4.0, 4.0), noise, 10.0);
+    let emergency = run.iter().any(|(_, _, o)| o.status.mode == AccMode::Emergency);
     assert!(!emergency, "an emergency for a lead 143 m ahead whose stop needs 0.9 m/s2");
 }
 
@@ -1004,32 +1016,13 @@ fn held_lamps_of_a_lead_whose_speed_reads_coarsely_do_not_vouch_for_its_estimate
 /// phantom braking).
 #[test]
 fn a_far_lead_braking_hard_whose_stop_needs_little_is_answered_within_comfort() {
-    let mut c = Controller::new(AccSettings { set_speed_mps: 20.0, ..truth() });
-    let lead_speed = |t: f64| if t < 2.0 { 24.0 } else { (24.0 - 5.0 * (t - 2.0)).max(0.0) };
-    let lead_at = |t: f64| {
-        let tb = (t - 2.0).clamp(0.0, 4.8);
-        24.0 * t.min(2.0) + 24.0 * tb - 2.5 * tb * tb
-    };
-    let (mut t, mut v, mut ego_at) = (0.0, 20.0, 0.0);
-    let (mut emergency, mut hardest) = (false, 0.0f64);
-    while t < 12.0 {
-        if ((t / DT).round() as i64) % 5 == 0 {
-            let gap = 110.0 + lead_at(t) - ego_at;
-            let o = Object { brake_lights: t >= 2.0, ..obj(1, gap, 0.0, lead_speed(t) - v) };
-            c.perceive(&frame(t, vec![o]), &ego(t, v));
-        }
-        let o = c.step(&ego(t, v), &[]);
-        emergency |= o.status.mode == AccMode::Emergency;
-        if t < 6.0 {
-            hardest = hardest.min(o.status.target_accel_mps2);
-        }
-        v = (v + o.status.target_accel_mps2 * DT).max(0.0);
-        ego_at += v * DT;
-        t += DT;
-    }
+    let run = lead_brakes_to_stop(truth(), (110.0, 20.0, 24.0), (2.0, 5.0), |_| 0.0, 12.0);
+    let emergency = run.iter().any(|(_, _, o)| o.status.mode == AccMode::Emergency);
+    let hardest =
+        run.iter().filter(|(t, _, _)| *t < 6.0).map(|(_, _, o)| o.status.target_accel_mps2).fold(0.0f64, f64::min);
     assert!(!emergency, "an emergency where comfort braking at 1.2 m/s2 does");
     assert!(hardest < -1.0 && hardest > -1.6, "braked at {hardest:.2} m/s2 while the lead stopped (1.2 needed)");
-    assert!(110.0 + lead_at(t) - ego_at > 2.0, "stopped behind it");
+    assert!(run.last().is_some_and(|(_, gap, _)| *gap > 2.0), "stopped behind it");
 }
 
 /// A car standing 170 m ahead of the ego at 25 m/s, braked for, then hidden from perception for
