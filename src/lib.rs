@@ -28,6 +28,8 @@
 //! - [`record`]: the bus into MCAP files, lossless and with every loss counted.
 //! - [`eval`]: recording a run, metrics, plots, latency per hop; the detect and ACC suites.
 //! - [`view`]: the live view, a Foxglove WebSocket server of camera, boxes, scene and series.
+//! - [`ros2`]: the loop as ROS 2 sees it over rmw_zenoh's keys (CDR messages, graph tokens),
+//!   and ROS 2 commands into the loop.
 //!
 //! **Tools**: what the `slipstream` command offers.
 //! - [`tools`]: `up`, `record`, `play`, `view`, `top`, `echo`, `info`, `demo`, `router`.
@@ -50,6 +52,7 @@ pub mod vehicle;
 pub mod eval;
 pub mod launch;
 pub mod record;
+pub mod ros2;
 pub mod view;
 
 pub mod bench;

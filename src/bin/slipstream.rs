@@ -63,6 +63,13 @@ enum Command {
     /// runs the same view inside `up`. Viewers never slow the loop: each gets the latest
     /// updates, at most --rate a second.
     View(slipstream::tools::view::ViewArgs),
+    /// Show the loop to ROS 2: a ROS 2 node on rmw_zenoh's keys (camera, camera info,
+    /// odometry, /tf, boxes, /clock, ACC status), found by `ros2 topic list` with no bridge to
+    /// install; --control lets a ROS 2 controller drive the ego
+    ///
+    /// Runs until Ctrl-C or --duration; `up --ros2` runs the same inside `up`. The mapping
+    /// (names, types, QoS) is the `ros2` block of config/slipstream.json5 (docs/ros2.md).
+    Ros2(slipstream::tools::ros2::Ros2Args),
     /// Run a Zenoh router (for nodes on several PCs, in client mode) with config/router.json5
     /// (or -c FILE): for users who have no zenohd. Runs until Ctrl-C.
     ///
@@ -230,6 +237,11 @@ fn run(cli: Cli) -> Result<ExitCode> {
         })),
         Command::View(args) => done(on_bus(connect, &format!("view-{}", std::process::id()), |bus| async move {
             slipstream::tools::view::run(&bus, &args).await?;
+            Ok(bus)
+        })),
+        Command::Ros2(args) if args.list => done(connect.topic_map().map_err(Into::into).and_then(|t| slipstream::tools::ros2::list(&t, &args))),
+        Command::Ros2(args) => done(on_bus(connect, &format!("ros2-{}", std::process::id()), |bus| async move {
+            slipstream::tools::ros2::run(&bus, &args).await?;
             Ok(bus)
         })),
         Command::Fuzz(args) => done(slipstream::tools::fuzz::command(&args)),

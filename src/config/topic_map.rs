@@ -60,6 +60,9 @@ pub struct TopicMap {
     pub camera: CameraSettings,
     /// The file it was read from, for messages.
     pub origin: String,
+    /// The `ros2` block as written (the ROS 2 bridge reads and checks it: src/ros2/mapping.rs);
+    /// None when the file has none.
+    pub ros2: Option<serde_json::Value>,
 }
 
 #[derive(Deserialize, Default)]
@@ -71,6 +74,8 @@ struct RawFile {
     camera: RawCamera,
     #[serde(default)]
     topics: BTreeMap<String, RawTopic>,
+    #[serde(default)]
+    ros2: Option<serde_json::Value>,
 }
 
 #[derive(Deserialize, Default)]
@@ -102,6 +107,7 @@ impl Default for TopicMap {
             entries: BTreeMap::new(),
             camera: CameraSettings::default(),
             origin: "built-in defaults".to_string(),
+            ros2: None,
         };
         for t in Topic::ALL {
             let key = key_expr(t.name()).expect("default topic names are valid keys");
@@ -148,7 +154,7 @@ impl TopicMap {
     }
 
     fn from_raw(raw: RawFile, origin: &str) -> Result<TopicMap, ConfigError> {
-        let mut map = TopicMap { origin: origin.to_string(), ..TopicMap::default() };
+        let mut map = TopicMap { origin: origin.to_string(), ros2: raw.ros2, ..TopicMap::default() };
         map.set_namespace(&raw.namespace)
             .map_err(|(problem, fix)| ConfigError::new(origin, "namespace", problem, fix))?;
 

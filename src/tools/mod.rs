@@ -1,5 +1,5 @@
 //! The `slipstream` command's tools that are not benchmarks: `up` (the whole loop, through the
-//! launch and eval layers), `record`, `play`, `view`, `top`, `echo`, `info`, `demo`, `router`, `soak`.
+//! launch and eval layers), `record`, `play`, `view`, `ros2`, `top`, `echo`, `info`, `demo`, `router`, `soak`.
 
 pub mod demo;
 pub mod echo;
@@ -7,6 +7,7 @@ pub mod fuzz;
 pub mod info;
 pub mod play;
 pub mod record;
+pub mod ros2;
 pub mod router;
 pub mod soak;
 pub mod top;

@@ -84,6 +84,11 @@ pub struct UpArgs {
     /// The live view's port (0: any free port, printed)
     #[arg(long, default_value_t = crate::view::live::DEFAULT_PORT, requires = "view")]
     pub view_port: u16,
+    /// Show the loop to ROS 2 while it runs (`slipstream ros2` inside `up`): camera, camera
+    /// info, odometry, /tf, boxes, /clock and the ACC's status on rmw_zenoh's keys, with the
+    /// mapping of config/slipstream.json5's `ros2` block (docs/ros2.md)
+    #[arg(long)]
+    pub ros2: bool,
     #[command(flatten)]
     pub faults: FaultArgs,
     /// Re-simulate: a recording (`up --record`, `slipstream record`) drives today's detector
@@ -136,6 +141,8 @@ pub struct UpReport {
     pub recording: Option<RecordingSummary>,
     /// With --view: what the live view sent.
     pub view: Option<ViewStats>,
+    /// With --ros2: what the ROS 2 bridge sent, per route.
+    pub ros2: Option<crate::ros2::BridgeStats>,
     pub report_dir: PathBuf,
 }
 
@@ -370,6 +377,17 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
         }
         false => None,
     };
+    let ros2 = match args.ros2 {
+        true => {
+            let config = crate::ros2::Ros2Config::from_topic_map(lp.bus().topics())?;
+            let vehicle = VehicleParams::of_class(scenario.ego.class.into());
+            let bridge = crate::ros2::Bridge::start(lp.bus(), &config, vehicle).await?;
+            let n = bridge.node();
+            eprintln!("ROS 2: node {} in namespace {} on domain {} ({:?} keys)", n.name, n.namespace, n.domain, n.distro);
+            Some(bridge)
+        }
+        false => None,
+    };
     eprintln!(
         "slipstream up: {} ({} clock, {} perception), report in {}",
         scenario.name,
@@ -396,6 +414,10 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
     };
     let recording = match recording {
         Some(r) => Some(tokio::task::spawn_blocking(move || r.finish()).await??),
+        None => None,
+    };
+    let ros2 = match ros2 {
+        Some(b) => Some(b.stop().await),
         None => None,
     };
     let sim = lp.sim_report().ok();
@@ -437,6 +459,7 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
         plots,
         recording,
         view,
+        ros2,
         report_dir: dir.to_path_buf(),
     };
     // The report is on disk before the session closes: sessions still attached (top, echo, a

@@ -20,6 +20,7 @@ const LAYER_OF: &[(&str, u8)] = &[
     ("launch", 2),
     ("record", 2),
     ("view", 2),
+    ("ros2", 2),
     ("eval", 2),
     ("tools", 3),
     ("bench", 3),
@@ -30,9 +31,9 @@ const LAYER_OF: &[(&str, u8)] = &[
 /// geometry.
 const DOMAIN_SHARED: &[&str] = &["vehicle", "road"];
 
-/// Within orchestration: recordings may hold the view's Foxglove copies, evaluation runs the
-/// loop through launch and reads recordings; never the other way.
-const ORCHESTRATION_ORDER: &[&str] = &["launch", "view", "record", "eval"];
+/// Within orchestration: recordings may hold the view's Foxglove copies and ROS 2 messages,
+/// evaluation runs the loop through launch and reads recordings; never the other way.
+const ORCHESTRATION_ORDER: &[&str] = &["launch", "view", "ros2", "record", "eval"];
 
 /// Names the crate root re-exports from the contract (`crate::Bus`, ...).
 const ROOT_REEXPORTS: &[(&str, &str)] =

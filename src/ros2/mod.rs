@@ -1,0 +1,30 @@
+//! ROS 2 sees the loop: the loop's topics as ROS 2 messages on rmw_zenoh's keys, with the
+//! liveliness tokens that put them in the ROS graph, and a ROS 2 controller's commands into
+//! the loop, over the same Zenoh network and with nothing to install on the ROS side but
+//! rmw_zenoh (docs/ros2.md).
+//!
+//! # Layout
+//! - [`catalog`], [`schema`]: the message definitions; DDS names, RIHS01 hashes, `ros2msg` text.
+//! - [`messages`]: the messages as serde structs in CDR layout.
+//! - [`convert`]: the loop's messages as ROS messages (frames, stamps in simulation time).
+//! - [`graph`]: rmw_zenoh's data keys, liveliness tokens, QoS and attachment.
+//! - [`mapping`]: the `ros2` block of config/slipstream.json5 (routes, names, types, QoS).
+//! - [`node`]: a ROS node and its publishers on a Zenoh session.
+//! - [`outbox`], [`bridge`]: the bus to ROS 2, never holding up the bus.
+//! - [`command`], [`inbound`]: ROS 2 commands into vehicle/control, checked and watched.
+
+pub mod bridge;
+pub mod catalog;
+pub mod command;
+pub mod convert;
+pub mod graph;
+pub mod inbound;
+pub mod mapping;
+pub mod messages;
+pub mod node;
+pub mod outbox;
+pub mod schema;
+
+pub use bridge::{Bridge, BridgeStats, RouteStats};
+pub use mapping::{Ros2Config, Route};
+pub use schema::Distro;
