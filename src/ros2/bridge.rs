@@ -157,12 +157,12 @@ impl Bridge {
     /// Stops taking samples, sends what is queued, and undeclares the node.
     pub async fn stop(mut self) -> BridgeStats {
         self.subs.clear();
-        self.commands = None;
+        let commands = self.commands.take().map(|c| c.stats());
         for (outbox, thread) in self.outboxes.drain(..) {
             outbox.close();
             let _ = tokio::task::spawn_blocking(move || thread.join()).await;
         }
-        self.stats()
+        BridgeStats { commands, ..self.stats() }
     }
 }
 

@@ -183,3 +183,75 @@ def check_messages(col):
     assert any(m.type == 1 and m.scale.x > 1.0 for m in markers.markers[1:])
     acc, _ = col.items("acc")[-1]
     assert acc.layout.dim[0].label.split(",")[0] == "mode" and len(acc.data) == acc.layout.dim[0].size
+
+
+class Controller:
+    """A ROS 2 controller stand-in: AckermannDriveStamped in CDR by rosbags, on the key and with
+    the attachment zenoh-ros2-sdk makes for a ROS 2 publisher (its own gid)."""
+
+    TYPE = "ackermann_msgs/msg/AckermannDriveStamped"
+
+    def __init__(self, session, ts, gid):
+        dds = "ackermann_msgs::msg::dds_::AckermannDriveStamped_"
+        self.key = topic_keyexpr(0, "/vehicle/ackermann_cmd", dds, ts.hash_rihs01(self.TYPE))
+        self.pub = session.declare_publisher(self.key)
+        self.ts, self.gid, self.seq = ts, gid, 0
+        self.types = ts.types
+
+    def send(self, speed, steering=0.0, acceleration=0.0):
+        Time = self.types["builtin_interfaces/msg/Time"]
+        Header = self.types["std_msgs/msg/Header"]
+        Drive = self.types["ackermann_msgs/msg/AckermannDrive"]
+        Stamped = self.types[self.TYPE]
+        msg = Stamped(header=Header(stamp=Time(sec=0, nanosec=0), frame_id="ego"),
+                      drive=Drive(steering_angle=steering, steering_angle_velocity=0.0, speed=speed,
+                                  acceleration=acceleration, jerk=0.0))
+        self.seq += 1
+        att = Attachment(sequence_id=self.seq, timestamp_ns=time.time_ns(), gid=self.gid)
+        self.pub.put(bytes(self.ts.serialize_cdr(msg, self.TYPE)), attachment=att.to_bytes())
+
+
+def test_a_ros_controller_drives_the_ego_and_bad_commands_are_refused(slipstream_bin, sim_bin, free_port):
+    ts = typestore(slipstream_bin)
+    endpoint = f"tcp/127.0.0.1:{free_port}"
+    sim = subprocess.Popen([sim_bin, "--scenario", "open-road", "--clock", "realtime", "--duration", "60",
+                            "-l", endpoint], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=ROOT)
+    bridge = subprocess.Popen([slipstream_bin, "-e", endpoint, "ros2", "--control", "--json", "--duration", "25"],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    try:
+        speeds = Collector(keep=100000)
+        with zenoh.open(peer_config(endpoint)) as session:
+            sub = session.declare_subscriber(
+                "vehicle/state", speeds.handler("state", lambda s: decode(s.payload.to_bytes())[2]))
+            assert wait_for(lambda: speeds.count("state") > 10, bridge, 30), "no vehicle/state"
+            time.sleep(2.0)  # the bridge's command subscription is declared
+            ctl = Controller(session, ts, b"\x01" * 16)
+            stranger = Controller(session, ts, b"\x02" * 16)
+            start = speeds.items("state")[-1]["speed_mps"]
+            for i in range(80):  # 8 s at 10 Hz toward 8 m/s, with bad commands in between
+                ctl.send(8.0)
+                if i % 20 == 5:
+                    ctl.send(float("nan"))
+                    ctl.send(-5.0)
+                    stranger.send(35.0)
+                time.sleep(0.1)
+            driven = speeds.items("state")[-1]
+            # The controller stops (dies): the loop goes on, the simulator's watchdog brakes.
+            n_before = speeds.count("state")
+            time.sleep(2.0)
+            after = speeds.items("state")[-1]
+            assert speeds.count("state") > n_before, "the simulator kept running"
+            sub.undeclare()
+        assert start > 15.0
+        assert 5.0 < driven["speed_mps"] < 12.0, (start, driven["speed_mps"])
+        assert after["applied"]["brake"] > 0.0 and after["applied"]["throttle"] == 0.0, after["applied"]
+        out, err = bridge.communicate(timeout=60)
+        stats = json.loads(out)["commands"]
+        assert stats["accepted"] >= 70, stats
+        assert stats["refused"] == 12, stats  # 4 rounds of NaN, negative speed, second publisher
+        assert stats["applied"] > 100, stats
+    finally:
+        for p in (bridge, sim):
+            if p.poll() is None:
+                p.send_signal(signal.SIGINT)
+                p.wait(timeout=30)
