@@ -70,6 +70,9 @@ enum Command {
     /// Runs until Ctrl-C or --duration; `up --ros2` runs the same inside `up`. The mapping
     /// (names, types, QoS) is the `ros2` block of config/slipstream.json5 (docs/ros2.md).
     Ros2(slipstream::tools::ros2::Ros2Args),
+    /// Convert a recording: `--to ros2` writes the ROS 2 messages of the `ros2` mapping into a
+    /// ros2-profile MCAP file that `ros2 bag play`, Foxglove and ROS tools read (docs/ros2.md)
+    Convert(slipstream::tools::convert::ConvertArgs),
     /// Run a Zenoh router (for nodes on several PCs, in client mode) with config/router.json5
     /// (or -c FILE): for users who have no zenohd. Runs until Ctrl-C.
     ///
@@ -184,6 +187,11 @@ where
     })
 }
 
+/// Exit 0 when the command says all went well, 1 when it says something was lost.
+fn code(clean: Result<bool>) -> Result<ExitCode> {
+    Ok(if clean? { ExitCode::SUCCESS } else { ExitCode::FAILURE })
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     // A router forwards what it receives: its receive path must not share the tx pool, or a
@@ -215,6 +223,10 @@ fn run(cli: Cli) -> Result<ExitCode> {
             }
             Ok(bus)
         })),
+        Command::Record(args) if args.profile == slipstream::tools::record::Profile::Ros2 => {
+            code(slipstream::tools::record::command_ros2(&args, connect))
+        }
+        Command::Convert(args) => code(connect.topic_map().map_err(Into::into).and_then(|t| slipstream::tools::convert::command(&args, &t))),
         Command::Record(args) => {
             let rt = tokio::runtime::Runtime::new()?;
             let summary = rt.block_on(async {

@@ -9,22 +9,31 @@
 //! - [`convert`]: the loop's messages as ROS messages (frames, stamps in simulation time).
 //! - [`graph`]: rmw_zenoh's data keys, liveliness tokens, QoS and attachment.
 //! - [`mapping`]: the `ros2` block of config/slipstream.json5 (routes, names, types, QoS).
-//! - [`node`]: a ROS node and its publishers on a Zenoh session.
-//! - [`outbox`], [`bridge`]: the bus to ROS 2, never holding up the bus.
+//! - [`translate`]: one bus payload into one route's CDR (live, recorded or converted alike).
+//! - [`node`], [`outlet`], [`bag`]: where CDR goes: a ROS node's publishers, or a `ros2`-profile
+//!   MCAP file.
+//! - [`outbox`], [`bridge`]: the bus to an outlet, never holding up the bus.
 //! - [`command`], [`inbound`]: ROS 2 commands into vehicle/control, checked and watched.
+//! - [`face`]: the node, its publishers and its commands together (`slipstream ros2`).
 
+pub mod bag;
 pub mod bridge;
 pub mod catalog;
 pub mod command;
 pub mod convert;
+pub mod face;
 pub mod graph;
 pub mod inbound;
 pub mod mapping;
 pub mod messages;
 pub mod node;
 pub mod outbox;
+pub mod outlet;
 pub mod schema;
+pub mod translate;
 
-pub use bridge::{Bridge, BridgeStats, RouteStats};
+pub use bag::Bag;
+pub use bridge::{Bridge, RouteStats};
+pub use face::{FaceStats, RosFace};
 pub use mapping::{Ros2Config, Route};
 pub use schema::Distro;

@@ -1,6 +1,7 @@
 //! The `slipstream` command's tools that are not benchmarks: `up` (the whole loop, through the
 //! launch and eval layers), `record`, `play`, `view`, `ros2`, `top`, `echo`, `info`, `demo`, `router`, `soak`.
 
+pub mod convert;
 pub mod demo;
 pub mod echo;
 pub mod fuzz;

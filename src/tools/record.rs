@@ -37,6 +37,80 @@ pub struct RecordArgs {
     /// [default: the one the simulator announces, if built in]
     #[arg(long, requires = "viewable")]
     pub scenario: Option<String>,
+    /// What the file holds: slipstream (every payload byte for byte, for `play` and `up
+    /// --from`) or ros2 (the ROS 2 messages of the `ros2` mapping in CDR, for `ros2 bag play`,
+    /// Foxglove and ROS tools; docs/ros2.md)
+    #[arg(long, value_enum, default_value = "slipstream", conflicts_with_all = ["keys", "viewable"])]
+    pub profile: Profile,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Profile {
+    Slipstream,
+    Ros2,
+}
+
+/// What a ros2-profile recording wrote, per route.
+#[derive(Debug, serde::Serialize)]
+pub struct Ros2Summary {
+    pub path: PathBuf,
+    pub messages: u64,
+    pub routes: Vec<crate::ros2::RouteStats>,
+}
+
+impl Ros2Summary {
+    /// Anything dropped or not converted.
+    pub fn lost_anything(&self) -> bool {
+        self.routes.iter().any(|r| r.dropped > 0 || r.failed > 0)
+    }
+
+    pub fn render(&self) -> String {
+        let mut s = format!("{}: {} ROS 2 messages\n", self.path.display(), self.messages);
+        for r in &self.routes {
+            s.push_str(&format!(
+                "  {:32} {:7} messages {:9.1} MB  dropped {}  failed {}\n",
+                r.topic,
+                r.sent,
+                r.bytes as f64 / 1e6,
+                r.dropped,
+                r.failed
+            ));
+        }
+        s
+    }
+}
+
+/// `record --profile ros2` as a command: its own session, closed at the end; whether nothing
+/// was dropped or failed.
+pub fn command_ros2(args: &RecordArgs, connect: &crate::config::ConnectArgs) -> Result<bool> {
+    let rt = tokio::runtime::Runtime::new()?;
+    rt.block_on(async {
+        let bus = Bus::open(connect.zenoh_config()?, connect.topic_map()?, "record").await?;
+        let summary = run_ros2(&bus, args).await;
+        let _ = tokio::time::timeout(crate::launch::CLOSE_TIMEOUT, bus.close()).await;
+        Ok(!summary?.lost_anything())
+    })
+}
+
+/// `--profile ros2`: the `ros2` mapping's routes into a ros2-profile MCAP file until Ctrl-C or
+/// --duration.
+pub async fn run_ros2(bus: &Bus, args: &RecordArgs) -> Result<Ros2Summary> {
+    let path = args.output.clone().unwrap_or_else(|| PathBuf::from(format!("recording-{}.mcap", super::utc_stamp())));
+    let config = crate::ros2::Ros2Config::from_topic_map(bus.topics())?;
+    let bag = std::sync::Arc::new(crate::ros2::Bag::create(&path, &config)?);
+    let bridge = crate::ros2::Bridge::start(bus, bag.clone()).await?;
+    eprintln!("recording the ROS 2 mapping into {} (profile ros2)", path.display());
+    let started = Instant::now();
+    super::until_stopped(args.duration, PROGRESS_EVERY, || {
+        let n: u64 = bridge.stats().iter().map(|r| r.sent).sum();
+        format!("{:6.1} s  {n} messages", started.elapsed().as_secs_f64())
+    })
+    .await;
+    let routes = bridge.stop().await;
+    let messages = tokio::task::spawn_blocking(move || bag.finish()).await??;
+    let summary = Ros2Summary { path, messages, routes };
+    println!("{}", summary.render());
+    Ok(summary)
 }
 
 /// The key expressions `args.keys` name: a topic's key after namespace and remapping, or a

@@ -13,7 +13,7 @@ use crate::acc::VehicleClass;
 use crate::bus::Bus;
 use crate::config::{ConfigError, TopicMap};
 use crate::ros2::mapping::{Direction, Ros2Config, Route};
-use crate::ros2::{schema, Bridge, BridgeStats, Distro};
+use crate::ros2::{schema, Distro, FaceStats, RosFace};
 
 /// How often the status line is refreshed.
 const STATUS_EVERY: Duration = Duration::from_secs(2);
@@ -171,7 +171,7 @@ pub fn list(topics: &TopicMap, args: &Ros2Args) -> Result<()> {
 }
 
 /// One line of what the bridge has sent.
-pub fn status_line(s: &BridgeStats) -> String {
+pub fn status_line(s: &FaceStats) -> String {
     let sent: u64 = s.routes.iter().map(|r| r.sent).sum();
     let dropped: u64 = s.routes.iter().map(|r| r.dropped).sum();
     let mb = s.routes.iter().map(|r| r.bytes).sum::<u64>() as f64 / 1e6;
@@ -183,16 +183,16 @@ pub fn status_line(s: &BridgeStats) -> String {
 }
 
 /// Runs the bridge until Ctrl-C or --duration, with a status line on stderr.
-pub async fn run(bus: &Bus, args: &Ros2Args) -> Result<BridgeStats> {
+pub async fn run(bus: &Bus, args: &Ros2Args) -> Result<FaceStats> {
     let c = config(bus.topics(), args)?;
-    let bridge = Bridge::start(bus, &c, args.vehicle.params()).await?;
-    let n = bridge.node();
+    let face = RosFace::start(bus, &c, args.vehicle.params()).await?;
+    let n = face.node();
     eprintln!(
         "ROS 2 node {} in namespace {} on domain {} ({:?} keys): `ros2 topic list -t` with rmw_zenoh shows its topics",
         n.name, n.namespace, n.domain, n.distro
     );
-    super::until_stopped(args.duration, STATUS_EVERY, || status_line(&bridge.stats())).await;
-    let stats = bridge.stop().await;
+    super::until_stopped(args.duration, STATUS_EVERY, || status_line(&face.stats())).await;
+    let stats = face.stop().await;
     if args.json {
         println!("{}", serde_json::to_string_pretty(&stats)?);
     } else {

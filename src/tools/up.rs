@@ -41,6 +41,8 @@ const REFRESH_PLAIN: Duration = Duration::from_millis(2000);
 const BAR_WIDTH: usize = 24;
 /// The recording's file in the report directory (`--record`).
 const RECORDING: &str = "run.mcap";
+/// With --record --ros2: the ROS 2 messages' recording in the report directory.
+const ROS2_RECORDING: &str = "run.ros2.mcap";
 
 #[derive(Debug, Clone, clap::Args)]
 pub struct UpArgs {
@@ -70,7 +72,8 @@ pub struct UpArgs {
     /// terminal)
     #[arg(long)]
     pub plain: bool,
-    /// Record every key of the run into run.mcap in the report directory (docs/recording.md)
+    /// Record every key of the run into run.mcap in the report directory (docs/recording.md);
+    /// with --ros2 also the ROS 2 messages into run.ros2.mcap (profile ros2, docs/ros2.md)
     #[arg(long)]
     pub record: bool,
     /// With --record: also write copies Foxglove's own panels show (camera, boxes, 3D scene,
@@ -142,7 +145,9 @@ pub struct UpReport {
     /// With --view: what the live view sent.
     pub view: Option<ViewStats>,
     /// With --ros2: what the ROS 2 bridge sent, per route.
-    pub ros2: Option<crate::ros2::BridgeStats>,
+    pub ros2: Option<crate::ros2::FaceStats>,
+    /// With --record --ros2: what went into run.ros2.mcap, per route.
+    pub ros2_recording: Option<Vec<crate::ros2::RouteStats>>,
     pub report_dir: PathBuf,
 }
 
@@ -381,10 +386,18 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
         true => {
             let config = crate::ros2::Ros2Config::from_topic_map(lp.bus().topics())?;
             let vehicle = VehicleParams::of_class(scenario.ego.class.into());
-            let bridge = crate::ros2::Bridge::start(lp.bus(), &config, vehicle).await?;
-            let n = bridge.node();
+            let face = crate::ros2::RosFace::start(lp.bus(), &config, vehicle).await?;
+            let n = face.node();
             eprintln!("ROS 2: node {} in namespace {} on domain {} ({:?} keys)", n.name, n.namespace, n.domain, n.distro);
-            Some(bridge)
+            Some(face)
+        }
+        false => None,
+    };
+    let ros2_bag = match args.ros2 && args.record {
+        true => {
+            let config = crate::ros2::Ros2Config::from_topic_map(lp.bus().topics())?;
+            let bag = Arc::new(crate::ros2::Bag::create(&dir.join(ROS2_RECORDING), &config)?);
+            Some((crate::ros2::Bridge::start(lp.bus(), bag.clone()).await?, bag))
         }
         false => None,
     };
@@ -418,6 +431,14 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
     };
     let ros2 = match ros2 {
         Some(b) => Some(b.stop().await),
+        None => None,
+    };
+    let ros2_recording = match ros2_bag {
+        Some((bridge, bag)) => {
+            let routes = bridge.stop().await;
+            tokio::task::spawn_blocking(move || bag.finish()).await??;
+            Some(routes)
+        }
         None => None,
     };
     let sim = lp.sim_report().ok();
@@ -460,6 +481,7 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
         recording,
         view,
         ros2,
+        ros2_recording,
         report_dir: dir.to_path_buf(),
     };
     // The report is on disk before the session closes: sessions still attached (top, echo, a
