@@ -226,7 +226,9 @@ fn run(cli: Cli) -> Result<ExitCode> {
         Command::Record(args) if args.profile == slipstream::tools::record::Profile::Ros2 => {
             code(slipstream::tools::record::command_ros2(&args, connect))
         }
-        Command::Convert(args) => code(connect.topic_map().map_err(Into::into).and_then(|t| slipstream::tools::convert::command(&args, &t))),
+        Command::Convert(args) => {
+            code(connect.topic_map().map_err(Into::into).and_then(|t| slipstream::tools::convert::command(&args, &t)))
+        }
         Command::Record(args) => {
             let rt = tokio::runtime::Runtime::new()?;
             let summary = rt.block_on(async {
@@ -251,7 +253,9 @@ fn run(cli: Cli) -> Result<ExitCode> {
             slipstream::tools::view::run(&bus, &args).await?;
             Ok(bus)
         })),
-        Command::Ros2(args) if args.list => done(connect.topic_map().map_err(Into::into).and_then(|t| slipstream::tools::ros2::list(&t, &args))),
+        Command::Ros2(args) if args.list => {
+            done(connect.topic_map().map_err(Into::into).and_then(|t| slipstream::tools::ros2::list(&t, &args)))
+        }
         Command::Ros2(args) => done(on_bus(connect, &format!("ros2-{}", std::process::id()), |bus| async move {
             slipstream::tools::ros2::run(&bus, &args).await?;
             Ok(bus)

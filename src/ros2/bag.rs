@@ -116,8 +116,8 @@ impl Outlet for Bag {
         self.write(route, header, crate::msg::wall_clock_ns(), &cdr)
     }
 
-    fn routes(&self) -> Vec<(Route, String)> {
-        self.routes.iter().map(|(r, (topic, _))| (*r, topic.clone())).collect()
+    fn routes(&self) -> Vec<(Route, String, String)> {
+        self.routes.iter().map(|(r, (topic, ty))| (*r, topic.clone(), ty.clone())).collect()
     }
 }
 

@@ -57,8 +57,10 @@ impl Bridge {
         };
         let (frames, frames_thread) = Outbox::start("ros2-frames", FRAME_BACKLOG, lookup.clone())?;
         let (signals, signals_thread) = Outbox::start("ros2-signals", SIGNAL_BACKLOG, lookup)?;
-        let translator = Arc::new(Translator::new(bus.topics().namespace()));
-        let routes: Vec<Route> = outlet.routes().into_iter().map(|(r, _)| r).collect();
+        let taken = outlet.routes();
+        let types = taken.iter().map(|(r, _, t)| (*r, t.as_str()));
+        let translator = Arc::new(Translator::new(bus.topics().namespace()).with_types(types));
+        let routes: Vec<Route> = taken.iter().map(|(r, _, _)| *r).collect();
         let topics: BTreeSet<Topic> = routes.iter().flat_map(|r| r.sources().iter().copied()).collect();
         let mut subs = Vec::new();
         for topic in topics {
@@ -93,7 +95,7 @@ impl Bridge {
         self.outlet
             .routes()
             .into_iter()
-            .map(|(route, topic)| {
+            .map(|(route, topic, _)| {
                 let c = &self.counters[&route];
                 RouteStats {
                     route: route.id(),

@@ -26,10 +26,7 @@ pub const TYPES: &[(&str, &str)] = &[
     ("geometry_msgs/msg/Twist", "Vector3 linear\nVector3 angular"),
     ("geometry_msgs/msg/TwistWithCovariance", "Twist twist\nfloat64[36] covariance"),
     ("geometry_msgs/msg/Transform", "Vector3 translation\nQuaternion rotation"),
-    (
-        "geometry_msgs/msg/TransformStamped",
-        "std_msgs/Header header\nstring child_frame_id\nTransform transform",
-    ),
+    ("geometry_msgs/msg/TransformStamped", "std_msgs/Header header\nstring child_frame_id\nTransform transform"),
     ("tf2_msgs/msg/TFMessage", "geometry_msgs/TransformStamped[] transforms"),
     ("rosgraph_msgs/msg/Clock", "builtin_interfaces/Time clock"),
     (

@@ -52,7 +52,13 @@ pub struct CommandGate {
 
 impl CommandGate {
     /// Takes a command from publisher `gid` received at `now_ns`, or refuses it with why.
-    pub fn offer(&mut self, gid: [u8; 16], now_ns: u64, drive: &AckermannDrive, params: &VehicleParams) -> Result<(), String> {
+    pub fn offer(
+        &mut self,
+        gid: [u8; 16],
+        now_ns: u64,
+        drive: &AckermannDrive,
+        params: &VehicleParams,
+    ) -> Result<(), String> {
         let verdict = self.judge(gid, now_ns, drive, params);
         match &verdict {
             Ok(()) => {

@@ -100,7 +100,13 @@ fn vec3(v: [f64; 3]) -> Vector3 {
     Vector3 { x: v[0], y: v[1], z: v[2] }
 }
 
-fn stamped(stamp_sim_ns: u64, parent: String, child: String, translation: Vector3, rotation: Quaternion) -> TransformStamped {
+fn stamped(
+    stamp_sim_ns: u64,
+    parent: String,
+    child: String,
+    translation: Vector3,
+    rotation: Quaternion,
+) -> TransformStamped {
     TransformStamped {
         header: header(stamp_sim_ns, parent),
         child_frame_id: child,
@@ -114,7 +120,13 @@ pub fn mount_transforms(frames: &Frames, camera: &str, info: &CameraInfo) -> Vec
     let [roll, pitch, yaw] = info.mount_roll_pitch_yaw_rad;
     let half_pi = std::f64::consts::FRAC_PI_2;
     vec![
-        stamped(0, frames.ego(), mount.clone(), vec3(info.mount_position_in_ego_m), Quaternion::from_rpy(roll, pitch, yaw)),
+        stamped(
+            0,
+            frames.ego(),
+            mount.clone(),
+            vec3(info.mount_position_in_ego_m),
+            Quaternion::from_rpy(roll, pitch, yaw),
+        ),
         stamped(0, mount, optical, Vector3::default(), Quaternion::from_rpy(-half_pi, 0.0, -half_pi)),
     ]
 }
@@ -189,7 +201,15 @@ fn cube(stamp_sim_ns: u64, frame: &str, ns: &str, id: u32, class: ObjectClass, p
 /// The array starts with DELETEALL, so each message is the whole set (boxes of vehicles that
 /// left do not linger in rviz2).
 fn array(stamp_sim_ns: u64, frame: &str, ns: &str, boxes: impl Iterator<Item = Marker>) -> MarkerArray {
-    let mut clear = cube(stamp_sim_ns, frame, ns, 0, ObjectClass::Unknown, Pose { position: Vector3::default(), orientation: Quaternion::IDENTITY }, [0.0; 3]);
+    let mut clear = cube(
+        stamp_sim_ns,
+        frame,
+        ns,
+        0,
+        ObjectClass::Unknown,
+        Pose { position: Vector3::default(), orientation: Quaternion::IDENTITY },
+        [0.0; 3],
+    );
     clear.action = DELETE_ALL;
     clear.text.clear();
     MarkerArray { markers: std::iter::once(clear).chain(boxes).collect() }
@@ -199,7 +219,8 @@ fn array(stamp_sim_ns: u64, frame: &str, ns: &str, boxes: impl Iterator<Item = M
 pub fn ground_truth_markers(stamp_sim_ns: u64, frames: &Frames, objects: &GroundTruthObjects) -> MarkerArray {
     let ego = frames.ego();
     let boxes = objects.objects.iter().map(|o| {
-        let pose = Pose { position: vec3(o.position_in_ego_m), orientation: Quaternion::from_rpy(0.0, 0.0, o.yaw_in_ego_rad) };
+        let pose =
+            Pose { position: vec3(o.position_in_ego_m), orientation: Quaternion::from_rpy(0.0, 0.0, o.yaw_in_ego_rad) };
         cube(stamp_sim_ns, &ego, "ground_truth", o.id, o.class, pose, o.size_m)
     });
     array(stamp_sim_ns, &ego, "ground_truth", boxes)

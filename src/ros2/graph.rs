@@ -47,11 +47,14 @@ const DEFAULT_DEPTH: u32 = 42;
 
 impl RosQos {
     /// ROS's "sensor data" profile: best effort, keep the last 5.
-    pub const SENSOR: RosQos = RosQos { reliability: Reliability::BestEffort, durability: Durability::Volatile, depth: 5 };
+    pub const SENSOR: RosQos =
+        RosQos { reliability: Reliability::BestEffort, durability: Durability::Volatile, depth: 5 };
     /// ROS's default: reliable, volatile, keep the last 10.
-    pub const DEFAULT: RosQos = RosQos { reliability: Reliability::Reliable, durability: Durability::Volatile, depth: 10 };
+    pub const DEFAULT: RosQos =
+        RosQos { reliability: Reliability::Reliable, durability: Durability::Volatile, depth: 10 };
     /// Latched: a late subscriber gets the last message (rviz2's camera info, /tf_static).
-    pub const LATCHED: RosQos = RosQos { reliability: Reliability::Reliable, durability: Durability::TransientLocal, depth: 1 };
+    pub const LATCHED: RosQos =
+        RosQos { reliability: Reliability::Reliable, durability: Durability::TransientLocal, depth: 1 };
 
     /// The QoS part of a token, as rmw_zenoh writes it: reliability (1 reliable, 2 best
     /// effort), durability (1 transient local, 2 volatile), history `<kind>,<depth>`, then
@@ -94,7 +97,13 @@ impl NodeId {
     /// The node's liveliness token.
     pub fn node_token(&self) -> String {
         let id = self.node_id;
-        format!("@ros2_lv/{}/{}/{id}/{id}/NN/%/{}/{}", self.domain, self.zid, mangle_ns(&self.namespace), mangle(&self.name))
+        format!(
+            "@ros2_lv/{}/{}/{id}/{id}/NN/%/{}/{}",
+            self.domain,
+            self.zid,
+            mangle_ns(&self.namespace),
+            mangle(&self.name)
+        )
     }
 
     /// A topic name resolved against the node's namespace: `/clock` stays, `camera/image`
@@ -224,7 +233,13 @@ mod tests {
         let n = node(Distro::Humble);
         assert_eq!(n.node_token(), "@ros2_lv/7/abc123/0/0/NN/%/%car1/slipstream");
         let t = n
-            .endpoint_token(3, EndpointKind::Publisher, "/car1/camera/info", "sensor_msgs/msg/CameraInfo", &RosQos::LATCHED)
+            .endpoint_token(
+                3,
+                EndpointKind::Publisher,
+                "/car1/camera/info",
+                "sensor_msgs/msg/CameraInfo",
+                &RosQos::LATCHED,
+            )
             .unwrap();
         assert_eq!(
             t,

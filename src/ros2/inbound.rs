@@ -27,7 +27,12 @@ pub struct CommandPath {
 }
 
 impl CommandPath {
-    pub async fn start(bus: &Bus, node: &RosNode, entry: &Entry, vehicle: crate::vehicle::VehicleParams) -> Result<CommandPath> {
+    pub async fn start(
+        bus: &Bus,
+        node: &RosNode,
+        entry: &Entry,
+        vehicle: crate::vehicle::VehicleParams,
+    ) -> Result<CommandPath> {
         let (key, token) = node.subscription(&entry.name, &entry.type_name, entry.qos).await?;
         let gate: Arc<Mutex<CommandGate>> = Arc::default();
         let g = gate.clone();

@@ -86,7 +86,8 @@ impl Route {
     /// Name, type, QoS and whether it is on, when the config says nothing. Relative names
     /// resolve under the node's namespace; /tf, /tf_static and /clock are global, as in ROS.
     fn default_entry(self) -> Entry {
-        let e = |name: &str, ty: &str, qos: RosQos| Entry { name: name.into(), type_name: ty.into(), qos, enabled: true };
+        let e =
+            |name: &str, ty: &str, qos: RosQos| Entry { name: name.into(), type_name: ty.into(), qos, enabled: true };
         let reliable = |depth| RosQos { depth, ..RosQos::DEFAULT };
         match self {
             Route::CameraFront => e("camera/front/image_raw", IMAGE, RosQos::SENSOR),
@@ -200,12 +201,19 @@ impl Ros2Config {
                 .map_err(|e| ConfigError { key: format!("ros2.{}", e.key).trim_end_matches('.').into(), ..e })?,
         };
         let namespace = match raw.namespace {
-            Some(ns) => ros_namespace(&ns).map_err(|p| ConfigError::new(origin, "ros2.namespace", p, "use `/` or `/name`"))?,
+            Some(ns) => {
+                ros_namespace(&ns).map_err(|p| ConfigError::new(origin, "ros2.namespace", p, "use `/` or `/name`"))?
+            }
             None => format!("/{}", topics.namespace()).trim_end_matches('/').to_string(),
         };
         let node = raw.node.unwrap_or_else(|| "slipstream".into());
         if !valid_name_part(&node) {
-            return Err(ConfigError::new(origin, "ros2.node", format!("`{node}` is not a ROS node name"), "use letters, digits and _"));
+            return Err(ConfigError::new(
+                origin,
+                "ros2.node",
+                format!("`{node}` is not a ROS node name"),
+                "use letters, digits and _",
+            ));
         }
         let domain_id = match raw.domain_id {
             Some(d) => d,
@@ -223,9 +231,28 @@ impl Ros2Config {
         for (id, over) in raw.topics {
             let route = Route::ALL.into_iter().find(|r| r.id() == id).ok_or_else(|| {
                 let ids: Vec<_> = Route::ALL.iter().map(|r| r.id()).collect();
-                ConfigError::new(origin, format!("ros2.topics.{id}"), format!("unknown route `{id}`"), format!("use one of: {}", ids.join(", ")))
+                ConfigError::new(
+                    origin,
+                    format!("ros2.topics.{id}"),
+                    format!("unknown route `{id}`"),
+                    format!("use one of: {}", ids.join(", ")),
+                )
             })?;
             apply(route, routes.get_mut(&route).expect("every route has an entry"), over, origin)?;
+        }
+        for r in [Route::CameraFront, Route::CameraNarrow] {
+            let compressed = routes[&r].type_name == COMPRESSED;
+            if compressed != (topics.camera.encoding == CameraEncoding::Jpeg) {
+                return Err(ConfigError::new(
+                    origin,
+                    format!("ros2.topics.{}.type", r.id()),
+                    format!(
+                        "frames are sent as {:?} (camera.encoding), which {} cannot carry",
+                        topics.camera.encoding, routes[&r].type_name
+                    ),
+                    "leave the type out: it follows camera.encoding (raw: Image, jpeg: CompressedImage)",
+                ));
+            }
         }
         let namespace = if namespace.is_empty() { "/".to_string() } else { namespace };
         Ok(Ros2Config { domain_id, distro: raw.distro.unwrap_or(Distro::Jazzy), node, namespace, routes })
@@ -266,7 +293,12 @@ fn apply(route: Route, entry: &mut Entry, over: RawEntry, origin: &str) -> Resul
         entry.qos.durability = q.durability.unwrap_or(entry.qos.durability);
         if let Some(d) = q.depth {
             if d == 0 || d > 10_000 {
-                return Err(ConfigError::new(origin, format!("{key}.qos.depth"), format!("{d} is out of range"), "use 1 to 10000"));
+                return Err(ConfigError::new(
+                    origin,
+                    format!("{key}.qos.depth"),
+                    format!("{d} is out of range"),
+                    "use 1 to 10000",
+                ));
             }
             entry.qos.depth = d;
         }
@@ -324,7 +356,7 @@ mod tests {
     #[test]
     fn overrides_apply_and_bad_keys_say_the_key_and_the_fix() {
         let c = config(
-            "{ ros2: { distro: 'humble', domain_id: 3, topics: { command: { enabled: true, name: '/cmd' }, \
+            "{ camera: { encoding: 'jpeg' }, ros2: { distro: 'humble', domain_id: 3, topics: { command: { enabled: true, name: '/cmd' }, \
              camera_front: { type: 'sensor_msgs/msg/CompressedImage', qos: { depth: 1 } } } } }",
         )
         .unwrap();
@@ -333,6 +365,9 @@ mod tests {
         assert_eq!(c.routes[&Route::CameraFront].qos.depth, 1);
         assert_eq!((c.domain_id, c.distro), (3, Distro::Humble));
 
+        let e =
+            config("{ ros2: { topics: { camera_front: { type: 'sensor_msgs/msg/CompressedImage' } } } }").unwrap_err();
+        assert_eq!(e.key, "ros2.topics.camera_front.type", "{e}");
         let e = config("{ ros2: { topics: { clock: { type: 'std_msgs/msg/String' } } } }").unwrap_err();
         assert_eq!(e.key, "ros2.topics.clock.type");
         assert!(e.fix.contains("rosgraph_msgs/msg/Clock"), "{e}");

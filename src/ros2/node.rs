@@ -74,7 +74,15 @@ impl RosNode {
             }
         };
         let token = declare_token(&self.session, &token_key).await?;
-        Ok(RosPublisher { inner, topic, key, type_name: type_name.to_string(), gid: gid(&token_key), seq: AtomicI64::new(1), _token: token })
+        Ok(RosPublisher {
+            inner,
+            topic,
+            key,
+            type_name: type_name.to_string(),
+            gid: gid(&token_key),
+            seq: AtomicI64::new(1),
+            _token: token,
+        })
     }
 
     /// The token and key of a subscription of `type_name` on `topic`; the caller subscribes

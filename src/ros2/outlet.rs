@@ -15,8 +15,8 @@ pub trait Outlet: Send + Sync {
     /// Sends `cdr` (with its encapsulation header), the message of `route` made from a bus
     /// message with `header`.
     fn put(&self, route: Route, header: &Header, cdr: Vec<u8>) -> Result<()>;
-    /// The routes it takes, with the ROS name each goes to.
-    fn routes(&self) -> Vec<(Route, String)>;
+    /// The routes it takes, with the ROS name and type each goes to.
+    fn routes(&self) -> Vec<(Route, String, String)>;
 }
 
 /// The ROS graph: one publisher per route that is on.
@@ -44,7 +44,7 @@ impl Outlet for RosOutlet {
         }
     }
 
-    fn routes(&self) -> Vec<(Route, String)> {
-        self.publishers.iter().map(|(r, p)| (*r, p.topic.clone())).collect()
+    fn routes(&self) -> Vec<(Route, String, String)> {
+        self.publishers.iter().map(|(r, p)| (*r, p.topic.clone(), p.type_name.clone())).collect()
     }
 }

@@ -125,10 +125,7 @@ fn parse(full_name: &str, text: &str) -> Result<Vec<Field>, String> {
 fn table() -> &'static BTreeMap<&'static str, Vec<Field>> {
     static TABLE: OnceLock<BTreeMap<&'static str, Vec<Field>>> = OnceLock::new();
     TABLE.get_or_init(|| {
-        TYPES
-            .iter()
-            .map(|(name, text)| (*name, parse(name, text).unwrap_or_else(|e| panic!("catalog: {e}"))))
-            .collect()
+        TYPES.iter().map(|(name, text)| (*name, parse(name, text).unwrap_or_else(|e| panic!("catalog: {e}")))).collect()
     })
 }
 
@@ -165,7 +162,9 @@ fn dependencies(name: &str) -> Result<BTreeSet<&'static str>, String> {
 fn description(name: &str) -> Result<TypeDescription, String> {
     let fields = fields_of(name)?
         .iter()
-        .map(|f| Ok(FieldDescription { name: f.name.clone(), field_type: f.description()?, default_value: String::new() }))
+        .map(|f| {
+            Ok(FieldDescription { name: f.name.clone(), field_type: f.description()?, default_value: String::new() })
+        })
         .collect::<Result<_, String>>()?;
     Ok(TypeDescription { type_name: name.to_string(), fields })
 }

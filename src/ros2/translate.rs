@@ -53,6 +53,8 @@ impl Route {
 /// Payloads in, CDR out, for one vehicle's frames.
 pub struct Translator {
     frames: Frames,
+    /// Camera routes whose configured type is CompressedImage (the others carry Image).
+    compressed: Vec<Route>,
     /// Each camera's mount transforms, all sent together on /tf_static (a latched topic keeps
     /// only the last message).
     mounts: Mutex<BTreeMap<&'static str, Vec<TransformStamped>>>,
@@ -69,7 +71,15 @@ fn decoded<'a, M: msg::Message + serde::Deserialize<'a>>(payload: &'a [u8]) -> R
 impl Translator {
     /// For the vehicle in bus namespace `ns` (its frames are prefixed with it).
     pub fn new(ns: &str) -> Translator {
-        Translator { frames: Frames::new(ns), mounts: Mutex::default() }
+        Translator { frames: Frames::new(ns), compressed: Vec::new(), mounts: Mutex::default() }
+    }
+
+    /// The routes' configured types (route, type name): a camera route refuses frames whose
+    /// encoding its type cannot carry.
+    pub fn with_types<'a>(mut self, types: impl IntoIterator<Item = (Route, &'a str)>) -> Translator {
+        self.compressed =
+            types.into_iter().filter(|(_, t)| *t == "sensor_msgs/msg/CompressedImage").map(|(r, _)| r).collect();
+        self
     }
 
     /// `route`'s message from `payload`, a message of `topic` (one of the route's sources),
@@ -81,9 +91,16 @@ impl Translator {
                 let s = decoded::<CameraFrameRef>(payload)?;
                 let optical = f.camera(camera_of(topic)).1;
                 let hint = s.msg.data.len() + 128;
-                match convert::image(s.header.stamp_sim_ns, optical, &s.msg) {
-                    RosImage::Raw(img) => cdr(s.header, &img, hint),
-                    RosImage::Compressed(img) => cdr(s.header, &img, hint),
+                match (convert::image(s.header.stamp_sim_ns, optical, &s.msg), self.compressed.contains(&route)) {
+                    (RosImage::Raw(img), false) => cdr(s.header, &img, hint),
+                    (RosImage::Compressed(img), true) => cdr(s.header, &img, hint),
+                    (_, compressed) => Err(format!(
+                        "{topic} frames are {:?} but ros2.topics.{}.type is {} (fix: set it to {}, or leave it out)",
+                        s.msg.encoding,
+                        route.id(),
+                        if compressed { "CompressedImage" } else { "Image" },
+                        if compressed { "sensor_msgs/msg/Image" } else { "sensor_msgs/msg/CompressedImage" },
+                    )),
                 }
             }
             Route::CameraFrontInfo | Route::CameraNarrowInfo => {
@@ -105,7 +122,11 @@ impl Translator {
             }
             Route::Tf => {
                 let s = decoded::<VehicleState>(payload)?;
-                cdr(s.header, &TfMessage { transforms: vec![convert::ego_transform(s.header.stamp_sim_ns, f, &s.msg)] }, 128)
+                cdr(
+                    s.header,
+                    &TfMessage { transforms: vec![convert::ego_transform(s.header.stamp_sim_ns, f, &s.msg)] },
+                    128,
+                )
             }
             _ => self.encode_signal(route, payload),
         }
@@ -158,12 +179,28 @@ mod tests {
     }
 
     #[test]
+    fn frames_go_out_as_published_or_are_refused_with_the_fix() {
+        let jpeg =
+            msg::CameraFrameRef { width: 4, height: 2, encoding: msg::ImageEncoding::Jpeg, data: &[0xff, 0xd8, 1, 2] };
+        let payload = msg::encode(&Header::default(), &jpeg);
+        let plain = Translator::new("");
+        let err = plain.encode(Route::CameraFront, Topic::CameraFront, &payload).unwrap_err();
+        assert!(err.contains("ros2.topics.camera_front.type") && err.contains("CompressedImage"), "{err}");
+        let typed = Translator::new("").with_types([(Route::CameraFront, "sensor_msgs/msg/CompressedImage")]);
+        let (_, cdr) = typed.encode(Route::CameraFront, Topic::CameraFront, &payload).unwrap().unwrap();
+        // header (stamp 8, frame id length 4 + 21 bytes "camera_front_optical\0"), then "jpeg".
+        assert!(cdr.windows(5).any(|w| w == b"jpeg\0"));
+        assert!(cdr.ends_with(&[0xff, 0xd8, 1, 2]));
+    }
+
+    #[test]
     fn tf_static_carries_every_camera_seen() {
         let t = Translator::new("car1");
         let info = msg::encode(&Header::default(), &msg::example_info());
         t.encode(Route::TfStatic, Topic::CameraFrontInfo, &info).unwrap();
         let (_, both) = t.encode(Route::TfStatic, Topic::CameraNarrowInfo, &info).unwrap().unwrap();
-        let (_, one) = Translator::new("car1").encode(Route::TfStatic, Topic::CameraNarrowInfo, &info).unwrap().unwrap();
+        let (_, one) =
+            Translator::new("car1").encode(Route::TfStatic, Topic::CameraNarrowInfo, &info).unwrap().unwrap();
         assert!(both.len() > one.len() + 100, "{} vs {}", both.len(), one.len());
     }
 }

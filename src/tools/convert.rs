@@ -63,6 +63,7 @@ pub fn run(args: &ConvertArgs, topics: &TopicMap) -> Result<ConvertSummary> {
     let mut translators: HashMap<String, Translator> = HashMap::new();
     let routes: Vec<Route> =
         config.enabled().filter(|(r, _)| r.direction() == Direction::ToRos).map(|(r, _)| r).collect();
+    let types: Vec<(Route, &str)> = config.enabled().map(|(r, e)| (r, e.type_name.as_str())).collect();
     summary.input_cut = crate::record::play::each_message(&args.input, |m| {
         summary.read += 1;
         let found = keys.entry(m.channel.topic.clone()).or_insert_with(|| topic_of(topics, &m.channel));
@@ -70,7 +71,7 @@ pub fn run(args: &ConvertArgs, topics: &TopicMap) -> Result<ConvertSummary> {
             summary.unmapped += 1;
             return Ok(());
         };
-        let translator = translators.entry(ns.clone()).or_insert_with(|| Translator::new(ns));
+        let translator = translators.entry(ns.clone()).or_insert_with(|| Translator::new(ns).with_types(types.clone()));
         let fed: Vec<Route> = routes.iter().copied().filter(|r| r.sources().contains(topic)).collect();
         if fed.is_empty() {
             summary.unmapped += 1;

@@ -388,7 +388,10 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
             let vehicle = VehicleParams::of_class(scenario.ego.class.into());
             let face = crate::ros2::RosFace::start(lp.bus(), &config, vehicle).await?;
             let n = face.node();
-            eprintln!("ROS 2: node {} in namespace {} on domain {} ({:?} keys)", n.name, n.namespace, n.domain, n.distro);
+            eprintln!(
+                "ROS 2: node {} in namespace {} on domain {} ({:?} keys)",
+                n.name, n.namespace, n.domain, n.distro
+            );
             Some(face)
         }
         false => None,
