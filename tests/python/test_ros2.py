@@ -8,6 +8,7 @@ its hash is checked for the hashing, not for the definition (docs/ros2.md says s
 import json
 import signal
 import subprocess
+import sys
 import threading
 import time
 
@@ -304,3 +305,41 @@ def test_ros2_recordings_and_conversions_decode_with_mcap_ros2_support(slipstrea
     # Log time is when a message was taken, publish time the bus publisher's stamp.
     msg, _ = conv_bag[2]["/clock"][-1]
     assert msg.log_time >= msg.publish_time > 0
+
+
+def test_a_ros_host_on_another_subnet_sees_the_loop_through_the_router(slipstream_bin, sim_bin, tmp_path):
+    from netns import Lan, can_create_namespaces
+
+    why = can_create_namespaces()
+    if why:
+        pytest.skip(f"namespace test: {why}")
+    lan = Lan(["router", "sim", "ros"])
+    procs = []
+    try:
+        router = f"tcp/{lan.addr['router']}:7447"
+        client = ["-c", "config/client.json5", "-e", router, "--cfg", "transport/shared_memory/enabled:false"]
+        logs = {n: open(tmp_path / f"{n}.log", "w") for n in ("router", "sim", "bridge")}
+        procs.append(lan.popen("router", [slipstream_bin, "router", "-c", "config/router.json5"], cwd=ROOT,
+                               stdout=logs["router"], stderr=subprocess.STDOUT))
+        procs.append(lan.popen("sim", [sim_bin, "--scenario", "steady-follow", "--duration", "120", *client],
+                               cwd=ROOT, stdout=logs["sim"], stderr=subprocess.STDOUT))
+        procs.append(lan.popen("sim", [slipstream_bin, *client, "ros2"], cwd=ROOT, stdout=logs["bridge"],
+                               stderr=subprocess.STDOUT))
+        remote = lan.popen("ros", [sys.executable, str(ROOT / "tests" / "python" / "ros2_remote.py"),
+                                   lan.addr["router"], "7447", "45"], cwd=ROOT, stdout=subprocess.PIPE, text=True)
+        out, _ = remote.communicate(timeout=90)
+        seen = json.loads(out)
+    finally:
+        for p in procs:
+            p.send_signal(signal.SIGINT)
+        for p in procs:
+            try:
+                p.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                p.kill()
+        lan.close()
+    tails = "\n".join(f"--- {f.name}\n{f.read_text()[-1500:]}" for f in sorted(tmp_path.glob("*.log")))
+    assert seen["topics"].get("/vehicle/odometry") == ["nav_msgs/msg/Odometry"], (seen, tails)
+    assert seen["topics"].get("/camera/front/image_raw") == ["sensor_msgs/msg/Image"], seen
+    assert seen["clock"] >= 50 and seen["odometry"] >= 50, (seen, tails)
+    assert 10.0 < seen["speed"] < 40.0, seen
