@@ -354,6 +354,17 @@ mod tests {
     }
 
     #[test]
+    fn the_shipped_config_says_what_the_defaults_are() {
+        let shipped = TopicMap::from_json5(include_str!("../../config/slipstream.json5"), "shipped").unwrap();
+        let mut from_file = Ros2Config::from_topic_map(&shipped).unwrap();
+        let mut defaults = config("{}").unwrap();
+        // The domain may come from the environment in both.
+        from_file.domain_id = 0;
+        defaults.domain_id = 0;
+        assert_eq!(from_file, defaults);
+    }
+
+    #[test]
     fn overrides_apply_and_bad_keys_say_the_key_and_the_fix() {
         let c = config(
             "{ camera: { encoding: 'jpeg' }, ros2: { distro: 'humble', domain_id: 3, topics: { command: { enabled: true, name: '/cmd' }, \
