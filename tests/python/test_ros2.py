@@ -343,3 +343,23 @@ def test_a_ros_host_on_another_subnet_sees_the_loop_through_the_router(slipstrea
     assert seen["topics"].get("/camera/front/image_raw") == ["sensor_msgs/msg/Image"], seen
     assert seen["clock"] >= 50 and seen["odometry"] >= 50, (seen, tails)
     assert 10.0 < seen["speed"] < 40.0, seen
+
+
+def test_the_domain_and_distribution_choose_the_keys(slipstream_bin):
+    import os
+
+    def mapping(*flags, domain=None):
+        env = dict(os.environ)
+        env.pop("ROS_DOMAIN_ID", None)
+        if domain is not None:
+            env["ROS_DOMAIN_ID"] = domain
+        return subprocess.run([slipstream_bin, "ros2", "--list", "--json", *flags], capture_output=True, text=True,
+                              cwd=ROOT, env=env)
+
+    rows = {r["route"]: r for r in json.loads(mapping(domain="7").stdout)}
+    assert rows["clock"]["key"].startswith("7/clock/rosgraph_msgs::msg::dds_::Clock_/RIHS01_")
+    humble = {r["route"]: r for r in json.loads(mapping("--distro", "humble", "--domain-id", "3", domain="7").stdout)}
+    assert humble["clock"]["key"] == "3/clock/rosgraph_msgs::msg::dds_::Clock_/TypeHashNotSupported"
+    assert humble["command"]["enabled"] is False
+    bad = mapping(domain="lots")
+    assert bad.returncode != 0 and "ROS_DOMAIN_ID" in bad.stderr and "0 to 232" in bad.stderr, bad.stderr
