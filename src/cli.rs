@@ -24,6 +24,24 @@ pub fn apply_zenoh_runtime_default() {
     }
 }
 
+/// Resolves when the process is asked to stop: Ctrl-C (SIGINT), SIGTERM (a supervisor, `kill`,
+/// systemd, docker stop) or SIGHUP (its terminal closed). Every long-running command stops on
+/// any of them the same way, nodes stopped and reports written. Returns the signal's name.
+pub async fn stop_requested() -> &'static str {
+    use tokio::signal::unix::{signal, SignalKind};
+    let (term, hup) = (signal(SignalKind::terminate()), signal(SignalKind::hangup()));
+    let (Ok(mut term), Ok(mut hup)) = (term, hup) else {
+        // No signal handling here (not expected on Linux): Ctrl-C alone.
+        let _ = tokio::signal::ctrl_c().await;
+        return "Ctrl-C";
+    };
+    tokio::select! {
+        _ = tokio::signal::ctrl_c() => "Ctrl-C",
+        _ = term.recv() => "SIGTERM",
+        _ = hup.recv() => "SIGHUP",
+    }
+}
+
 /// The exit of a binary's `main`: its code, or on an error the error and each cause under it
 /// (see [`error_report`]) on stderr and exit code 1.
 pub fn exit_code(result: anyhow::Result<std::process::ExitCode>) -> std::process::ExitCode {

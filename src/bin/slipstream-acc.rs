@@ -51,7 +51,7 @@ fn run() -> Result<()> {
             .await
             .context("acc: join the bus")?;
         let shutdown = async {
-            let _ = tokio::signal::ctrl_c().await;
+            slipstream::cli::stop_requested().await;
         };
         let stats = slipstream::acc::node::run(&bus, settings, shutdown).await.context("acc: run")?;
         tracing::info!(

@@ -41,7 +41,7 @@ fn run() -> Result<()> {
         let bus =
             slipstream::Bus::open_node(&cli.connect, &cli.faults, &cli.name).await.context("detect: join the bus")?;
         let shutdown = async {
-            let _ = tokio::signal::ctrl_c().await;
+            slipstream::cli::stop_requested().await;
         };
         let stats = slipstream::perception::node::run(&bus, DetectorParams::default(), shutdown)
             .await

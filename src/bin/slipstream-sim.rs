@@ -61,7 +61,7 @@ fn run() -> Result<()> {
         let bus =
             slipstream::Bus::open_node(&cli.connect, &cli.faults, &cli.sim.name).await.context("sim: join the bus")?;
         let shutdown = async {
-            let _ = tokio::signal::ctrl_c().await;
+            slipstream::cli::stop_requested().await;
         };
         let report = slipstream::sim::run(&bus, world, &settings, shutdown).await.context("sim: run")?;
         bus.close().await.context("sim: leave the bus")?;

@@ -49,7 +49,26 @@ pub struct Child {
 }
 
 impl Child {
+    /// Starts `cmd` so that it never outlives this process: should this process end without
+    /// stopping it (killed with SIGKILL, a crash), the kernel sends the child SIGTERM, which
+    /// every node takes as a request to stop (Linux's parent-death signal; the "parent" is
+    /// the spawning thread, here a runtime thread that lives as long as the process's work).
     pub fn spawn(name: &str, cmd: &mut Command) -> Result<Child> {
+        use std::os::unix::process::CommandExt as _;
+        let parent = std::process::id() as libc::pid_t;
+        // SAFETY: between fork and exec only async-signal-safe calls (prctl, getppid).
+        unsafe {
+            cmd.pre_exec(move || {
+                if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM) != 0 {
+                    return Err(std::io::Error::last_os_error());
+                }
+                // The parent may have died before the signal was set up.
+                if libc::getppid() != parent {
+                    return Err(std::io::Error::other("the launcher exited while starting this node"));
+                }
+                Ok(())
+            });
+        }
         let child = cmd.spawn().with_context(|| format!("start {name} ({:?})", cmd.get_program()))?;
         Ok(Child { name: name.to_string(), child, status: None })
     }

@@ -69,7 +69,7 @@ pub async fn run(bus: &Bus, args: &EchoArgs) -> Result<u64> {
     let deadline = args.duration.map(|d| Instant::now() + Duration::from_secs_f64(d));
     let mut printed = 0u64;
     let mut out = std::io::stdout().lock();
-    let ctrl_c = tokio::signal::ctrl_c();
+    let ctrl_c = crate::cli::stop_requested();
     tokio::pin!(ctrl_c);
     while args.count.is_none_or(|n| printed < n) {
         let left = deadline.map_or(Duration::from_secs(3600), |d| d.saturating_duration_since(Instant::now()));

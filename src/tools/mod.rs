@@ -15,7 +15,7 @@ pub mod top;
 pub mod up;
 pub mod view;
 
-/// Waits for Ctrl-C or `duration_s`, printing `status()` on stderr every `every`: one line
+/// Waits for a stop request (Ctrl-C, SIGTERM, SIGHUP: [`crate::cli::stop_requested`]) or `duration_s`, printing `status()` on stderr every `every`: one line
 /// redrawn in place on a terminal, a line each otherwise (`record`, `view`).
 pub(crate) async fn until_stopped(
     duration_s: Option<f64>,
@@ -26,7 +26,7 @@ pub(crate) async fn until_stopped(
     use std::time::{Duration, Instant};
     let tty = std::io::stderr().is_terminal();
     let deadline = duration_s.map(|d| Instant::now() + Duration::from_secs_f64(d));
-    let ctrl_c = tokio::signal::ctrl_c();
+    let ctrl_c = crate::cli::stop_requested();
     tokio::pin!(ctrl_c);
     let mut tick = tokio::time::interval(every);
     loop {

@@ -17,7 +17,7 @@ pub fn run(connect: &ConnectArgs) -> Result<()> {
         let locators: Vec<String> = session.info().locators().await.iter().map(|l| l.to_string()).collect();
         tracing::info!(zid = %session.zid(), ?locators, "router up (Ctrl-C to stop)");
         println!("router {} listening on {}", session.zid(), locators.join(", "));
-        tokio::signal::ctrl_c().await?;
+        crate::cli::stop_requested().await;
         session.close().await.map_err(|e| anyhow!("close the router: {e}"))?;
         Ok(())
     })

@@ -248,7 +248,7 @@ pub fn run(args: &SoakArgs, connect: &crate::config::ConnectArgs) -> Result<Soak
         let mut next = started;
         let mut samples = Vec::new();
         let mut sim_time_s = 0.0;
-        let ctrl_c = tokio::signal::ctrl_c();
+        let ctrl_c = crate::cli::stop_requested();
         tokio::pin!(ctrl_c);
         let progress = loop {
             while let Some(c) = clock.try_recv() {
@@ -267,7 +267,7 @@ pub fn run(args: &SoakArgs, connect: &crate::config::ConnectArgs) -> Result<Soak
                 break progress;
             }
             tokio::select! {
-                _ = &mut ctrl_c => { eprintln!("Ctrl-C: stopping"); break lp.check() },
+                signal = &mut ctrl_c => { eprintln!("{signal}: stopping"); break lp.check() },
                 _ = tokio::time::sleep(NODE_POLL.max(Duration::from_millis(200))) => {}
             }
         };

@@ -251,7 +251,7 @@ pub async fn run(bus: &Bus, args: &TopArgs) -> Result<()> {
     let deadline = args.duration.map(|d| Instant::now() + Duration::from_secs_f64(d));
     let mut tick = tokio::time::interval(Duration::from_secs_f64(args.interval));
     tick.tick().await;
-    let ctrl_c = tokio::signal::ctrl_c();
+    let ctrl_c = crate::cli::stop_requested();
     tokio::pin!(ctrl_c);
     let mut out = std::io::stdout();
     loop {

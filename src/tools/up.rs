@@ -307,13 +307,18 @@ impl Watch {
 }
 
 /// Draws the live view (or prints a plain line) until the simulator ends, a node dies or
-/// Ctrl-C. Returns whether it was Ctrl-C.
-async fn watch_until_over(lp: &mut LoopRun, watch: &Watch, args: &UpArgs, duration_s: f64) -> Result<bool> {
+/// a stop request (Ctrl-C, SIGTERM, SIGHUP). Returns the stop request's signal, if one came.
+async fn watch_until_over(
+    lp: &mut LoopRun,
+    watch: &Watch,
+    args: &UpArgs,
+    duration_s: f64,
+) -> Result<Option<&'static str>> {
     let name = lp.spec().scenario.clone();
     let plain = args.plain || !std::io::stderr().is_terminal();
     let refresh = if plain { REFRESH_PLAIN } else { REFRESH_TTY };
     let nodes_seen = lp.bus().watch_nodes().await?;
-    let ctrl_c = tokio::signal::ctrl_c();
+    let ctrl_c = crate::cli::stop_requested();
     tokio::pin!(ctrl_c);
     // The end is noticed within NODE_POLL; the view is drawn at its own refresh rate.
     let mut poll = tokio::time::interval(NODE_POLL);
@@ -321,7 +326,7 @@ async fn watch_until_over(lp: &mut LoopRun, watch: &Watch, args: &UpArgs, durati
     let mut drawn_lines = 0usize;
     loop {
         tokio::select! {
-            _ = &mut ctrl_c => return Ok(true),
+            signal = &mut ctrl_c => return Ok(Some(signal)),
             _ = poll.tick() => {}
         }
         let over = lp.check().over();
@@ -344,7 +349,7 @@ async fn watch_until_over(lp: &mut LoopRun, watch: &Watch, args: &UpArgs, durati
         }
         let _ = err.flush();
         if over {
-            return Ok(false);
+            return Ok(None);
         }
     }
 }
@@ -412,15 +417,16 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
         dir.display()
     );
     lp.start().await?;
-    let interrupted = watch_until_over(&mut lp, &watch, args, scenario.duration_s).await?;
+    let stopped_by = watch_until_over(&mut lp, &watch, args, scenario.duration_s).await?;
+    let interrupted = stopped_by.is_some();
     for node in lp.check().died {
         eprintln!(
             "{node} ended before the run was over; see {}",
             crate::launch::nodes::log_of(lp.logs(), &node).display()
         );
     }
-    if interrupted {
-        eprintln!("Ctrl-C: stopping the nodes");
+    if let Some(signal) = stopped_by {
+        eprintln!("{signal}: stopping the nodes");
     }
     let nodes = lp.stop().await;
     let wall = started.elapsed().as_secs_f64();
@@ -452,7 +458,10 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
     let end_event = watch.end_event.lock().clone();
     drop(watch);
 
-    let fallback = end_event.unwrap_or_else(|| if interrupted { "stopped (Ctrl-C)".into() } else { "stopped".into() });
+    let fallback = end_event.unwrap_or_else(|| match stopped_by {
+        Some(signal) => format!("stopped ({signal})"),
+        None => "stopped".into(),
+    });
     let judged = judge(&rec, &scenario, sim.as_ref(), &fallback);
     let trace = judged.trace;
     let plots = judged_outputs(&trace, &latency, &scenario.name, args, t0_ns, dir)?;
