@@ -46,8 +46,8 @@ pub struct AccStats {
     pub perception_waits_timed_out: u64,
     /// Answers given without the vehicle/state of their step (it came too late).
     pub state_waits_timed_out: u64,
-    /// Speed, state and perception messages from another publisher than the one followed
-    /// (see `Following`): not used.
+    /// Speed, state, perception and command messages from another publisher than the one
+    /// followed (see `Following`; commands keep their first operator): not used.
     pub foreign_inputs: u64,
     /// Wall time spent computing answers (inputs taken, controller stepped), seconds.
     pub busy_s: f64,
@@ -146,6 +146,7 @@ struct State {
     speed_from: Following,
     state_from: Following,
     perception_from: Following,
+    command_from: Following,
 }
 
 /// A command to publish, with the status when one is due.
@@ -248,7 +249,10 @@ pub async fn run(bus: &Bus, settings: AccSettings, shutdown: impl Future<Output 
             status_pub.put(answer.stamp_ns, status)?;
         }
     }
-    st.stats.foreign_inputs = st.speed_from.rejected() + st.state_from.rejected() + st.perception_from.rejected();
+    st.stats.foreign_inputs = st.speed_from.rejected()
+        + st.state_from.rejected()
+        + st.perception_from.rejected()
+        + st.command_from.rejected();
     st.stats.inputs = vec![
         inputs.speed.stats().snapshot(),
         inputs.state.stats().snapshot(),
@@ -282,6 +286,9 @@ async fn answer_speed(st: &mut State, inputs: &Inputs, settings: &AccSettings, s
         pose: state.as_ref().map(Pose::of).or(st.ego.pose),
     };
     while let Some(c) = inputs.command.try_recv() {
+        if !st.command_from.accept(c.source.as_deref(), Instant::now()) {
+            continue;
+        }
         if let Some(note) = st.ctl.command(&c.msg) {
             tracing::warn!("acc/command: {note}");
         }
@@ -436,6 +443,7 @@ impl State {
             speed_from: Following::new("vehicle/speed"),
             state_from: Following::new("vehicle/state"),
             perception_from: Following::new("perception"),
+            command_from: Following::first_only("acc/command"),
         }
     }
 

@@ -20,6 +20,8 @@ const LOG_EVERY: Duration = Duration::from_secs(5);
 #[derive(Debug)]
 pub struct Following {
     input: &'static str,
+    /// Silence after which the next named publisher is followed; None: never (commands).
+    switch_after: Option<Duration>,
     name: Option<String>,
     last_seen: Option<Instant>,
     rejected: u64,
@@ -28,12 +30,28 @@ pub struct Following {
 
 impl Following {
     pub fn new(input: &'static str) -> Self {
-        Following { input, name: None, last_seen: None, rejected: 0, last_log: None }
+        Following {
+            input,
+            switch_after: Some(FOLLOW_SWITCH_AFTER),
+            name: None,
+            last_seen: None,
+            rejected: 0,
+            last_log: None,
+        }
+    }
+
+    /// An input that keeps its first named publisher however long it is silent: commands
+    /// (acc/command) come now and then, and a second operator must not take over between two.
+    pub fn first_only(input: &'static str) -> Self {
+        Following { switch_after: None, ..Following::new(input) }
     }
 
     /// Whether a sample from `source` (its attachment), arriving at `now`, is used.
     pub fn accept(&mut self, source: Option<&str>, now: Instant) -> bool {
-        let silent = self.last_seen.is_none_or(|t| now.duration_since(t) > FOLLOW_SWITCH_AFTER);
+        let silent = match self.switch_after {
+            Some(after) => self.last_seen.is_none_or(|t| now.duration_since(t) > after),
+            None => self.name.is_none(),
+        };
         let ok = match (&self.name, source) {
             (Some(n), Some(s)) if n == s => true,
             (None, None) => true,
@@ -101,5 +119,15 @@ mod tests {
         let later = t0 + Duration::from_secs(1) + FOLLOW_SWITCH_AFTER + Duration::from_millis(1);
         assert!(f.accept(Some("sim-2"), later));
         assert!(!f.accept(Some("sim"), later));
+    }
+
+    #[test]
+    fn commands_keep_their_first_operator_however_long_it_is_silent() {
+        let mut f = Following::first_only("acc/command");
+        let t0 = Instant::now();
+        assert!(f.accept(Some("operator"), t0));
+        assert!(!f.accept(Some("stranger"), t0 + Duration::from_secs(60)));
+        assert!(f.accept(Some("operator"), t0 + Duration::from_secs(61)));
+        assert_eq!(f.rejected(), 1);
     }
 }
