@@ -72,12 +72,13 @@ pub fn error_report(e: &anyhow::Error) -> String {
 /// (see config/zenoh.json5).
 pub fn init_tracing() {
     let env = EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| EnvFilter::new("info,zenoh=warn,zenoh_ext=warn,foxglove=warn"));
+        .unwrap_or_else(|_| EnvFilter::new(format!("info,zenoh=warn,zenoh_ext=warn,foxglove=warn,{ACL_TARGET}=trace")));
     let layer = tracing_subscriber::fmt::layer()
         .with_writer(std::io::stderr)
         // Colours on a terminal only: `slipstream up` writes the nodes' logs to files.
         .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .with_filter(RendezvousNoise)
+        .with_filter(AclRefusals::default())
         .with_filter(env);
     let _ = tracing_subscriber::registry().with(layer).try_init();
 }
@@ -126,9 +127,70 @@ impl<S> Filter<S> for RendezvousNoise {
     }
 }
 
+/// Where Zenoh's access control says what it decided (at trace level only).
+const ACL_TARGET: &str = "zenoh::net::routing::interceptor::access_control";
+/// A refusal of the same thing is logged at most once per this period.
+const REFUSAL_LOG_EVERY: std::time::Duration = std::time::Duration::from_secs(5);
+
+/// Lets through, of Zenoh's access-control decisions, only the refusals ("... is unauthorized
+/// to put on car2/vehicle/control"), each at most once per [`REFUSAL_LOG_EVERY`]: a router
+/// with access control says in its log who was refused what (docs/deployment.md), without a
+/// line for every message it allows or every repeat of a flood.
+#[derive(Default)]
+struct AclRefusals {
+    last: parking_lot::Mutex<std::collections::HashMap<String, std::time::Instant>>,
+}
+
+impl AclRefusals {
+    fn admits(&self, message: &str, now: std::time::Instant) -> bool {
+        if !message.contains("is unauthorized to") {
+            return false;
+        }
+        // "Using cached result: X" repeats X's first decision: one key for both.
+        let what = message.trim_start_matches("Using cached result: ").to_string();
+        let mut last = self.last.lock();
+        if last.len() > 1024 {
+            last.clear();
+        }
+        match last.get(&what) {
+            Some(t) if now.duration_since(*t) < REFUSAL_LOG_EVERY => false,
+            _ => {
+                last.insert(what, now);
+                true
+            }
+        }
+    }
+}
+
+impl<S> Filter<S> for AclRefusals {
+    fn enabled(&self, _meta: &Metadata<'_>, _cx: &Context<'_, S>) -> bool {
+        true
+    }
+
+    fn event_enabled(&self, event: &Event<'_>, _cx: &Context<'_, S>) -> bool {
+        if event.metadata().target() != ACL_TARGET || *event.metadata().level() <= tracing::Level::INFO {
+            return true;
+        }
+        let mut m = Message(String::new());
+        event.record(&mut m);
+        self.admits(&m.0, std::time::Instant::now())
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::{error_report, is_rendezvous_noise};
+
+    #[test]
+    fn only_access_control_refusals_pass_and_each_once_a_while() {
+        let f = super::AclRefusals::default();
+        let t0 = std::time::Instant::now();
+        let refused = "zid on car1-acc is unauthorized to put on car2/vehicle/control";
+        assert!(f.admits(refused, t0));
+        assert!(!f.admits(&format!("Using cached result: {refused}"), t0 + std::time::Duration::from_secs(1)));
+        assert!(f.admits(refused, t0 + super::REFUSAL_LOG_EVERY));
+        assert!(!f.admits("zid on car1-acc is authorized to put on car1/vehicle/control", t0));
+    }
 
     #[test]
     fn an_error_is_reported_with_each_cause_on_a_line_of_its_own() {

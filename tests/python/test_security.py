@@ -6,6 +6,7 @@ certificate, plain TCP; vehicle/control from another identity; camera/front from
 the simulator). Loopback only."""
 
 import json
+import signal
 import subprocess
 import threading
 import time
@@ -140,3 +141,58 @@ def test_only_the_simulator_publishes_camera_and_only_acc_drives(secure_router, 
     assert all(s["applied"]["brake"] != 1.0 for s in states), "a rogue command was applied"
     report = json.loads(out)
     assert report["control_rejected"] == 0, report
+
+
+FLEET = ["operator", "car1-sim", "car1-detect", "car1-acc", "car2-sim", "car2-detect", "car2-acc"]
+
+
+def test_with_the_fleet_acl_a_vehicle_cannot_command_another(slipstream_bin, free_port, tmp_path):
+    """config/secure/router-fleet.json5: car1's ACC drives car1 and cannot put on car2's
+    control; car2's can; a client without credentials is refused; the router logs the refusal."""
+    make_ca(tmp_path, "ca")
+    cert, key = make_cert(tmp_path, "ca", "router", "IP:127.0.0.1,DNS:localhost")
+    creds = tmp_path / "credentials.txt"
+    creds.write_text("".join(f"{u}:pw-{u}\n" for u in FLEET))
+    endpoint, ca = f"tls/127.0.0.1:{free_port}", tmp_path / "ca.pem"
+    router = subprocess.Popen(
+        [slipstream_bin, "router", "-c", "config/secure/router-fleet.json5",
+         "--cfg", f"listen/endpoints:{json.dumps([endpoint])}",
+         "--cfg", f"transport/link/tls/listen_certificate:{json.dumps(str(cert))}",
+         "--cfg", f"transport/link/tls/listen_private_key:{json.dumps(str(key))}",
+         "--cfg", f"transport/link/tls/root_ca_certificate:{json.dumps(str(ca))}",
+         "--cfg", f"transport/auth/usrpwd/dictionary_file:{json.dumps(str(creds))}"],
+        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    seen, lock = set(), threading.Lock()
+    try:
+        assert endpoint in router.stdout.readline()
+        assert refused(client_config(endpoint, ca)), "no credentials: refused"
+        watcher = zenoh.open(client_config(endpoint, ca, "operator", "pw-operator"))
+        car1 = zenoh.open(client_config(endpoint, ca, "car1-acc", "pw-car1-acc"))
+        car2 = zenoh.open(client_config(endpoint, ca, "car2-acc", "pw-car2-acc"))
+
+        def on_sample(sample):
+            with lock:
+                seen.add((str(sample.key_expr), sample.payload.to_bytes().decode()))
+        sub = watcher.declare_subscriber("*/vehicle/control", on_sample)
+        deadline = time.monotonic() + 15
+        while time.monotonic() < deadline:
+            car1.put("car1/vehicle/control", "car1 drives car1")
+            car1.put("car2/vehicle/control", "car1 drives car2")
+            car2.put("car2/vehicle/control", "car2 drives car2")
+            with lock:
+                if len(seen) >= 2:
+                    break
+            time.sleep(0.1)
+        time.sleep(0.5)
+        sub.undeclare()
+        for session in (watcher, car1, car2):
+            session.close()
+    finally:
+        router.send_signal(signal.SIGINT)
+        try:
+            _, err = router.communicate(timeout=30)
+        except subprocess.TimeoutExpired:
+            router.kill()
+            _, err = router.communicate()
+    assert seen == {("car1/vehicle/control", "car1 drives car1"), ("car2/vehicle/control", "car2 drives car2")}, seen
+    assert "car1-acc" in err and "unauthorized to Put (ingress) on car2/vehicle/control" in err, err[-2000:]
