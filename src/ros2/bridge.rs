@@ -4,7 +4,8 @@
 //! payload, no copy): frames into an outbox of their own (two deep), everything else into a
 //! second one. Each outbox's thread converts to CDR through the [`Translator`] (one copy of a
 //! frame's pixels) and hands the result to the outlet; when it falls behind, the oldest job is
-//! dropped and counted, so no ROS subscriber and no disk can slow the bus.
+//! dropped and counted, so no ROS subscriber and no disk can slow the bus. A route nobody
+//! subscribes to is not converted at all (the outlet says, [`Outlet::wanted`]).
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
@@ -69,6 +70,9 @@ impl Bridge {
             let (outbox, outlet, translator) = (outbox.clone(), outlet.clone(), translator.clone());
             let handler = move |sample: zenoh::sample::Sample| {
                 for &route in &fed {
+                    if !outlet.wanted(route) {
+                        continue;
+                    }
                     let (payload, outlet, translator) = (sample.payload().clone(), outlet.clone(), translator.clone());
                     let job: Job = Box::new(move || {
                         let bytes = payload.to_bytes();

@@ -3,7 +3,8 @@
 //! attachment every sample carries. Transient-local publishers keep their last samples in a
 //! Zenoh advanced publisher's cache, which is where rmw_zenoh's late subscribers ask.
 
-use std::sync::atomic::{AtomicI64, AtomicU32, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicI64, AtomicU32, Ordering};
+use std::sync::Arc;
 
 use anyhow::{Context as _, Result};
 use zenoh::liveliness::LivelinessToken;
@@ -73,12 +74,18 @@ impl RosNode {
                 Inner::Cached(cached)
             }
         };
+        let watched = match &inner {
+            Inner::Plain(p) => Some(Watched::declare(p).await?),
+            // A late subscriber reads the cache: it is filled whether anyone listens or not.
+            Inner::Cached(_) => None,
+        };
         let token = declare_token(&self.session, &token_key).await?;
         Ok(RosPublisher {
             inner,
             topic,
             key,
             type_name: type_name.to_string(),
+            watched,
             gid: gid(&token_key),
             seq: AtomicI64::new(1),
             _token: token,
@@ -121,12 +128,40 @@ pub struct RosPublisher {
     pub key: String,
     /// The ROS type (`sensor_msgs/msg/Image`).
     pub type_name: String,
+    /// Whether a subscriber matches (None: always send).
+    watched: Option<Watched>,
     gid: [u8; 16],
     seq: AtomicI64,
     _token: LivelinessToken,
 }
 
+/// Whether a volatile publisher has a matching subscriber now, kept by Zenoh's matching
+/// listener: with nobody listening, a route is not even converted (a frame's copy saved).
+struct Watched {
+    matching: Arc<AtomicBool>,
+    _listener: zenoh::matching::MatchingListener<()>,
+}
+
+impl Watched {
+    async fn declare(p: &zenoh::pubsub::Publisher<'static>) -> Result<Watched> {
+        let now = p.matching_status().await.map_err(anyhow::Error::from_boxed)?.matching();
+        let matching = Arc::new(AtomicBool::new(now));
+        let m = matching.clone();
+        let listener = p
+            .matching_listener()
+            .callback(move |s: zenoh::matching::MatchingStatus| m.store(s.matching(), Ordering::Relaxed))
+            .await
+            .map_err(anyhow::Error::from_boxed)?;
+        Ok(Watched { matching, _listener: listener })
+    }
+}
+
 impl RosPublisher {
+    /// Whether a message sent now reaches anyone (or is kept for late subscribers).
+    pub fn wanted(&self) -> bool {
+        self.watched.as_ref().is_none_or(|w| w.matching.load(Ordering::Relaxed))
+    }
+
     /// Sends one CDR payload (with its encapsulation header).
     pub fn put(&self, cdr: Vec<u8>) -> Result<()> {
         let attachment = Attachment {

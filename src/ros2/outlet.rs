@@ -17,6 +17,11 @@ pub trait Outlet: Send + Sync {
     fn put(&self, route: Route, header: &Header, cdr: Vec<u8>) -> Result<()>;
     /// The routes it takes, with the ROS name and type each goes to.
     fn routes(&self) -> Vec<(Route, String, String)>;
+    /// Whether a message of `route` would reach anyone now; when not, the bridge does not
+    /// convert it.
+    fn wanted(&self, _route: Route) -> bool {
+        true
+    }
 }
 
 /// The ROS graph: one publisher per route that is on.
@@ -46,5 +51,9 @@ impl Outlet for RosOutlet {
 
     fn routes(&self) -> Vec<(Route, String, String)> {
         self.publishers.iter().map(|(r, p)| (*r, p.topic.clone(), p.type_name.clone())).collect()
+    }
+
+    fn wanted(&self, route: Route) -> bool {
+        self.publishers.get(&route).is_some_and(RosPublisher::wanted)
     }
 }
