@@ -22,28 +22,37 @@ from slipstream_client import decode, encode
 USERS = {"sim": "pw-sim", "detect": "pw-detect", "acc": "pw-acc", "operator": "pw-operator"}
 
 
-@pytest.fixture
-def secure_router(slipstream_bin, free_port, tmp_path):
+def start_router(slipstream_bin, config, endpoint, tmp_path, users):
+    """`slipstream router -c config` on `endpoint` with a CA and router certificate made in
+    `tmp_path` (ca.pem) and `users` ({user: password}) as its credentials; returns once it
+    listens. No shared memory at the router: frames pass it as bytes, as between PCs."""
     make_ca(tmp_path, "ca")
     cert, key = make_cert(tmp_path, "ca", "router", "IP:127.0.0.1,DNS:localhost")
-    make_ca(tmp_path, "other-ca")  # a CA the router's certificate does not come from
     creds = tmp_path / "credentials.txt"
-    creds.write_text("".join(f"{u}:{p}\n" for u, p in USERS.items()))
-    endpoint = f"tls/127.0.0.1:{free_port}"
+    creds.write_text("".join(f"{u}:{p}\n" for u, p in users.items()))
     router = subprocess.Popen(
-        [slipstream_bin, "router", "-c", "config/secure/router.json5",
+        [slipstream_bin, "router", "-c", config,
          "--cfg", f"listen/endpoints:{json.dumps([endpoint])}",
          "--cfg", f"transport/link/tls/listen_certificate:{json.dumps(str(cert))}",
          "--cfg", f"transport/link/tls/listen_private_key:{json.dumps(str(key))}",
          "--cfg", f"transport/link/tls/root_ca_certificate:{json.dumps(str(tmp_path / 'ca.pem'))}",
          "--cfg", f"transport/auth/usrpwd/dictionary_file:{json.dumps(str(creds))}",
-         # No shared memory at the router: frames pass it as bytes, as between PCs.
          "--cfg", "transport/shared_memory/enabled:false"],
         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
     )
+    line = router.stdout.readline()  # "router <zid> listening on ..." once it listens
+    if endpoint not in line:
+        router.kill()
+        raise AssertionError((line, router.communicate(timeout=20)[1]))
+    return router
+
+
+@pytest.fixture
+def secure_router(slipstream_bin, free_port, tmp_path):
+    endpoint = f"tls/127.0.0.1:{free_port}"
+    router = start_router(slipstream_bin, "config/secure/router.json5", endpoint, tmp_path, USERS)
+    make_ca(tmp_path, "other-ca")  # a CA the router's certificate does not come from
     try:
-        line = router.stdout.readline()  # "router <zid> listening on ..." once it listens
-        assert endpoint in line, (line, router.stderr.read() if router.poll() is not None else "")
         yield {"endpoint": endpoint, "ca": tmp_path / "ca.pem", "other_ca": tmp_path / "other-ca.pem", "dir": tmp_path}
     finally:
         router.terminate()
@@ -149,22 +158,11 @@ FLEET = ["operator", "car1-sim", "car1-detect", "car1-acc", "car2-sim", "car2-de
 def test_with_the_fleet_acl_a_vehicle_cannot_command_another(slipstream_bin, free_port, tmp_path):
     """config/secure/router-fleet.json5: car1's ACC drives car1 and cannot put on car2's
     control; car2's can; a client without credentials is refused; the router logs the refusal."""
-    make_ca(tmp_path, "ca")
-    cert, key = make_cert(tmp_path, "ca", "router", "IP:127.0.0.1,DNS:localhost")
-    creds = tmp_path / "credentials.txt"
-    creds.write_text("".join(f"{u}:pw-{u}\n" for u in FLEET))
     endpoint, ca = f"tls/127.0.0.1:{free_port}", tmp_path / "ca.pem"
-    router = subprocess.Popen(
-        [slipstream_bin, "router", "-c", "config/secure/router-fleet.json5",
-         "--cfg", f"listen/endpoints:{json.dumps([endpoint])}",
-         "--cfg", f"transport/link/tls/listen_certificate:{json.dumps(str(cert))}",
-         "--cfg", f"transport/link/tls/listen_private_key:{json.dumps(str(key))}",
-         "--cfg", f"transport/link/tls/root_ca_certificate:{json.dumps(str(ca))}",
-         "--cfg", f"transport/auth/usrpwd/dictionary_file:{json.dumps(str(creds))}"],
-        cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    router = start_router(slipstream_bin, "config/secure/router-fleet.json5", endpoint, tmp_path,
+                          {u: f"pw-{u}" for u in FLEET})
     seen, lock = set(), threading.Lock()
     try:
-        assert endpoint in router.stdout.readline()
         assert refused(client_config(endpoint, ca)), "no credentials: refused"
         watcher = zenoh.open(client_config(endpoint, ca, "operator", "pw-operator"))
         car1 = zenoh.open(client_config(endpoint, ca, "car1-acc", "pw-car1-acc"))
