@@ -41,6 +41,46 @@ pub fn interrupt(pid: u32) {
     }
 }
 
+type SpawnRequest = (Command, std::sync::mpsc::Sender<std::io::Result<std::process::Child>>);
+
+/// The thread that forks every child, started once and never ending before the process does.
+fn spawner() -> &'static std::sync::Mutex<std::sync::mpsc::Sender<SpawnRequest>> {
+    static SPAWNER: std::sync::OnceLock<std::sync::Mutex<std::sync::mpsc::Sender<SpawnRequest>>> =
+        std::sync::OnceLock::new();
+    SPAWNER.get_or_init(|| {
+        let (tx, rx) = std::sync::mpsc::channel::<SpawnRequest>();
+        let forker = move || {
+            for (mut cmd, reply) in rx {
+                let _ = reply.send(spawn_tied(&mut cmd));
+            }
+        };
+        if let Err(e) = std::thread::Builder::new().name("spawner".into()).spawn(forker) {
+            tracing::warn!("no spawner thread ({e}): children cannot be started");
+        }
+        std::sync::Mutex::new(tx)
+    })
+}
+
+/// Forks `cmd` with the parent-death signal set (SIGTERM) in the child.
+fn spawn_tied(cmd: &mut Command) -> std::io::Result<std::process::Child> {
+    use std::os::unix::process::CommandExt as _;
+    let parent = std::process::id() as libc::pid_t;
+    // SAFETY: between fork and exec only async-signal-safe calls (prctl, getppid).
+    unsafe {
+        cmd.pre_exec(move || {
+            if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM) != 0 {
+                return Err(std::io::Error::last_os_error());
+            }
+            // The parent may have died before the signal was set up.
+            if libc::getppid() != parent {
+                return Err(std::io::Error::other("the launcher exited while starting this node"));
+            }
+            Ok(())
+        });
+    }
+    cmd.spawn()
+}
+
 /// A node started as a child process; stopped (SIGINT, then killed) when dropped.
 pub struct Child {
     pub name: String,
@@ -51,28 +91,25 @@ pub struct Child {
 impl Child {
     /// Starts `cmd` so that it never outlives this process: should this process end without
     /// stopping it (killed with SIGKILL, a crash), the kernel sends the child SIGTERM, which
-    /// every node takes as a request to stop (Linux's parent-death signal; the "parent" is
-    /// the spawning thread, here a runtime thread that lives as long as the process's work).
+    /// every node takes as a request to stop (Linux's parent-death signal). The signal follows
+    /// the *thread* that forked, so every child is forked by one thread that lives as long as
+    /// the process ([`spawner`]): forked from a runtime's blocking thread, a node was stopped
+    /// when that thread retired after 10 s idle.
     pub fn spawn(name: &str, cmd: &mut Command) -> Result<Child> {
-        use std::os::unix::process::CommandExt as _;
-        let parent = std::process::id() as libc::pid_t;
-        // SAFETY: between fork and exec only async-signal-safe calls (prctl, getppid).
-        unsafe {
-            cmd.pre_exec(move || {
-                if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM) != 0 {
-                    return Err(std::io::Error::last_os_error());
-                }
-                // The parent may have died before the signal was set up.
-                if libc::getppid() != parent {
-                    return Err(std::io::Error::other("the launcher exited while starting this node"));
-                }
-                Ok(())
-            });
-        }
-        let child = cmd.spawn().with_context(|| format!("start {name} ({:?})", cmd.get_program()))?;
+        let cmd = std::mem::replace(cmd, Command::new(cmd.get_program()));
+        let program = cmd.get_program().to_owned();
+        let (tx, rx) = std::sync::mpsc::channel();
+        spawner()
+            .lock()
+            .map_err(|_| anyhow::anyhow!("the process spawner is gone"))?
+            .send((cmd, tx))
+            .map_err(|_| anyhow::anyhow!("the process spawner is gone"))?;
+        let child = rx
+            .recv()
+            .map_err(|_| anyhow::anyhow!("the process spawner is gone"))?
+            .with_context(|| format!("start {name} ({program:?})"))?;
         Ok(Child { name: name.to_string(), child, status: None })
     }
-
     pub fn pid(&self) -> u32 {
         self.child.id()
     }
