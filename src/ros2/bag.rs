@@ -52,14 +52,7 @@ impl Bag {
             .library(format!("slipstream {}", env!("CARGO_PKG_VERSION")))
             .create(BufWriter::new(file))
             .map_err(|e| anyhow!("start {}: {e}", path.display()))?;
-        let node = super::graph::NodeId {
-            domain: config.domain_id,
-            zid: String::new(),
-            node_id: 0,
-            namespace: config.namespace.clone(),
-            name: config.node.clone(),
-            distro: config.distro,
-        };
+        let node = config.node_id(String::new());
         let routes = config
             .enabled()
             .filter(|(r, _)| r.direction() == Direction::ToRos)

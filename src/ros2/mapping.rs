@@ -10,7 +10,7 @@ use std::collections::BTreeMap;
 
 use serde::Deserialize;
 
-use super::graph::{Durability, Reliability, RosQos};
+use super::graph::{Durability, NodeId, Reliability, RosQos};
 use super::schema::Distro;
 use crate::config::{from_value, CameraEncoding, ConfigError, TopicMap};
 
@@ -256,6 +256,19 @@ impl Ros2Config {
         }
         let namespace = if namespace.is_empty() { "/".to_string() } else { namespace };
         Ok(Ros2Config { domain_id, distro: raw.distro.unwrap_or(Distro::Jazzy), node, namespace, routes })
+    }
+
+    /// The node's place in the ROS graph; `zid` is its Zenoh session's id (empty where only
+    /// names and keys are wanted).
+    pub fn node_id(&self, zid: String) -> NodeId {
+        NodeId {
+            domain: self.domain_id,
+            zid,
+            node_id: 0,
+            namespace: self.namespace.clone(),
+            name: self.node.clone(),
+            distro: self.distro,
+        }
     }
 
     /// The routes that are on.

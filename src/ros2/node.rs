@@ -25,14 +25,7 @@ pub struct RosNode {
 impl RosNode {
     /// Declares the node on `session` (its `NN` token).
     pub async fn declare(session: &zenoh::Session, config: &Ros2Config) -> Result<RosNode> {
-        let id = NodeId {
-            domain: config.domain_id,
-            zid: session.zid().to_string(),
-            node_id: 0,
-            namespace: config.namespace.clone(),
-            name: config.node.clone(),
-            distro: config.distro,
-        };
+        let id = config.node_id(session.zid().to_string());
         let token = declare_token(session, &id.node_token()).await?;
         Ok(RosNode { session: session.clone(), id, next_entity: AtomicU32::new(1), _token: token })
     }
@@ -45,14 +38,24 @@ impl RosNode {
         self.next_entity.fetch_add(1, Ordering::Relaxed)
     }
 
-    /// A publisher of `type_name` on `topic` (relative names resolve under the namespace).
-    pub async fn publisher(&self, topic: &str, type_name: &str, qos: RosQos) -> Result<RosPublisher> {
+    /// An endpoint's resolved topic (relative names under the namespace), data key and token.
+    fn endpoint(
+        &self,
+        kind: EndpointKind,
+        topic: &str,
+        type_name: &str,
+        qos: &RosQos,
+    ) -> Result<(String, String, String)> {
         let topic = self.id.resolve(topic);
         let key = self.id.data_key(&topic, type_name).map_err(anyhow::Error::msg)?;
-        let token_key = self
-            .id
-            .endpoint_token(self.entity_id(), EndpointKind::Publisher, &topic, type_name, &qos)
-            .map_err(anyhow::Error::msg)?;
+        let token =
+            self.id.endpoint_token(self.entity_id(), kind, &topic, type_name, qos).map_err(anyhow::Error::msg)?;
+        Ok((topic, key, token))
+    }
+
+    /// A publisher of `type_name` on `topic` (relative names resolve under the namespace).
+    pub async fn publisher(&self, topic: &str, type_name: &str, qos: RosQos) -> Result<RosPublisher> {
+        let (topic, key, token_key) = self.endpoint(EndpointKind::Publisher, topic, type_name, &qos)?;
         let congestion = match qos.reliability {
             Reliability::Reliable => CongestionControl::Block,
             Reliability::BestEffort => CongestionControl::Drop,
@@ -95,12 +98,7 @@ impl RosNode {
     /// The token and key of a subscription of `type_name` on `topic`; the caller subscribes
     /// to the key (with the handler it needs) and keeps the token as long.
     pub async fn subscription(&self, topic: &str, type_name: &str, qos: RosQos) -> Result<(String, LivelinessToken)> {
-        let topic = self.id.resolve(topic);
-        let key = self.id.data_key(&topic, type_name).map_err(anyhow::Error::msg)?;
-        let token_key = self
-            .id
-            .endpoint_token(self.entity_id(), EndpointKind::Subscription, &topic, type_name, &qos)
-            .map_err(anyhow::Error::msg)?;
+        let (_, key, token_key) = self.endpoint(EndpointKind::Subscription, topic, type_name, &qos)?;
         Ok((key, declare_token(&self.session, &token_key).await?))
     }
 }

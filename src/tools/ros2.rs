@@ -94,14 +94,7 @@ pub struct MappingRow {
 
 /// The mapping as rows, each with its resolved name and data key.
 pub fn mapping(c: &Ros2Config) -> Result<Vec<MappingRow>> {
-    let node = crate::ros2::graph::NodeId {
-        domain: c.domain_id,
-        zid: String::new(),
-        node_id: 0,
-        namespace: c.namespace.clone(),
-        name: c.node.clone(),
-        distro: c.distro,
-    };
+    let node = c.node_id(String::new());
     c.routes
         .iter()
         .map(|(route, e)| {
