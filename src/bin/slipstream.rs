@@ -70,6 +70,11 @@ enum Command {
     /// Runs until Ctrl-C or --duration; `up --ros2` runs the same inside `up`. The mapping
     /// (names, types, QoS) is the `ros2` block of config/slipstream.json5 (docs/ros2.md).
     Ros2(slipstream::tools::ros2::Ros2Args),
+    /// Check a component against its contract: `conform sim` checks a running simulator
+    /// (slipstream-sim, the Python reference simulator, the CARLA or CoppeliaSim adapter)
+    /// against docs/simulator-contract.md; exits with 1 when a rule fails
+    #[command(subcommand)]
+    Conform(slipstream::tools::conform::ConformCommand),
     /// Convert a recording: `--to ros2` writes the ROS 2 messages of the `ros2` mapping into a
     /// ros2-profile MCAP file that `ros2 bag play`, Foxglove and ROS tools read (docs/ros2.md)
     Convert(slipstream::tools::convert::ConvertArgs),
@@ -260,6 +265,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
             slipstream::tools::ros2::run(&bus, &args).await?;
             Ok(bus)
         })),
+        Command::Conform(slipstream::tools::conform::ConformCommand::Sim(args)) => conform_sim(connect, &args),
         Command::Fuzz(args) => done(slipstream::tools::fuzz::command(&args)),
         Command::Soak(args) => {
             use slipstream::tools::soak;
@@ -326,6 +332,24 @@ fn run(cli: Cli) -> Result<ExitCode> {
             }))
         }
     }
+}
+
+/// `conform sim`: as the lockstep node it answers for, or as a watcher of its own name.
+fn conform_sim(connect: &ConnectArgs, args: &slipstream::tools::conform::ConformSimArgs) -> Result<ExitCode> {
+    use slipstream::tools::conform;
+    let node = if args.lockstep { args.name.clone() } else { format!("conform-{}", std::process::id()) };
+    let mut pass = false;
+    on_bus(connect, &node, |bus| async {
+        let report = conform::run_sim(&bus, args).await?;
+        if args.json {
+            println!("{}", serde_json::to_string_pretty(&report)?);
+        } else {
+            print!("{}", conform::render(&report));
+        }
+        pass = report.pass;
+        Ok(bus)
+    })?;
+    Ok(if pass { ExitCode::SUCCESS } else { ExitCode::FAILURE })
 }
 
 /// A report as JSON or as its markdown rendering.

@@ -9,6 +9,9 @@
 //!   slipstream-sim): [`LoopRun`] opens an observer session, starts the controllers, waits for
 //!   their liveliness tokens, starts the simulator, watches for its end or a death, stops
 //!   everything and reads the simulator's report.
+//! - [`external`]: a simulator started elsewhere (`up --sim external`), known by its messages:
+//!   there once vehicle/speed arrives, over when it ends the scenario, runs the time asked
+//!   for, or goes silent for [`external::SILENCE`] (5 s).
 //!
 //! # Timings (chosen here once, for every caller)
 //! | constant | value | what for |
@@ -22,9 +25,11 @@
 use std::time::Duration;
 
 pub mod child;
+pub mod external;
 pub mod nodes;
 
 pub use child::{free_ports, sibling_binary, Child};
+pub use external::ExternalSim;
 pub use nodes::{ClockMode, LinkKind, LoopRun, LoopSpec, Network, NodeEnd, NodeInput};
 
 /// How long the controllers may take to appear on the bus.

@@ -1,6 +1,8 @@
 //! The `slipstream` command's tools that are not benchmarks: `up` (the whole loop, through the
-//! launch and eval layers), `record`, `play`, `view`, `ros2`, `top`, `echo`, `info`, `demo`, `router`, `soak`.
+//! launch and eval layers), `record`, `play`, `view`, `ros2`, `conform`, `top`, `echo`, `info`, `demo`, `router`,
+//! `soak`.
 
+pub mod conform;
 pub mod convert;
 pub mod demo;
 pub mod echo;

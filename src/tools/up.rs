@@ -92,6 +92,19 @@ pub struct UpArgs {
     /// mapping of config/slipstream.json5's `ros2` block (docs/ros2.md)
     #[arg(long)]
     pub ros2: bool,
+    /// Which simulator the loop runs around: builtin (slipstream-sim, started here) or
+    /// external (one started elsewhere: clients/python/examples/reference_sim.py, a CARLA or
+    /// CoppeliaSim adapter, another PC through the router; `up` waits for its vehicle/speed
+    /// and ends with its scenario, after --duration simulated seconds, or when it goes
+    /// silent for 5 s; docs/simulator-contract.md)
+    #[arg(long, value_enum, default_value = "builtin")]
+    pub sim: SimSource,
+    /// With --sim external: how long to wait for the simulator's first message, seconds
+    #[arg(long, default_value_t = 60.0, value_parser = super::top::positive)]
+    pub sim_wait: f64,
+    /// The ACC's set speed, m/s [default: the scenario's; 25 with --sim external]
+    #[arg(long, value_parser = super::top::positive)]
+    pub set_speed: Option<f64>,
     #[command(flatten)]
     pub faults: FaultArgs,
     /// Re-simulate: a recording (`up --record`, `slipstream record`) drives today's detector
@@ -100,6 +113,16 @@ pub struct UpArgs {
     /// come from the recording.
     #[arg(long, value_name = "FILE.mcap", conflicts_with_all = ["record", "viewable", "view", "mode", "duration", "perception", "faults"])]
     pub from: Option<PathBuf>,
+}
+
+/// Where the loop's simulator comes from.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum, Serialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SimSource {
+    /// slipstream-sim, started by `up`.
+    Builtin,
+    /// A simulator started elsewhere, keeping docs/simulator-contract.md.
+    External,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -133,6 +156,11 @@ pub struct UpReport {
     pub nodes: Vec<NodeEnd>,
     pub latency: LatencyReport,
     pub metrics: Option<Metrics>,
+    /// The simulator: builtin or external.
+    pub sim: SimSource,
+    /// The simulator published ground truth (objects): gaps, TTC and the lead's figures are
+    /// judged against it; without it they are not.
+    pub ground_truth: bool,
     /// Every key seen during the run (as `slipstream top` shows it), at the end.
     pub topics: Vec<KeyRow>,
     /// The fault profile the nodes injected (`--faults`), if any.
@@ -212,7 +240,10 @@ pub fn run_from(path: &Path, args: &UpArgs, connect: &ConnectArgs) -> Result<u8>
 
 /// Runs the loop to the end of the scenario (or Ctrl-C), prints the summary, writes the report.
 pub fn run(args: &UpArgs, connect: &ConnectArgs) -> Result<Outcome> {
-    let mut scenario = Scenario::find(&args.scenario)?;
+    let mut scenario = match args.sim {
+        SimSource::Builtin => Scenario::find(&args.scenario)?,
+        SimSource::External => external_scenario(args)?,
+    };
     if let Some(d) = args.duration {
         scenario.duration_s = d;
     }
@@ -228,6 +259,16 @@ pub fn run(args: &UpArgs, connect: &ConnectArgs) -> Result<Outcome> {
     let report = rt.block_on(run_loop(args, connect, scenario, &dir))?;
     println!("{}", summary(&report));
     Ok(Outcome { report })
+}
+
+/// With --sim external the scenario is the simulator's: this one only names the run, sets
+/// the ACC's speed and the ego's class (a car) for the judge, and runs until the simulator
+/// ends it (a day at most).
+fn external_scenario(args: &UpArgs) -> Result<Scenario> {
+    let speed = args.set_speed.unwrap_or(25.0);
+    let text =
+        format!("{{ name: 'external', duration_s: 86400, ego: {{ lane: 1, speed_mps: {speed} }}, traffic: [] }}");
+    Ok(Scenario::parse(&text, "up --sim external")?)
 }
 
 /// What `up` follows on the bus while the loop runs: the run's record (the same recorder as
@@ -269,7 +310,8 @@ impl Watch {
     }
 
     /// The live view's lines.
-    fn lines(&self, name: &str, mode: ClockMode, duration_s: f64, alive: &[String]) -> Vec<String> {
+    /// The live view's lines; `duration_s` None: no known end (an external simulator's).
+    fn lines(&self, name: &str, mode: ClockMode, duration_s: Option<f64>, alive: &[String]) -> Vec<String> {
         let (sim_s, speed, status, collisions) = {
             let rec = self.recorder.rec.lock();
             (
@@ -279,9 +321,15 @@ impl Watch {
                 rec.collisions,
             )
         };
-        let frac = (sim_s / duration_s.max(1e-9)).clamp(0.0, 1.0);
-        let filled = (frac * BAR_WIDTH as f64).round() as usize;
-        let bar = format!("{}{}", "#".repeat(filled), ".".repeat(BAR_WIDTH - filled));
+        let progress = match duration_s {
+            Some(d) => {
+                let frac = (sim_s / d.max(1e-9)).clamp(0.0, 1.0);
+                let filled = (frac * BAR_WIDTH as f64).round() as usize;
+                let bar = format!("{}{}", "#".repeat(filled), ".".repeat(BAR_WIDTH - filled));
+                format!("{sim_s:6.1}/{d:.0} s [{bar}] {:3.0}%", frac * 100.0)
+            }
+            None => format!("{sim_s:6.1} s"),
+        };
         let acc = match &status {
             Some(AccStatus { mode, lead: Some(l), .. }) => {
                 format!("ACC {mode:?}, lead #{} gap {:.1} m (wants {:.1})", l.id, l.gap_m, l.desired_gap_m)
@@ -293,12 +341,7 @@ impl Watch {
         let hops = self.latency.lock().stats(true);
         let hop = |(h, short): (&HopStats, &&str)| format!("{short} {}/{}", fmt_opt(h.p50_ms, 1), fmt_opt(h.p99_ms, 1));
         vec![
-            format!(
-                "{name} [{}] {sim_s:6.1}/{duration_s:.0} s [{bar}] {:3.0}%  RTF {}",
-                mode.name(),
-                frac * 100.0,
-                fmt_opt(rtf, 2)
-            ),
+            format!("{name} [{}] {progress}  RTF {}", mode.name(), fmt_opt(rtf, 2)),
             format!("ego {} m/s  {acc}  collisions {collisions}", fmt_opt(speed, 1)),
             format!("latency p50/p99 ms: {}", hops.iter().zip(&HOPS_SHORT).map(hop).collect::<Vec<_>>().join("  ")),
             format!("nodes alive: {}", if alive.is_empty() { "(none yet)".to_string() } else { alive.join(", ") }),
@@ -312,7 +355,8 @@ async fn watch_until_over(
     lp: &mut LoopRun,
     watch: &Watch,
     args: &UpArgs,
-    duration_s: f64,
+    duration_s: Option<f64>,
+    external: Option<&crate::launch::ExternalSim>,
 ) -> Result<Option<&'static str>> {
     let name = lp.spec().scenario.clone();
     let plain = args.plain || !std::io::stderr().is_terminal();
@@ -329,7 +373,7 @@ async fn watch_until_over(
             signal = &mut ctrl_c => return Ok(Some(signal)),
             _ = poll.tick() => {}
         }
-        let over = lp.check().over();
+        let over = lp.check().over() || external.is_some_and(|e| e.over(args.duration).is_some());
         if !over && drawn_at.is_some_and(|t| t.elapsed() < refresh) {
             continue;
         }
@@ -358,11 +402,14 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
     let started = Instant::now();
     let t0_ns = crate::msg::wall_clock_ns();
     let spec = LoopSpec {
-        scenario: args.scenario.clone(),
+        scenario: match args.sim {
+            SimSource::Builtin => args.scenario.clone(),
+            SimSource::External => scenario.name.clone(),
+        },
         duration_s: scenario.duration_s,
         clock: args.mode,
         perception: args.perception,
-        set_speed_mps: scenario.ego.controller_set_speed_mps(),
+        set_speed_mps: args.set_speed.unwrap_or(scenario.ego.controller_set_speed_mps()),
         time_gap_s: scenario.ego.time_gap_s,
         vehicle: Some(LoopSpec::vehicle_of(&scenario)),
         faults: args.faults.profile()?,
@@ -416,8 +463,25 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
         args.perception.name(),
         dir.display()
     );
-    lp.start().await?;
-    let stopped_by = watch_until_over(&mut lp, &watch, args, scenario.duration_s).await?;
+    let external = match args.sim {
+        SimSource::Builtin => {
+            lp.start().await?;
+            None
+        }
+        SimSource::External => {
+            let ext = crate::launch::ExternalSim::watch(lp.bus()).await?;
+            lp.start_controllers().await?;
+            eprintln!(
+                "waiting for the simulator on {} (at most {:.0} s)",
+                lp.bus().topics().key(topics::VEHICLE_SPEED.topic),
+                args.sim_wait
+            );
+            ext.wait_started(Duration::from_secs_f64(args.sim_wait)).await?;
+            Some(ext)
+        }
+    };
+    let shown = if external.is_some() { args.duration } else { Some(scenario.duration_s) };
+    let stopped_by = watch_until_over(&mut lp, &watch, args, shown, external.as_ref()).await?;
     let interrupted = stopped_by.is_some();
     for node in lp.check().died {
         eprintln!(
@@ -458,10 +522,12 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
     let end_event = watch.end_event.lock().clone();
     drop(watch);
 
-    let fallback = end_event.unwrap_or_else(|| match stopped_by {
+    let external_end = external.as_ref().and_then(|e| e.over(args.duration));
+    let fallback = end_event.or(external_end).unwrap_or_else(|| match stopped_by {
         Some(signal) => format!("stopped ({signal})"),
         None => "stopped".into(),
     });
+    let ground_truth = !rec.objects.is_empty();
     let judged = judge(&rec, &scenario, sim.as_ref(), &fallback);
     let trace = judged.trace;
     let plots = judged_outputs(&trace, &latency, &scenario.name, args, t0_ns, dir)?;
@@ -486,6 +552,8 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
             VehicleParams::of_class(scenario.ego.class.into()).actuator_lag_s,
         ),
         metrics: judged.metrics,
+        sim: args.sim,
+        ground_truth,
         topics: topics_seen,
         faults,
         inputs,
@@ -582,6 +650,12 @@ pub fn summary(r: &UpReport) -> String {
             f(h.p99_ms, 2),
             f(h.max_ms, 2)
         ));
+    }
+    if !r.ground_truth {
+        s.push_str(
+            "  no ground truth: the simulator published no objects, so gaps, TTC and the lead's figures are not judged \
+             (docs/simulator-contract.md, optional parts)\n",
+        );
     }
     if let Some(h) = r.latency.min_stable_time_gap_s {
         s.push_str(&format!(

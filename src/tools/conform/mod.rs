@@ -1,0 +1,111 @@
+//! `slipstream conform sim`: checks that whatever publishes the simulator's side of the bus
+//! (slipstream-sim, the Python reference simulator, a CARLA or CoppeliaSim adapter) keeps the
+//! contract the detector, the ACC and the tools rely on (docs/simulator-contract.md).
+//!
+//! # Layout
+//! - observed.rs: what was seen, as plain data;
+//! - watch.rs: the bus side (subscriptions, the late subscriber, the control probe, lockstep
+//!   answers), every wait bounded;
+//! - rules.rs: the contract's rules judged from what was seen.
+
+pub mod observed;
+pub mod rules;
+pub mod watch;
+
+use serde::Serialize;
+
+pub use rules::{failed, judge, Outcome, Verdict};
+
+/// `slipstream conform`: the contracts a component can be checked against.
+#[derive(clap::Subcommand, Debug)]
+pub enum ConformCommand {
+    /// Check a running simulator against the simulator contract (docs/simulator-contract.md)
+    ///
+    /// Joins the bus beside the simulator (same connection flags and -n/--namespace as the
+    /// loop), watches every key of the contract for --duration, then, in realtime or fast
+    /// mode, sends a gentle brake (0.3125) on vehicle/control for up to 1 s and checks that
+    /// vehicle/state shows it applied; with --lockstep it answers every step instead, as the
+    /// node the simulator's lockstep waits for. Prints one line per rule, PASS, FAIL or SKIP
+    /// with the numbers, and exits with 1 on any FAIL. Run it with the simulator alone (no
+    /// ACC driving it). Examples:
+    ///
+    ///   slipstream-sim --clock realtime &   slipstream conform sim
+    ///   slipstream-sim --clock lockstep &   slipstream conform sim --lockstep
+    ///   slipstream -n car1 -e tcp/ROUTER:7447 conform sim --json
+    #[command(verbatim_doc_comment)]
+    Sim(ConformSimArgs),
+}
+
+#[derive(clap::Args, Debug, Clone)]
+pub struct ConformSimArgs {
+    /// Wall-clock seconds to watch (after the first message)
+    #[arg(long, default_value_t = 5.0, value_parser = super::top::positive)]
+    pub duration: f64,
+    /// Seconds to wait for the simulator's first message before judging
+    #[arg(long, default_value_t = 10.0, value_parser = super::top::positive)]
+    pub wait: f64,
+    /// Answer every step as the controller a lockstep simulator waits for (node --as)
+    #[arg(long)]
+    pub lockstep: bool,
+    /// The node name to answer as in lockstep: one the simulator's lockstep.wait_for lists
+    #[arg(long = "as", value_name = "NODE", default_value = "acc")]
+    pub name: String,
+    /// Do not send the control probe (the control rule is then skipped)
+    #[arg(long)]
+    pub no_control: bool,
+    /// Print the verdicts as JSON
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// The result of one `conform sim`.
+#[derive(Debug, Clone, Serialize)]
+pub struct ConformReport {
+    pub namespace: String,
+    pub lockstep: bool,
+    pub window_s: f64,
+    pub pass: bool,
+    pub verdicts: Vec<Verdict>,
+}
+
+/// Watches the simulator on `bus` and judges it.
+pub async fn run_sim(bus: &crate::Bus, args: &ConformSimArgs) -> Result<ConformReport, crate::bus::BusError> {
+    let observed = watch::watch(bus, args).await?;
+    let verdicts = judge(&observed);
+    Ok(ConformReport {
+        namespace: bus.topics().namespace().to_string(),
+        lockstep: args.lockstep,
+        window_s: observed.window_s,
+        pass: !failed(&verdicts),
+        verdicts,
+    })
+}
+
+/// The verdicts as a table, one rule a line.
+pub fn render(report: &ConformReport) -> String {
+    let width = report.verdicts.iter().map(|v| v.rule.len()).max().unwrap_or(0);
+    let mut out = String::new();
+    for v in &report.verdicts {
+        let outcome = match v.outcome {
+            Outcome::Pass => "PASS",
+            Outcome::Fail => "FAIL",
+            Outcome::Skip => "skip",
+        };
+        out += &format!("{outcome}  {:width$}  {}\n", v.rule, v.detail);
+    }
+    let count = |o: Outcome| report.verdicts.iter().filter(|v| v.outcome == o).count();
+    let ns = if report.namespace.is_empty() {
+        "no namespace".to_string()
+    } else {
+        format!("namespace '{}'", report.namespace)
+    };
+    out += &format!(
+        "{} passed, {} failed, {} skipped ({ns}, {:.1} s watched): the simulator {} the contract\n",
+        count(Outcome::Pass),
+        count(Outcome::Fail),
+        count(Outcome::Skip),
+        report.window_s,
+        if report.pass { "keeps" } else { "breaks" }
+    );
+    out
+}
