@@ -10,6 +10,8 @@ sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[2] / "clients" /
 import reference_sim  # noqa: E402
 from reference_sim import ReferenceSim  # noqa: E402
 
+from slipstream_client.simulator import SimulatorSide  # noqa: E402
+
 
 class NoCamera(ReferenceSim):
     """Leaves out a required key: camera/front (and its ground truth)."""
@@ -18,7 +20,7 @@ class NoCamera(ReferenceSim):
         pass
 
 
-class SpeedAt10Hz(ReferenceSim):
+class SpeedAt10Hz(SimulatorSide):
     """Publishes vehicle/speed at 10 Hz while everything else runs at 100 Hz."""
 
     def put(self, topic, kind, k, body):
@@ -27,32 +29,32 @@ class SpeedAt10Hz(ReferenceSim):
         super().put(topic, kind, k, body)
 
 
-class StampsBackwards(ReferenceSim):
+class StampsBackwards(SimulatorSide):
     """Simulated time jumps back by a second every 50 steps."""
 
     def stamp(self, k):
         return max(0, super().stamp(k) - (1_000_000_000 if k % 50 == 49 else 0))
 
 
-class InfoNotLatched(ReferenceSim):
+class InfoNotLatched(SimulatorSide):
     """Sends the camera info once with a plain publisher: a late subscriber never gets it."""
 
     def latched(self, topic):
         return self.session.declare_publisher(self.topics.key(topic))
 
 
-class IgnoresControl(ReferenceSim):
+class IgnoresControl(SimulatorSide):
     """Never applies vehicle/control (reports the neutral command)."""
 
-    def command_for(self, k, t_ns):
-        return None
+    def command_for(self, k):
+        return None, None
 
 
-class NoLockstepWait(ReferenceSim):
+class NoLockstepWait(SimulatorSide):
     """Says Lockstep on sim/clock but never waits for the controller's answer."""
 
     def await_answer(self, k):
-        return None
+        return None, None
 
     def wait_for_controllers(self):
         pass
@@ -62,5 +64,8 @@ BROKEN = {cls.__name__: cls for cls in (NoCamera, SpeedAt10Hz, StampsBackwards, 
                                         NoLockstepWait)}
 
 if __name__ == "__main__":
-    name = sys.argv.pop(1)
-    reference_sim.main(BROKEN[name])
+    broken = BROKEN[sys.argv.pop(1)]
+    if issubclass(broken, ReferenceSim):
+        reference_sim.main(sim_class=broken)
+    else:
+        reference_sim.main(side_class=broken)
