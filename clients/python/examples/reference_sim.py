@@ -25,6 +25,7 @@ import _path  # noqa: F401  (source checkout)
 import numpy as np
 
 from slipstream_client import connect
+from slipstream_client.camera import Pinhole, pinhole_info
 from slipstream_client.simulator import MODES, RealTimeFactor, SimulatorSide
 
 LANES, LANE_W = 3, 3.5
@@ -60,24 +61,23 @@ class Vehicle:
 
 
 class Camera:
-    """A pinhole camera on the ego: 60 degrees wide, 1.35 m up, pitched 3 degrees down."""
+    """A pinhole camera on the ego: 60 degrees wide, 1.35 m up, pitched 3 degrees down. The
+    scene is drawn for the detector: a daylight road, each vehicle's rear with the dark band
+    where it meets the road."""
 
     def __init__(self, width, height, rate_hz, fov_deg=60.0, mount=(1.6, 0.0, 1.35), pitch_deg=3.0):
-        self.w, self.h, self.rate_hz, self.mount, self.pitch = width, height, rate_hz, mount, math.radians(pitch_deg)
-        self.f = (width / 2) / math.tan(math.radians(fov_deg) / 2)
-        self.info = {"width": width, "height": height, "fx_px": self.f, "fy_px": self.f, "cx_px": width / 2,
-                     "cy_px": height / 2, "horizontal_fov_rad": math.radians(fov_deg),
-                     "mount_position_in_ego_m": list(mount), "mount_roll_pitch_yaw_rad": [0.0, self.pitch, 0.0],
-                     "rate_hz": rate_hz, "encoding": "Rgb8"}
+        self.info = pinhole_info(width, height, fov_deg, mount, pitch_deg, rate_hz)
+        self.pin = Pinhole(self.info)
+        self.w, self.h, self.rate_hz = width, height, rate_hz
         # Where each pixel's ray meets the ground (ego frame), once: the road is straight and
         # the ego keeps its lane, so only the dashes move.
         u, v = np.meshgrid(np.arange(width) + 0.5, np.arange(height) + 0.5)
-        cp, sp = math.cos(self.pitch), math.sin(self.pitch)
-        right, up = (u - width / 2) / self.f, (height / 2 - v) / self.f
+        cp, sp = math.cos(self.pin.pitch), math.sin(self.pin.pitch)
+        right, up = (u - self.pin.cx) / self.pin.fx, (self.pin.cy - v) / self.pin.fy
         dx, dz = cp + up * sp, -sp + up * cp
         ground = dz < -1e-6
         t = np.where(ground, -mount[2] / np.where(ground, dz, -1.0), 0.0)
-        self.gx, self.gy = mount[0] + t * dx, -t * right
+        self.gx, self.gy = mount[0] + t * dx, mount[1] - t * right
         road = ground & (np.abs(self.gy) <= LANES * LANE_W / 2) & (self.gx < 400)
         self.base = np.empty((height, width, 3), np.uint8)
         self.base[:] = SKY
@@ -85,15 +85,6 @@ class Camera:
         self.base[road] = ASPHALT
         lines = [lane_d(i) + LANE_W / 2 for i in range(LANES - 1)]
         self.marking = road & (np.min([np.abs(self.gy - y) for y in lines], axis=0) < 0.075) & (self.gx < 160)
-
-    def project(self, x, y, z):
-        """Pixel (u, v) of a point in the ego frame, or None behind the camera."""
-        px, pz = x - self.mount[0], z - self.mount[2]
-        depth = px * math.cos(self.pitch) - pz * math.sin(self.pitch)
-        if depth < 0.5:
-            return None
-        up = px * math.sin(self.pitch) + pz * math.cos(self.pitch)
-        return self.w / 2 - self.f * (y - self.mount[1]) / depth, self.h / 2 - self.f * up / depth
 
     def render(self, ego_s, others):
         """The frame (H x W x 3 RGB8) and each vehicle's (bbox, visible fraction)."""
@@ -105,15 +96,11 @@ class Camera:
         return img, boxes
 
     def draw(self, img, o):
-        half_w, height = CAR_SIZE[1] / 2, CAR_SIZE[2]
-        a, b = self.project(o["x"], o["y"] + half_w, height), self.project(o["x"], o["y"] - half_w, 0.0)
-        if a is None or b is None:
+        box, visible = self.pin.rear_box(o["x"], o["y"], CAR_SIZE[1], CAR_SIZE[2])
+        if box is None:
             return None, 0.0
-        (u0, v0), (u1, v1) = a, b
-        area = max((u1 - u0) * (v1 - v0), 1e-9)
-        cu0, cv0, cu1, cv1 = max(u0, 0), max(v0, 0), min(u1, self.w), min(v1, self.h)
-        if cu1 <= cu0 or cv1 <= cv0:
-            return None, 0.0
+        (u0, v0), (u1, v1) = (self.pin.project(o["x"], o["y"] + CAR_SIZE[1] / 2, CAR_SIZE[2]),
+                              self.pin.project(o["x"], o["y"] - CAR_SIZE[1] / 2, 0.0))
         bottom = math.floor(v1)  # the row the contact line crosses: covered v1 - bottom
         rows = lambda f0, f1: slice(int(round(v1 - f1 * (v1 - v0))), bottom if f0 == 0 else int(round(v1 - f0 * (v1 - v0))))
         cols = slice(int(round(u0)), int(round(u1)))
@@ -129,8 +116,7 @@ class Camera:
         lamp = BRAKE_LAMP if o["braking"] else TAIL
         for c in (slice(int(u0), int(u0) + lamp_w), slice(int(u1) - lamp_w, int(u1))):
             img[span(rows(0.35, 0.45)), span(c)] = lamp
-        bbox = {"u_min_px": cu0, "v_min_px": cv0, "u_max_px": cu1, "v_max_px": cv1}
-        return bbox, (cu1 - cu0) * (cv1 - cv0) / area
+        return box, visible
 
 
 class ReferenceSim:
