@@ -31,8 +31,8 @@ def conform(slipstream_bin, endpoint, namespace, *args, timeout=60):
 class Running:
     """A simulator process, killed when the test leaves."""
 
-    def __init__(self, argv):
-        self.proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    def __init__(self, argv, **popen):
+        self.proc = subprocess.Popen(argv, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **popen)
         time.sleep(0.5)
 
     def __enter__(self):

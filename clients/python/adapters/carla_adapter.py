@@ -50,7 +50,8 @@ class Body:
         t, box = actor.get_transform(), actor.bounding_box
         self.yaw = -math.radians(t.rotation.yaw)
         fwd = (math.cos(self.yaw), math.sin(self.yaw))
-        centre = t.transform(box.location)
+        # Transform.transform rewrites the point it is given: hand it a copy.
+        centre = t.transform(carla.Location(box.location.x, box.location.y, box.location.z))
         cx, cy = centre.x, -centre.y
         back = box.extent.x - rear_overhang
         self.x, self.y = cx - fwd[0] * back, cy - fwd[1] * back

@@ -77,6 +77,16 @@ pub struct StateSeen {
     pub arrived_s: f64,
 }
 
+/// One ground-truth object in one objects message: where it is and how fast it moves,
+/// relative to the ego.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ObjectSeen {
+    pub stamp_sim_ns: u64,
+    pub id: u32,
+    pub position_in_ego_m: [f64; 2],
+    pub velocity_in_ego_mps: [f64; 2],
+}
+
 /// A frame's size and encoding.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct FrameSeen {
@@ -121,6 +131,7 @@ pub struct Observed {
     pub states: Vec<StateSeen>,
     pub clocks: Vec<SimClock>,
     pub frames: Vec<FrameSeen>,
+    pub objects_seen: Vec<ObjectSeen>,
     pub info: Option<CameraInfo>,
     /// A subscriber declared after the start: seconds until it got the camera info (None:
     /// never; not asked when the watch ended first).

@@ -19,6 +19,9 @@ pub const RTF_TOLERANCE: f64 = 0.20;
 pub const CONTROL_BOUND_S: f64 = 0.25;
 /// A subscriber that joins late must get the camera info this soon.
 pub const LATE_INFO_BOUND_S: f64 = 3.0;
+/// How far ground truth's position_in_ego_m may move from what its velocity_in_ego_mps says,
+/// m/s (median over consecutive messages).
+pub const OBJECT_SPEED_TOLERANCE: f64 = 0.5;
 /// Largest share of vehicle/speed or vehicle/state messages missing from the sequence.
 pub const MAX_EGO_LOSS: f64 = 0.05;
 
@@ -76,6 +79,7 @@ pub fn judge(o: &Observed) -> Vec<Verdict> {
     out.push(monotonic(o));
     out.push(steps(o));
     out.push(frames_match(o));
+    out.push(objects_motion(o));
     out.push(losses(o));
     out.push(late_info(o));
     out.push(frame_size(o));
@@ -290,6 +294,41 @@ fn frames_match(o: &Observed) -> Verdict {
         true,
         format!("{judged} frames on speed steps; {matched} of {} objects on a frame's stamp", objects.len()),
     )
+}
+
+/// Ground truth moves as it says it does: between two objects messages, each object's
+/// position in the ego frame changes by its velocity in the ego frame (within
+/// [`OBJECT_SPEED_TOLERANCE`], the median over every pair).
+fn objects_motion(o: &Observed) -> Verdict {
+    const RULE: &str = "objects.motion";
+    let mut by_id: std::collections::BTreeMap<u32, Vec<&super::observed::ObjectSeen>> = Default::default();
+    for s in &o.objects_seen {
+        by_id.entry(s.id).or_default().push(s);
+    }
+    let mut errors: Vec<(f64, u32)> = Vec::new();
+    for (id, seen) in &by_id {
+        for w in seen.windows(2) {
+            let dt = w[1].stamp_sim_ns.saturating_sub(w[0].stamp_sim_ns) as f64 / 1e9;
+            if !(dt > 0.0 && dt <= 0.5) {
+                continue;
+            }
+            let moved = |i: usize| (w[1].position_in_ego_m[i] - w[0].position_in_ego_m[i]) / dt;
+            let said = |i: usize| (w[0].velocity_in_ego_mps[i] + w[1].velocity_in_ego_mps[i]) / 2.0;
+            errors.push((((moved(0) - said(0)).powi(2) + (moved(1) - said(1)).powi(2)).sqrt(), *id));
+        }
+    }
+    if errors.is_empty() {
+        return skip(RULE, "no object seen in two messages");
+    }
+    errors.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let (median, worst) = (errors[errors.len() / 2].0, errors[errors.len() - 1]);
+    let detail = format!(
+        "position_in_ego_m moves at velocity_in_ego_mps within {median:.2} m/s (median of {} pairs; worst {:.2} m/s, object {}; at most {OBJECT_SPEED_TOLERANCE} m/s)",
+        errors.len(),
+        worst.0,
+        worst.1
+    );
+    verdict(RULE, median <= OBJECT_SPEED_TOLERANCE, detail)
 }
 
 fn losses(o: &Observed) -> Verdict {

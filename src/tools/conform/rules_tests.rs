@@ -1,6 +1,6 @@
 use super::*;
 use crate::msg::{CameraInfo, Header, ImageEncoding, SimClock};
-use crate::tools::conform::observed::{FrameSeen, KeyLog, LockstepLog, ProbeLog};
+use crate::tools::conform::observed::{FrameSeen, KeyLog, LockstepLog, ObjectSeen, ProbeLog};
 use crate::tools::conform::watch::PROBE;
 
 const HZ: u64 = 500;
@@ -44,6 +44,15 @@ fn good() -> Observed {
         .map(|k| SimClock { step: k, real_time_factor: 1.0, mode: SimMode::Realtime, physics_hz: HZ as f64 })
         .collect();
     o.frames = every(25).map(|_| FrameSeen { width: 640, height: 480, encoding: ImageEncoding::Rgb8 }).collect();
+    // A lead 30 m ahead closing at 2 m/s.
+    o.objects_seen = every(25)
+        .map(|k| ObjectSeen {
+            stamp_sim_ns: stamp(k),
+            id: 7,
+            position_in_ego_m: [30.0 - 2.0 * stamp(k) as f64 / 1e9, 0.0],
+            velocity_in_ego_mps: [-2.0, 0.0],
+        })
+        .collect();
     o.states = every(5)
         .map(|k| {
             let applied = if stamp(k) as f64 / 1e9 >= 1.53 { PROBE } else { ControlCommand::NEUTRAL };
@@ -152,6 +161,15 @@ fn frames_between_speed_steps_or_ground_truth_off_the_frame_fail() {
     let mut o = good();
     o.speed.seen.retain(|s| s.header.seq % 5 != 0);
     assert_eq!(outcome(&o, "stamps.frames_match").0, Outcome::Skip);
+}
+
+#[test]
+fn ground_truth_that_moves_otherwise_than_its_velocity_says_fails() {
+    let mut o = good();
+    for (i, s) in o.objects_seen.iter_mut().enumerate() {
+        s.position_in_ego_m[0] -= i as f64 * 0.7; // drifts 14 m/s faster than it says
+    }
+    assert!(fails(&o, "objects.motion").contains("object 7"));
 }
 
 #[test]

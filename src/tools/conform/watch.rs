@@ -10,7 +10,7 @@ use parking_lot::Mutex;
 use serde::de::DeserializeOwned;
 use zenoh::sample::Sample;
 
-use super::observed::{FrameSeen, KeyLog, LockstepLog, Observed, ProbeLog, StateSeen};
+use super::observed::{FrameSeen, KeyLog, LockstepLog, ObjectSeen, Observed, ProbeLog, StateSeen};
 use super::ConformSimArgs;
 use crate::bus::{Bus, BusError, Declared, Publisher};
 use crate::msg::{self, CameraFrameRef, ControlCommand, Message, SimEventKind, SimMode, Stamped};
@@ -166,8 +166,7 @@ async fn subscribe(bus: &Bus, tap: &Tap, answerer: Option<Arc<Mutex<Answerer>>>)
     )
     .await?;
     let tp = tap.clone();
-    on(Topic::Objects, false, Box::new(move |s| drop(tp.take::<msg::GroundTruthObjects>(&s, |o| &mut o.objects))))
-        .await?;
+    on(Topic::Objects, false, Box::new(move |s| take_objects(&tp, &s))).await?;
     let tp = tap.clone();
     on(Topic::CameraFront, false, Box::new(move |s| take_frame(&tp, &s, true))).await?;
     let tp = tap.clone();
@@ -226,6 +225,18 @@ fn take_state(tap: &Tap, sample: &Sample, answerer: Option<&Mutex<Answerer>>) {
     if let Some(a) = answerer {
         a.lock().answer(state.step, stamp, tap);
     }
+}
+
+fn take_objects(tap: &Tap, sample: &Sample) {
+    let Some(gt) = tap.take::<msg::GroundTruthObjects>(sample, |o| &mut o.objects) else { return };
+    let mut o = tap.observed.lock();
+    let Some(stamp_sim_ns) = o.objects.seen.last().map(|s| s.header.stamp_sim_ns) else { return };
+    o.objects_seen.extend(gt.objects.iter().map(|g| ObjectSeen {
+        stamp_sim_ns,
+        id: g.id,
+        position_in_ego_m: [g.position_in_ego_m[0], g.position_in_ego_m[1]],
+        velocity_in_ego_mps: [g.velocity_in_ego_mps[0], g.velocity_in_ego_mps[1]],
+    }));
 }
 
 fn take_frame(tap: &Tap, sample: &Sample, front: bool) {
