@@ -7,7 +7,8 @@
 #     its examples run against the Rust nodes), mcap (an independent reader of recordings),
 #     websockets (an independent Foxglove WebSocket client of the live view), rosbags and
 #     zenoh-ros2-sdk (independent ROS 2 CDR, type hashes and graph discovery, for the ROS 2
-#     bridge; no ROS install);
+#     bridge; no ROS install), carla and coppeliasim-zmqremoteapi-client (the simulators' own
+#     client packages, which the adapters use against stand-ins of their servers);
 #   - the Rust tests in the release profile, the profile of the quick start's
 #     `cargo build --release`: the package has no dev-dependencies and resolves the same
 #     features for both, so after that build no dependency (Zenoh included) compiles again;
@@ -36,10 +37,10 @@ fi
 echo "ok"
 
 step "python venv (.venv) with eclipse-zenoh 1.10"
-if ! .venv/bin/python -c 'import zenoh, numpy, pytest, mcap, websockets, rosbags, zenoh_ros2_sdk' >/dev/null 2>&1; then
+if ! .venv/bin/python -c 'import zenoh, numpy, pytest, mcap, websockets, rosbags, zenoh_ros2_sdk, carla, coppeliasim_zmqremoteapi_client' >/dev/null 2>&1; then
   python3 -m venv .venv
   .venv/bin/pip install --quiet --disable-pip-version-check 'eclipse-zenoh==1.10.*' numpy pytest mcap websockets \
-    'rosbags==0.11.*' 'zenoh-ros2-sdk==0.1.*'
+    'rosbags==0.11.*' 'zenoh-ros2-sdk==0.1.*' 'carla==0.9.16' 'coppeliasim-zmqremoteapi-client==2.0.*'
 fi
 .venv/bin/python -c 'import zenoh; print("eclipse-zenoh", zenoh.__version__ if hasattr(zenoh, "__version__") else "installed")'
 
