@@ -60,11 +60,9 @@ impl ExternalSim {
         Ok(ExternalSim { seen, speed_key, _subs: [speed, events] })
     }
 
-    /// Waits until the simulator's first vehicle/speed, at most `timeout`, or a stop request.
+    /// Waits until the simulator's first vehicle/speed, at most `timeout`.
     pub async fn wait_started(&self, timeout: Duration) -> Result<()> {
         let deadline = Instant::now() + timeout;
-        let stop = crate::cli::stop_requested();
-        tokio::pin!(stop);
         loop {
             if self.seen.lock().last.is_some() {
                 return Ok(());
@@ -78,10 +76,7 @@ impl ExternalSim {
                     timeout.as_secs_f64()
                 );
             }
-            tokio::select! {
-                signal = &mut stop => bail!("{signal} while waiting for the simulator"),
-                _ = tokio::time::sleep(Duration::from_millis(50)) => {}
-            }
+            tokio::time::sleep(Duration::from_millis(50)).await;
         }
     }
 

@@ -398,10 +398,8 @@ async fn watch_until_over(
     }
 }
 
-async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir: &Path) -> Result<UpReport> {
-    let started = Instant::now();
-    let t0_ns = crate::msg::wall_clock_ns();
-    let spec = LoopSpec {
+fn loop_spec(args: &UpArgs, scenario: &Scenario) -> Result<LoopSpec> {
+    Ok(LoopSpec {
         scenario: match args.sim {
             SimSource::Builtin => args.scenario.clone(),
             SimSource::External => scenario.name.clone(),
@@ -411,78 +409,128 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
         perception: args.perception,
         set_speed_mps: args.set_speed.unwrap_or(scenario.ego.controller_set_speed_mps()),
         time_gap_s: scenario.ego.time_gap_s,
-        vehicle: Some(LoopSpec::vehicle_of(&scenario)),
+        vehicle: Some(LoopSpec::vehicle_of(scenario)),
         faults: args.faults.profile()?,
         link: Default::default(),
-    };
+    })
+}
+
+/// What `up` runs beside the loop when asked: the recording, the live view, the ROS 2 face
+/// and its recording.
+struct Extras {
+    recording: Option<Recording>,
+    view: Option<LiveView>,
+    ros2: Option<crate::ros2::RosFace>,
+    ros2_bag: Option<(crate::ros2::Bridge, Arc<crate::ros2::Bag>)>,
+}
+
+/// What the extras did, once stopped.
+struct ExtrasDone {
+    recording: Option<RecordingSummary>,
+    view: Option<ViewStats>,
+    ros2: Option<crate::ros2::FaceStats>,
+    ros2_recording: Option<Vec<crate::ros2::RouteStats>>,
+}
+
+impl Extras {
+    async fn start(bus: &Bus, args: &UpArgs, scenario: &Scenario, dir: &Path) -> Result<Extras> {
+        let recording = match args.record {
+            true => {
+                let viewable = args.viewable.then(|| crate::view::copies::Copies::new(Some(scenario)));
+                Some(Recording::start_with(bus, &bus.topics().every_key(), &dir.join(RECORDING), viewable).await?)
+            }
+            false => None,
+        };
+        let view = match args.view {
+            true => {
+                let opts = ViewOptions::new(crate::view::live::DEFAULT_HOST, args.view_port).with_scenario(scenario);
+                let view = LiveView::start(bus, opts).await?;
+                eprintln!("{}", super::view::how_to_open(crate::view::live::DEFAULT_HOST, view.port()));
+                Some(view)
+            }
+            false => None,
+        };
+        let ros2 = match args.ros2 {
+            true => {
+                let config = crate::ros2::Ros2Config::from_topic_map(bus.topics())?;
+                let vehicle = VehicleParams::of_class(scenario.ego.class.into());
+                let face = crate::ros2::RosFace::start(bus, &config, vehicle).await?;
+                let n = face.node();
+                eprintln!(
+                    "ROS 2: node {} in namespace {} on domain {} ({:?} keys)",
+                    n.name, n.namespace, n.domain, n.distro
+                );
+                Some(face)
+            }
+            false => None,
+        };
+        let ros2_bag = match args.ros2 && args.record {
+            true => {
+                let config = crate::ros2::Ros2Config::from_topic_map(bus.topics())?;
+                let bag = Arc::new(crate::ros2::Bag::create(&dir.join(ROS2_RECORDING), &config)?);
+                Some((crate::ros2::Bridge::start(bus, bag.clone()).await?, bag))
+            }
+            false => None,
+        };
+        Ok(Extras { recording, view, ros2, ros2_bag })
+    }
+
+    async fn stop(self) -> Result<ExtrasDone> {
+        let view = match self.view {
+            Some(v) => Some(v.stop().await),
+            None => None,
+        };
+        let recording = match self.recording {
+            Some(r) => Some(tokio::task::spawn_blocking(move || r.finish()).await??),
+            None => None,
+        };
+        let ros2 = match self.ros2 {
+            Some(b) => Some(b.stop().await),
+            None => None,
+        };
+        let ros2_recording = match self.ros2_bag {
+            Some((bridge, bag)) => {
+                let routes = bridge.stop().await;
+                tokio::task::spawn_blocking(move || bag.finish()).await??;
+                Some(routes)
+            }
+            None => None,
+        };
+        Ok(ExtrasDone { recording, view, ros2, ros2_recording })
+    }
+}
+
+/// Starts the loop's nodes: all of them, or, with --sim external, the controllers, then waits
+/// for the simulator started elsewhere.
+async fn start_nodes(lp: &mut LoopRun, args: &UpArgs) -> Result<Option<crate::launch::ExternalSim>> {
+    if args.sim == SimSource::Builtin {
+        lp.start().await?;
+        return Ok(None);
+    }
+    let ext = crate::launch::ExternalSim::watch(lp.bus()).await?;
+    lp.start_controllers().await?;
+    let key = lp.bus().topics().key(topics::VEHICLE_SPEED.topic);
+    eprintln!("waiting for the simulator on {key} (at most {:.0} s)", args.sim_wait);
+    tokio::select! {
+        started = ext.wait_started(Duration::from_secs_f64(args.sim_wait)) => started?,
+        signal = crate::cli::stop_requested() => anyhow::bail!("{signal} while waiting for the simulator"),
+    }
+    Ok(Some(ext))
+}
+
+async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir: &Path) -> Result<UpReport> {
+    let started = Instant::now();
+    let t0_ns = crate::msg::wall_clock_ns();
+    let spec = loop_spec(args, &scenario)?;
     let faults = spec.faults.as_ref().map(|p| p.summary());
     let mut lp = LoopRun::open(spec, Network::User(connect), &dir.join("logs"), "up").await.context("up")?;
     let watch = Watch::start(lp.bus(), args.perception == PerceptionSource::Camera).await?;
-    let recording = match args.record {
-        true => {
-            let viewable = args.viewable.then(|| crate::view::copies::Copies::new(Some(&scenario)));
-            Some(Recording::start_with(lp.bus(), &lp.bus().topics().every_key(), &dir.join(RECORDING), viewable).await?)
-        }
-        false => None,
-    };
-    let view = match args.view {
-        true => {
-            let opts = ViewOptions::new(crate::view::live::DEFAULT_HOST, args.view_port).with_scenario(&scenario);
-            let view = LiveView::start(lp.bus(), opts).await?;
-            eprintln!("{}", super::view::how_to_open(crate::view::live::DEFAULT_HOST, view.port()));
-            Some(view)
-        }
-        false => None,
-    };
-    let ros2 = match args.ros2 {
-        true => {
-            let config = crate::ros2::Ros2Config::from_topic_map(lp.bus().topics())?;
-            let vehicle = VehicleParams::of_class(scenario.ego.class.into());
-            let face = crate::ros2::RosFace::start(lp.bus(), &config, vehicle).await?;
-            let n = face.node();
-            eprintln!(
-                "ROS 2: node {} in namespace {} on domain {} ({:?} keys)",
-                n.name, n.namespace, n.domain, n.distro
-            );
-            Some(face)
-        }
-        false => None,
-    };
-    let ros2_bag = match args.ros2 && args.record {
-        true => {
-            let config = crate::ros2::Ros2Config::from_topic_map(lp.bus().topics())?;
-            let bag = Arc::new(crate::ros2::Bag::create(&dir.join(ROS2_RECORDING), &config)?);
-            Some((crate::ros2::Bridge::start(lp.bus(), bag.clone()).await?, bag))
-        }
-        false => None,
-    };
-    eprintln!(
-        "slipstream up: {} ({} clock, {} perception), report in {}",
-        scenario.name,
-        args.mode.name(),
-        args.perception.name(),
-        dir.display()
-    );
-    let external = match args.sim {
-        SimSource::Builtin => {
-            lp.start().await?;
-            None
-        }
-        SimSource::External => {
-            let ext = crate::launch::ExternalSim::watch(lp.bus()).await?;
-            lp.start_controllers().await?;
-            eprintln!(
-                "waiting for the simulator on {} (at most {:.0} s)",
-                lp.bus().topics().key(topics::VEHICLE_SPEED.topic),
-                args.sim_wait
-            );
-            ext.wait_started(Duration::from_secs_f64(args.sim_wait)).await?;
-            Some(ext)
-        }
-    };
+    let extras = Extras::start(lp.bus(), args, &scenario, dir).await?;
+    let (clock, perception) = (args.mode.name(), args.perception.name());
+    eprintln!("slipstream up: {} ({clock} clock, {perception} perception), report in {}", scenario.name, dir.display());
+    let external = start_nodes(&mut lp, args).await?;
     let shown = if external.is_some() { args.duration } else { Some(scenario.duration_s) };
     let stopped_by = watch_until_over(&mut lp, &watch, args, shown, external.as_ref()).await?;
-    let interrupted = stopped_by.is_some();
     for node in lp.check().died {
         eprintln!(
             "{node} ended before the run was over; see {}",
@@ -494,26 +542,7 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
     }
     let nodes = lp.stop().await;
     let wall = started.elapsed().as_secs_f64();
-    let view = match view {
-        Some(v) => Some(v.stop().await),
-        None => None,
-    };
-    let recording = match recording {
-        Some(r) => Some(tokio::task::spawn_blocking(move || r.finish()).await??),
-        None => None,
-    };
-    let ros2 = match ros2 {
-        Some(b) => Some(b.stop().await),
-        None => None,
-    };
-    let ros2_recording = match ros2_bag {
-        Some((bridge, bag)) => {
-            let routes = bridge.stop().await;
-            tokio::task::spawn_blocking(move || bag.finish()).await??;
-            Some(routes)
-        }
-        None => None,
-    };
+    let done = extras.stop().await?;
     let sim = lp.sim_report().ok();
     let inputs = lp.inputs();
     let topics_seen = watch.keys.view(lp.bus()).keys;
@@ -527,41 +556,36 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
         Some(signal) => format!("stopped ({signal})"),
         None => "stopped".into(),
     });
-    let ground_truth = !rec.objects.is_empty();
     let judged = judge(&rec, &scenario, sim.as_ref(), &fallback);
     let trace = judged.trace;
     let plots = judged_outputs(&trace, &latency, &scenario.name, args, t0_ns, dir)?;
     let sim_time_s = trace.samples.last().map_or(0.0, |s| s.t_s);
+    let lag_s = VehicleParams::of_class(scenario.ego.class.into()).actuator_lag_s;
     let report = UpReport {
         command: std::env::args().collect::<Vec<_>>().join(" "),
         scenario: scenario.name.clone(),
         mode: args.mode,
         perception: args.perception,
         ended: trace.end.clone(),
-        interrupted,
+        interrupted: stopped_by.is_some(),
         collisions: trace.collisions,
         traffic_collisions: trace.traffic_collisions,
         sim_time_s,
         wall_time_s: wall,
         real_time_factor: sim_time_s / wall.max(1e-9),
         nodes,
-        latency: latency_report(
-            &latency,
-            args,
-            rec.statuses.last().map(|s| s.msg.time_gap_s),
-            VehicleParams::of_class(scenario.ego.class.into()).actuator_lag_s,
-        ),
+        latency: latency_report(&latency, args, rec.statuses.last().map(|s| s.msg.time_gap_s), lag_s),
         metrics: judged.metrics,
         sim: args.sim,
-        ground_truth,
+        ground_truth: !rec.objects.is_empty(),
         topics: topics_seen,
         faults,
         inputs,
         plots,
-        recording,
-        view,
-        ros2,
-        ros2_recording,
+        recording: done.recording,
+        view: done.view,
+        ros2: done.ros2,
+        ros2_recording: done.ros2_recording,
         report_dir: dir.to_path_buf(),
     };
     // The report is on disk before the session closes: sessions still attached (top, echo, a
