@@ -4,7 +4,8 @@
 #     drop on the namespace links), openssl (the security tests make their certificates),
 #     python3 venv support;
 #   - a Python venv in .venv with eclipse-zenoh 1.10, numpy and pytest (the Python client and
-#     its examples run against the Rust nodes), mcap (an independent reader of recordings),
+#     its examples run against the Rust nodes), mcap and mcap-ros2-support (independent readers
+#     of recordings, slipstream's and ROS 2's),
 #     websockets (an independent Foxglove WebSocket client of the live view), rosbags and
 #     zenoh-ros2-sdk (independent ROS 2 CDR, type hashes and graph discovery, for the ROS 2
 #     bridge; no ROS install), carla and coppeliasim-zmqremoteapi-client (the simulators' own
@@ -37,10 +38,11 @@ fi
 echo "ok"
 
 step "python venv (.venv) with eclipse-zenoh 1.10"
-if ! .venv/bin/python -c 'import zenoh, numpy, pytest, mcap, websockets, rosbags, zenoh_ros2_sdk, carla, coppeliasim_zmqremoteapi_client' >/dev/null 2>&1; then
+if ! .venv/bin/python -c 'import zenoh, numpy, pytest, mcap, mcap_ros2, websockets, rosbags, zenoh_ros2_sdk, carla, coppeliasim_zmqremoteapi_client' >/dev/null 2>&1; then
   python3 -m venv .venv
-  .venv/bin/pip install --quiet --disable-pip-version-check 'eclipse-zenoh==1.10.*' numpy pytest mcap websockets \
-    'rosbags==0.11.*' 'zenoh-ros2-sdk==0.1.*' 'carla==0.9.16' 'coppeliasim-zmqremoteapi-client==2.0.*'
+  .venv/bin/pip install --quiet --disable-pip-version-check 'eclipse-zenoh==1.10.*' numpy pytest mcap \
+    mcap-ros2-support websockets 'rosbags==0.11.*' 'zenoh-ros2-sdk==0.1.*' 'carla==0.9.16' \
+    'coppeliasim-zmqremoteapi-client==2.0.*'
 fi
 .venv/bin/python -c 'import zenoh; print("eclipse-zenoh", zenoh.__version__ if hasattr(zenoh, "__version__") else "installed")'
 

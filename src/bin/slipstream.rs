@@ -118,6 +118,11 @@ enum Command {
     /// Print the example payload of every message type (hex, as in docs/wire-format.md)
     #[command(hide = true)]
     WireExamples,
+    /// Decode payloads given as hex, one per line on stdin, and print one JSON verdict per
+    /// line (`{"kind": ...}` or `{"error": ...}`): the Rust decoder as an oracle for other
+    /// implementations of docs/wire-format.md (tests/python/test_wire.py)
+    #[command(hide = true)]
+    WireCheck,
     /// One side of a benchmark case (started by `slipstream bench`)
     #[command(hide = true)]
     BenchPeer {
@@ -319,6 +324,21 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 .map(|(kind, bytes)| serde_json::json!({ "kind": kind.name(), "hex": slipstream::msg::hex_lines(&bytes).replace('\n', " ") }))
                 .collect();
             println!("{}", serde_json::to_string_pretty(&all)?);
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::WireCheck => {
+            use std::io::BufRead;
+            for line in std::io::stdin().lock().lines() {
+                let line = line?;
+                let bytes: Result<Vec<u8>, _> =
+                    (0..line.len()).step_by(2).map(|i| u8::from_str_radix(line.get(i..i + 2).unwrap_or("zz"), 16)).collect();
+                let verdict = match bytes.map(|b| slipstream::msg::decode_json(&b)) {
+                    Ok(Ok((kind, _, _))) => serde_json::json!({ "kind": kind.name() }),
+                    Ok(Err(e)) => serde_json::json!({ "error": e.to_string() }),
+                    Err(_) => serde_json::json!({ "error": format!("not hex: {line}") }),
+                };
+                println!("{verdict}");
+            }
             Ok(ExitCode::SUCCESS)
         }
         Command::BenchPeer { role, spec, endpoint } => {

@@ -414,6 +414,25 @@ fn the_wire_format_doc_quotes_every_example() {
     }
 }
 
+/// One version everywhere the doc states it: its title, the envelope table a reader is
+/// written from, every encoding schema and the first byte of every worked example.
+#[test]
+fn the_wire_format_doc_states_one_version_everywhere() {
+    let doc = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/docs/wire-format.md")).unwrap();
+    let v = slipstream::msg::WIRE_VERSION;
+    assert!(doc.starts_with(&format!("# slipstream wire format (version {v})\n")), "the title");
+    let envelope = doc.lines().find(|l| l.starts_with("| 0 | 1 | version |")).expect("the envelope's version row");
+    assert!(envelope.contains(&format!("`0x{v:02x}`")), "the envelope table says {envelope}");
+    let schemas: Vec<&str> = doc.split("slipstream/").skip(1).filter_map(|s| s.split(['|', '`', ' ']).next()).collect();
+    assert!(schemas.len() >= 14, "{schemas:?}");
+    for schema in schemas.iter().filter(|s| s.contains("/v")) {
+        assert!(schema.ends_with(&format!("/v{v}")), "encoding schema {schema}");
+    }
+    for (kind, bytes) in examples() {
+        assert_eq!(bytes[0], v, "{} example", kind.name());
+    }
+}
+
 /// Every decoder and config parser takes 100,000 (parsers 5,000) mutated valid inputs without
 /// a panic, and the mutations reach both sides: some inputs accepted, most rejected
 /// (`slipstream fuzz --count 10000000` is the long run, docs/performance.md).

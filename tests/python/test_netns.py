@@ -348,3 +348,39 @@ def test_peer_mode_nodes_find_each_other_by_multicast_inside_the_namespaces(lan,
     record("peer_multicast", {"first_loop_s": round(first, 3), "last_3s": window, "latency_ms": steady})
     # The loop runs at its rates: 100 Hz states, 20 Hz frames and detections.
     assert window["state"] > 200 and window["frame"] > 40 and window["det"] > 40, window
+
+
+def test_a_simulator_on_another_host_is_checked_then_driven_through_the_router(tmp_path, slipstream_bin):
+    """The simulator contract across hosts (docs/simulator-contract.md): the Python reference
+    simulator on one host, the router on a second, `conform sim` and then `up --sim external`
+    on a third; frames cross the bridge (shared memory off)."""
+    net = Lan(["router", "simpc", "looppc"], subnet="10.217.0")
+    b = bins(slipstream_bin)
+    router_ep = f"tcp/{net.addr['router']}:7447"
+    client = ["-c", "config/client.json5", "-e", router_ep, *NO_SHM]
+    reference = [sys.executable, str(ROOT / "clients" / "python" / "examples" / "reference_sim.py"),
+                 "-m", "client", "-e", router_ep, *NO_SHM]
+    on_loop_pc = lambda *argv, timeout: subprocess.run(["ip", "netns", "exec", net.ns["looppc"], b["slipstream"],
+                                                        *client, *argv], capture_output=True, text=True,
+                                                       timeout=timeout, cwd=ROOT)
+    with running_on(net, tmp_path / "logs") as hosts:
+        hosts.start("router", [b["slipstream"], "router", "-c", "config/router.json5", *NO_SHM])
+        hosts.start("simpc", [*reference, "-n", "lab", "--mode", "realtime", "--duration", "600"], name="sim-realtime")
+        checked = on_loop_pc("-n", "lab", "conform", "sim", "--json", "--duration", "3", "--wait", "30", timeout=120)
+        hosts.procs["sim-realtime"].send_signal(signal.SIGINT)
+        hosts.start("simpc", [*reference, "-n", "lab2", "--mode", "lockstep", "--duration", "20"], name="sim-lockstep")
+        up = on_loop_pc("-n", "lab2", "up", "--sim", "external", "--mode", "lockstep", "--plain", "--report",
+                        str(tmp_path / "report"), timeout=300)
+        logs = hosts.tails()
+    assert checked.stdout, f"{checked.stderr[-2000:]}\n{logs}"
+    verdicts = {v["rule"]: v for v in json.loads(checked.stdout)["verdicts"]}
+    failed = {r: v["detail"] for r, v in verdicts.items() if v["outcome"] == "FAIL"}
+    assert checked.returncode == 0 and not failed, failed
+    assert up.returncode == 0, f"{up.stderr[-3000:]}\n{logs}"
+    report = json.loads((tmp_path / "report" / "report.json").read_text())
+    assert report["ended"] == "duration reached" and report["collisions"] == 0, report["ended"]
+    rows = {r["key"]: r for r in report["topics"]}
+    assert rows["lab2/perception/objects"]["from"] == "detect" and rows["lab2/vehicle/control"]["from"] == "acc"
+    record("external_simulator", {"conform": {r: v["outcome"] for r, v in verdicts.items()},
+                                  "up_sim_time_s": report["sim_time_s"], "up_wall_time_s": report["wall_time_s"],
+                                  "min_gap_m": report["metrics"]["min_gap_m"]})

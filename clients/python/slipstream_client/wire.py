@@ -6,6 +6,7 @@ Bodies are dicts keyed by the field names of the doc; enums are their variant na
 Decoding is strict, like the Rust side: any malformed payload raises WireError.
 """
 
+import math
 import struct
 import threading
 
@@ -259,16 +260,62 @@ def _write(out, ty, v):
         raise AssertionError(f"unknown type {ty}")
 
 
+def _in(v, lo, hi):
+    """lo <= v <= hi; False for NaN (every comparison with NaN is)."""
+    return lo <= v <= hi
+
+
 def _check(kind, body):
+    """The value rules of docs/wire-format.md ("Value rules")."""
     if kind == "CameraFrame":
         if body["width"] == 0 or body["height"] == 0:
             raise WireError("frame size is empty")
         if body["encoding"] == "Rgb8" and len(body["data"]) != body["width"] * body["height"] * 3:
             raise WireError("Rgb8 frame length does not match its size")
-    if kind == "ControlCommand":
+    elif kind == "ControlCommand":
         for f, lo, hi in (("throttle", 0, 1), ("brake", 0, 1), ("steer", -1, 1)):
-            if not lo <= body[f] <= hi:
+            if not _in(body[f], lo, hi):
                 raise WireError(f"{f} {body[f]} is outside {lo}..{hi}")
+    elif kind == "CameraInfo":
+        if body["width"] == 0 or body["height"] == 0:
+            raise WireError("image size is empty")
+        if not (body["fx_px"] > 0 and body["fy_px"] > 0):
+            raise WireError(f"focal lengths must be positive, got fx={body['fx_px']} fy={body['fy_px']}")
+    elif kind == "Detections":
+        for d in body["detections"]:
+            if not _in(d["confidence"], 0, 1):
+                raise WireError(f"track {d['track_id']}: confidence {d['confidence']} is outside 0..1")
+            if not (d["distance_sigma_m"] >= 0 and d["relative_speed_sigma_mps"] >= 0):
+                raise WireError(f"track {d['track_id']}: standard deviations must be 0 or more")
+    elif kind == "AccCommand":
+        v, h = body["set_speed_mps"], body["time_gap_s"]
+        if v is not None and not (math.isfinite(v) and v >= 0):
+            raise WireError(f"set_speed_mps {v} must be a finite value >= 0")
+        if h is not None and not (math.isfinite(h) and h > 0):
+            raise WireError(f"time_gap_s {h} must be a finite value > 0")
+    elif kind == "RoadMap":
+        _check_road(body)
+
+
+def _check_road(road):
+    if not _in(road["lanes"], 1, 8):
+        raise WireError(f"road.lanes: {road['lanes']} lanes (1 to 8)")
+    if not _in(road["lane_width_m"], 2.0, 6.0):
+        raise WireError(f"road.lane_width_m: {road['lane_width_m']} m (2 to 6)")
+    if not _in(road["length_m"], 100.0, 100_000.0):
+        raise WireError(f"road.length_m: {road['length_m']} m (100 m to 100 km)")
+    for i, c in enumerate(road["curves"]):
+        if not (math.isfinite(c["radius_m"]) and abs(c["radius_m"]) >= 30):
+            raise WireError(f"road.curves[{i}].radius_m: radius {c['radius_m']} m is too tight")
+        if not (math.isfinite(c["start_m"]) and math.isfinite(c["length_m"]) and c["start_m"] >= 0 and c["length_m"] > 0):
+            raise WireError(f"road.curves[{i}]: start_m must be >= 0 and length_m > 0")
+    for i, e in enumerate(road["lane_ends"]):
+        if road["lanes"] < 2 or e["lane"] not in (0, road["lanes"] - 1):
+            raise WireError(f"road.lane_ends[{i}].lane: lane {e['lane']} is not an outer lane")
+        if not (math.isfinite(e["taper_m"]) and e["taper_m"] >= 20 and e["taper_m"] <= e["end_m"] <= road["length_m"]):
+            raise WireError(f"road.lane_ends[{i}]: end_m {e['end_m']} and taper_m {e['taper_m']}")
+        if any(o["lane"] == e["lane"] for o in road["lane_ends"][:i]):
+            raise WireError(f"road.lane_ends[{i}].lane: lane {e['lane']} ends twice")
 
 
 def decode(payload, expected=None, copy=True):
