@@ -66,6 +66,5 @@ BROKEN = {cls.__name__: cls for cls in (NoCamera, SpeedAt10Hz, StampsBackwards, 
 if __name__ == "__main__":
     broken = BROKEN[sys.argv.pop(1)]
     if issubclass(broken, ReferenceSim):
-        reference_sim.main(sim_class=broken)
-    else:
-        reference_sim.main(side_class=broken)
+        sys.exit(reference_sim.main(sim_class=broken))
+    sys.exit(reference_sim.main(side_class=broken))

@@ -28,7 +28,6 @@ import argparse
 import math
 import queue
 import sys
-import threading
 import time
 
 import carla
@@ -40,7 +39,7 @@ except ImportError:  # a source checkout
     sys.path.insert(0, str(__import__("pathlib").Path(__file__).resolve().parents[1]))
     from slipstream_client import connect
 from slipstream_client.camera import Pinhole, pinhole_info
-from slipstream_client.simulator import MODES, RealTimeFactor, SimulatorSide
+from slipstream_client.simulator import MODES, RealTimeFactor, SimulatorSide, run_world
 
 
 class Body:
@@ -299,26 +298,15 @@ def main(client_class=None):
         raise SystemExit(f"carla adapter: cannot reach CARLA at {args.host}:{args.port}: {e}") from None
     session, topics = connect.open_from_args(args)
     side = SimulatorSide(session, topics, args.mode, args.physics_hz, args.wait_for or ["acc"], args.step_timeout)
-    stop, code = threading.Event(), 0
-    adapter = None
-    try:
+
+    def make(side):
         adapter = CarlaAdapter(side, world, args)
         print(f"# carla adapter: {args.mode} at {args.physics_hz} Hz, ego {adapter.ego.type_id} #{adapter.ego.id}, "
               f"on {topics.key('vehicle/speed')}", flush=True)
-        steps = adapter.run(stop)
-        print(f"# {steps} steps, {side.bad.count} undecodable commands", flush=True)
-    except KeyboardInterrupt:
-        stop.set()
-    except RuntimeError as e:  # CARLA's client raises RuntimeError on a lost server / time-out
-        print(f"carla adapter: lost the CARLA server: {e}", file=sys.stderr, flush=True)
-        code = 1
-    finally:
-        if adapter is not None and code == 0:
-            adapter.close()
-        side.close()
-        session.close()
-    return code
+        return adapter
 
+    # CARLA's client raises RuntimeError on a lost server (its time-out).
+    return run_world(side, session, make, {RuntimeError: lambda e: f"carla adapter: lost the CARLA server: {e}"})
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -27,7 +27,6 @@ origin) is --rear-axle m behind it. Vision sensor images come bottom row first a
 import argparse
 import math
 import sys
-import threading
 import time
 
 import numpy as np
@@ -40,7 +39,7 @@ except ImportError:  # a source checkout
     sys.path.insert(0, str(__import__("pathlib").Path(__file__).resolve().parents[1]))
     from slipstream_client import connect
 from slipstream_client.camera import Pinhole
-from slipstream_client.simulator import MODES, RealTimeFactor, SimulatorSide
+from slipstream_client.simulator import MODES, RealTimeFactor, SimulatorSide, run_world
 
 
 class Pose:
@@ -224,29 +223,18 @@ def main():
               ">= 50 Hz: set a 10 or 20 ms time step", file=sys.stderr, flush=True)
     session, topics = connect.open_from_args(args)
     side = SimulatorSide(session, topics, args.mode, hz, args.wait_for or ["acc"], args.step_timeout)
-    stop, code, adapter = threading.Event(), 0, None
-    try:
+
+    def make(side):
         adapter = CoppeliaAdapter(side, sim, args)
         print(f"# coppeliasim adapter: {args.mode} at {hz} Hz, ego {args.ego}, on {topics.key('vehicle/speed')}",
               flush=True)
-        steps = adapter.run(stop)
-        print(f"# {steps} steps, {side.bad.count} undecodable commands", flush=True)
-    except KeyboardInterrupt:
-        stop.set()
-    except zmq.Again:
-        print(f"coppeliasim adapter: lost CoppeliaSim: no answer within {args.timeout:g} s", file=sys.stderr,
-              flush=True)
-        code = 1
-    except Exception as e:  # the client raises a plain Exception with CoppeliaSim's error text
-        print(f"coppeliasim adapter: CoppeliaSim refused a call: {e}", file=sys.stderr, flush=True)
-        code = 1
-    finally:
-        if adapter is not None and code == 0:
-            adapter.close()
-        side.close()
-        session.close()
-    return code
+        return adapter
 
+    return run_world(side, session, make, {
+        zmq.Again: lambda e: f"coppeliasim adapter: lost CoppeliaSim: no answer within {args.timeout:g} s",
+        # The client raises a plain Exception with CoppeliaSim's own words.
+        Exception: lambda e: f"coppeliasim adapter: CoppeliaSim refused a call: {e}",
+    })
 
 if __name__ == "__main__":
     sys.exit(main())

@@ -18,7 +18,7 @@ realtime, fast, lockstep (--wait-for NODE: every step waits for that node's answ
 
 import argparse
 import math
-import threading
+import sys
 import time
 
 import _path  # noqa: F401  (source checkout)
@@ -26,7 +26,7 @@ import numpy as np
 
 from slipstream_client import connect
 from slipstream_client.camera import Pinhole, pinhole_info
-from slipstream_client.simulator import MODES, RealTimeFactor, SimulatorSide
+from slipstream_client.simulator import MODES, RealTimeFactor, SimulatorSide, run_world
 
 LANES, LANE_W = 3, 3.5
 CAR_SIZE, CAR_REAR_OVERHANG = [4.6, 1.85, 1.45], 0.95
@@ -224,20 +224,10 @@ def main(sim_class=ReferenceSim, side_class=SimulatorSide):
     if args.physics_hz % args.camera_hz or not 0 < args.camera_hz <= args.physics_hz:
         raise SystemExit("--camera-hz must divide --physics-hz")
     session, topics = connect.open_from_args(args)
-    stop = threading.Event()
     side = side_class(session, topics, args.mode, args.physics_hz, args.wait_for or ["acc"], args.step_timeout)
-    sim = sim_class(side, args)
     print(f"# reference simulator: {args.mode}, {args.duration:g} s at {args.physics_hz} Hz on "
           f"{topics.key('vehicle/speed')} ...", flush=True)
-    try:
-        steps = sim.run(stop)
-        print(f"# {steps} steps, {side.bad.count} undecodable commands", flush=True)
-    except KeyboardInterrupt:
-        stop.set()
-    finally:
-        side.close()
-        session.close()
-
+    return run_world(side, session, lambda side: sim_class(side, args))
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

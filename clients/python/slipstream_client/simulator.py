@@ -18,6 +18,7 @@ silence), holds a command 200 ms of simulated time, then brakes 0.4. In lockstep
 waits for every awaited node's answer to step k (at most `step_timeout` s, then a
 ControlTimeout event and a brake)."""
 
+import sys
 import threading
 import time
 
@@ -192,3 +193,30 @@ class SimulatorSide:
     def close(self):
         self.token.undeclare()
         self.control_sub.undeclare()
+
+
+def run_world(side, session, make, failures=None):
+    """Runs a simulator on `side` to its end, Ctrl-C or SIGTERM, then closes it (when it ended
+    cleanly), the side and the session; returns the process's exit code. `make(side)` builds the
+    simulator: an object with `run(stop_event) -> steps` and, if it holds something to let go
+    of, `close()`. `failures` maps an
+    exception type to a function that words it (a lost server): said on stderr, exit code 1;
+    the first type that matches, in order."""
+    failures = failures or {}
+    stop, world, code = threading.Event(), None, 0
+    try:
+        world = make(side)
+        steps = world.run(stop)
+        print(f"# {steps} steps, {side.bad.count} undecodable commands", flush=True)
+    except KeyboardInterrupt:
+        stop.set()
+    except tuple(failures) as e:
+        words = next(w for kind, w in failures.items() if isinstance(e, kind))
+        print(words(e), file=sys.stderr, flush=True)
+        code = 1
+    finally:
+        if world is not None and code == 0 and hasattr(world, "close"):
+            world.close()
+        side.close()
+        session.close()
+    return code
