@@ -330,8 +330,10 @@ fn run(cli: Cli) -> Result<ExitCode> {
             use std::io::BufRead;
             for line in std::io::stdin().lock().lines() {
                 let line = line?;
-                let bytes: Result<Vec<u8>, _> =
-                    (0..line.len()).step_by(2).map(|i| u8::from_str_radix(line.get(i..i + 2).unwrap_or("zz"), 16)).collect();
+                let bytes: Result<Vec<u8>, _> = (0..line.len())
+                    .step_by(2)
+                    .map(|i| u8::from_str_radix(line.get(i..i + 2).unwrap_or("zz"), 16))
+                    .collect();
                 let verdict = match bytes.map(|b| slipstream::msg::decode_json(&b)) {
                     Ok(Ok((kind, _, _))) => serde_json::json!({ "kind": kind.name() }),
                     Ok(Err(e)) => serde_json::json!({ "error": e.to_string() }),

@@ -46,6 +46,9 @@ struct Inner {
 #[derive(Debug, Clone, Default, Serialize, serde::Deserialize, PartialEq)]
 #[serde(default)]
 pub struct StatsSnapshot {
+    /// The subscription's name (a topic, or a key); left out of JSON when empty (a row that
+    /// names its key and topic itself: `top`).
+    #[serde(skip_serializing_if = "String::is_empty")]
     pub topic: String,
     pub received: u64,
     pub bytes: u64,

@@ -116,7 +116,9 @@ impl Watcher {
                     .map(|t| t.name()),
                 from: from.clone(),
                 kind: kind.map(|k| k.name()),
-                stats: stats.snapshot(),
+                // The row names its key and topic: the snapshot's name (the key) would repeat
+                // the field `topic` in JSON with another meaning.
+                stats: StatsSnapshot { topic: String::new(), ..stats.snapshot() },
             })
             .collect();
         TopView {
