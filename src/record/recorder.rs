@@ -328,7 +328,7 @@ fn write_loop(
                     viewable_skipped += copies.skip(&item.key, &item.payload);
                 } else {
                     for c in copies.of(&item.key, &item.payload) {
-                        write_copy(&mut writer, &mut viewable_channels, c).map_err(fail)?;
+                        write_copy(&mut writer, &mut viewable_channels, c, item.received_ns).map_err(fail)?;
                         viewable_copies += 1;
                     }
                 }
@@ -426,11 +426,13 @@ fn add_channel(
     writer.add_channel(schema, &key.0, &message_encoding(), &meta)
 }
 
-/// A viewable copy on its topic's channel (made with its schema at the first copy).
+/// A viewable copy on its topic's channel (made with its schema at the first copy), logged when
+/// its original was received (`received_ns`), published when its original was.
 fn write_copy(
     writer: &mut mcap::Writer<BufWriter<File>>,
     channels: &mut HashMap<&'static str, u16>,
     c: ViewableCopy,
+    received_ns: u64,
 ) -> mcap::McapResult<()> {
     let id = match channels.get(c.topic) {
         Some(id) => *id,
@@ -444,7 +446,7 @@ fn write_copy(
         }
     };
     let header =
-        mcap::records::MessageHeader { channel_id: id, sequence: 0, log_time: c.log_time, publish_time: c.log_time };
+        mcap::records::MessageHeader { channel_id: id, sequence: 0, log_time: received_ns, publish_time: c.log_time };
     writer.write_to_known_channel(&header, &c.data)
 }
 
@@ -472,12 +474,13 @@ fn write_item(
     }
     channel.summary.messages += 1;
     channel.summary.bytes += item.payload.len() as u64;
-    let time = header.map_or(item.received_ns, |h| h.stamp_pub_ns);
+    // MCAP's (and rosbag2's) meaning: logged when the recorder received it, published when the
+    // publisher stamped it.
     let record = mcap::records::MessageHeader {
         channel_id: channel.id,
         sequence: header.map_or(0, |h| h.seq as u32),
-        log_time: time,
-        publish_time: time,
+        log_time: item.received_ns,
+        publish_time: header.map_or(item.received_ns, |h| h.stamp_pub_ns),
     };
     writer.write_to_known_channel(&record, &item.payload)
 }
