@@ -44,6 +44,9 @@ if ! .venv/bin/python -c 'import zenoh, numpy, pytest, mcap, mcap_ros2, websocke
     mcap-ros2-support websockets 'rosbags==0.11.*' 'zenoh-ros2-sdk==0.1.*' 'carla==0.9.16' \
     'coppeliasim-zmqremoteapi-client==2.0.*'
 fi
+# The Python client as its users install it (editable: the tests run against this checkout's
+# code, imported as an installed package, not from a path the tests add).
+.venv/bin/pip install --quiet --disable-pip-version-check -e 'clients/python[numpy,carla,coppeliasim]'
 .venv/bin/python -c 'import zenoh; print("eclipse-zenoh", zenoh.__version__ if hasattr(zenoh, "__version__") else "installed")'
 
 step "rust build and tests (cargo test --release)"

@@ -1,14 +1,13 @@
-"""Shared fixtures: the Rust binary under test and the Python client on the path."""
+"""Shared fixtures: the Rust binary under test. The Python client is imported as installed
+(scripts/test.sh: pip install -e clients/python)."""
 
 import os
 import pathlib
 import socket
-import sys
 
 import pytest
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(ROOT / "clients" / "python"))
 
 
 @pytest.fixture(scope="session")

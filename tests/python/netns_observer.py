@@ -10,14 +10,11 @@ test_netns.py through `ip netns exec`):
 All stamps are wall-clock nanoseconds of one machine (namespaces share the clock)."""
 
 import json
-import pathlib
-import sys
 import threading
 import time
 
-sys.path.insert(0, str(pathlib.Path(__file__).resolve().parents[2] / "clients" / "python"))
 
-from slipstream_client import WireError, connect, decode  # noqa: E402
+from slipstream_client import WireError, cli, connect, decode
 
 
 def main():
@@ -27,7 +24,7 @@ def main():
     connect.add_args(parser)
     parser.add_argument("--seconds", type=float, default=300)
     args = parser.parse_args()
-    session, topics = connect.open_from_args(args)
+    session, topics = cli.open_session(args)
     lock = threading.Lock()
     counts = {"state": 0, "det": 0, "frame": 0}
     latencies = {"speed_ms": [], "frame_ms": []}

@@ -48,8 +48,11 @@ def test_bad_topic_configs_name_the_file_key_and_fix(tmp_path):
         Topics.load(str(bad))
     with pytest.raises(ConfigError, match=r"key `topics.vehicle/speed.key`: `car/\*\*` is not a plain Zenoh key"):
         Topics(remap={"vehicle/speed": "car/**"})
-    with pytest.raises(ConfigError, match="line 3.*expected `,` or `]`"):
+    with pytest.raises(ConfigError, match=r"key `line 3`: Unexpected \"}\" at column 1; fix: write valid JSON5"):
         parse_json5('{\n  a: [1, 2\n}')
+    # JSON5 as the spec has it: escapes, hexadecimal numbers, infinities, trailing commas.
+    assert parse_json5('{ a: "\\u00e9", b: 0x1f, c: -Infinity, d: [1, 2,], }') == {
+        "a": "\u00e9", "b": 31, "c": float("-inf"), "d": [1, 2]}
 
 
 def test_connection_flags_are_spelled_as_in_rust(slipstream_bin, tmp_path):

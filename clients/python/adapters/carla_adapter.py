@@ -34,12 +34,12 @@ import carla
 import numpy as np
 
 try:
-    from slipstream_client import connect
+    from slipstream_client import cli, connect
 except ImportError:  # a source checkout
     sys.path.insert(0, str(__import__("pathlib").Path(__file__).resolve().parents[1]))
-    from slipstream_client import connect
+    from slipstream_client import cli, connect
 from slipstream_client.camera import Pinhole, pinhole_info
-from slipstream_client.simulator import MODES, RealTimeFactor, SimulatorSide, run_world
+from slipstream_client.simulator import MODES, RealTimeFactor, SimulatorSide
 
 
 class Body:
@@ -296,7 +296,7 @@ def main(client_class=None):
         world = client.get_world()
     except RuntimeError as e:
         raise SystemExit(f"carla adapter: cannot reach CARLA at {args.host}:{args.port}: {e}") from None
-    session, topics = connect.open_from_args(args)
+    session, topics = cli.open_session(args)
     side = SimulatorSide(session, topics, args.mode, args.physics_hz, args.wait_for or ["acc"], args.step_timeout)
 
     def make(side):
@@ -306,7 +306,7 @@ def main(client_class=None):
         return adapter
 
     # CARLA's client raises RuntimeError on a lost server (its time-out).
-    return run_world(side, session, make, {RuntimeError: lambda e: f"carla adapter: lost the CARLA server: {e}"})
+    return cli.run_world(side, session, make, {RuntimeError: lambda e: f"carla adapter: lost the CARLA server: {e}"})
 
 if __name__ == "__main__":
     sys.exit(main())

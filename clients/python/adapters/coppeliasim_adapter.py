@@ -34,12 +34,12 @@ import zmq
 from coppeliasim_zmqremoteapi_client import RemoteAPIClient
 
 try:
-    from slipstream_client import connect
+    from slipstream_client import cli, connect
 except ImportError:  # a source checkout
     sys.path.insert(0, str(__import__("pathlib").Path(__file__).resolve().parents[1]))
-    from slipstream_client import connect
+    from slipstream_client import cli, connect
 from slipstream_client.camera import Pinhole
-from slipstream_client.simulator import MODES, RealTimeFactor, SimulatorSide, run_world
+from slipstream_client.simulator import MODES, RealTimeFactor, SimulatorSide
 
 
 class Pose:
@@ -221,7 +221,7 @@ def main():
     if hz < 50:
         print(f"coppeliasim adapter: the scene's time step gives {hz} Hz; the contract asks vehicle/speed at "
               ">= 50 Hz: set a 10 or 20 ms time step", file=sys.stderr, flush=True)
-    session, topics = connect.open_from_args(args)
+    session, topics = cli.open_session(args)
     side = SimulatorSide(session, topics, args.mode, hz, args.wait_for or ["acc"], args.step_timeout)
 
     def make(side):
@@ -230,7 +230,7 @@ def main():
               flush=True)
         return adapter
 
-    return run_world(side, session, make, {
+    return cli.run_world(side, session, make, {
         zmq.Again: lambda e: f"coppeliasim adapter: lost CoppeliaSim: no answer within {args.timeout:g} s",
         # The client raises a plain Exception with CoppeliaSim's own words.
         Exception: lambda e: f"coppeliasim adapter: CoppeliaSim refused a call: {e}",

@@ -18,7 +18,7 @@ import _path  # noqa: F401  (source checkout)
 
 import zenoh.ext
 
-from slipstream_client import BadPayloads, WireError, connect, decode
+from slipstream_client import BadPayloads, WireError, cli, connect, decode
 from slipstream_client.image import frame_array
 
 
@@ -36,7 +36,7 @@ def main():
             raise SystemExit("--show needs OpenCV: pip install opencv-python") from None
         if not os.environ.get("DISPLAY") and os.name == "posix":
             raise SystemExit("--show needs a display (DISPLAY is not set); leave --show out to print frames")
-    session, topics = connect.open_from_args(args)
+    session, topics = cli.open_session(args)
     latest = {"frame": None}
     cond = threading.Condition()
     stats = {"n": 0}

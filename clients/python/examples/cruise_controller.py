@@ -18,7 +18,7 @@ import time
 
 import _path  # noqa: F401  (source checkout)
 
-from slipstream_client import BadPayloads, WireError, connect, decode, encode
+from slipstream_client import BadPayloads, WireError, cli, connect, decode, encode
 
 # The simulator's default car (config/acc.json5 "vehicle"): feed-forward from acceleration to pedals.
 MASS_KG, MAX_FORCE_N, MAX_POWER_W, MAX_BRAKE_MPS2 = 1500.0, 6500.0, 110000.0, 9.0
@@ -66,7 +66,7 @@ def main():
     args = parser.parse_args()
     if not (0 < args.set_speed < 70 and 0.5 <= args.time_gap <= 5):
         raise SystemExit("--set-speed must be in 0..70 m/s and --time-gap in 0.5..5 s")
-    session, topics = connect.open_from_args(args)
+    session, topics = cli.open_session(args)
     lock = threading.Lock()
     state = {"lead": None, "objects_at": 0.0, "seq": 0, "sent": 0}
     bad = BadPayloads()

@@ -13,7 +13,7 @@ import time
 
 import _path  # noqa: F401  (source checkout)
 
-from slipstream_client import BadPayloads, WireError, connect, decode
+from slipstream_client import BadPayloads, WireError, cli, connect, decode
 
 
 def main():
@@ -22,7 +22,7 @@ def main():
     parser.add_argument("--every", type=int, default=1, help="print one message in N [default: 1]")
     connect.add_args(parser)
     args = parser.parse_args()
-    session, topics = connect.open_from_args(args)
+    session, topics = cli.open_session(args)
     key = topics.key("vehicle/speed")
     done = threading.Event()
     seen = {"n": 0}

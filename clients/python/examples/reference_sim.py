@@ -24,9 +24,9 @@ import time
 import _path  # noqa: F401  (source checkout)
 import numpy as np
 
-from slipstream_client import connect
+from slipstream_client import cli, connect
 from slipstream_client.camera import Pinhole, pinhole_info
-from slipstream_client.simulator import MODES, RealTimeFactor, SimulatorSide, run_world
+from slipstream_client.simulator import MODES, RealTimeFactor, SimulatorSide
 
 LANES, LANE_W = 3, 3.5
 CAR_SIZE, CAR_REAR_OVERHANG = [4.6, 1.85, 1.45], 0.95
@@ -223,11 +223,11 @@ def main(sim_class=ReferenceSim, side_class=SimulatorSide):
     args = parser().parse_args()
     if args.physics_hz % args.camera_hz or not 0 < args.camera_hz <= args.physics_hz:
         raise SystemExit("--camera-hz must divide --physics-hz")
-    session, topics = connect.open_from_args(args)
+    session, topics = cli.open_session(args)
     side = side_class(session, topics, args.mode, args.physics_hz, args.wait_for or ["acc"], args.step_timeout)
     print(f"# reference simulator: {args.mode}, {args.duration:g} s at {args.physics_hz} Hz on "
           f"{topics.key('vehicle/speed')} ...", flush=True)
-    return run_world(side, session, lambda side: sim_class(side, args))
+    return cli.run_world(side, session, lambda side: sim_class(side, args))
 
 if __name__ == "__main__":
     sys.exit(main())

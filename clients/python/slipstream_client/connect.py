@@ -10,9 +10,10 @@ or `-c config/lan-peer.json5` for multicast discovery, or any Zenoh config file 
     session, topics = connect.open_from_args(args)
 """
 
+import argparse
 import json
 import os
-import signal
+from typing import Optional, Sequence, Tuple
 
 import zenoh
 
@@ -21,7 +22,11 @@ from .keys import Topics
 DEFAULT_ENDPOINT = "tcp/127.0.0.1:7447"
 
 
-def add_args(parser):
+class ConnectError(ValueError):
+    """A connection flag Zenoh refuses, or a session that cannot open: says which and why."""
+
+
+def add_args(parser: argparse.ArgumentParser) -> None:
     g = parser.add_argument_group("connection (same flags as the Rust nodes)")
     g.add_argument("-c", "--config", "--zenoh-config", dest="zenoh_config", metavar="FILE",
                    default=os.environ.get("SLIPSTREAM_ZENOH_CONFIG"),
@@ -42,11 +47,15 @@ def add_args(parser):
     g.add_argument("-n", "--namespace", help="put every key under this namespace [env: SLIPSTREAM_NAMESPACE]")
 
 
-def zenoh_config(config_file=None, mode=None, connect=(), listen=(), cfg=(), no_multicast_scouting=False):
+def zenoh_config(config_file: Optional[str] = None, mode: Optional[str] = None, connect: Sequence[str] = (),
+                 listen: Sequence[str] = (), cfg: Sequence[str] = (), no_multicast_scouting: bool = False) -> zenoh.Config:
     """A zenoh.Config: the file, else loopback peer defaults; then mode, endpoints, scouting and
     --cfg pairs (the order the Rust nodes apply them in)."""
     if config_file:
-        conf = zenoh.Config.from_file(config_file)
+        try:
+            conf = zenoh.Config.from_file(config_file)
+        except Exception as e:  # zenoh raises its own error type
+            raise ConnectError(f"{config_file}: not a Zenoh config Zenoh takes: {e}") from None
     else:
         conf = zenoh.Config()
         conf.insert_json5("mode", '"peer"')
@@ -64,28 +73,23 @@ def zenoh_config(config_file=None, mode=None, connect=(), listen=(), cfg=(), no_
     for kv in cfg:
         key, sep, value = kv.partition(":")
         if not sep:
-            raise SystemExit(f"--cfg {kv!r}: missing `:` between key and value; write --cfg 'KEY:VALUE'")
+            raise ConnectError(f"--cfg {kv!r}: missing `:` between key and value; write --cfg 'KEY:VALUE'")
         try:
             conf.insert_json5(key, value)
         except Exception as e:  # zenoh raises its own error type
-            raise SystemExit(f"--cfg {kv!r}: rejected: {e}") from None
+            raise ConnectError(f"--cfg {kv!r}: rejected: {e}") from None
     return conf
 
 
-def _interrupt(signum, frame):
-    raise KeyboardInterrupt
-
-
-def open_from_args(args):
-    """Opens the session and loads the topic keys from parsed `add_args` flags."""
-    # SIGTERM (a process manager, `kill`) stops as cleanly as Ctrl-C.
-    signal.signal(signal.SIGTERM, _interrupt)
+def open_from_args(args: argparse.Namespace) -> Tuple[zenoh.Session, Topics]:
+    """Opens the session and loads the topic keys from parsed `add_args` flags. Raises
+    ConnectError (or keys.ConfigError for the topic config) with what to fix."""
     topics = Topics.load(args.topics, args.namespace)
     conf = zenoh_config(args.zenoh_config, args.zenoh_mode, args.connect, args.listen, args.cfg,
                         args.no_multicast_scouting)
     try:
         session = zenoh.open(conf)
-    except Exception as e:
+    except Exception as e:  # zenoh raises its own error type
         where = ", ".join(args.connect) or args.zenoh_config or DEFAULT_ENDPOINT
-        raise SystemExit(f"cannot open a Zenoh session ({where}): {e}") from None
+        raise ConnectError(f"cannot open a Zenoh session ({where}): {e}") from None
     return session, topics

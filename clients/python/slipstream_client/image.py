@@ -1,9 +1,11 @@
 """Camera frames as numpy arrays (numpy is needed only by this module)."""
 
+from typing import Any, Dict, Tuple
+
 from .wire import WireError, decode
 
 
-def frame_array(payload):
+def frame_array(payload: bytes) -> Tuple[Dict[str, int], Dict[str, Any], Any]:
     """Decodes a camera/front payload into (header, frame, pixels).
 
     pixels is a (height, width, 3) uint8 RGB array. For raw (Rgb8) frames it is a read-only

@@ -16,6 +16,10 @@ import os
 import pathlib
 import re
 
+from typing import Dict, ItemsView, Optional
+
+import json5
+
 from .wire import DEFAULT_KEYS
 
 _CHUNK = re.compile(r"^[A-Za-z0-9_\-.~+=,;:!'()]+$")
@@ -24,7 +28,7 @@ _CHUNK = re.compile(r"^[A-Za-z0-9_\-.~+=,;:!'()]+$")
 class ConfigError(ValueError):
     """A topic config the nodes would refuse: names the file, the key and the fix."""
 
-    def __init__(self, origin, key, problem, fix):
+    def __init__(self, origin: str, key: str, problem: str, fix: str) -> None:
         super().__init__(f"{origin}: key `{key}`: {problem}; fix: {fix}")
 
 
@@ -39,7 +43,7 @@ def _plain_key(origin, where, key):
 class Topics:
     """The key of every topic after namespace and remapping."""
 
-    def __init__(self, namespace="", remap=None, origin="arguments"):
+    def __init__(self, namespace: str = "", remap: Optional[Dict[str, str]] = None, origin: str = "arguments") -> None:
         self.namespace = _plain_key(origin, "namespace", namespace.strip("/")) if namespace.strip("/") else ""
         self._keys = {}
         for topic in DEFAULT_KEYS:
@@ -53,7 +57,7 @@ class Topics:
                               f"the topics are {', '.join(DEFAULT_KEYS)}")
 
     @classmethod
-    def load(cls, path=None, namespace=None):
+    def load(cls, path: Optional[str] = None, namespace: Optional[str] = None) -> "Topics":
         """Reads a slipstream topic config the way the nodes do: `path`, else $SLIPSTREAM_CONFIG,
         else ./config/slipstream.json5 when present, else the defaults. `namespace` (else
         $SLIPSTREAM_NAMESPACE) overrides the file's."""
@@ -81,130 +85,40 @@ class Topics:
                 remap[topic] = entry["key"]
         return cls(namespace, remap, origin)
 
-    def key(self, topic):
+    def key(self, topic: str) -> str:
         """The key `topic` (a logical name such as "vehicle/speed") is published on."""
         try:
             return self._keys[topic]
         except KeyError:
             raise KeyError(f"no topic {topic!r}; the topics are {', '.join(DEFAULT_KEYS)}") from None
 
-    def topic(self, key):
+    def topic(self, key: str) -> Optional[str]:
         """The logical topic published on `key`, or None."""
         return next((t for t, k in self._keys.items() if k == str(key)), None)
 
-    def kind(self, key):
+    def kind(self, key: str) -> Optional[str]:
         """The message type published on `key`, or None."""
         topic = self.topic(key)
         return DEFAULT_KEYS[topic] if topic else None
 
-    def node_key(self, name):
+    def node_key(self, name: str) -> str:
         """The liveliness token key of a node: `<namespace>/nodes/<name>`."""
         return f"{self.namespace}/nodes/{name}" if self.namespace else f"nodes/{name}"
 
-    def all(self):
+    def all(self) -> str:
         """A key expression matching every key of this namespace."""
         return f"{self.namespace}/**" if self.namespace else "**"
 
-    def items(self):
+    def items(self) -> ItemsView[str, str]:
         return self._keys.items()
 
 
-def parse_json5(text, origin="<json5>"):
-    """The JSON5 the config files use: comments, unquoted keys, single quotes, trailing commas."""
-    p = _Json5(text, origin)
-    value = p.value()
-    p.space()
-    if p.i != len(text):
-        p.fail("text after the end of the document")
-    return value
-
-
-class _Json5:
-    def __init__(self, text, origin):
-        self.s, self.i, self.origin = text, 0, origin
-
-    def fail(self, what):
-        line = self.s.count("\n", 0, self.i) + 1
-        raise ConfigError(self.origin, f"line {line}", what, "write valid JSON5")
-
-    def space(self):
-        while self.i < len(self.s):
-            if self.s[self.i].isspace():
-                self.i += 1
-            elif self.s.startswith("//", self.i):
-                end = self.s.find("\n", self.i)
-                self.i = len(self.s) if end < 0 else end
-            elif self.s.startswith("/*", self.i):
-                end = self.s.find("*/", self.i)
-                if end < 0:
-                    self.fail("unclosed comment")
-                self.i = end + 2
-            else:
-                return
-
-    def value(self):
-        self.space()
-        if self.i >= len(self.s):
-            self.fail("unexpected end")
-        c = self.s[self.i]
-        if c == "{":
-            return self.container("}", keyed=True)
-        if c == "[":
-            return self.container("]", keyed=False)
-        if c in "\"'":
-            return self.string()
-        m = re.compile(r"[+-]?(?:\d+\.?\d*(?:[eE][+-]?\d+)?|\.\d+)|true|false|null|[A-Za-z_$][\w$]*").match(self.s, self.i)
-        if not m:
-            self.fail(f"unexpected {c!r}")
-        self.i = m.end()
-        word = m.group(0)
-        if word in ("true", "false", "null"):
-            return {"true": True, "false": False, "null": None}[word]
-        try:
-            return float(word) if any(ch in word for ch in ".eE") else int(word)
-        except ValueError:
-            self.fail(f"unexpected {word!r}")
-
-    def string(self):
-        quote, out = self.s[self.i], []
-        self.i += 1
-        while self.i < len(self.s) and self.s[self.i] != quote:
-            if self.s[self.i] == "\\":
-                self.i += 1
-                out.append({"n": "\n", "t": "\t"}.get(self.s[self.i], self.s[self.i]))
-            else:
-                out.append(self.s[self.i])
-            self.i += 1
-        if self.i >= len(self.s):
-            self.fail("unclosed string")
-        self.i += 1
-        return "".join(out)
-
-    def container(self, close, keyed):
-        self.i += 1
-        out = {} if keyed else []
-        while True:
-            self.space()
-            if self.s.startswith(close, self.i):
-                self.i += 1
-                return out
-            if keyed:
-                if self.s[self.i] in "\"'":
-                    key = self.string()
-                else:
-                    m = re.compile(r"[A-Za-z_$][\w$]*").match(self.s, self.i)
-                    if not m:
-                        self.fail("expected a key")
-                    key, self.i = m.group(0), m.end()
-                self.space()
-                if not self.s.startswith(":", self.i):
-                    self.fail(f"expected `:` after {key!r}")
-                self.i += 1
-                out[key] = self.value()
-            else:
-                out.append(self.value())
-            self.space()
-            if self.s.startswith(",", self.i):
-                self.i += 1
-            elif not self.s.startswith(close, self.i):
-                self.fail(f"expected `,` or `{close}`")
+def parse_json5(text: str, origin: str = "<json5>"):
+    """A JSON5 document (the config files' language) read with the `json5` package; an error
+    names the file and the line."""
+    try:
+        return json5.loads(text)
+    except ValueError as e:
+        where = re.match(r"<string>:(\d+) (.*)", str(e))
+        line, what = (f"line {where.group(1)}", where.group(2)) if where else ("", str(e))
+        raise ConfigError(origin, line, what, "write valid JSON5") from None

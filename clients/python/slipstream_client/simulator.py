@@ -18,13 +18,14 @@ silence), holds a command 200 ms of simulated time, then brakes 0.4. In lockstep
 waits for every awaited node's answer to step k (at most `step_timeout` s, then a
 ControlTimeout event and a brake)."""
 
-import sys
 import threading
 import time
+from typing import Any, Dict, List, Optional, Sequence
 
 import zenoh
 import zenoh.ext
 
+from .keys import Topics
 from .wire import BadPayloads, WireError, decode, encode, encoding_schema
 
 NEUTRAL = {"throttle": 0.0, "brake": 0.0, "steer": 0.0, "answers_step": None, "perception_stamp_pub_ns": None}
@@ -59,7 +60,8 @@ class RealTimeFactor:
 class SimulatorSide:
     """One simulator on the bus (see the module's doc)."""
 
-    def __init__(self, session, topics, mode, physics_hz, wait_for=("acc",), step_timeout=2.0, name="sim"):
+    def __init__(self, session: zenoh.Session, topics: Topics, mode: str, physics_hz: int,
+                 wait_for: Sequence[str] = ("acc",), step_timeout: float = 2.0, name: str = "sim") -> None:
         if mode not in MODES:
             raise ValueError(f"mode {mode!r}: use one of {', '.join(MODES)}")
         self.session, self.topics, self.mode, self.hz = session, topics, mode, int(physics_hz)
@@ -81,17 +83,18 @@ class SimulatorSide:
             self.session, self.topics.key(topic), cache=zenoh.ext.CacheConfig(max_samples=1),
             sample_miss_detection=zenoh.ext.MissDetectionConfig(), publisher_detection=True)
 
-    def stamp(self, k):
+    def stamp(self, k: int) -> int:
         """Step k's simulated time, ns: floor(k * 1e9 / physics_hz)."""
         return k * 1_000_000_000 // self.hz
 
-    def put(self, topic, kind, k, body):
+    def put(self, topic: str, kind: str, k: int, body: Dict[str, Any]) -> None:
         seq = self.seq[topic] = self.seq.get(topic, -1) + 1
         header = {"seq": seq, "stamp_sim_ns": self.stamp(k), "stamp_pub_ns": time.time_ns()}
         self.pubs[topic].put(encode(kind, header, body), attachment=self.attachment,
                              encoding=zenoh.Encoding.APPLICATION_OCTET_STREAM.with_schema(encoding_schema(kind)))
 
-    def start(self, camera_info, road=None, scenario="external", seed=0):
+    def start(self, camera_info: Dict[str, Any], road: Optional[Dict[str, Any]] = None, scenario: str = "external",
+              seed: int = 0) -> None:
         """Camera info and road (latched), ScenarioStart; in lockstep, the awaited controllers."""
         self.put("camera/front/info", "CameraInfo", 0, camera_info)
         if road is not None:
@@ -100,7 +103,7 @@ class SimulatorSide:
         if self.mode == "lockstep":
             self.wait_for_controllers()
 
-    def publish_ego(self, k, speed_mps, state, rtf):
+    def publish_ego(self, k: int, speed_mps: float, state: Dict[str, Any], rtf: float) -> None:
         """vehicle/speed, vehicle/state (`state` without step, applied and control_timing) and
         sim/clock for step k."""
         self.now_ns = self.stamp(k)
@@ -110,16 +113,16 @@ class SimulatorSide:
         self.put("sim/clock", "SimClock", k, {"step": k, "real_time_factor": rtf, "mode": self.mode.capitalize(),
                                               "physics_hz": float(self.hz)})
 
-    def publish_frame(self, k, frame, objects=None):
+    def publish_frame(self, k: int, frame: Dict[str, Any], objects: Optional[List[Dict[str, Any]]] = None) -> None:
         """camera/front (a CameraFrame body) and, when given, its ground truth (a list)."""
         self.put("camera/front", "CameraFrame", k, frame)
         if objects is not None:
             self.put("objects", "GroundTruthObjects", k, {"step": k, "objects": objects})
 
-    def event(self, k, variant, **fields):
+    def event(self, k: int, variant: str, **fields: Any) -> None:
         self.put("sim/events", "SimEvent", k, {"kind": {"variant": variant, **fields}})
 
-    def end(self, k, reason, success=True):
+    def end(self, k: int, reason: str, success: bool = True) -> None:
         self.event(k, "ScenarioEnd", reason=reason, success=success)
 
     def on_control(self, sample):
@@ -139,7 +142,7 @@ class SimulatorSide:
                     self.latest = (cmd, header, time.time_ns(), self.now_ns)
             self.arrived.notify_all()
 
-    def control(self, k):
+    def control(self, k: int) -> Optional[Dict[str, Any]]:
         """The ego's input from step k to k + 1: a ControlCommand dict, or None before the first
         command (the simulator decides: the reference simulator holds its speed). What it
         returns shows in the next state's `applied`."""
@@ -190,33 +193,7 @@ class SimulatorSide:
         raise TimeoutError(f"lockstep: {', '.join(self.wait_for)} not up after {timeout:.0f} s "
                            "(start the loop, e.g. `slipstream up --sim external --mode lockstep`)")
 
-    def close(self):
+    def close(self) -> None:
         self.token.undeclare()
         self.control_sub.undeclare()
 
-
-def run_world(side, session, make, failures=None):
-    """Runs a simulator on `side` to its end, Ctrl-C or SIGTERM, then closes it (when it ended
-    cleanly), the side and the session; returns the process's exit code. `make(side)` builds the
-    simulator: an object with `run(stop_event) -> steps` and, if it holds something to let go
-    of, `close()`. `failures` maps an
-    exception type to a function that words it (a lost server): said on stderr, exit code 1;
-    the first type that matches, in order."""
-    failures = failures or {}
-    stop, world, code = threading.Event(), None, 0
-    try:
-        world = make(side)
-        steps = world.run(stop)
-        print(f"# {steps} steps, {side.bad.count} undecodable commands", flush=True)
-    except KeyboardInterrupt:
-        stop.set()
-    except tuple(failures) as e:
-        words = next(w for kind, w in failures.items() if isinstance(e, kind))
-        print(words(e), file=sys.stderr, flush=True)
-        code = 1
-    finally:
-        if world is not None and code == 0 and hasattr(world, "close"):
-            world.close()
-        side.close()
-        session.close()
-    return code

@@ -6,9 +6,11 @@ Bodies are dicts keyed by the field names of the doc; enums are their variant na
 Decoding is strict, like the Rust side: any malformed payload raises WireError.
 """
 
+import logging
 import math
 import struct
 import threading
+from typing import Any, Dict, Optional, Tuple
 
 WIRE_VERSION = 4
 
@@ -17,21 +19,25 @@ class WireError(ValueError):
     """A payload that is not a valid slipstream message of this wire version."""
 
 
-class BadPayloads:
-    """Counts undecodable payloads and prints the 1st, 10th, 100th, ... of them: a client
-    keeps running on bad input and says so without flooding its output, as the nodes do.
-    Callable from any Zenoh callback thread: bad(key, error)."""
+log = logging.getLogger("slipstream_client")
 
-    def __init__(self):
+
+class BadPayloads:
+    """Counts undecodable payloads and logs the 1st, 10th, 100th, ... of them as warnings
+    (logger "slipstream_client"): a client keeps running on bad input and says so without
+    flooding its log, as the nodes do. Callable from any Zenoh callback thread:
+    bad(key, error)."""
+
+    def __init__(self) -> None:
         self.count = 0
         self._lock = threading.Lock()
 
-    def __call__(self, key, error):
+    def __call__(self, key: str, error: Exception) -> None:
         with self._lock:
             self.count += 1
             n = self.count
         if str(n).rstrip("0") == "1":  # 1, 10, 100, ...
-            print(f"# {key}: undecodable payload #{n}: {error}", flush=True)
+            log.warning("%s: undecodable payload #%d: %s", key, n, error)
 
 
 # Type language: "u8" "u32" "u64" "i32" "f32" "f64" "bool" "str" "bytes",
@@ -318,7 +324,7 @@ def _check_road(road):
             raise WireError(f"road.lane_ends[{i}].lane: lane {e['lane']} ends twice")
 
 
-def decode(payload, expected=None, copy=True):
+def decode(payload: bytes, expected: Optional[str] = None, copy: bool = True) -> Tuple[str, Dict[str, int], Dict[str, Any]]:
     """Decodes one payload strictly. Returns (kind, header, body).
 
     copy=False leaves bytes fields (camera pixels) as memoryviews into `payload` instead of
@@ -344,7 +350,7 @@ def decode(payload, expected=None, copy=True):
     return kind, header, body
 
 
-def encode(kind, header, body):
+def encode(kind: str, header: Dict[str, int], body: Dict[str, Any]) -> bytes:
     """Encodes a message; header is {"seq", "stamp_sim_ns", "stamp_pub_ns"}."""
     out = bytearray([WIRE_VERSION, KIND_IDS[kind]])
     _write(out, ("struct", "Header"), header)
@@ -352,6 +358,6 @@ def encode(kind, header, body):
     return bytes(out)
 
 
-def encoding_schema(kind):
+def encoding_schema(kind: str) -> str:
     """The Zenoh encoding schema every sample of `kind` carries."""
     return f"slipstream/{kind}/v{WIRE_VERSION}"
