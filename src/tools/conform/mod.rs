@@ -38,11 +38,12 @@ pub enum ConformCommand {
 
 #[derive(clap::Args, Debug, Clone)]
 pub struct ConformSimArgs {
-    /// Wall-clock seconds to watch (after the first message)
-    #[arg(long, default_value_t = 5.0, value_parser = super::top::positive)]
+    /// Wall-clock seconds to watch (after the first message), at most an hour (what is seen
+    /// is kept to be judged)
+    #[arg(long, default_value_t = 5.0, value_parser = up_to_an_hour)]
     pub duration: f64,
     /// Seconds to wait for the simulator's first message before judging
-    #[arg(long, default_value_t = 10.0, value_parser = super::top::positive)]
+    #[arg(long, default_value_t = 10.0, value_parser = up_to_an_hour)]
     pub wait: f64,
     /// Answer every step as the controller a lockstep simulator waits for (node --as)
     #[arg(long)]
@@ -56,6 +57,13 @@ pub struct ConformSimArgs {
     /// Print the verdicts as JSON
     #[arg(long)]
     pub json: bool,
+}
+
+fn up_to_an_hour(s: &str) -> Result<f64, String> {
+    super::top::positive(s).and_then(|v| match v <= 3600.0 {
+        true => Ok(v),
+        false => Err(format!("`{s}` s is more than an hour: watch at most 3600 s")),
+    })
 }
 
 /// The result of one `conform sim`.
