@@ -22,7 +22,7 @@ use slipstream::config::{ConnectArgs, FaultArgs};
 ///
 ///   slipstream-acc --lockstep     (with slipstream-sim --clock lockstep --wait-for acc)
 #[derive(Parser)]
-#[command(version, verbatim_doc_comment)]
+#[command(name = "slipstream-acc", version, verbatim_doc_comment)]
 struct Cli {
     #[command(flatten)]
     connect: ConnectArgs,

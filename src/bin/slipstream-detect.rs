@@ -13,7 +13,7 @@ use slipstream::perception::DetectorParams;
 /// time, sequence number and publish time, so consumers can match it to speed and ground
 /// truth. Method and scores: docs/perception.md.
 #[derive(Parser)]
-#[command(version)]
+#[command(name = "slipstream-detect", version)]
 struct Cli {
     #[command(flatten)]
     connect: ConnectArgs,

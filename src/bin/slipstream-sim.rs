@@ -21,7 +21,7 @@ use slipstream::sim::args::SimArgs;
 ///
 ///   slipstream-sim --scenario busy-traffic --preview frame.png --at 5
 #[derive(Parser)]
-#[command(version, verbatim_doc_comment)]
+#[command(name = "slipstream-sim", version, verbatim_doc_comment)]
 struct Cli {
     #[command(flatten)]
     connect: ConnectArgs,

@@ -3,7 +3,7 @@
 use std::process::ExitCode;
 
 use anyhow::{Context, Result};
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, Parser, Subcommand};
 use slipstream::bench::{self, BenchArgs, CaseSpec};
 use slipstream::config::ConnectArgs;
 
@@ -13,7 +13,7 @@ use slipstream::config::ConnectArgs;
 /// -t FILE) from the working directory when present, else built-in defaults: peer mode on
 /// this machine, no router needed.
 #[derive(Parser)]
-#[command(version, propagate_version = true)]
+#[command(name = "slipstream", version, propagate_version = true)]
 struct Cli {
     #[command(flatten)]
     connect: ConnectArgs,
@@ -115,6 +115,21 @@ enum Command {
     /// Score a node against the simulator's ground truth
     #[command(subcommand)]
     Eval(EvalCommand),
+    /// Print the completion script of a shell for `slipstream` (bash, zsh, fish, elvish,
+    /// powershell). Example:
+    ///
+    ///   slipstream completions bash > ~/.local/share/bash-completion/completions/slipstream
+    #[command(verbatim_doc_comment)]
+    Completions {
+        #[arg(value_enum)]
+        shell: clap_complete::Shell,
+    },
+    /// Write the man pages of `slipstream` and of each of its commands into DIR
+    /// (slipstream.1, slipstream-up.1, ...; `man -l DIR/slipstream-up.1`)
+    Man {
+        #[arg(value_name = "DIR")]
+        dir: std::path::PathBuf,
+    },
     /// Print the example payload of every message type (hex, as in docs/wire-format.md)
     #[command(hide = true)]
     WireExamples,
@@ -318,6 +333,11 @@ fn run(cli: Cli) -> Result<ExitCode> {
             print_report(args.json, &report, faults::markdown)?;
             Ok(ExitCode::SUCCESS)
         }
+        Command::Completions { shell } => {
+            clap_complete::generate(shell, &mut Cli::command(), "slipstream", &mut std::io::stdout());
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::Man { dir } => done(write_man_pages(&dir)),
         Command::WireExamples => {
             let all: Vec<_> = slipstream::msg::examples()
                 .into_iter()
@@ -372,6 +392,25 @@ fn conform_sim(connect: &ConnectArgs, args: &slipstream::tools::conform::Conform
         Ok(bus)
     })?;
     Ok(if pass { ExitCode::SUCCESS } else { ExitCode::FAILURE })
+}
+
+/// slipstream.1 and a page per visible command (slipstream-up.1, ...) into `dir`.
+fn write_man_pages(dir: &std::path::Path) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("create {}", dir.display()))?;
+    let top = Cli::command();
+    let pages = std::iter::once(top.clone()).chain(
+        top.get_subcommands()
+            .filter(|c| !c.is_hide_set())
+            .map(|c| c.clone().name(format!("slipstream-{}", c.get_name())))
+            .collect::<Vec<_>>(),
+    );
+    for page in pages {
+        let path = dir.join(format!("{}.1", page.get_name()));
+        let mut text = Vec::new();
+        clap_mangen::Man::new(page).render(&mut text)?;
+        std::fs::write(&path, text).with_context(|| format!("write {}", path.display()))?;
+    }
+    Ok(())
 }
 
 /// A report as JSON or as its markdown rendering.

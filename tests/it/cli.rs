@@ -264,3 +264,28 @@ fn eval_detect_scores_a_scenario_as_json() {
         !bad.status.success() && String::from_utf8_lossy(&bad.stderr).contains("no built-in scenario named `nope`")
     );
 }
+
+/// Completions and man pages come from the command line itself, so every command is in them,
+/// under the command's own name (not the package's).
+#[test]
+fn completions_and_man_pages_cover_every_command() {
+    let mut cmd = bin();
+    cmd.args(["completions", "bash"]);
+    let out = run(cmd, Duration::from_secs(30));
+    assert!(out.status.success(), "stderr: {}", String::from_utf8_lossy(&out.stderr));
+    let script = String::from_utf8_lossy(&out.stdout);
+    for word in ["_slipstream()", "conform", "--sim-wait", "completions"] {
+        assert!(script.contains(word), "the bash completion lacks {word}");
+    }
+    let dir = std::env::temp_dir().join(format!("slipstream-man-{}", std::process::id()));
+    let mut cmd = bin();
+    cmd.arg("man").arg(&dir);
+    let out = run(cmd, Duration::from_secs(30));
+    assert!(out.status.success(), "stderr: {}", String::from_utf8_lossy(&out.stderr));
+    for page in ["slipstream.1", "slipstream-up.1", "slipstream-conform.1", "slipstream-record.1"] {
+        let text = std::fs::read_to_string(dir.join(page)).unwrap_or_else(|e| panic!("{page}: {e}"));
+        assert!(text.contains(".TH "), "{page} is no man page");
+    }
+    assert!(!dir.join("slipstream-bench-peer.1").exists(), "hidden commands have no page");
+    let _ = std::fs::remove_dir_all(&dir);
+}
