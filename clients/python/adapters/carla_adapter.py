@@ -39,7 +39,7 @@ except ImportError:  # a source checkout
     sys.path.insert(0, str(__import__("pathlib").Path(__file__).resolve().parents[1]))
     from slipstream_client import cli, connect
 from slipstream_client.camera import Pinhole, pinhole_info
-from slipstream_client.simulator import MODES, RealTimeFactor, SimulatorSide
+from slipstream_client.simulator import RealTimeFactor, SimulatorSide
 
 
 class Body:
@@ -266,10 +266,7 @@ def parser():
     p.add_argument("--host", default="127.0.0.1", help="CARLA server [default: 127.0.0.1]")
     p.add_argument("--port", type=int, default=2000, help="CARLA server port [default: 2000]")
     p.add_argument("--timeout", type=float, default=10.0, help="seconds CARLA may take to answer [default: 10]")
-    p.add_argument("--mode", choices=MODES, default="lockstep", help="[default: lockstep]")
-    p.add_argument("--duration", type=float, default=3600.0, help="simulated seconds [default: 3600]")
     p.add_argument("--physics-hz", type=int, default=100, help="steps per simulated second [default: 100]")
-    p.add_argument("--camera-hz", type=float, default=20.0, help="frames per simulated second [default: 20]")
     p.add_argument("--camera-size", type=size, default=(640, 480), help="WIDTHxHEIGHT [default: 640x480]")
     p.add_argument("--fov", type=float, default=60.0, help="horizontal field of view, degrees [default: 60]")
     p.add_argument("--mount-x", type=float, default=1.6, help="camera ahead of the rear axle, m [default: 1.6]")
@@ -279,8 +276,7 @@ def parser():
     p.add_argument("--role-name", default="hero", help="the ego's role_name attribute [default: hero]")
     p.add_argument("--blueprint", default="vehicle.tesla.model3", help="spawned when no ego is found")
     p.add_argument("--spawn-point", type=int, default=0, help="index into the map's spawn points [default: 0]")
-    p.add_argument("--wait-for", action="append", metavar="NODE", help="lockstep: awaited node(s) [default: acc]")
-    p.add_argument("--step-timeout", type=float, default=2.0, help="lockstep: seconds a step waits [default: 2]")
+    cli.add_clock_args(p, "lockstep", 3600.0)
     connect.add_args(p)
     return p
 

@@ -39,7 +39,7 @@ except ImportError:  # a source checkout
     sys.path.insert(0, str(__import__("pathlib").Path(__file__).resolve().parents[1]))
     from slipstream_client import cli, connect
 from slipstream_client.camera import Pinhole
-from slipstream_client.simulator import MODES, RealTimeFactor, SimulatorSide
+from slipstream_client.simulator import RealTimeFactor, SimulatorSide
 
 
 class Pose:
@@ -184,9 +184,6 @@ def parser():
     p.add_argument("--host", default="127.0.0.1", help="CoppeliaSim's ZMQ remote API host [default: 127.0.0.1]")
     p.add_argument("--port", type=int, default=23000, help="its port [default: 23000]")
     p.add_argument("--timeout", type=float, default=10.0, help="seconds CoppeliaSim may take to answer [default: 10]")
-    p.add_argument("--mode", choices=MODES, default="lockstep", help="[default: lockstep]")
-    p.add_argument("--duration", type=float, default=3600.0, help="simulated seconds [default: 3600]")
-    p.add_argument("--camera-hz", type=float, default=20.0, help="frames per simulated second [default: 20]")
     p.add_argument("--ego", default="/Car", help="the ego vehicle's object path [default: /Car]")
     p.add_argument("--camera", default="/Car/visionSensor", help="its vision sensor [default: /Car/visionSensor]")
     p.add_argument("--traffic", action="append", default=[], metavar="PATH", help="other vehicles (ground truth)")
@@ -194,8 +191,7 @@ def parser():
     p.add_argument("--rear-axle", type=float, default=1.35, help="model origin to rear axle, m [default: 1.35]")
     p.add_argument("--ground-z", type=float, default=0.0, help="model origin above the ground, m [default: 0]")
     p.add_argument("--control-function", default="slipstream_control", help="the ego script's function")
-    p.add_argument("--wait-for", action="append", metavar="NODE", help="lockstep: awaited node(s) [default: acc]")
-    p.add_argument("--step-timeout", type=float, default=2.0, help="lockstep: seconds a step waits [default: 2]")
+    cli.add_clock_args(p, "lockstep", 3600.0)
     connect.add_args(p)
     return p
 

@@ -26,7 +26,7 @@ import numpy as np
 
 from slipstream_client import cli, connect
 from slipstream_client.camera import Pinhole, pinhole_info
-from slipstream_client.simulator import MODES, RealTimeFactor, SimulatorSide
+from slipstream_client.simulator import RealTimeFactor, SimulatorSide
 
 LANES, LANE_W = 3, 3.5
 CAR_SIZE, CAR_REAR_OVERHANG = [4.6, 1.85, 1.45], 0.95
@@ -207,14 +207,9 @@ def size(text):
 
 def parser():
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--mode", choices=MODES, default="realtime", help="[default: realtime]")
-    p.add_argument("--duration", type=float, default=60.0, help="simulated seconds [default: 60]")
     p.add_argument("--physics-hz", type=int, default=100, help="steps per simulated second [default: 100]")
-    p.add_argument("--camera-hz", type=float, default=20.0, help="frames per simulated second [default: 20]")
     p.add_argument("--camera-size", type=size, default=(640, 480), help="WIDTHxHEIGHT [default: 640x480]")
-    p.add_argument("--wait-for", action="append", metavar="NODE",
-                   help="lockstep: the node(s) whose answer each step waits for [default: acc]")
-    p.add_argument("--step-timeout", type=float, default=2.0, help="lockstep: seconds a step waits [default: 2]")
+    cli.add_clock_args(p, "realtime", 60.0)
     connect.add_args(p)
     return p
 

@@ -14,6 +14,20 @@ from . import connect
 from .keys import ConfigError, Topics
 
 
+def add_clock_args(parser: argparse.ArgumentParser, mode: str, duration_s: float) -> None:
+    """The flags every simulator on the client takes for its clock and lockstep: --mode,
+    --duration, --camera-hz, --wait-for, --step-timeout (defaults: `mode`, `duration_s`)."""
+    from .simulator import MODES
+
+    p = parser
+    p.add_argument("--mode", choices=MODES, default=mode, help=f"[default: {mode}]")
+    p.add_argument("--duration", type=float, default=duration_s, help=f"simulated seconds [default: {duration_s:g}]")
+    p.add_argument("--camera-hz", type=float, default=20.0, help="frames per simulated second [default: 20]")
+    p.add_argument("--wait-for", action="append", metavar="NODE",
+                   help="lockstep: the node(s) whose answer each step waits for [default: acc]")
+    p.add_argument("--step-timeout", type=float, default=2.0, help="lockstep: seconds a step waits [default: 2]")
+
+
 def _interrupt(signum, frame):
     raise KeyboardInterrupt
 
