@@ -4,8 +4,9 @@ router has a leg in every subnet, and every node is given both routers (client m
 config/client.json5). The loop starts through the first router; the second comes up and dials
 the first; then the first is killed: the clients fail over to the second by themselves, and the
 loop closes again. Then the first router comes back, and the second router's host goes dark
-(every link down, no TCP reset): the clients fail over when the lease expires. The failover
-times go to target/test-reports/netns.json (docs/deployment.md)."""
+(every link down, no TCP reset): the clients fail over when the router's lease (1 s in the
+shipped configs) expires. The failover times and their phases go to
+target/test-reports/netns.json (docs/deployment.md, "Failover")."""
 
 import subprocess
 import time
@@ -20,11 +21,29 @@ pytestmark = pytest.mark.skipif(why is not None, reason=f"namespace test: {why}"
 LAYOUT = {"a": ["r1", "r2", "sim"], "b": ["r1", "r2", "acc"], "c": ["r1", "r2", "detect", "tools"]}
 
 
-def connections(nets, role):
-    """Established TCP connections on a router's port 7447 (clients and the other router)."""
+def peers(nets, role):
+    """The addresses with an established TCP connection to a router's port 7447 (clients and
+    the other router)."""
     out = subprocess.run(["ip", "netns", "exec", nets.ns[role], "ss", "-Htn", "state", "established", "( sport = :7447 )"],
                          capture_output=True, text=True, timeout=10, check=True).stdout
-    return len([line for line in out.splitlines() if line.strip()])
+    return [line.split()[-1].rsplit(":", 1)[0] for line in out.splitlines() if line.strip()]
+
+
+def connections(nets, role):
+    return len(peers(nets, role))
+
+
+def when_clients_on(nets, role, clients, since_ns, timeout_s):
+    """For each client name -> address: seconds from `since_ns` until it has a session on the
+    router `role` (polled every 20 ms), or None if it has none within the timeout."""
+    seen = {}
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline and len(seen) < len(clients):
+        on = set(peers(nets, role))
+        t = round((time.time_ns() - since_ns) / 1e9, 3)
+        seen.update({name: t for name, address in clients.items() if address in on and name not in seen})
+        time.sleep(0.02)
+    return {name: seen.get(name) for name in clients}
 
 
 @pytest.fixture
@@ -45,6 +64,9 @@ def test_killing_one_of_two_meshed_routers_keeps_the_loop_running(subnets, slips
         eps = [x for r in ("r1", "r2") for x in ("-e", f"tcp/{nets.addr[(r, subnet)]}:7447")]
         return ["-c", "config/client.json5", *eps, *NO_SHM]
 
+    # The clients' addresses: sim on a, acc on b, detect and the observer on c.
+    clients = {"sim": nets.addr[("sim", "a")], "acc": nets.addr[("acc", "b")], "detect": nets.addr[("detect", "c")],
+               "observer": nets.addr[("tools", "c")]}
     t0 = time.time_ns()
     hosts.start("acc", [b["slipstream-acc"], "--perception", "camera", *client("b")])
     hosts.start("detect", [b["slipstream-detect"], *client("c")])
@@ -67,11 +89,14 @@ def test_killing_one_of_two_meshed_routers_keeps_the_loop_running(subnets, slips
         after = obs.counts(t1 - 3_000_000_000, t1)
         # Now the other way, the hard way: r1 comes back and meshes with r2, then r2's host
         # goes silent (every leg down: no TCP reset reaches anyone). The clients notice only
-        # when Zenoh's lease (10 s) expires, then dial r1.
+        # when r2's lease expires, close that session, then dial r1.
         hosts.start("r1", [*router, "-e", f"tcp/{nets.addr[('r2', 'a')]}:7447"], name="r1-again")
         time.sleep(4)
+        on_r2_before_dark = connections(nets, "r2")
         t_dark = time.time_ns()
         nets.links("r2", up=False)
+        on_r1 = when_clients_on(nets, "r1", clients, t_dark, 60)
+        reconnected = max((t for t in on_r1.values() if t is not None), default=None)
         silent_failover = obs.wait_closed_after(t_dark, 60, loop)
         still_running = {n: p.poll() is None for n, p in loop.items()}
     except AssertionError as e:
@@ -79,10 +104,17 @@ def test_killing_one_of_two_meshed_routers_keeps_the_loop_running(subnets, slips
     result = {"first_loop_s": round(first, 3), "tcp_sessions_before_kill": sessions,
               "loop_closed_after_router_killed_s": round(failover, 3),
               "loop_closed_after_router_host_went_dark_s": round(silent_failover, 3),
+              "dark_phases_s": {"sessions_on_r2_before": on_r2_before_dark,
+                                "each_client_on_the_other_router": on_r1,
+                                "then_first_closed_loop": reconnected and round(silent_failover - reconnected, 3)},
               "last_3s_on_the_other_router": after}
     record("router_failover", result)
     print(result)
     assert all(still_running.values()), still_running
     # On the second router the loop runs: states, frames and detections keep coming.
     assert after["state"] > 0 and after["frame"] > 0 and after["det"] > 0, result
-    assert failover < 30 and silent_failover < 60, result
+    assert failover < 30, result
+    # The shipped configs bound the dark case by lease (1 s) + flush (lease/4) + one dial of
+    # the dark router (1 s): ~2.5 s. 10 s leaves room for a loaded machine; Zenoh's defaults
+    # took 22.7 s.
+    assert silent_failover < 10, result

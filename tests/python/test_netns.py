@@ -2,7 +2,7 @@
 with the router, simulator, detector, cruise control and an observer each on its own host.
 
 Router mode (multicast off): the loop closes through the router; the cruise-control host's
-link goes down and up (for 4 s, within Zenoh's lease, and for 12 s, past it) while the others
+link goes down and up (for 4 s, past the router's 1 s lease, and for 0.5 s, within it) while the others
 keep running, and the loop recovers; the router is killed and restarted, the nodes reconnect
 and the loop recovers. Peer mode: with multicast
 scouting on inside the namespaces, the nodes find each other with no address configured.
@@ -13,6 +13,7 @@ written to target/test-reports/netns.json (scripts/test.sh prints them)."""
 
 import contextlib
 import json
+import os
 import pathlib
 import signal
 import subprocess
@@ -118,7 +119,7 @@ class Hosts:
         name = name or role
         log = open(self.logs / f"{name}.log", "ab")
         kw.setdefault("stdout", log)
-        env = {"RUST_LOG": "info,zenoh=warn,zenoh_ext=warn", "PATH": "/usr/bin:/bin"}
+        env = {"RUST_LOG": os.environ.get("SLIPSTREAM_NODE_LOG", "info,zenoh=warn,zenoh_ext=warn"), "PATH": "/usr/bin:/bin"}
         self.procs[name] = self.lan.popen(role, argv, stderr=log, cwd=ROOT, env=env, **kw)
         return self.procs[name]
 
@@ -181,7 +182,7 @@ def test_router_mode_closes_the_loop_and_recovers_from_a_link_and_a_router_loss(
     router_ep = f"tcp/{lan.addr['router']}:7447"
     router_argv = [b["slipstream"], "router", "-c", "config/router.json5", *NO_SHM]
     hosts.start("router", router_argv)
-    # config/client.json5 as shipped (multicast off, retry 0.25 s doubling to 2 s), the router's address given.
+    # config/client.json5 as shipped (multicast off, retry 0.25 s doubling to 1 s), the router's address given.
     client = ["-c", "config/client.json5", "-e", router_ep, *NO_SHM]
     t0 = time.time_ns()
     start_loop(hosts, b, client)
@@ -194,8 +195,9 @@ def test_router_mode_closes_the_loop_and_recovers_from_a_link_and_a_router_loss(
         time.sleep(4)
         steady = obs.latency(time.time_ns() - 3_000_000_000, time.time_ns())
 
-        # (c) The cruise-control host loses its link for 4 s (less than Zenoh's 10 s lease: the
-        # session survives)...
+        # (c) The cruise-control host loses its link for 4 s, past the router's 1 s lease
+        # (config/router.json5): both sides close the session, and the acc host's client dials
+        # again (every 1 s at most) until the link is back...
         t_down = time.time_ns()
         lan.link("acc", up=False)
         time.sleep(4)
@@ -205,12 +207,12 @@ def test_router_mode_closes_the_loop_and_recovers_from_a_link_and_a_router_loss(
         link_recovery = obs.wait_closed_after(t_up, 60, loop)
         stale, stale_age = obs.stale_applied(t_up, t_up)
 
-        # ...and then for 12 s: the lease expires, both sides close the session, and the acc
-        # host's client connects again once the link is back.
+        # ...and then a 0.5 s glitch, shorter than the lease: the session may survive (TCP
+        # retransmits what was lost) or expire and reconnect, whichever comes first.
         time.sleep(2)
         t_down_long = time.time_ns()
         lan.link("acc", up=False)
-        time.sleep(12)
+        time.sleep(0.5)
         t_up_long = time.time_ns()
         lan.link("acc", up=True)
         long_recovery = obs.wait_closed_after(t_up_long, 60, loop)
@@ -233,7 +235,7 @@ def test_router_mode_closes_the_loop_and_recovers_from_a_link_and_a_router_loss(
         "first_loop_s": round(first, 3),
         "link_down_up": {"down_s": round((t_up - t_down) / 1e9, 2), "recovery_after_up_s": round(link_recovery, 3),
                          "stale_commands_applied_after_up": stale, "stale_max_age_s": round(stale_age, 3)},
-        "link_down_past_lease": {"down_s": round((t_up_long - t_down_long) / 1e9, 2),
+        "link_glitch": {"down_s": round((t_up_long - t_down_long) / 1e9, 2),
                                  "recovery_after_up_s": round(long_recovery, 3),
                                  "stale_commands_applied_after_up": stale_long},
         "router_kill_restart": {"down_s": round((t_restart - t_kill) / 1e9, 2),
