@@ -7,6 +7,7 @@
 
 pub mod faults;
 mod follow;
+mod frame_copies;
 mod publisher;
 mod stats;
 mod subscriber;
@@ -188,7 +189,7 @@ impl Bus {
         M: Message + serde::de::DeserializeOwned + Clone + Send + 'static,
     {
         let sub =
-            Subscriber::declare(&self.session, self.topics.key(def.topic), def.topic.name(), self.inlet(def.topic))
+            Subscriber::declare(&self.session, self.topics.read_key(def.topic), def.topic.name(), self.inlet(def.topic))
                 .await?;
         self.register(sub.stats());
         Ok(sub)
@@ -199,7 +200,8 @@ impl Bus {
     pub async fn frame_subscriber(&self, def: TopicDef<CameraFrame>) -> Result<FrameSubscriber, BusError> {
         let topic = def.topic;
         let sub =
-            FrameSubscriber::declare(&self.session, self.topics.key(topic), topic.name(), self.inlet(topic)).await?;
+            FrameSubscriber::declare(&self.session, self.topics.read_key(topic), topic.name(), self.inlet(topic))
+                .await?;
         self.register(sub.stats());
         Ok(sub)
     }
@@ -213,7 +215,7 @@ impl Bus {
     {
         let sub = CallbackSubscriber::declare(
             &self.session,
-            self.topics.key(def.topic),
+            self.topics.read_key(def.topic),
             def.topic.name(),
             self.inlet(def.topic),
             handler,
@@ -236,7 +238,7 @@ impl Bus {
         let topic = def.topic;
         let sub = CallbackSubscriber::declare_frames(
             &self.session,
-            self.topics.key(topic),
+            self.topics.read_key(topic),
             topic.name(),
             self.inlet(topic),
             handler,

@@ -9,7 +9,8 @@ use zenoh::shm::{GarbageCollect, PosixShmProviderBackend, ShmProvider, ShmProvid
 use zenoh::Wait;
 
 use super::{zerr, BusError};
-use crate::config::{CameraEncoding, CameraSettings, TopicMap};
+use super::frame_copies::FrameCopies;
+use crate::config::{CameraSettings, TopicMap};
 use crate::msg::{self, encode_into, frame_prefix, CameraFrame, CameraFrameRef, Header, ImageEncoding, Message};
 use crate::topics::Topic;
 
@@ -43,8 +44,17 @@ impl<M: Message> Publisher<M> {
         topic: Topic,
         node: &str,
     ) -> Result<Self, BusError> {
-        let key = topics.key(topic);
-        let qos = topics.qos(topic);
+        Self::declare_at(session, topics.key(topic), topics.qos(topic), topic, node).await
+    }
+
+    /// Declares the publisher of `topic`'s messages on `key` with `qos`.
+    pub(super) async fn declare_at(
+        session: &zenoh::Session,
+        key: zenoh::key_expr::OwnedKeyExpr,
+        qos: crate::qos::TopicQos,
+        topic: Topic,
+        node: &str,
+    ) -> Result<Self, BusError> {
         let builder = session
             .declare_publisher(key.clone())
             .encoding(encoding_of(M::KIND))
@@ -92,6 +102,34 @@ impl<M: Message> Publisher<M> {
         self.size_hint.store(buf.len(), Ordering::Relaxed);
         self.send(buf)?;
         Ok(Some(header))
+    }
+
+    /// Sends `msg` with a header made elsewhere (a frame's link copy carries its frame's).
+    /// `msg` is any type of this publisher's kind (a borrowed frame for a frame publisher).
+    pub(super) fn put_stamped<T: Message>(&self, header: &Header, msg: &T) -> Result<(), BusError> {
+        debug_assert_eq!(T::KIND, M::KIND);
+        let mut buf = Vec::with_capacity(self.size_hint.load(Ordering::Relaxed));
+        encode_into(&mut buf, header, msg);
+        self.size_hint.store(buf.len(), Ordering::Relaxed);
+        self.send(buf)
+    }
+
+    /// A flag that follows whether any subscriber matches this publisher (kept current by a
+    /// matching listener). A latched publisher's flag stays true.
+    pub(super) async fn matching_flag(&self) -> Result<std::sync::Arc<std::sync::atomic::AtomicBool>, BusError> {
+        let flag = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        match &self.inner {
+            Inner::Plain(p) => {
+                let f = flag.clone();
+                p.matching_listener()
+                    .callback(move |s| f.store(s.matching(), Ordering::Relaxed))
+                    .background()
+                    .await
+                    .map_err(zerr(format!("matching listener on {}", self.key())))?;
+            }
+            Inner::Latched(_) => flag.store(true, Ordering::Relaxed),
+        }
+        Ok(flag)
     }
 
     /// Allocates the next header, or None when rate-limited.
@@ -194,6 +232,9 @@ pub struct FramePublisher {
     shm: Option<ShmProvider<PosixShmProviderBackend>>,
     heap_fallbacks: AtomicU64,
     camera: CameraSettings,
+    copies: FrameCopies,
+    /// Raw pixels kept for the link copies while one has a reader (the payload has gone).
+    scratch: Mutex<Vec<u8>>,
 }
 
 /// How long a dropped frame publisher's shared-memory pool outlives it at most: frames put
@@ -267,7 +308,15 @@ impl FramePublisher {
         } else {
             None
         };
-        Ok(FramePublisher { inner, shm, heap_fallbacks: AtomicU64::new(0), camera: topics.camera })
+        let copies = FrameCopies::declare(session, topics, topic, node).await?;
+        Ok(FramePublisher {
+            inner,
+            shm,
+            heap_fallbacks: AtomicU64::new(0),
+            camera: topics.camera,
+            copies,
+            scratch: Mutex::new(Vec::new()),
+        })
     }
 
     /// Publishes a frame whose `data_len` image bytes `fill` writes in place.
@@ -305,14 +354,30 @@ impl FramePublisher {
                 (header, prefix.clone())
             }
         };
+        // Raw pixels the link copies are made from, once the frame itself has gone out.
+        let keep = encoding == ImageEncoding::Rgb8 && self.copies.wanted();
+        let kept = |pixels: &[u8]| {
+            if keep {
+                let mut scratch = self.scratch.lock();
+                scratch.clear();
+                scratch.extend_from_slice(pixels);
+            }
+        };
+        let copies = |header: &Header| {
+            if keep {
+                self.copies.publish(header, width, height, &self.scratch.lock());
+            }
+        };
         if let Some(shm) = &self.shm {
             match shm.alloc(total).with_policy::<GarbageCollect>().wait() {
                 Ok(mut buf) => {
                     let bytes: &mut [u8] = &mut buf;
                     fill(&mut bytes[prefix.len()..]);
+                    kept(&bytes[prefix.len()..]);
                     let (header, prefix) = stamped();
                     bytes[..prefix.len()].copy_from_slice(&prefix);
                     self.inner.send(buf)?;
+                    copies(&header);
                     return Ok(Some(FrameSent { header, shared_memory: true }));
                 }
                 Err(e) => {
@@ -330,22 +395,25 @@ impl FramePublisher {
         // so the renderer's writes are the only pass over it (no memset first).
         let mut buf = vec![0u8; total];
         fill(&mut buf[prefix.len()..]);
+        kept(&buf[prefix.len()..]);
         let (header, prefix) = stamped();
         buf[..prefix.len()].copy_from_slice(&prefix);
         self.inner.send(buf)?;
+        copies(&header);
         Ok(Some(FrameSent { header, shared_memory: false }))
     }
 
-    /// Publishes an existing image (one copy of its bytes into the payload).
+    /// Publishes an existing image (one copy of its bytes into the payload); a raw one's link
+    /// copies too.
     pub fn put(&self, stamp_sim_ns: u64, frame: &CameraFrameRef<'_>) -> Result<Option<FrameSent>, BusError> {
         self.put_with(stamp_sim_ns, frame.width, frame.height, frame.encoding, frame.data.len(), |dst| {
             dst.copy_from_slice(frame.data)
         })
     }
 
-    /// Publishes RGB8 pixels in the encoding the config chose (`camera.encoding`): raw (one copy
-    /// into the payload; render with [`FramePublisher::put_with`] to avoid it) or JPEG at
-    /// `camera.jpeg_quality`.
+    /// Publishes RGB8 pixels in the encoding the config chose (`camera.encoding`; raw is one
+    /// copy into the payload: render with [`FramePublisher::put_with`] to avoid it), then the
+    /// link copies that have a reader.
     pub fn put_rgb(
         &self,
         stamp_sim_ns: u64,
@@ -353,30 +421,40 @@ impl FramePublisher {
         height: u32,
         rgb: &[u8],
     ) -> Result<Option<FrameSent>, BusError> {
-        let frame = |encoding, data| CameraFrameRef { width, height, encoding, data };
-        match self.camera.encoding {
-            CameraEncoding::Raw => self.put(stamp_sim_ns, &frame(ImageEncoding::Rgb8, rgb)),
-            CameraEncoding::Jpeg => {
-                if ImageEncoding::Rgb8.expected_len(width, height) != Some(rgb.len()) {
-                    return Err(BusError::InvalidFrame(format!(
-                        "{width}x{height} RGB8 needs {} bytes, got {}",
-                        width as usize * height as usize * 3,
-                        rgb.len()
-                    )));
-                }
-                let jpeg =
-                    msg::encode_jpeg(rgb, width, height, self.camera.jpeg_quality).map_err(BusError::InvalidFrame)?;
-                self.put(stamp_sim_ns, &frame(ImageEncoding::Jpeg, &jpeg))
+        let encoding = self.encoding();
+        if encoding == ImageEncoding::Rgb8 {
+            // put_with sends the copies of raw frames.
+            return self.put(stamp_sim_ns, &CameraFrameRef { width, height, encoding, data: rgb });
+        }
+        let data =
+            msg::encode_pixels(rgb, width, height, encoding, self.camera.jpeg_quality).map_err(BusError::InvalidFrame)?;
+        let sent = self.put(stamp_sim_ns, &CameraFrameRef { width, height, encoding, data: &data })?;
+        if let Some(sent) = &sent {
+            if self.copies.wanted() {
+                self.copies.publish(&sent.header, width, height, rgb);
             }
         }
+        Ok(sent)
     }
 
     /// The encoding `put_rgb` uses.
     pub fn encoding(&self) -> ImageEncoding {
-        match self.camera.encoding {
-            CameraEncoding::Raw => ImageEncoding::Rgb8,
-            CameraEncoding::Jpeg => ImageEncoding::Jpeg,
-        }
+        self.camera.encoding.image_encoding()
+    }
+
+    /// Keys of the link copies this publisher offers (`camera.link_copies`).
+    pub fn copy_keys(&self) -> Vec<String> {
+        self.copies.keys()
+    }
+
+    /// Whether some subscriber reads a link copy now (copies are encoded only then).
+    pub fn copies_wanted(&self) -> bool {
+        self.copies.wanted()
+    }
+
+    /// Link copies sent so far, every encoding together.
+    pub fn copies_sent(&self) -> u64 {
+        self.copies.sent()
     }
 
     /// Frames that had to go through the heap because the pool was full.

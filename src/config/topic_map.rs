@@ -7,6 +7,7 @@ use serde::Deserialize;
 use zenoh::key_expr::OwnedKeyExpr;
 
 use super::{parse_json5, ConfigError};
+use crate::msg::ImageEncoding;
 use crate::qos::{Congestion, Delivery, Priority, Reliability, TopicQos};
 use crate::topics::{Topic, NODES_PREFIX};
 
@@ -22,8 +23,55 @@ pub const DEFAULT_SLIPSTREAM_CONFIG_PATH: &str = "config/slipstream.json5";
 pub enum CameraEncoding {
     /// RGB8 pixels: no encode cost, zero-copy through shared memory on one host.
     Raw,
-    /// JPEG at `jpeg_quality`: ~20x smaller, for frames that cross a LAN.
+    /// RGB8 compressed with LZ4: lossless, ~1 ms a frame each way, a few times smaller.
+    Lz4,
+    /// JPEG at `jpeg_quality`: ~20-50x smaller, lossy, for frames that cross a LAN.
     Jpeg,
+    /// PNG: lossless and smaller than LZ4, slower to encode.
+    Png,
+}
+
+impl CameraEncoding {
+    pub const ALL: [CameraEncoding; 4] = [CameraEncoding::Raw, CameraEncoding::Lz4, CameraEncoding::Jpeg, CameraEncoding::Png];
+
+    /// The encoding frames carry on the wire.
+    pub fn image_encoding(self) -> ImageEncoding {
+        match self {
+            CameraEncoding::Raw => ImageEncoding::Rgb8,
+            CameraEncoding::Lz4 => ImageEncoding::Lz4,
+            CameraEncoding::Jpeg => ImageEncoding::Jpeg,
+            CameraEncoding::Png => ImageEncoding::Png,
+        }
+    }
+
+    /// Its name in the config; `@` and the name are the last chunk of a link copy's key
+    /// (`camera/front/@lz4`).
+    pub fn name(self) -> &'static str {
+        match self {
+            CameraEncoding::Raw => "raw",
+            CameraEncoding::Lz4 => "lz4",
+            CameraEncoding::Jpeg => "jpeg",
+            CameraEncoding::Png => "png",
+        }
+    }
+}
+
+/// A set of encodings (`camera.link_copies`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct EncodingSet(u8);
+
+impl EncodingSet {
+    pub fn of(encodings: &[CameraEncoding]) -> EncodingSet {
+        EncodingSet(encodings.iter().fold(0, |bits, e| bits | 1 << *e as u8))
+    }
+
+    pub fn contains(self, e: CameraEncoding) -> bool {
+        self.0 & (1 << e as u8) != 0
+    }
+
+    pub fn iter(self) -> impl Iterator<Item = CameraEncoding> {
+        CameraEncoding::ALL.into_iter().filter(move |e| self.contains(*e))
+    }
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -34,11 +82,23 @@ pub struct CameraSettings {
     pub shm_pool_mib: usize,
     /// Publish frames through shared memory when a subscriber on this host can read it.
     pub shared_memory: bool,
+    /// Copies a frame publisher offers beside its frames, each on `<frames key>/@<encoding>` and
+    /// encoded only while a subscriber reads it: a reader across a link picks the one that fits.
+    pub link_copies: EncodingSet,
+    /// Which copy this node's frame subscribers read; None: the frames as published.
+    pub read: Option<CameraEncoding>,
 }
 
 impl Default for CameraSettings {
     fn default() -> Self {
-        CameraSettings { encoding: CameraEncoding::Raw, jpeg_quality: 85, shm_pool_mib: 64, shared_memory: true }
+        CameraSettings {
+            encoding: CameraEncoding::Raw,
+            jpeg_quality: 85,
+            shm_pool_mib: 64,
+            shared_memory: true,
+            link_copies: EncodingSet::of(&[CameraEncoding::Lz4, CameraEncoding::Jpeg]),
+            read: None,
+        }
     }
 }
 
@@ -82,6 +142,8 @@ struct RawFile {
 #[serde(deny_unknown_fields)]
 struct RawCamera {
     encoding: Option<CameraEncoding>,
+    link_copies: Option<Vec<CameraEncoding>>,
+    read: Option<String>,
     jpeg_quality: Option<u8>,
     shm_pool_mib: Option<usize>,
     shared_memory: Option<bool>,
@@ -182,6 +244,20 @@ impl TopicMap {
             map.camera.shm_pool_mib = mib;
         }
         map.camera.encoding = cam.encoding.unwrap_or(map.camera.encoding);
+        if let Some(copies) = cam.link_copies {
+            map.camera.link_copies = EncodingSet::of(&copies);
+        }
+        map.camera.read = match cam.read.as_deref() {
+            None | Some("published") => None,
+            Some(name) => Some(CameraEncoding::ALL.into_iter().find(|e| e.name() == name).ok_or_else(|| {
+                ConfigError::new(
+                    origin,
+                    "camera.read",
+                    format!("`{name}` is not a frame encoding"),
+                    "use \"published\" (the frames as the simulator sends them) or a link copy: \"raw\", \"lz4\", \"jpeg\", \"png\"",
+                )
+            })?),
+        };
         map.camera.shared_memory = cam.shared_memory.unwrap_or(map.camera.shared_memory);
 
         for (name, over) in raw.topics {
@@ -272,6 +348,22 @@ impl TopicMap {
             entry.key.clone()
         } else {
             self.full_key(&entry.key)
+        }
+    }
+
+    /// The key of a frame topic's link copy in `encoding`: `<key>/@<encoding>` (camera/front/@lz4).
+    pub fn copy_key(&self, topic: Topic, encoding: CameraEncoding) -> OwnedKeyExpr {
+        // A verbatim chunk (`@`): wildcards never match it, so a `**` subscriber (record, top,
+        // echo) neither receives copies nor makes them wanted.
+        self.key(topic).join(&format!("@{}", encoding.name())).expect("@ and an encoding name make a verbatim chunk")
+    }
+
+    /// The key this node's subscribers read `topic` from: for a camera frame topic, the link
+    /// copy `camera.read` names (if any); else the topic's key.
+    pub fn read_key(&self, topic: Topic) -> OwnedKeyExpr {
+        match (topic.kind(), self.camera.read) {
+            (crate::msg::MessageKind::CameraFrame, Some(copy)) => self.copy_key(topic, copy),
+            _ => self.key(topic),
         }
     }
 

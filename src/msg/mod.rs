@@ -19,13 +19,15 @@ mod any;
 mod camera;
 mod codec;
 mod objects;
+mod pixels;
 mod road;
 mod sim;
 mod vehicle;
 
 pub use acc::{AccCommand, AccMode, AccStatus, AccWarning, LeadInfo};
 pub use any::{decode_json, peek_kind};
-pub use camera::{encode_jpeg, frame_prefix, CameraFrame, CameraFrameRef, CameraInfo, ImageEncoding};
+pub use camera::{frame_prefix, CameraFrame, CameraFrameRef, CameraInfo, ImageEncoding};
+pub use pixels::{check_size as check_frame_size, decode as decode_pixels, encode as encode_pixels, MAX_FRAME_PIXELS};
 pub use codec::{decode, decode_header, encode, encode_into, DecodeError, Stamped};
 pub use objects::{BoundingBox2d, Detection, Detections, GroundTruthObject, GroundTruthObjects, ObjectClass};
 pub use road::{Curve, LaneEnd, RoadSpec};
@@ -38,7 +40,7 @@ pub(crate) use {acc::example_status, camera::example_info, objects::example_dete
 use serde::{Deserialize, Serialize};
 
 /// Version of the envelope and of every message layout. A decoder refuses any other value.
-pub const WIRE_VERSION: u8 = 4;
+pub const WIRE_VERSION: u8 = 5;
 
 /// Bytes before the header: version and kind.
 pub const PREAMBLE_LEN: usize = 2;

@@ -3,7 +3,7 @@
 //! A recording keeps every payload byte for byte, on one MCAP channel per key, message type
 //! and publisher: the channel's topic is the Zenoh key, its schema is named after the message
 //! type (`slipstream.Speed`, ...), its message encoding names the wire version
-//! (`slipstream/v4`; docs/wire-format.md is the schema), its metadata names the publishing node. Log and publish time are the header's publish stamp,
+//! (`slipstream/v5`; docs/wire-format.md is the schema), its metadata names the publishing node. Log and publish time are the header's publish stamp,
 //! the MCAP sequence its seq; the header's simulation time stays inside the payload.
 //!
 //! The recorder never blocks a publisher: Zenoh's callback copies the payload into a bounded

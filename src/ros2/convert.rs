@@ -53,7 +53,8 @@ fn header(stamp_sim_ns: u64, frame_id: String) -> Header {
 }
 
 /// A frame as ROS carries it, pixels borrowed: raw RGB as Image (`rgb8`), JPEG and PNG as
-/// CompressedImage, never re-encoded.
+/// CompressedImage, never re-encoded. LZ4 is no ROS image format: the caller decodes it to
+/// raw first (translate.rs); given one, it is labelled "lz4", which no ROS tool reads.
 #[derive(Debug)]
 pub enum RosImage<'a> {
     Raw(Image<'a>),
@@ -74,6 +75,7 @@ pub fn image<'a>(stamp_sim_ns: u64, frame_id: String, frame: &CameraFrameRef<'a>
         }),
         ImageEncoding::Jpeg => RosImage::Compressed(CompressedImage { header, format: "jpeg", data: frame.data }),
         ImageEncoding::Png => RosImage::Compressed(CompressedImage { header, format: "png", data: frame.data }),
+        ImageEncoding::Lz4 => RosImage::Compressed(CompressedImage { header, format: "lz4", data: frame.data }),
     }
 }
 

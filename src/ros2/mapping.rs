@@ -220,8 +220,9 @@ impl Ros2Config {
             None => domain_from_env()?.unwrap_or(0),
         };
         let mut routes: BTreeMap<Route, Entry> = Route::ALL.iter().map(|r| (*r, r.default_entry())).collect();
-        if topics.camera.encoding == CameraEncoding::Jpeg {
-            // Frames go out as published: JPEG as CompressedImage, under image_transport's name.
+        let compressed_frames = matches!(topics.camera.encoding, CameraEncoding::Jpeg | CameraEncoding::Png);
+        if compressed_frames {
+            // Frames go out as published: JPEG and PNG as CompressedImage, under image_transport's name.
             for r in [Route::CameraFront, Route::CameraNarrow] {
                 let e = routes.get_mut(&r).expect("every route has an entry");
                 e.type_name = COMPRESSED.into();
@@ -242,7 +243,7 @@ impl Ros2Config {
         }
         for r in [Route::CameraFront, Route::CameraNarrow] {
             let compressed = routes[&r].type_name == COMPRESSED;
-            if compressed != (topics.camera.encoding == CameraEncoding::Jpeg) {
+            if compressed != compressed_frames {
                 return Err(ConfigError::new(
                     origin,
                     format!("ros2.topics.{}.type", r.id()),
@@ -250,7 +251,7 @@ impl Ros2Config {
                         "frames are sent as {:?} (camera.encoding), which {} cannot carry",
                         topics.camera.encoding, routes[&r].type_name
                     ),
-                    "leave the type out: it follows camera.encoding (raw: Image, jpeg: CompressedImage)",
+                    "leave the type out: it follows camera.encoding (raw, lz4: Image; jpeg, png: CompressedImage)",
                 ));
             }
         }

@@ -75,8 +75,17 @@ impl Translator {
             Route::CameraFront | Route::CameraNarrow => {
                 let s = decoded::<CameraFrameRef>(payload)?;
                 let optical = f.camera(camera_of(topic)).1;
-                let hint = s.msg.data.len() + 128;
-                match (convert::image(s.header.stamp_sim_ns, optical, &s.msg), self.compressed.contains(&route)) {
+                // LZ4 is no ROS format: such frames go out as raw Images.
+                let pixels;
+                let frame = match s.msg.encoding {
+                    crate::msg::ImageEncoding::Lz4 => {
+                        pixels = s.msg.to_rgb8().map_err(|e| e.to_string())?;
+                        CameraFrameRef { encoding: crate::msg::ImageEncoding::Rgb8, data: &pixels, ..s.msg }
+                    }
+                    _ => s.msg,
+                };
+                let hint = frame.data.len() + 128;
+                match (convert::image(s.header.stamp_sim_ns, optical, &frame), self.compressed.contains(&route)) {
                     (RosImage::Raw(img), false) => cdr(s.header, &img, hint),
                     (RosImage::Compressed(img), true) => cdr(s.header, &img, hint),
                     (_, compressed) => Err(format!(

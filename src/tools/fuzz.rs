@@ -5,7 +5,8 @@
 //!
 //! Targets: the wire decoder of every message type (the example payloads of
 //! docs/wire-format.md mutated, through the same dispatch `echo` and the recorder use), the
-//! zero-copy camera frame decoder, the topic config, a scenario, the ACC settings and a fault profile (their
+//! zero-copy camera frame decoder, the pixel decoders (a frame in LZ4, JPEG and PNG mutated:
+//! truncations, mislabelled encodings, sizes that would expand far beyond the bytes), the topic config, a scenario, the ACC settings and a fault profile (their
 //! shipped files mutated). The parsers read whole files, thousands a second: they get a count
 //! of their own.
 
@@ -191,6 +192,12 @@ pub fn run(count: u64, parser_count: u64, seed: u64) -> Vec<TargetReport> {
             }));
         }
     }
+    for (encoding, payload) in frame_payloads() {
+        let name = format!("pixels: {encoding:?} frame");
+        reports.push(fuzz(&name, &[payload.as_slice()], &all, false, count, seed, |input| {
+            msg::decode::<CameraFrameRef>(input).is_ok_and(|f| f.msg.to_rgb8().is_ok())
+        }));
+    }
     let text = |s: &'static str| -> &'static [u8] { s.as_bytes() };
     let (n, as_str) = (parser_count, |b: &[u8]| String::from_utf8_lossy(b).into_owned());
     reports.push(fuzz("config: topic config", &[text(TOPIC_CONFIG)], &[text(TOPIC_CONFIG)], true, n, seed, |b| {
@@ -206,6 +213,30 @@ pub fn run(count: u64, parser_count: u64, seed: u64) -> Vec<TargetReport> {
         crate::config::FaultProfile::parse(&as_str(b), "fuzz", "fuzz").is_ok()
     }));
     reports
+}
+
+/// A small frame (40x30, a horizon and a dark box) as a camera/front payload in each
+/// compressed encoding.
+fn frame_payloads() -> Vec<(msg::ImageEncoding, Vec<u8>)> {
+    let (w, h) = (40u32, 30u32);
+    let rgb: Vec<u8> = (0..w * h)
+        .flat_map(|i| {
+            let (x, y) = (i % w, i / w);
+            match (y < h / 2, (15..25).contains(&x) && (15..20).contains(&y)) {
+                (_, true) => [20, 20, 25],
+                (true, _) => [150, 180, 220],
+                _ => [90, 90, (x % 7) as u8 + 90],
+            }
+        })
+        .collect();
+    [msg::ImageEncoding::Lz4, msg::ImageEncoding::Jpeg, msg::ImageEncoding::Png]
+        .into_iter()
+        .map(|encoding| {
+            let data = msg::encode_pixels(&rgb, w, h, encoding, 85).expect("a valid frame encodes");
+            let frame = msg::CameraFrame { width: w, height: h, encoding, data };
+            (encoding, msg::encode(&msg::Header::default(), &frame))
+        })
+        .collect()
 }
 
 /// The table people read.

@@ -124,7 +124,9 @@ impl Copies {
         let stamp = f.header.stamp_pub_ns;
         // One copy of the pixels, into the protobuf message.
         let pixels = foxglove::bytes::Bytes::copy_from_slice(f.msg.data);
-        let image = scene::frame_image(stamp, f.msg.width, f.msg.height, f.msg.encoding, pixels);
+        let Some(image) = scene::frame_image(stamp, f.msg.width, f.msg.height, f.msg.encoding, pixels) else {
+            return Vec::new();
+        };
         let mut out: Vec<ViewableCopy> = match &image {
             Image::Raw(i) => copy(TOPIC_CAMERA, i, stamp),
             Image::Compressed(i) => copy(TOPIC_CAMERA, i, stamp),

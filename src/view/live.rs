@@ -142,10 +142,11 @@ impl Channels {
         let stamp = sample.header().stamp_pub_ns;
         let ctx = &self.ctx;
         match scene::image(sample) {
-            Image::Raw(img) => {
+            None => false,
+            Some(Image::Raw(img)) => {
                 Self::log(self.raw.get_or_insert_with(|| ctx.channel_builder(TOPIC_CAMERA).build()), &img, stamp)
             }
-            Image::Compressed(img) => {
+            Some(Image::Compressed(img)) => {
                 Self::log(self.compressed.get_or_insert_with(|| ctx.channel_builder(TOPIC_CAMERA).build()), &img, stamp)
             }
         }

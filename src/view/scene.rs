@@ -62,8 +62,9 @@ impl AsRef<[u8]> for Payload {
     }
 }
 
-/// The frame as an image message, its pixels borrowed from the payload.
-pub fn image(sample: FrameSample) -> Image {
+/// The frame as an image message, its pixels borrowed from the payload (LZ4 frames decoded);
+/// None for a frame that does not decode.
+pub fn image(sample: FrameSample) -> Option<Image> {
     let frame = sample.frame();
     let (stamp, f) = (frame.header.stamp_pub_ns, frame.msg);
     let offset = f.data.as_ptr() as usize - sample.bytes().as_ptr() as usize;
@@ -72,11 +73,23 @@ pub fn image(sample: FrameSample) -> Image {
     frame_image(stamp, width, height, encoding, data)
 }
 
-/// A frame of `width` x `height` in `encoding`, its pixels `data`, as an image message.
-pub fn frame_image(stamp_ns: u64, width: u32, height: u32, encoding: ImageEncoding, data: Bytes) -> Image {
+/// A frame of `width` x `height` in `encoding`, its pixels `data`, as an image message: raw
+/// pixels as RawImage, JPEG and PNG as CompressedImage, LZ4 decoded into a RawImage (Foxglove
+/// does not read LZ4). None when an LZ4 frame does not decode.
+pub fn frame_image(stamp_ns: u64, width: u32, height: u32, encoding: ImageEncoding, data: Bytes) -> Option<Image> {
     let stamp = Some(timestamp(stamp_ns));
     let frame_id = FRAME_CAMERA.to_string();
-    match encoding {
+    Some(match encoding {
+        ImageEncoding::Lz4 => {
+            let rgb = match crate::msg::decode_pixels(&data, width, height, encoding) {
+                Ok(rgb) => rgb.into_owned(),
+                Err(e) => {
+                    tracing::debug!("frame not shown: {e}");
+                    return None;
+                }
+            };
+            return frame_image(stamp_ns, width, height, ImageEncoding::Rgb8, Bytes::from(rgb));
+        }
         ImageEncoding::Rgb8 => Image::Raw(RawImage {
             timestamp: stamp,
             frame_id,
@@ -92,7 +105,7 @@ pub fn frame_image(stamp_ns: u64, width: u32, height: u32, encoding: ImageEncodi
         ImageEncoding::Png => {
             Image::Compressed(CompressedImage { timestamp: stamp, frame_id, data, format: "png".into() })
         }
-    }
+    })
 }
 
 /// The camera's intrinsics (a pinhole without distortion, as rendered), so the Image panel

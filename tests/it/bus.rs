@@ -176,6 +176,43 @@ async fn frames_go_through_shared_memory_when_enabled() {
 }
 
 #[tokio::test(flavor = "multi_thread")]
+async fn a_reader_across_a_link_gets_a_link_copy_encoded_only_while_it_reads_it() {
+    let (a, b) =
+        bus_pair(map(r#"{ camera: { link_copies: ["lz4", "png"] } }"#), map(r#"{ camera: { read: "lz4" } }"#)).await;
+    let publisher = a.frame_publisher(slipstream::topics::CAMERA_FRONT).await.unwrap();
+    assert_eq!(publisher.copy_keys(), vec!["camera/front/@lz4", "camera/front/@png"]);
+    let (w, h) = (160u32, 120u32);
+    let put = |stamp: u64| {
+        publisher
+            .put_with(stamp, w, h, ImageEncoding::Rgb8, (w * h * 3) as usize, |px| {
+                px.iter_mut().enumerate().for_each(|(i, b)| *b = ((i / 3 % w as usize) as u64 + stamp) as u8)
+            })
+            .unwrap()
+            .unwrap()
+    };
+    // Nobody reads a copy yet: the frame goes out, no copy is encoded.
+    put(1);
+    assert!(!publisher.copies_wanted());
+    assert_eq!(publisher.copies_sent(), 0);
+    // b reads camera/front/@lz4 (camera.read): only that copy is made, with its frame's header.
+    let sub = b.frame_subscriber(slipstream::topics::CAMERA_FRONT).await.unwrap();
+    within!(async {
+        while !publisher.copies_wanted() {
+            tokio::time::sleep(Duration::from_millis(10)).await;
+        }
+    });
+    let sent = put(2);
+    let s = within!(sub.recv());
+    let f = s.frame();
+    assert_eq!(f.msg.encoding, ImageEncoding::Lz4);
+    assert_eq!(f.header, sent.header, "a copy carries its frame's header");
+    let rgb = f.msg.to_rgb8().unwrap();
+    assert!(rgb.iter().enumerate().all(|(i, b)| *b == ((i / 3 % w as usize) as u64 + 2) as u8), "bit-exact");
+    assert!(f.msg.data.len() < rgb.len() / 4, "{} bytes of LZ4 for {}", f.msg.data.len(), rgb.len());
+    assert_eq!(publisher.copies_sent(), 1, "the png copy has no reader: not encoded");
+}
+
+#[tokio::test(flavor = "multi_thread")]
 async fn malformed_payloads_are_counted_and_the_stream_goes_on() {
     let (a, b) = bus_pair(TopicMap::default(), TopicMap::default()).await;
     let sub = b.subscriber(VEHICLE_SPEED).await.unwrap();

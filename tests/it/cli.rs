@@ -62,7 +62,7 @@ fn info_shows_namespace_remapping_and_qos() {
     let speed = info["topics"].as_array().unwrap().iter().find(|t| t["topic"] == "vehicle/speed").unwrap();
     assert_eq!(speed["key"], "car7/ego/v");
     assert_eq!(speed["priority"], "data-high");
-    assert_eq!(speed["encoding"], "application/octet-stream;slipstream/Speed/v4");
+    assert_eq!(speed["encoding"], "application/octet-stream;slipstream/Speed/v5");
     assert_eq!(info["zenoh_mode"], "peer");
     assert_eq!(info["multicast_scouting"], false);
 }

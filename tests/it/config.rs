@@ -63,6 +63,12 @@ fn errors_name_file_key_and_what_is_allowed() {
     let e = err(r#"{ camera: { jpeg_quality: 0 } }"#);
     assert!(e.contains("`camera.jpeg_quality`") && e.contains("1 to 100"), "{e}");
 
+    let e = err(r#"{ camera: { read: "webp" } }"#);
+    assert!(e.contains("`camera.read`") && e.contains("\"published\"") && e.contains("\"lz4\""), "{e}");
+
+    let e = err(r#"{ camera: { link_copies: ["lz4", "gif"] } }"#);
+    assert!(e.contains("camera.link_copies") && e.contains("gif"), "{e}");
+
     let e = err(r#"{ topics: { "objects": { key: "a/*/b" } } }"#);
     assert!(e.contains("`topics.objects.key`") && e.contains("wildcard"), "{e}");
 

@@ -53,3 +53,56 @@ def test_python_subscriber_decodes_rust_publications(slipstream_bin, free_port):
     finally:
         publisher.kill()
         publisher.wait(timeout=10)
+
+
+def test_link_copies_decode_with_an_independent_lz4_and_match_the_raw_frames(slipstream_bin, free_port):
+    """camera/front/@lz4 and camera/front/@jpeg (link copies, config/slipstream.json5) beside raw
+    camera/front: the LZ4 block expands, with the `lz4` package (not our decoder), to exactly
+    the raw frame of the same seq; the JPEG copy is a JPEG with the same header."""
+    import lz4.block
+
+    from slipstream_client.image import frame_array
+
+    endpoint = f"tcp/127.0.0.1:{free_port}"
+    publisher = subprocess.Popen(
+        [slipstream_bin, "demo", "--role", "pub", "--duration", "8", "-l", endpoint, "-e", endpoint],
+        stdout=subprocess.DEVNULL,
+    )
+    try:
+        got = {"camera/front": {}, "camera/front/@lz4": {}, "camera/front/@jpeg": {}}
+        lock = threading.Lock()
+
+        def on_sample(sample):
+            payload = sample.payload.to_bytes()
+            _, header, body = decode(payload)
+            with lock:
+                got[str(sample.key_expr)][header["seq"]] = (header, body, payload)
+
+        with zenoh.open(peer_config(endpoint)) as session:
+            subs = [session.declare_subscriber(k, on_sample) for k in got]
+            deadline = time.time() + 20
+            while time.time() < deadline:
+                with lock:
+                    common = set(got["camera/front"]) & set(got["camera/front/@lz4"]) & set(got["camera/front/@jpeg"])
+                if len(common) >= 3:
+                    break
+                time.sleep(0.1)
+            for s in subs:
+                s.undeclare()
+        assert len(common) >= 3, {k: len(v) for k, v in got.items()}
+        for seq in sorted(common)[:3]:
+            raw_h, raw, _ = got["camera/front"][seq]
+            lz_h, lz, lz_payload = got["camera/front/@lz4"][seq]
+            jp_h, jp, _ = got["camera/front/@jpeg"][seq]
+            assert raw_h == lz_h == jp_h, "a copy carries its frame's header"
+            assert (lz["encoding"], jp["encoding"]) == ("Lz4", "Jpeg")
+            pixels = lz4.block.decompress(bytes(lz["data"]), uncompressed_size=640 * 480 * 3)
+            assert pixels == bytes(raw["data"]), "bit-exact"
+            assert len(lz["data"]) < len(raw["data"]) / 3
+            assert bytes(jp["data"][:2]) == b"\xff\xd8" and len(jp["data"]) < len(raw["data"]) / 10
+            # The client's own reader agrees.
+            _, _, array = frame_array(lz_payload)
+            assert array.tobytes() == pixels
+    finally:
+        publisher.kill()
+        publisher.wait(timeout=10)

@@ -70,7 +70,7 @@ def test_python_encodes_what_rust_documents():
     header = {"seq": 1, "stamp_sim_ns": 0, "stamp_pub_ns": 5}
     # -1 as i32 is zigzag 1; 300 as varint is ac 02.
     state_lane = encode("Speed", header, {"speed_mps": 1.0})
-    assert state_lane[:5] == bytes([WIRE_VERSION, 1, 1, 0, 5]) and WIRE_VERSION == 4
+    assert state_lane[:5] == bytes([WIRE_VERSION, 1, 1, 0, 5]) and WIRE_VERSION == 5
     event = encode("SimEvent", header, {"kind": {"variant": "ControlTimeout", "late": ["acc"]}})
     assert event[5:] == bytes([3, 1, 3]) + b"acc"
     assert decode(event)[2]["kind"]["late"] == ["acc"]

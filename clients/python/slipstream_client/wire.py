@@ -1,4 +1,4 @@
-"""slipstream wire format (version 4) in pure Python, written from docs/wire-format.md alone.
+"""slipstream wire format (version 5) in pure Python, written from docs/wire-format.md alone.
 
 decode(payload) -> (kind_name, header, body) and encode(kind_name, header, body) -> bytes.
 Bodies are dicts keyed by the field names of the doc; enums are their variant names
@@ -12,7 +12,9 @@ import struct
 import threading
 from typing import Any, Dict, Optional, Tuple
 
-WIRE_VERSION = 4
+WIRE_VERSION = 5
+# The most pixels a camera frame may have (8192 x 8192).
+MAX_FRAME_PIXELS = 8192 * 8192
 
 
 class WireError(ValueError):
@@ -43,7 +45,7 @@ class BadPayloads:
 # Type language: "u8" "u32" "u64" "i32" "f32" "f64" "bool" "str" "bytes",
 # ("opt", T), ("seq", T), ("arr", T, N), ("enum", [names]), ("struct", NAME), ("variants", NAME).
 VEC3 = ("arr", "f64", 3)
-IMAGE_ENCODING = ("enum", ["Rgb8", "Jpeg", "Png"])
+IMAGE_ENCODING = ("enum", ["Rgb8", "Jpeg", "Png", "Lz4"])
 OBJECT_CLASS = ("enum", ["Unknown", "Car", "Van", "Truck", "Motorcycle"])
 
 STRUCTS = {
@@ -276,8 +278,16 @@ def _check(kind, body):
     if kind == "CameraFrame":
         if body["width"] == 0 or body["height"] == 0:
             raise WireError("frame size is empty")
-        if body["encoding"] == "Rgb8" and len(body["data"]) != body["width"] * body["height"] * 3:
+        pixels = body["width"] * body["height"]
+        if pixels > MAX_FRAME_PIXELS:
+            raise WireError(f"{body['width']}x{body['height']} is more than {MAX_FRAME_PIXELS} pixels")
+        n = len(body["data"])
+        if body["encoding"] == "Rgb8" and n != pixels * 3:
             raise WireError("Rgb8 frame length does not match its size")
+        if body["encoding"] == "Lz4" and (n == 0 or n * 255 + 16 < pixels * 3):
+            raise WireError(f"{n} bytes of Lz4 cannot expand to {pixels * 3}")
+        if body["encoding"] in ("Jpeg", "Png") and n == 0:
+            raise WireError(f"empty {body['encoding']} frame")
     elif kind == "ControlCommand":
         for f, lo, hi in (("throttle", 0, 1), ("brake", 0, 1), ("steer", -1, 1)):
             if not _in(body[f], lo, hi):
