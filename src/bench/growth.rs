@@ -86,6 +86,9 @@ pub struct RouterRow {
     pub lost: f64,
     /// The router's CPU while forwarding, % of one core.
     pub router_cpu_percent: Option<f64>,
+    /// The most memory the router held during the run, MiB.
+    #[serde(default)]
+    pub router_peak_rss_mib: Option<f64>,
 }
 
 /// Sorted latencies in us: (p50, p99).
@@ -107,7 +110,14 @@ fn fanout_spec(path: FanoutPath, subscribers: usize, rate_hz: Option<f64>, quick
 }
 
 /// One run of `spec` (through a fresh router when the case says so).
-fn run_once(specs: &[CaseSpec]) -> Result<(Vec<(SendReport, Vec<RecvReport>)>, Option<f64>)> {
+/// What the router used in one run: CPU (% of a core) and its peak memory (MiB).
+#[derive(Debug, Clone, Copy)]
+struct RouterUse {
+    cpu_percent: f64,
+    peak_rss_mib: Option<f64>,
+}
+
+fn run_once(specs: &[CaseSpec]) -> Result<(Vec<(SendReport, Vec<RecvReport>)>, Option<RouterUse>)> {
     if specs.iter().any(|s| s.via_router) {
         let router = RouterProcess::start()?;
         let cpu_before = router.cpu_s();
@@ -116,7 +126,7 @@ fn run_once(specs: &[CaseSpec]) -> Result<(Vec<(SendReport, Vec<RecvReport>)>, O
         // opening included): what forwarding and connecting took together.
         let busy_s = out.iter().map(|(s, _)| s.elapsed_s).fold(0.0, f64::max);
         let cpu = (router.cpu_s() - cpu_before) / busy_s.max(1e-3);
-        Ok((out, Some(cpu * 100.0)))
+        Ok((out, Some(RouterUse { cpu_percent: cpu * 100.0, peak_rss_mib: router.peak_rss_mib() })))
     } else {
         Ok((run_groups(specs, None)?, None))
     }
@@ -238,8 +248,8 @@ pub fn router(counts: &[usize], quick: bool, repeat: usize) -> Result<Vec<Router
             let what = if via_router { format!("{n} vehicle(s) through a router") } else { "1 vehicle, direct".into() };
             eprint!("[router] {what}, run {} ... ", run + 1);
             let specs: Vec<CaseSpec> = (0..n).map(|i| vehicle_spec(i, via_router, quick)).collect();
-            let (groups, cpu) = run_once(&specs).with_context(|| what.clone())?;
-            let r = vehicle_figures(&groups, cpu);
+            let (groups, router_use) = run_once(&specs).with_context(|| what.clone())?;
+            let r = vehicle_figures(&groups, router_use);
             eprintln!(
                 "{:.0} messages/s, speed p50 {} us, {} lost",
                 r.messages_per_s,
@@ -265,13 +275,14 @@ pub fn router(counts: &[usize], quick: bool, repeat: usize) -> Result<Vec<Router
             },
             lost: m(&|r| Some(r.lost)).unwrap_or(0.0),
             router_cpu_percent: m(&|r| r.router_cpu_percent),
+            router_peak_rss_mib: m(&|r| r.router_peak_rss_mib),
         });
     }
     Ok(rows)
 }
 
 /// One run's figures over all vehicles (a vehicle: one sender with one receiver).
-fn vehicle_figures(groups: &[(SendReport, Vec<RecvReport>)], router_cpu_percent: Option<f64>) -> RouterRow {
+fn vehicle_figures(groups: &[(SendReport, Vec<RecvReport>)], router: Option<RouterUse>) -> RouterRow {
     let mut speed = Vec::new();
     let mut control = Vec::new();
     let (mut delivered, mut lost) = (0u64, 0u64);
@@ -289,7 +300,7 @@ fn vehicle_figures(groups: &[(SendReport, Vec<RecvReport>)], router_cpu_percent:
         }
     }
     RouterRow {
-        via_router: router_cpu_percent.is_some(),
+        via_router: router.is_some(),
         vehicles: groups.len(),
         messages_per_s: delivered as f64 / busy_s.max(1e-3),
         speed_p50_us: median(speed.iter().map(|p| p.0)),
@@ -298,7 +309,8 @@ fn vehicle_figures(groups: &[(SendReport, Vec<RecvReport>)], router_cpu_percent:
         control_p99_us: control.iter().filter_map(|p| p.1).reduce(f64::max),
         added_p50_us: None,
         lost: lost as f64,
-        router_cpu_percent,
+        router_cpu_percent: router.map(|r| r.cpu_percent),
+        router_peak_rss_mib: router.and_then(|r| r.peak_rss_mib),
     }
 }
 
@@ -330,10 +342,10 @@ pub fn markdown(fanout: &[FanoutRow], router: &[RouterRow]) -> String {
         }
     }
     if !router.is_empty() {
-        s.push_str("\n### g. a router forwarding speed (100 Hz) + control for N vehicles\n\n| path | vehicles | messages/s | speed p50 us | speed p99 us | control p50 us | control p99 us | added p50 us (vs direct) | lost | router CPU % of a core |\n|---|---|---|---|---|---|---|---|---|---|\n");
+        s.push_str("\n### g. a router forwarding speed (100 Hz) + control for N vehicles\n\n| path | vehicles | messages/s | speed p50 us | speed p99 us | control p50 us | control p99 us | added p50 us (vs direct) | lost | router CPU % of a core | router peak memory MiB |\n|---|---|---|---|---|---|---|---|---|---|---|\n");
         for r in router {
             s.push_str(&format!(
-                "| {} | {} | {:.0} | {} | {} | {} | {} | {} | {:.0} | {} |\n",
+                "| {} | {} | {:.0} | {} | {} | {} | {} | {} | {:.0} | {} | {} |\n",
                 if r.via_router { "through a router" } else { "direct (no router)" },
                 r.vehicles,
                 r.messages_per_s,
@@ -344,6 +356,7 @@ pub fn markdown(fanout: &[FanoutRow], router: &[RouterRow]) -> String {
                 fmt_opt(r.added_p50_us, 0),
                 r.lost,
                 fmt_opt(r.router_cpu_percent, 1),
+                fmt_opt(r.router_peak_rss_mib, 1),
             ));
         }
     }

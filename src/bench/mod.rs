@@ -6,7 +6,10 @@
 //! loopback interface. The receiver timestamps arrival against the publish time in the
 //! message: one-way latency on one host's clock.
 
+pub mod fleet;
+pub mod fleet_watch;
 pub mod growth;
+mod netns;
 mod peer;
 mod plot;
 pub mod scale;
@@ -48,6 +51,10 @@ pub enum Suite {
     /// g. a router forwarding speed + control for 1-16 vehicles: messages/s, added latency,
     /// the router's CPU
     Router,
+    /// h. a fleet through capped links: N simulators on one host, their detectors and ACCs on
+    /// another, a router between, every link capped (network namespaces, tc tbf; root);
+    /// frames delivered, speed and control lost, loop latency, router CPU; only when named
+    Fleet,
 }
 
 #[derive(Debug, Clone, clap::Args)]
@@ -84,6 +91,23 @@ pub struct BenchArgs {
     /// `cargo build --release --features uring`); repeatable
     #[arg(long, value_name = "LABEL=PATH")]
     pub with_build: Vec<String>,
+    /// fleet: how many vehicles, in turn
+    #[arg(long, value_delimiter = ',', default_value = "1,2,4,8")]
+    pub fleet_vehicles: Vec<usize>,
+    /// fleet: the links' caps in Mbit/s, in turn
+    #[arg(long, value_delimiter = ',', default_value = "1000,100")]
+    pub fleet_caps: Vec<u32>,
+    /// fleet: seconds each batch of vehicles drives (realtime)
+    #[arg(long, default_value_t = 20.0)]
+    pub fleet_seconds: f64,
+    /// fleet: what the client PC reads (its camera.read): a link copy (lz4, jpeg, png, raw)
+    /// or "published"
+    #[arg(long, default_value = "jpeg", value_parser = ["published", "raw", "lz4", "jpeg", "png"])]
+    pub fleet_frames: String,
+    /// fleet: a Zenoh setting for every node and the router, e.g. --fleet-cfg
+    /// transport/link/tx/queue/size/real_time:16 (KEY:VALUE as --cfg; repeatable)
+    #[arg(long, value_name = "KEY:VALUE")]
+    pub fleet_cfg: Vec<String>,
     /// Also draw how the cost grows (scale, fanout, router: whichever ran) into this PNG
     #[arg(long, value_name = "FILE")]
     pub plot: Option<std::path::PathBuf>,
@@ -127,6 +151,8 @@ pub struct BenchReport {
     pub fanout: Vec<growth::FanoutRow>,
     /// A router forwarding for several vehicles (g).
     pub router: Vec<growth::RouterRow>,
+    /// A fleet through capped links (h), when asked for.
+    pub fleet: Vec<fleet::FleetRow>,
 }
 
 struct Case {
@@ -524,10 +550,23 @@ impl RouterProcess {
     fn cpu_s(&self) -> f64 {
         process_cpu_s(self.process.0.id()).unwrap_or(0.0)
     }
+
+    /// The most memory the router has held so far, MiB.
+    fn peak_rss_mib(&self) -> Option<f64> {
+        process_peak_rss_mib(self.process.0.id())
+    }
+}
+
+/// The peak resident memory of a running process (VmHWM in /proc/PID/status), MiB.
+fn process_peak_rss_mib(pid: u32) -> Option<f64> {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
+    let line = status.lines().find(|l| l.starts_with("VmHWM:"))?;
+    let kib: f64 = line.split_whitespace().nth(1)?.parse().ok()?;
+    Some(kib / 1024.0)
 }
 
 /// User + system CPU seconds of a running process (/proc/PID/stat), None if unreadable.
-fn process_cpu_s(pid: u32) -> Option<f64> {
+pub(super) fn process_cpu_s(pid: u32) -> Option<f64> {
     let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).ok()?;
     // Fields after the command name (which may hold spaces) in parentheses.
     let rest = &stat[stat.rfind(')')? + 2..];
@@ -670,8 +709,30 @@ pub fn run(args: &BenchArgs) -> Result<BenchReport> {
         true => growth::router(&counts(&args.vehicles, "vehicles", 64)?, args.quick, repeat)?,
         false => Vec::new(),
     };
+    let fleet = match suites.contains(&Suite::Fleet) {
+        true => {
+            anyhow::ensure!(args.fleet_seconds >= 5.0, "--fleet-seconds must be at least 5");
+            anyhow::ensure!(
+                !args.fleet_vehicles.is_empty() && args.fleet_vehicles.iter().all(|n| (1..=64).contains(n)),
+                "--fleet-vehicles: give 1 to 64 per run, e.g. --fleet-vehicles 1,2,4,8"
+            );
+            let plan = fleet::FleetPlan {
+                vehicles: args.fleet_vehicles.clone(),
+                caps_mbit_s: args.fleet_caps.clone(),
+                seconds: if args.quick { 5.0 } else { args.fleet_seconds },
+                frames: args.fleet_frames.clone(),
+                cfg: args.fleet_cfg.clone(),
+            };
+            anyhow::ensure!(
+                plan.caps_mbit_s.iter().all(|c| (1..=100_000).contains(c)),
+                "--fleet-caps: give link speeds in Mbit/s, e.g. --fleet-caps 1000,100"
+            );
+            fleet::run(&plan)?
+        }
+        false => Vec::new(),
+    };
     let command = std::env::args().collect::<Vec<_>>().join(" ");
-    let report = BenchReport { command, rows, ratios, sim, scale, fanout, router };
+    let report = BenchReport { command, rows, ratios, sim, scale, fanout, router, fleet };
     if let Some(path) = &args.plot {
         plot::growth(&report, path)?;
         eprintln!("plot: {}", path.display());
@@ -824,6 +885,9 @@ pub fn markdown(report: &BenchReport) -> String {
         s.push_str(&scale::markdown(&report.scale));
     }
     s.push_str(&growth::markdown(&report.fanout, &report.router));
+    if !report.fleet.is_empty() {
+        s.push_str(&fleet::markdown(&report.fleet));
+    }
     if !report.ratios.is_empty() {
         s.push_str("\n### Ratios (same run)\n\n| ratio | value | aim |\n|---|---|---|\n");
         for r in &report.ratios {

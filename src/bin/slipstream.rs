@@ -138,6 +138,9 @@ enum Command {
     /// implementations of docs/wire-format.md (tests/python/test_wire.py)
     #[command(hide = true)]
     WireCheck,
+    /// The observer of `bench fleet` on the client PC's host (run by the bench)
+    #[command(hide = true)]
+    BenchFleetWatch(slipstream::bench::fleet_watch::FleetWatchArgs),
     /// One side of a benchmark case (started by `slipstream bench`)
     #[command(hide = true)]
     BenchPeer {
@@ -171,6 +174,13 @@ enum EvalCommand {
         /// built-in]
         #[arg(long, value_name = "FILE", env = "SLIPSTREAM_SIM_CONFIG")]
         settings: Option<std::path::PathBuf>,
+        /// Put every frame through this encoding and back before the detector sees it, as a
+        /// link copy would (raw, lz4, jpeg, png), and report its size and encode/decode time
+        #[arg(long, value_name = "ENCODING")]
+        frames: Option<String>,
+        /// JPEG quality for --frames jpeg, 1..100
+        #[arg(long, default_value_t = 85, value_parser = clap::value_parser!(u8).range(1..=100))]
+        jpeg_quality: u8,
     },
     /// Adaptive cruise control: runs slipstream-sim (lockstep, fast), slipstream-detect and
     /// slipstream-acc as separate processes over Zenoh through each scenario and reports
@@ -309,11 +319,20 @@ fn run(cli: Cli) -> Result<ExitCode> {
             }
             Ok(ExitCode::SUCCESS)
         }
-        Command::Eval(EvalCommand::Detect { scenarios, seconds, json, settings }) => {
-            use slipstream::eval::detect;
+        Command::Eval(EvalCommand::Detect { scenarios, seconds, json, settings, frames, jpeg_quality }) => {
+            use slipstream::eval::{detect, link_codec::LinkCodec};
             let names: Vec<String> = if scenarios.is_empty() { detect::standard() } else { scenarios };
             let settings = slipstream::sim::SimSettings::load_or_default(settings.as_deref())?;
-            let report = detect::evaluate(&names, seconds, &settings)?;
+            let codec = match frames.as_deref() {
+                None => None,
+                Some(name) => {
+                    let Some(e) = slipstream::config::CameraEncoding::ALL.into_iter().find(|e| e.name() == name) else {
+                        anyhow::bail!("--frames {name}: not a frame encoding (use raw, lz4, jpeg or png)");
+                    };
+                    Some(LinkCodec::new(e, jpeg_quality))
+                }
+            };
+            let report = detect::evaluate(&names, seconds, &settings, codec)?;
             print_report(json, &report, detect::markdown)?;
             Ok(ExitCode::SUCCESS)
         }
@@ -361,6 +380,12 @@ fn run(cli: Cli) -> Result<ExitCode> {
                 };
                 println!("{verdict}");
             }
+            Ok(ExitCode::SUCCESS)
+        }
+        Command::BenchFleetWatch(args) => {
+            let rt = tokio::runtime::Runtime::new()?;
+            let seen = rt.block_on(slipstream::bench::fleet_watch::watch(connect, args))?;
+            println!("{}", serde_json::to_string(&seen)?);
             Ok(ExitCode::SUCCESS)
         }
         Command::BenchPeer { role, spec, endpoint } => {

@@ -11,6 +11,7 @@
 
 use serde::Serialize;
 
+use super::link_codec::{LinkCodec, LinkCost};
 use crate::msg::{Detection, GroundTruthObject};
 use crate::perception::{CameraRig, DetectorParams};
 use crate::sim::cameras::Cameras;
@@ -225,8 +226,16 @@ fn percentiles(values: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
     Some((at(0.5), at(0.9)))
 }
 
-/// Runs one scenario (for at most `max_seconds` simulated) and scores every frame.
-pub fn evaluate_scenario(scenario: Scenario, seed: u64, settings: &SimSettings, max_seconds: f64, tally: &mut Tally) {
+/// Runs one scenario (for at most `max_seconds` simulated) and scores every frame; with
+/// `codec`, every frame goes through its encoding and back first.
+pub fn evaluate_scenario(
+    scenario: Scenario,
+    seed: u64,
+    settings: &SimSettings,
+    max_seconds: f64,
+    tally: &mut Tally,
+    mut codec: Option<&mut LinkCodec>,
+) {
     let mut world = World::new(scenario, seed, settings.physics_hz);
     let mut cameras = Cameras::new(settings, &world);
     let mut rig = CameraRig::new(cameras.front.info(), cameras.narrow_info(), DetectorParams::default());
@@ -236,7 +245,16 @@ pub fn evaluate_scenario(scenario: Scenario, seed: u64, settings: &SimSettings, 
         if world.step_count() % every == 0 {
             let vis = cameras.draw(&world);
             let truth = ground_truth(&world, &vis);
-            let dets = rig.update(&cameras.front.rgb, cameras.narrow_rgb(), world.time_ns() as f64 / 1e9);
+            let t_s = world.time_ns() as f64 / 1e9;
+            let dets = match codec.as_deref_mut() {
+                None => rig.update(&cameras.front.rgb, cameras.narrow_rgb(), t_s),
+                Some(c) => {
+                    let (f, n) = (cameras.front.info(), cameras.narrow_info());
+                    let front = c.pass(&cameras.front.rgb, f.width, f.height);
+                    let narrow = n.zip(cameras.narrow_rgb()).map(|(i, rgb)| c.pass(rgb, i.width, i.height));
+                    rig.update(&front, narrow.as_deref(), t_s)
+                }
+            };
             tally.add_frame(&dets, &truth.objects, 60.0, 0.5);
         }
         world.step(EgoInput::Follow);
@@ -252,6 +270,8 @@ pub fn standard() -> Vec<String> {
 #[derive(Debug, Clone, Serialize)]
 pub struct DetectReport {
     pub command: String,
+    /// With `--frames`: the encoding the frames went through and its cost.
+    pub frames_through: Option<LinkCost>,
     pub scenarios: Vec<ScenarioScore>,
     pub overall: ScenarioScore,
 }
@@ -314,6 +334,7 @@ pub fn evaluate(
     names: &[String],
     seconds: f64,
     settings: &SimSettings,
+    mut codec: Option<LinkCodec>,
 ) -> Result<DetectReport, crate::config::ConfigError> {
     let mut overall = Tally::default();
     let mut scenarios = Vec::new();
@@ -322,13 +343,14 @@ pub fn evaluate(
         let seed = scenario.seed;
         let mut t = Tally::default();
         let started = std::time::Instant::now();
-        evaluate_scenario(scenario.clone(), seed, settings, seconds, &mut t);
+        evaluate_scenario(scenario.clone(), seed, settings, seconds, &mut t, codec.as_mut());
         eprintln!("{name}: {} frames in {:.1} s", t.frames, started.elapsed().as_secs_f64());
         scenarios.push(ScenarioScore::from_tally(&scenario.name, &t));
         overall.merge(t);
     }
     let command = std::env::args().collect::<Vec<_>>().join(" ");
-    Ok(DetectReport { command, scenarios, overall: ScenarioScore::from_tally("all", &overall) })
+    let frames_through = codec.map(|c| c.cost());
+    Ok(DetectReport { command, frames_through, scenarios, overall: ScenarioScore::from_tally("all", &overall) })
 }
 
 impl Tally {
@@ -378,6 +400,13 @@ pub fn markdown(report: &DetectReport) -> String {
         ));
     }
     s.push_str("\nErrors: median / p90 over matched detections (relative speed: tracks seen twice or more).\n");
+    if let Some(c) = &report.frames_through {
+        let quality = if c.encoding == "jpeg" { format!(" at quality {}", c.jpeg_quality) } else { String::new() };
+        s.push_str(&format!(
+            "Frames through {}{quality}: {} frames (both cameras), {:.0} bytes a frame (p90 {:.0}), {:.1}x fewer than raw, encode {:.2} ms, decode {:.2} ms (medians).\n",
+            c.encoding, c.frames, c.bytes_per_frame, c.bytes_p90, c.ratio, c.encode_ms, c.decode_ms
+        ));
+    }
     s
 }
 

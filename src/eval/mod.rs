@@ -26,6 +26,7 @@ pub mod acc;
 pub mod detect;
 pub mod faults;
 pub mod latency;
+pub mod link_codec;
 pub mod metrics;
 pub mod offline;
 pub mod plot;

@@ -80,7 +80,7 @@ def main():
         session.declare_subscriber(topics.key("vehicle/control"), on_control),
         session.declare_subscriber(topics.key("vehicle/state"), on_state),
         session.declare_subscriber(topics.key("perception/objects"), count("det")),
-        session.declare_subscriber(topics.key("camera/front"), latency("frame_ms", "CameraFrame")),
+        session.declare_subscriber(topics.read_key("camera/front"), latency("frame_ms", "CameraFrame")),
         session.declare_subscriber(topics.key("vehicle/speed"), latency("speed_ms", "Speed")),
     ]
     end = time.monotonic() + args.seconds

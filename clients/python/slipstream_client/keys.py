@@ -10,6 +10,7 @@
     topics = Topics(namespace="car1")      # no file
     topics.key("vehicle/speed")            # "car1/vehicle/speed"
     topics.kind("car1/vehicle/speed")      # "Speed"
+    topics.read_key("camera/front")        # "car1/camera/front/@jpeg" with camera.read "jpeg"
 """
 
 import os
@@ -21,6 +22,9 @@ from typing import Dict, ItemsView, Optional
 import json5
 
 from .wire import DEFAULT_KEYS
+
+# camera.link_copies and camera.read name these (config/slipstream.json5).
+FRAME_ENCODINGS = ("raw", "lz4", "jpeg", "png")
 
 _CHUNK = re.compile(r"^[A-Za-z0-9_\-.~+=,;:!'()]+$")
 
@@ -43,7 +47,12 @@ def _plain_key(origin, where, key):
 class Topics:
     """The key of every topic after namespace and remapping."""
 
-    def __init__(self, namespace: str = "", remap: Optional[Dict[str, str]] = None, origin: str = "arguments") -> None:
+    def __init__(self, namespace: str = "", remap: Optional[Dict[str, str]] = None, origin: str = "arguments",
+                 read: Optional[str] = None) -> None:
+        if read not in (None, "published", *FRAME_ENCODINGS):
+            raise ConfigError(origin, "camera.read", f"`{read}` is not a frame encoding",
+                              'use "published" or a link copy: "raw", "lz4", "jpeg", "png"')
+        self.read = None if read == "published" else read
         self.namespace = _plain_key(origin, "namespace", namespace.strip("/")) if namespace.strip("/") else ""
         self._keys = {}
         for topic in DEFAULT_KEYS:
@@ -77,13 +86,14 @@ class Topics:
         if namespace is None:
             namespace = os.environ.get("SLIPSTREAM_NAMESPACE", raw.get("namespace", ""))
         remap = {}
+        read = (raw.get("camera") or {}).get("read")
         for topic, entry in (raw.get("topics") or {}).items():
             if topic not in DEFAULT_KEYS:
                 raise ConfigError(origin, f"topics.{topic}", "no such topic",
                                   f"the topics are {', '.join(DEFAULT_KEYS)}")
             if isinstance(entry, dict) and "key" in entry:
                 remap[topic] = entry["key"]
-        return cls(namespace, remap, origin)
+        return cls(namespace, remap, origin, read)
 
     def key(self, topic: str) -> str:
         """The key `topic` (a logical name such as "vehicle/speed") is published on."""
@@ -91,6 +101,20 @@ class Topics:
             return self._keys[topic]
         except KeyError:
             raise KeyError(f"no topic {topic!r}; the topics are {', '.join(DEFAULT_KEYS)}") from None
+
+    def copy_key(self, topic: str, encoding: str) -> str:
+        """The key of a frame topic's link copy: `<key>/@<encoding>` (camera/front/@lz4). The
+        "@" chunk is verbatim: wildcard subscriptions never match it."""
+        if encoding not in FRAME_ENCODINGS:
+            raise ValueError(f"{encoding!r} is not a frame encoding: {', '.join(FRAME_ENCODINGS)}")
+        return f"{self.key(topic)}/@{encoding}"
+
+    def read_key(self, topic: str) -> str:
+        """The key to read `topic` from: a camera frame topic's link copy when the config's
+        camera.read names one, else the topic's key (the same rule as the Rust nodes)."""
+        if self.read is not None and DEFAULT_KEYS.get(topic) == "CameraFrame":
+            return self.copy_key(topic, self.read)
+        return self.key(topic)
 
     def topic(self, key: str) -> Optional[str]:
         """The logical topic published on `key`, or None."""
