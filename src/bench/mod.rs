@@ -48,8 +48,8 @@ pub enum Suite {
     /// f. camera fan-out: 640x480 frames to 1, 2, 4, 8 subscribers, in shared memory and
     /// through a router: frames/s and latency per subscriber
     Fanout,
-    /// g. a router forwarding speed + control for 1-16 vehicles: messages/s, added latency,
-    /// the router's CPU
+    /// g. a router forwarding speed + control for 1-64 vehicles (--vehicles): messages/s,
+    /// added latency, the router's CPU and memory
     Router,
     /// h. a fleet through capped links: N simulators on one host, their detectors and ACCs on
     /// another, a router between, every link capped (network namespaces, tc tbf; root);
@@ -83,7 +83,7 @@ pub struct BenchArgs {
     /// fanout: how many subscribers, in turn
     #[arg(long, value_delimiter = ',', default_value = "1,2,4,8")]
     pub subscribers: Vec<usize>,
-    /// router: how many vehicles, in turn
+    /// router: how many vehicles, in turn (1 to 64)
     #[arg(long, value_delimiter = ',', default_value = "1,2,4,8,16")]
     pub vehicles: Vec<usize>,
     /// speed: also run the bus rows with the peers of another slipstream build, side by side
