@@ -389,13 +389,15 @@ mod tests {
             control_latencies_ns: vec![50_000; 7],
             ..SendReport::default()
         };
-        let row = vehicle_figures(&[(sent, vec![recv(9, &[100; 9], 0.09)])], Some(12.0));
+        let router = RouterUse { cpu_percent: 12.0, peak_rss_mib: Some(20.0) };
+        let row = vehicle_figures(&[(sent, vec![recv(9, &[100; 9], 0.09)])], Some(router));
         // 1 speed message lost, 2 of the 9 answers lost: 16 delivered in 0.1 s.
         assert_eq!(row.lost, 3.0);
         assert!((row.messages_per_s - 160.0).abs() < 1e-9);
         assert_eq!(row.speed_p50_us, Some(100.0));
         assert_eq!(row.control_p50_us, Some(50.0));
         assert!(row.via_router);
+        assert_eq!((row.router_cpu_percent, row.router_peak_rss_mib), (Some(12.0), Some(20.0)));
     }
 
     #[test]
