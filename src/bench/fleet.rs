@@ -45,8 +45,20 @@ pub struct FleetRow {
     pub loop_p99_ms: Option<f64>,
     /// The slowest simulator's real-time factor (below 1: this machine's CPU, not the link).
     pub rtf_min: f64,
-    /// The router's CPU while the simulators ran, % of one core.
+    /// The routers' CPU while the simulators ran, % of one core, all routers together.
     pub router_cpu_percent: f64,
+    /// Each router: its CPU, peak memory and how many vehicles' messages it carries (a mesh:
+    /// the router that serves none of a vehicle's nodes carries none of its data).
+    pub routers: Vec<RouterLoad>,
+}
+
+/// One router of a run.
+#[derive(Debug, Clone, Serialize)]
+pub struct RouterLoad {
+    pub cpu_percent: f64,
+    pub peak_rss_mib: Option<f64>,
+    /// Vehicles with a node connected to this router.
+    pub serves: usize,
 }
 
 /// What `bench fleet` runs.
@@ -57,6 +69,8 @@ pub struct FleetPlan {
     pub seconds: f64,
     /// camera.read on the client PC: "published", "raw", "lz4", "jpeg" or "png".
     pub frames: String,
+    /// 1: one router; 3: a mesh of three, a subnet each (see [`Placement`]).
+    pub routers: usize,
     /// Zenoh settings (`--cfg KEY:VALUE`) for every node and the router.
     pub cfg: Vec<String>,
 }
@@ -93,11 +107,14 @@ struct Hosts<'a> {
 }
 
 impl Hosts<'_> {
-    /// Starts `program args` on `host` with the node flags; stdout to `<name>.out`, stderr to
-    /// `<name>.log`.
-    fn start(&mut self, host: &str, name: &str, program: &Path, args: &[String]) -> Result<usize> {
+    /// Starts `program args` on `host` with the common flags and `-e endpoint`; stdout to
+    /// `<name>.out`, stderr to `<name>.log`.
+    fn start(&mut self, host: &str, name: &str, program: &Path, args: &[String], endpoint: Option<&str>) -> Result<usize> {
         let mut cmd = self.lan.command(host, program);
         cmd.args(args).args(&self.flags).env("RUST_LOG", "warn");
+        if let Some(ep) = endpoint {
+            cmd.args(["-e", ep]);
+        }
         cmd.stdout(std::fs::File::create(self.logs.join(format!("{name}.out")))?);
         cmd.stderr(std::fs::File::create(self.logs.join(format!("{name}.log")))?);
         cmd.stdin(Stdio::null());
@@ -110,57 +127,156 @@ impl Hosts<'_> {
         let text = std::fs::read_to_string(&path).with_context(|| format!("read {}", path.display()))?;
         serde_json::from_str(&text).with_context(|| format!("{name}: no report (see {})", path.display()))
     }
+
+    fn cpu_s(&self, i: usize) -> f64 {
+        super::process_cpu_s(self.procs[i].pid()).unwrap_or(0.0)
+    }
+}
+
+/// Where everything runs: one router and three hosts on one subnet, or a mesh of three
+/// routers, each with a subnet of its own (its simulator PC and client PC) and a leg on a
+/// backbone subnet the routers share. In the mesh, vehicle i's simulator sits on subnet
+/// i % 3 and its detector and ACC on the next subnet: its messages cross two routers, and the
+/// third does not serve it.
+struct Placement {
+    lan: Lan,
+    /// Router host, the endpoints it dials (the routers before it).
+    routers: Vec<(String, Vec<String>)>,
+    subnets: usize,
+}
+
+const MESH_BACKBONE: &str = "10.219.10";
+
+/// With `subnets` subnets, vehicle i's simulator is on subnet i % subnets and its detector and
+/// ACC on the next one (the same one when there is one subnet).
+fn sides(i: usize, subnets: usize) -> (usize, usize) {
+    let k = i % subnets;
+    (k, (k + 1) % subnets)
+}
+
+impl Placement {
+    fn build(tag: &str, routers: usize) -> Result<Placement> {
+        if routers == 1 {
+            let lan = Lan::create(tag, &["r0", "sim0", "ctl0"], SUBNET)?;
+            return Ok(Placement { lan, routers: vec![("r0".into(), Vec::new())], subnets: 1 });
+        }
+        let names: Vec<[String; 3]> = (0..routers).map(|k| [format!("r{k}"), format!("sim{k}"), format!("ctl{k}")]).collect();
+        let prefixes: Vec<String> = (0..routers).map(|k| format!("10.219.{}", k + 1)).collect();
+        let roles: Vec<Vec<&str>> = names.iter().map(|n| n.iter().map(String::as_str).collect()).collect();
+        let backbone: Vec<&str> = names.iter().map(|n| n[0].as_str()).collect();
+        let mut layout: Vec<(&str, &[&str])> = prefixes.iter().map(String::as_str).zip(roles.iter().map(Vec::as_slice)).collect();
+        layout.push((MESH_BACKBONE, &backbone));
+        let lan = Lan::create_subnets(tag, &layout)?;
+        let routers = (0..routers)
+            .map(|k| {
+                let dials = (0..k).map(|j| format!("tcp/{}:7447", lan.addr_on(&format!("r{j}"), MESH_BACKBONE))).collect();
+                (format!("r{k}"), dials)
+            })
+            .collect();
+        Ok(Placement { lan, routers, subnets: layout.len() - 1 })
+    }
+
+    /// Subnet of vehicle i's simulator, and of its detector and ACC.
+    fn sides(&self, i: usize) -> (usize, usize) {
+        sides(i, self.subnets)
+    }
+
+    /// The endpoint of subnet k's router, as its hosts dial it.
+    fn router_ep(&self, k: usize) -> String {
+        let prefix = if self.subnets == 1 { SUBNET.to_string() } else { format!("10.219.{}", k + 1) };
+        format!("tcp/{}:7447", self.lan.addr_on(&format!("r{k}"), &prefix))
+    }
 }
 
 fn one(plan: &FleetPlan, cap: u32, n: usize) -> Result<FleetRow> {
     let tag = format!("sf{}", std::process::id() % 100_000);
-    let lan = Lan::create(&tag, &["rt", "sim", "ctl"], SUBNET)?;
-    for host in ["rt", "sim", "ctl"] {
-        lan.cap(host, cap)?;
+    let place = Placement::build(&tag, plan.routers)?;
+    for k in 0..place.subnets {
+        for host in [format!("r{k}"), format!("sim{k}"), format!("ctl{k}")] {
+            place.lan.cap(&host, cap)?;
+        }
     }
     let logs = std::env::temp_dir().join(format!("slipstream-bench-fleet-{}/{cap}-{n}", std::process::id()));
     std::fs::create_dir_all(&logs)?;
     let remote = logs.join("client-pc.json5");
     std::fs::write(&remote, format!("{{ camera: {{ read: \"{}\" }} }}", plan.frames))?;
-    let router_ep = format!("tcp/{}:7447", lan.addr("rt"));
-    let flags = ["-m", "client", "-e", &router_ep, "--cfg", "transport/shared_memory/enabled:false"];
-    let mut flags: Vec<String> = flags.map(String::from).to_vec();
+    let mut flags = s(&["-m", "client", "--cfg", "transport/shared_memory/enabled:false"]);
     flags.extend(plan.cfg.iter().flat_map(|c| ["--cfg".to_string(), c.clone()]));
-    let mut hosts = Hosts { lan: &lan, logs: logs.clone(), flags, procs: Vec::new() };
-    let exe = std::env::current_exe()?;
-    let router = hosts.start("rt", "router", &exe, &["router".into()])?;
-    let (sim, detect, acc) = (sibling_binary("slipstream-sim")?, sibling_binary("slipstream-detect")?, sibling_binary("slipstream-acc")?);
-    let topics = remote.display().to_string();
-    for i in 0..n {
-        let ns = format!("car{i}");
-        hosts.start("ctl", &format!("acc{i}"), &acc, &s(&["--perception", "camera", "-n", &ns]))?;
-        hosts.start("ctl", &format!("detect{i}"), &detect, &s(&["--json", "-n", &ns, "-t", &topics]))?;
-    }
-    let watch = hosts.start("ctl", "watch", &exe, &s(&["bench-fleet-watch", "--vehicles", &n.to_string()]))?;
-    std::thread::sleep(Duration::from_millis(1500));
-    let cpu0 = super::process_cpu_s(hosts.procs[router].pid()).unwrap_or(0.0);
-    let started = Instant::now();
-    let secs = format!("{}", plan.seconds);
-    let sims: Vec<usize> = (0..n)
-        .map(|i| hosts.start("sim", &format!("sim{i}"), &sim, &s(&["--scenario", SCENARIO, "--duration", &secs, "--json", "-n", &format!("car{i}")])))
-        .collect::<Result<_>>()?;
+    let mut hosts = Hosts { lan: &place.lan, logs: logs.clone(), flags, procs: Vec::new() };
+    let run = start_all(plan, &place, &mut hosts, &remote, n)?;
     let limit = Duration::from_secs_f64(plan.seconds * 3.0 + 60.0);
-    for &i in &sims {
-        let left = limit.saturating_sub(started.elapsed());
-        anyhow::ensure!(hosts.procs[i].wait_for(left).is_some(), "{} did not end within {limit:?} (logs in {})", hosts.procs[i].name, logs.display());
+    for &i in &run.sims {
+        let left = limit.saturating_sub(run.started.elapsed());
+        let ended = hosts.procs[i].wait_for(left).is_some();
+        anyhow::ensure!(ended, "{} did not end within {limit:?} (logs in {})", hosts.procs[i].name, logs.display());
     }
-    let cpu = (super::process_cpu_s(hosts.procs[router].pid()).unwrap_or(0.0) - cpu0) / started.elapsed().as_secs_f64();
+    let wall_s = run.started.elapsed().as_secs_f64();
+    let routers: Vec<RouterLoad> = run
+        .routers
+        .iter()
+        .zip(&run.cpu0)
+        .enumerate()
+        .map(|(k, (&i, &cpu0))| RouterLoad {
+            cpu_percent: (hosts.cpu_s(i) - cpu0) / wall_s * 100.0,
+            peak_rss_mib: super::process_peak_rss_mib(hosts.procs[i].pid()),
+            serves: (0..n).filter(|&v| [place.sides(v).0, place.sides(v).1].contains(&k)).count(),
+        })
+        .collect();
     for p in &mut hosts.procs {
         p.interrupt();
     }
     for p in &mut hosts.procs {
         p.stop(Duration::from_secs(10));
     }
-    let _ = watch;
-    let row = figures(plan, &hosts, cap, n, cpu)?;
+    let row = figures(plan, &hosts, cap, n, routers, place.subnets)?;
     drop(hosts);
     let _ = std::fs::remove_dir_all(&logs);
     Ok(row)
+}
+
+/// The processes of a run once started: routers, clients, watchers, then the simulators.
+struct Started {
+    routers: Vec<usize>,
+    cpu0: Vec<f64>,
+    sims: Vec<usize>,
+    started: Instant,
+}
+
+fn start_all(plan: &FleetPlan, place: &Placement, hosts: &mut Hosts, remote: &Path, n: usize) -> Result<Started> {
+    let exe = std::env::current_exe()?;
+    let mut routers = Vec::new();
+    for (k, (host, dials)) in place.routers.iter().enumerate() {
+        let mut args = vec!["router".to_string()];
+        args.extend(dials.iter().flat_map(|d| ["-e".to_string(), d.clone()]));
+        routers.push(hosts.start(host, &format!("router{k}"), &exe, &args, None)?);
+    }
+    let (sim, detect, acc) =
+        (sibling_binary("slipstream-sim")?, sibling_binary("slipstream-detect")?, sibling_binary("slipstream-acc")?);
+    let topics = remote.display().to_string();
+    for i in 0..n {
+        let (ns, (_, c)) = (format!("car{i}"), place.sides(i));
+        let (host, ep) = (format!("ctl{c}"), place.router_ep(c));
+        hosts.start(&host, &format!("acc{i}"), &acc, &s(&["--perception", "camera", "-n", &ns]), Some(&ep))?;
+        hosts.start(&host, &format!("detect{i}"), &detect, &s(&["--json", "-n", &ns, "-t", &topics]), Some(&ep))?;
+    }
+    for c in 0..place.subnets {
+        let ids: Vec<String> = (0..n).filter(|&i| place.sides(i).1 == c).map(|i| i.to_string()).collect();
+        if !ids.is_empty() {
+            let args = s(&["bench-fleet-watch", "--ids", &ids.join(",")]);
+            hosts.start(&format!("ctl{c}"), &format!("watch{c}"), &exe, &args, Some(&place.router_ep(c)))?;
+        }
+    }
+    std::thread::sleep(Duration::from_millis(1500));
+    let cpu0 = routers.iter().map(|&i| hosts.cpu_s(i)).collect();
+    let started = Instant::now();
+    let secs = format!("{}", plan.seconds);
+    let mut sims = Vec::new();
+    for i in 0..n {
+        let (k, _) = place.sides(i);
+        let args = s(&["--scenario", SCENARIO, "--duration", &secs, "--json", "-n", &format!("car{i}")]);
+        sims.push(hosts.start(&format!("sim{k}"), &format!("sim{i}"), &sim, &args, Some(&place.router_ep(k)))?);
+    }
+    Ok(Started { routers, cpu0, sims, started })
 }
 
 fn s(args: &[&str]) -> Vec<String> {
@@ -168,8 +284,13 @@ fn s(args: &[&str]) -> Vec<String> {
 }
 
 /// The run's figures from the reports the processes printed.
-fn figures(plan: &FleetPlan, hosts: &Hosts, cap: u32, n: usize, router_cpu: f64) -> Result<FleetRow> {
-    let seen: Vec<VehicleSeen> = hosts.output("watch")?;
+fn figures(plan: &FleetPlan, hosts: &Hosts, cap: u32, n: usize, routers: Vec<RouterLoad>, subnets: usize) -> Result<FleetRow> {
+    let mut seen: Vec<VehicleSeen> = Vec::new();
+    for c in 0..subnets {
+        if hosts.logs.join(format!("watch{c}.out")).is_file() {
+            seen.extend(hosts.output::<Vec<VehicleSeen>>(&format!("watch{c}"))?);
+        }
+    }
     let (mut published, mut delivered, mut control_received, mut control_lost, mut rtf_min) = (0, 0, 0, 0, f64::INFINITY);
     for i in 0..n {
         let sim: crate::sim::SimReport = hosts.output(&format!("sim{i}"))?;
@@ -196,19 +317,20 @@ fn figures(plan: &FleetPlan, hosts: &Hosts, cap: u32, n: usize, router_cpu: f64)
         loop_p50_ms: p50s.get(p50s.len() / 2).copied(),
         loop_p99_ms: seen.iter().filter_map(|v| v.loop_p99_ms).reduce(f64::max),
         rtf_min,
-        router_cpu_percent: router_cpu * 100.0,
+        router_cpu_percent: routers.iter().map(|r| r.cpu_percent).sum(),
+        routers,
     })
 }
 
 /// The rows as a markdown table.
 pub fn markdown(rows: &[FleetRow]) -> String {
     let mut s = String::from(
-        "\n### h. a fleet through capped links (simulator PC -> router PC -> client PC)\n\n| link cap Mbit/s | vehicles | client reads | frames delivered / published | frames lost % | speed lost | control lost | loop p50 ms | loop p99 ms | slowest RTF | router CPU % of a core |\n|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "\n### h. a fleet through capped links (simulator PC -> router(s) -> client PC)\n\n| link cap Mbit/s | vehicles | client reads | frames delivered / published | frames lost % | speed lost | control lost | loop p50 ms | loop p99 ms | slowest RTF | router CPU % of a core | each router: CPU %, peak MiB, vehicles served |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     let ms = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v:.1}"));
     for r in rows {
         s.push_str(&format!(
-            "| {} | {} | {} | {} / {} | {:.2} | {} of {} | {} of {} | {} | {} | {:.2} | {:.0} |\n",
+            "| {} | {} | {} | {} / {} | {:.2} | {} of {} | {} of {} | {} | {} | {:.2} | {:.0} | {} |\n",
             r.cap_mbit_s,
             r.vehicles,
             r.frames,
@@ -222,8 +344,53 @@ pub fn markdown(rows: &[FleetRow]) -> String {
             ms(r.loop_p50_ms),
             ms(r.loop_p99_ms),
             r.rtf_min,
-            r.router_cpu_percent
+            r.router_cpu_percent,
+            r.routers
+                .iter()
+                .map(|l| format!("{:.1} %, {}, {}", l.cpu_percent, ms(l.peak_rss_mib), l.serves))
+                .collect::<Vec<_>>()
+                .join("; ")
         ));
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn in_a_mesh_every_vehicle_crosses_two_routers_and_one_router_skips_it() {
+        for i in 0..9 {
+            let (a, b) = sides(i, 3);
+            assert_ne!(a, b, "vehicle {i} crosses the backbone");
+        }
+        assert_eq!([sides(0, 3), sides(1, 3), sides(2, 3), sides(3, 3)], [(0, 1), (1, 2), (2, 0), (0, 1)]);
+        assert_eq!(sides(5, 1), (0, 0));
+    }
+
+    #[test]
+    fn the_table_shows_each_router_and_what_it_serves() {
+        let load = |cpu, serves| RouterLoad { cpu_percent: cpu, peak_rss_mib: Some(18.4), serves };
+        let row = FleetRow {
+            cap_mbit_s: 1000,
+            vehicles: 1,
+            frames: "lz4".into(),
+            frames_published: 200,
+            frames_delivered: 198,
+            frame_loss_percent: 1.0,
+            speed_received: 850,
+            speed_lost: 2,
+            control_received: 999,
+            control_lost: 1,
+            loop_p50_ms: Some(3.6),
+            loop_p99_ms: None,
+            rtf_min: 1.0,
+            router_cpu_percent: 4.1,
+            routers: vec![load(1.9, 1), load(2.2, 1), load(0.0, 0)],
+        };
+        let md = markdown(&[row]);
+        assert!(md.contains("| 1000 | 1 | lz4 | 198 / 200 | 1.00 | 2 of 852 | 1 of 1000 | 3.6 | - |"), "{md}");
+        assert!(md.contains("1.9 %, 18.4, 1; 2.2 %, 18.4, 1; 0.0 %, 18.4, 0 |"), "{md}");
+    }
 }

@@ -13,11 +13,11 @@ use crate::config::ConnectArgs;
 use crate::eval::latency::{LatencyWatch, WHOLE_LOOP};
 use crate::topics;
 
-#[derive(Debug, Clone, Copy, clap::Args)]
+#[derive(Debug, Clone, clap::Args)]
 pub struct FleetWatchArgs {
-    /// Vehicles car0 .. car<N-1>
-    #[arg(long)]
-    pub vehicles: usize,
+    /// The vehicles to watch, by number (car0, car3, ...)
+    #[arg(long, value_delimiter = ',', required = true)]
+    pub ids: Vec<usize>,
     /// Seconds to wait before counting (the loops start)
     #[arg(long, default_value_t = 3.0)]
     pub warmup: f64,
@@ -37,7 +37,7 @@ pub async fn watch(connect: &ConnectArgs, args: FleetWatchArgs) -> Result<Vec<Ve
     let session = zenoh::open(connect.zenoh_config()?).await.map_err(anyhow::Error::msg)?;
     let topics = connect.topic_map()?;
     let mut buses = Vec::new();
-    for i in 0..args.vehicles {
+    for i in &args.ids {
         let map = topics.clone().with_namespace(&format!("car{i}"))?;
         buses.push(Bus::from_session(session.clone(), map, "fleet-watch").await?);
     }

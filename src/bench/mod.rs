@@ -104,6 +104,13 @@ pub struct BenchArgs {
     /// or "published"
     #[arg(long, default_value = "jpeg", value_parser = ["published", "raw", "lz4", "jpeg", "png"])]
     pub fleet_frames: String,
+    /// fleet: 1 router, or a mesh of 3 (a subnet each, a backbone between them; vehicle i's
+    /// simulator on subnet i % 3, its detector and ACC on the next)
+    #[arg(long, default_value_t = 1, value_parser = clap::builder::TypedValueParser::map(
+        clap::builder::PossibleValuesParser::new(["1", "3"]),
+        |v: String| v.parse::<usize>().unwrap_or(1)
+    ))]
+    pub fleet_routers: usize,
     /// fleet: a Zenoh setting for every node and the router, e.g. --fleet-cfg
     /// transport/link/tx/queue/size/real_time:16 (KEY:VALUE as --cfg; repeatable)
     #[arg(long, value_name = "KEY:VALUE")]
@@ -722,6 +729,7 @@ pub fn run(args: &BenchArgs) -> Result<BenchReport> {
                 seconds: if args.quick { 5.0 } else { args.fleet_seconds },
                 frames: args.fleet_frames.clone(),
                 cfg: args.fleet_cfg.clone(),
+                routers: args.fleet_routers,
             };
             anyhow::ensure!(
                 plan.caps_mbit_s.iter().all(|c| (1..=100_000).contains(c)),

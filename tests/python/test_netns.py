@@ -435,8 +435,9 @@ def test_a_simulator_on_another_host_is_checked_then_driven_through_the_router(t
 
 def test_bench_fleet_runs_vehicles_through_capped_links_and_reports_what_crossed(slipstream_bin):
     """`slipstream bench fleet` (quick: 5 s) builds its own namespaces, runs one vehicle's loop
-    across them through a 100 Mbit/s cap with the client PC reading JPEG copies, and removes
-    the namespaces again; the figures are the bench's (docs/performance.md), not asserted."""
+    across them through a 100 Mbit/s cap with the client PC reading JPEG copies, then across a
+    mesh of three routers on three subnets, and removes the namespaces again; the figures are
+    the bench's (docs/performance.md), not asserted."""
     before = set(subprocess.run(["ip", "netns", "list"], capture_output=True, text=True).stdout.split())
     run = subprocess.run([slipstream_bin, "bench", "fleet", "--quick", "--fleet-vehicles", "1", "--fleet-caps", "100",
                           "--json"], capture_output=True, text=True, timeout=240, cwd=ROOT)
@@ -446,5 +447,14 @@ def test_bench_fleet_runs_vehicles_through_capped_links_and_reports_what_crossed
     r = rows[0]
     assert r["frames_published"] > 0 and 0 < r["frames_delivered"] <= r["frames_published"], r
     assert r["speed_received"] > 0 and r["control_received"] > 0 and r["loop_p50_ms"] is not None, r
+    assert [x["serves"] for x in r["routers"]] == [1], r
+    # A mesh of three routers on three subnets: the vehicle's messages cross two of them.
+    mesh = subprocess.run([slipstream_bin, "bench", "fleet", "--quick", "--fleet-vehicles", "1", "--fleet-caps", "1000",
+                           "--fleet-routers", "3", "--fleet-frames", "lz4", "--json"],
+                          capture_output=True, text=True, timeout=240, cwd=ROOT)
+    assert mesh.returncode == 0, mesh.stderr[-3000:]
+    m = json.loads(mesh.stdout)["fleet"][0]
+    assert [x["serves"] for x in m["routers"]] == [1, 1, 0], m
+    assert 0 < m["frames_delivered"] <= m["frames_published"] and m["loop_p50_ms"] is not None, m
     after = set(subprocess.run(["ip", "netns", "list"], capture_output=True, text=True).stdout.split())
     assert not {n for n in after - before if n.startswith("sf")}, "the bench left namespaces behind"
