@@ -397,10 +397,22 @@ impl TopicMap {
         self.full_key(&key_expr(&format!("{NODES_PREFIX}/**")).expect("valid"))
     }
 
-    /// Every key of this namespace (for tools that watch all topics).
-    /// Key expressions that cover every key of this map: the namespace, and any topic
-    /// remapped to an absolute key outside it (`top`, `record`).
+    /// Key expressions that cover every key of this map, for tools that watch all topics
+    /// (`top`, `record`): the namespace, and any topic remapped to an absolute key outside it.
+    /// A node that reads a frame link copy (`camera.read`) gets every topic at the key it reads
+    /// it from, and the nodes' keys, instead of the whole namespace: a `**` would pull the raw
+    /// frames across the link that the copy is there to spare.
     pub fn every_key(&self) -> Vec<OwnedKeyExpr> {
+        if self.camera.read.is_some() {
+            let mut selectors = vec![self.nodes_selector()];
+            for t in crate::topics::Topic::ALL {
+                let key = self.read_key(t);
+                if !selectors.contains(&key) {
+                    selectors.push(key);
+                }
+            }
+            return selectors;
+        }
         let all = self.all_selector();
         let mut selectors = vec![all.clone()];
         for t in crate::topics::Topic::ALL {

@@ -143,3 +143,19 @@ fn connection_flags_override_the_file() {
     let e = missing.zenoh_config().unwrap_err().to_string();
     assert!(e.contains("/nonexistent/z.json5") && e.contains("no such file"), "{e}");
 }
+
+#[test]
+fn a_node_reading_a_link_copy_watches_every_topic_at_its_read_key_not_the_whole_namespace() {
+    let all = |m: &TopicMap| m.every_key().iter().map(|k| k.to_string()).collect::<Vec<_>>();
+    assert_eq!(all(&crate::common::map("{ namespace: \"car1\" }")), vec!["car1/**"]);
+    let remote = crate::common::map(r#"{ namespace: "car1", camera: { read: "lz4" } }"#);
+    let keys = all(&remote);
+    assert!(keys.contains(&"car1/camera/front/@lz4".to_string()), "{keys:?}");
+    assert!(keys.contains(&"car1/camera/narrow/@lz4".to_string()), "{keys:?}");
+    assert!(keys.contains(&"car1/vehicle/speed".to_string()) && keys.contains(&"car1/nodes/**".to_string()), "{keys:?}");
+    // Nothing that would match the raw frames: `**` would pull them across the link.
+    for k in &keys {
+        let ke = zenoh::key_expr::KeyExpr::try_from(k.as_str()).unwrap();
+        assert!(!ke.intersects(&zenoh::key_expr::KeyExpr::try_from("car1/camera/front").unwrap()), "{k}");
+    }
+}
