@@ -109,7 +109,14 @@ struct Hosts<'a> {
 impl Hosts<'_> {
     /// Starts `program args` on `host` with the common flags and `-e endpoint`; stdout to
     /// `<name>.out`, stderr to `<name>.log`.
-    fn start(&mut self, host: &str, name: &str, program: &Path, args: &[String], endpoint: Option<&str>) -> Result<usize> {
+    fn start(
+        &mut self,
+        host: &str,
+        name: &str,
+        program: &Path,
+        args: &[String],
+        endpoint: Option<&str>,
+    ) -> Result<usize> {
         let mut cmd = self.lan.command(host, program);
         cmd.args(args).args(&self.flags).env("RUST_LOG", "warn");
         if let Some(ep) = endpoint {
@@ -160,16 +167,19 @@ impl Placement {
             let lan = Lan::create(tag, &["r0", "sim0", "ctl0"], SUBNET)?;
             return Ok(Placement { lan, routers: vec![("r0".into(), Vec::new())], subnets: 1 });
         }
-        let names: Vec<[String; 3]> = (0..routers).map(|k| [format!("r{k}"), format!("sim{k}"), format!("ctl{k}")]).collect();
+        let names: Vec<[String; 3]> =
+            (0..routers).map(|k| [format!("r{k}"), format!("sim{k}"), format!("ctl{k}")]).collect();
         let prefixes: Vec<String> = (0..routers).map(|k| format!("10.219.{}", k + 1)).collect();
         let roles: Vec<Vec<&str>> = names.iter().map(|n| n.iter().map(String::as_str).collect()).collect();
         let backbone: Vec<&str> = names.iter().map(|n| n[0].as_str()).collect();
-        let mut layout: Vec<(&str, &[&str])> = prefixes.iter().map(String::as_str).zip(roles.iter().map(Vec::as_slice)).collect();
+        let mut layout: Vec<(&str, &[&str])> =
+            prefixes.iter().map(String::as_str).zip(roles.iter().map(Vec::as_slice)).collect();
         layout.push((MESH_BACKBONE, &backbone));
         let lan = Lan::create_subnets(tag, &layout)?;
         let routers = (0..routers)
             .map(|k| {
-                let dials = (0..k).map(|j| format!("tcp/{}:7447", lan.addr_on(&format!("r{j}"), MESH_BACKBONE))).collect();
+                let dials =
+                    (0..k).map(|j| format!("tcp/{}:7447", lan.addr_on(&format!("r{j}"), MESH_BACKBONE))).collect();
                 (format!("r{k}"), dials)
             })
             .collect();
@@ -284,14 +294,22 @@ fn s(args: &[&str]) -> Vec<String> {
 }
 
 /// The run's figures from the reports the processes printed.
-fn figures(plan: &FleetPlan, hosts: &Hosts, cap: u32, n: usize, routers: Vec<RouterLoad>, subnets: usize) -> Result<FleetRow> {
+fn figures(
+    plan: &FleetPlan,
+    hosts: &Hosts,
+    cap: u32,
+    n: usize,
+    routers: Vec<RouterLoad>,
+    subnets: usize,
+) -> Result<FleetRow> {
     let mut seen: Vec<VehicleSeen> = Vec::new();
     for c in 0..subnets {
         if hosts.logs.join(format!("watch{c}.out")).is_file() {
             seen.extend(hosts.output::<Vec<VehicleSeen>>(&format!("watch{c}"))?);
         }
     }
-    let (mut published, mut delivered, mut control_received, mut control_lost, mut rtf_min) = (0, 0, 0, 0, f64::INFINITY);
+    let (mut published, mut delivered, mut control_received, mut control_lost, mut rtf_min) =
+        (0, 0, 0, 0, f64::INFINITY);
     for i in 0..n {
         let sim: crate::sim::SimReport = hosts.output(&format!("sim{i}"))?;
         let det: crate::perception::node::DetectStats = hosts.output(&format!("detect{i}"))?;

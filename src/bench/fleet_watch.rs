@@ -53,7 +53,12 @@ pub async fn watch(connect: &ConnectArgs, args: FleetWatchArgs) -> Result<Vec<Ve
         .map(|(speed, latency)| {
             let s = speed.stats().snapshot();
             let whole = &latency.latency.lock().stats(false)[WHOLE_LOOP];
-            VehicleSeen { speed_received: s.received, speed_lost: s.lost, loop_p50_ms: whole.p50_ms, loop_p99_ms: whole.p99_ms }
+            VehicleSeen {
+                speed_received: s.received,
+                speed_lost: s.lost,
+                loop_p50_ms: whole.p50_ms,
+                loop_p99_ms: whole.p99_ms,
+            }
         })
         .collect();
     drop(watched);

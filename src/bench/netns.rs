@@ -84,7 +84,6 @@ impl Lan {
         list.iter().find(|(r, _)| r == role).map(|(_, v)| v.as_str()).expect("a role of this LAN")
     }
 
-
     /// Caps what a host sends at `mbit_s` on each of its legs (a token bucket on each link: a
     /// port of that speed).
     pub fn cap(&self, role: &str, mbit_s: u32) -> Result<()> {

@@ -188,9 +188,13 @@ impl Bus {
     where
         M: Message + serde::de::DeserializeOwned + Clone + Send + 'static,
     {
-        let sub =
-            Subscriber::declare(&self.session, self.topics.read_key(def.topic), def.topic.name(), self.inlet(def.topic))
-                .await?;
+        let sub = Subscriber::declare(
+            &self.session,
+            self.topics.read_key(def.topic),
+            def.topic.name(),
+            self.inlet(def.topic),
+        )
+        .await?;
         self.register(sub.stats());
         Ok(sub)
     }
@@ -199,9 +203,8 @@ impl Bus {
     /// place (shared memory on one host).
     pub async fn frame_subscriber(&self, def: TopicDef<CameraFrame>) -> Result<FrameSubscriber, BusError> {
         let topic = def.topic;
-        let sub =
-            FrameSubscriber::declare(&self.session, self.topics.read_key(topic), topic.name(), self.inlet(topic))
-                .await?;
+        let sub = FrameSubscriber::declare(&self.session, self.topics.read_key(topic), topic.name(), self.inlet(topic))
+            .await?;
         self.register(sub.stats());
         Ok(sub)
     }

@@ -8,8 +8,8 @@ use zenoh::bytes::{Encoding, ZBytes};
 use zenoh::shm::{GarbageCollect, PosixShmProviderBackend, ShmProvider, ShmProviderBuilder};
 use zenoh::Wait;
 
-use super::{zerr, BusError};
 use super::frame_copies::FrameCopies;
+use super::{zerr, BusError};
 use crate::config::{CameraSettings, TopicMap};
 use crate::msg::{self, encode_into, frame_prefix, CameraFrame, CameraFrameRef, Header, ImageEncoding, Message};
 use crate::topics::Topic;
@@ -426,8 +426,8 @@ impl FramePublisher {
             // put_with sends the copies of raw frames.
             return self.put(stamp_sim_ns, &CameraFrameRef { width, height, encoding, data: rgb });
         }
-        let data =
-            msg::encode_pixels(rgb, width, height, encoding, self.camera.jpeg_quality).map_err(BusError::InvalidFrame)?;
+        let data = msg::encode_pixels(rgb, width, height, encoding, self.camera.jpeg_quality)
+            .map_err(BusError::InvalidFrame)?;
         let sent = self.put(stamp_sim_ns, &CameraFrameRef { width, height, encoding, data: &data })?;
         if let Some(sent) = &sent {
             if self.copies.wanted() {

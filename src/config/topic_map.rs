@@ -32,7 +32,8 @@ pub enum CameraEncoding {
 }
 
 impl CameraEncoding {
-    pub const ALL: [CameraEncoding; 4] = [CameraEncoding::Raw, CameraEncoding::Lz4, CameraEncoding::Jpeg, CameraEncoding::Png];
+    pub const ALL: [CameraEncoding; 4] =
+        [CameraEncoding::Raw, CameraEncoding::Lz4, CameraEncoding::Jpeg, CameraEncoding::Png];
 
     /// The encoding frames carry on the wire.
     pub fn image_encoding(self) -> ImageEncoding {

@@ -35,9 +35,7 @@ pub fn check_size(width: u32, height: u32, encoding: ImageEncoding, len: usize) 
     }
     let rgb_len = pixels as usize * 3;
     match encoding {
-        ImageEncoding::Rgb8 if len != rgb_len => {
-            Err(format!("{width}x{height} Rgb8 needs {rgb_len} bytes, got {len}"))
-        }
+        ImageEncoding::Rgb8 if len != rgb_len => Err(format!("{width}x{height} Rgb8 needs {rgb_len} bytes, got {len}")),
         ImageEncoding::Lz4 if len == 0 || len.saturating_mul(LZ4_MAX_RATIO) + 16 < rgb_len => Err(format!(
             "{len} bytes of LZ4 cannot expand to {width}x{height} Rgb8 ({rgb_len} bytes; at most {LZ4_MAX_RATIO}x)"
         )),
@@ -85,7 +83,8 @@ pub fn decode<'a>(data: &'a [u8], width: u32, height: u32, encoding: ImageEncodi
         ImageEncoding::Lz4 => {
             // The output is allocated at the size the frame states (bounded above), never at
             // a size the block claims.
-            let rgb = lz4_flex::block::decompress(data, rgb_len).map_err(|e| format!("Lz4 block does not decode: {e}"))?;
+            let rgb =
+                lz4_flex::block::decompress(data, rgb_len).map_err(|e| format!("Lz4 block does not decode: {e}"))?;
             if rgb.len() != rgb_len {
                 return Err(format!("Lz4 block expands to {} bytes, {width}x{height} Rgb8 is {rgb_len}", rgb.len()));
             }

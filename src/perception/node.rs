@@ -151,26 +151,30 @@ pub async fn run(
 }
 
 /// A frame's pixels as RGB8 when it has the size its camera's info states and decodes; else
-/// counted and logged.
+/// counted and logged (the 1st, 2nd, 4th, 8th ... such frame: a stream of bad frames does not
+/// flood the log).
 fn usable<'a>(
     frame: &CameraFrameRef<'a>,
     info: &CameraInfo,
     seq: u64,
     stats: &mut DetectStats,
 ) -> Option<std::borrow::Cow<'a, [u8]>> {
-    if (frame.width, frame.height) != (info.width, info.height) {
-        stats.unusable += 1;
-        tracing::warn!(frame = ?(frame.width, frame.height), info = ?(info.width, info.height), "frame size unlike camera info: skipped");
-        return None;
-    }
-    match frame.to_rgb8() {
-        Ok(rgb) => Some(rgb),
-        Err(e) => {
-            stats.unusable += 1;
-            tracing::warn!("undecodable frame {seq}: {e}");
-            None
+    let why = if (frame.width, frame.height) != (info.width, info.height) {
+        format!(
+            "frame {seq} is {}x{}, its camera info says {}x{}: skipped",
+            frame.width, frame.height, info.width, info.height
+        )
+    } else {
+        match frame.to_rgb8() {
+            Ok(rgb) => return Some(rgb),
+            Err(e) => format!("undecodable frame {seq}: {e}"),
         }
+    };
+    stats.unusable += 1;
+    if stats.unusable.is_power_of_two() {
+        tracing::warn!(unusable = stats.unusable, "{why}");
     }
+    None
 }
 
 /// The narrow camera's frame stamped `stamp_ns`: already in, or in within [`NARROW_WAIT`];

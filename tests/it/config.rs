@@ -152,7 +152,10 @@ fn a_node_reading_a_link_copy_watches_every_topic_at_its_read_key_not_the_whole_
     let keys = all(&remote);
     assert!(keys.contains(&"car1/camera/front/@lz4".to_string()), "{keys:?}");
     assert!(keys.contains(&"car1/camera/narrow/@lz4".to_string()), "{keys:?}");
-    assert!(keys.contains(&"car1/vehicle/speed".to_string()) && keys.contains(&"car1/nodes/**".to_string()), "{keys:?}");
+    assert!(
+        keys.contains(&"car1/vehicle/speed".to_string()) && keys.contains(&"car1/nodes/**".to_string()),
+        "{keys:?}"
+    );
     // Nothing that would match the raw frames: `**` would pull them across the link.
     for k in &keys {
         let ke = zenoh::key_expr::KeyExpr::try_from(k.as_str()).unwrap();
