@@ -5,7 +5,8 @@
 //! cruise controls, the router PC a Zenoh router between them. The client PC reads frames in
 //! the encoding chosen (`--fleet-frames`: its topic config's camera.read, a link copy), so raw
 //! frames stay on the simulator PC. Per cap and N: frames delivered / published, speed and
-//! control lost, the loop's latency and the router's CPU. Needs root (namespaces).
+//! control lost, the loop's latency and the router's CPU. With `--fleet-routers 3`, a mesh of
+//! three routers, a subnet each ([`Placement`]). Needs root (namespaces).
 
 use std::path::{Path, PathBuf};
 use std::process::Stdio;
@@ -149,6 +150,8 @@ struct Placement {
     lan: Lan,
     /// Router host, the endpoints it dials (the routers before it).
     routers: Vec<(String, Vec<String>)>,
+    /// Subnet k's address prefix: router k, simulator PC k and client PC k are on it.
+    prefixes: Vec<String>,
     subnets: usize,
 }
 
@@ -165,7 +168,8 @@ impl Placement {
     fn build(tag: &str, routers: usize) -> Result<Placement> {
         if routers == 1 {
             let lan = Lan::create(tag, &["r0", "sim0", "ctl0"], SUBNET)?;
-            return Ok(Placement { lan, routers: vec![("r0".into(), Vec::new())], subnets: 1 });
+            let prefixes = vec![SUBNET.to_string()];
+            return Ok(Placement { lan, routers: vec![("r0".into(), Vec::new())], prefixes, subnets: 1 });
         }
         let names: Vec<[String; 3]> =
             (0..routers).map(|k| [format!("r{k}"), format!("sim{k}"), format!("ctl{k}")]).collect();
@@ -183,7 +187,8 @@ impl Placement {
                 (format!("r{k}"), dials)
             })
             .collect();
-        Ok(Placement { lan, routers, subnets: layout.len() - 1 })
+        let subnets = prefixes.len();
+        Ok(Placement { lan, routers, prefixes, subnets })
     }
 
     /// Subnet of vehicle i's simulator, and of its detector and ACC.
@@ -193,8 +198,7 @@ impl Placement {
 
     /// The endpoint of subnet k's router, as its hosts dial it.
     fn router_ep(&self, k: usize) -> String {
-        let prefix = if self.subnets == 1 { SUBNET.to_string() } else { format!("10.219.{}", k + 1) };
-        format!("tcp/{}:7447", self.lan.addr_on(&format!("r{k}"), &prefix))
+        format!("tcp/{}:7447", self.lan.addr_on(&format!("r{k}"), &self.prefixes[k]))
     }
 }
 
