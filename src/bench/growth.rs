@@ -105,7 +105,7 @@ fn fanout_spec(path: FanoutPath, subscribers: usize, rate_hz: Option<f64>, quick
         unix_socket: shm,
         via_router: path == FanoutPath::Router,
         subscribers,
-        ..super::frame_spec(Transport::Bus, FANOUT_FRAME, shm, rate_hz, quick)
+        ..super::cases::frame_spec(Transport::Bus, FANOUT_FRAME, shm, rate_hz, quick)
     }
 }
 
@@ -233,7 +233,7 @@ fn vehicle_spec(i: usize, via_router: bool, quick: bool) -> CaseSpec {
         namespace: Some(format!("vehicle{i}")),
         control_echo: true,
         subscribers: 1,
-        ..super::speed_spec(Transport::Bus, count)
+        ..super::cases::speed_spec(Transport::Bus, count)
     }
 }
 

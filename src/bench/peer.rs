@@ -168,7 +168,9 @@ pub async fn run_receiver(spec: CaseSpec, router: Option<String>) -> Result<()> 
         Transport::Tcp => receive_tcp(&col, &stop, &mut receiving)?,
         Transport::Zenoh => receive_zenoh(&spec, router.as_deref(), &col, &mut receiving).await?,
         Transport::Bus => receive_bus(&spec, router.as_deref(), &col, &stop, &mut receiving).await?,
-        Transport::SeedPythonUdp => anyhow::bail!("the seed's peers are the Python script, not bench-peer"),
+        Transport::SeedPythonUdp | Transport::SeedPythonTcpPickle => {
+            anyhow::bail!("the seed's peers are the Python script, not bench-peer")
+        }
     };
     println!("READY {endpoint}");
     std::io::stdout().flush()?;
@@ -481,7 +483,9 @@ pub async fn run_sender(spec: CaseSpec, endpoints: Vec<String>) -> Result<()> {
         }
         Transport::Zenoh => SendReport { sent: send_zenoh(&spec, &endpoints, max).await?, ..SendReport::default() },
         Transport::Bus => send_bus(&spec, &endpoints, max).await?,
-        Transport::SeedPythonUdp => anyhow::bail!("the seed's peers are the Python script, not bench-peer"),
+        Transport::SeedPythonUdp | Transport::SeedPythonTcpPickle => {
+            anyhow::bail!("the seed's peers are the Python script, not bench-peer")
+        }
     };
     report.elapsed_s = started.elapsed().as_secs_f64();
     println!("SENT {}", serde_json::to_string(&report)?);

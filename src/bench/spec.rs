@@ -15,8 +15,18 @@ pub enum Transport {
     /// Length-prefixed messages on one TCP connection (the seed design's image port).
     Tcp,
     /// The seed design itself: a Python script (standard library) sending the speed as text,
-    /// one UDP datagram per message (src/bench/seed_udp.py).
+    /// one UDP datagram per message (src/bench/seed.py).
     SeedPythonUdp,
+    /// The seed design's camera link: the same script pickling each frame and sending it over
+    /// one TCP connection behind a 4-byte length.
+    SeedPythonTcpPickle,
+}
+
+impl Transport {
+    /// The seed's own peers: the Python script, not `slipstream bench-peer`.
+    pub fn is_seed(self) -> bool {
+        matches!(self, Transport::SeedPythonUdp | Transport::SeedPythonTcpPickle)
+    }
 }
 
 /// What flows in the measured stream.

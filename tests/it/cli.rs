@@ -204,7 +204,16 @@ fn bench_quick_every_path_delivers() {
             assert!(r["background_frames_per_s"].as_f64().unwrap() > 0.0, "{suite} / {path}: frames flowed");
         }
     }
-    assert!(!report["ratios"].as_array().unwrap().is_empty());
+    // The seed's two links (Python here runs the tests' own tools) are rows of their tables,
+    // found by id, and every ratio found both its rows.
+    for (table, path) in [("speed", "seed-python-udp"), ("frames", "seed-python-tcp-pickle")] {
+        assert!(rows.iter().any(|r| r["id"]["table"] == table && r["id"]["path"] == path), "no {table} row {path}");
+    }
+    let ratios = report["ratios"].as_array().unwrap();
+    assert!(!ratios.is_empty());
+    for r in ratios {
+        assert!(r.get("missing").is_none(), "a ratio lost a row: {r}");
+    }
 
     // f. Fan-out: every subscriber of every path got frames, in shared memory only on the
     // shared-memory path (a router's clients get copies over TCP).

@@ -1,0 +1,101 @@
+//! From the peers' reports to a row: each run's figures (latency percentiles, throughput), then
+//! the medians over runs.
+
+use serde::Serialize;
+
+use super::cases::Case;
+use super::cases::CaseId;
+use super::spec::{CaseSpec, RecvReport, SendReport};
+
+/// One measured path in one table, medians over runs.
+#[derive(Debug, Clone, Serialize)]
+pub struct Row {
+    /// What code finds the row by.
+    pub id: CaseId,
+    /// The table's and the path's labels, for people.
+    pub suite: String,
+    pub path: String,
+    pub runs: usize,
+    pub sent: f64,
+    pub received: f64,
+    pub lost: f64,
+    pub p50_us: Option<f64>,
+    pub p99_us: Option<f64>,
+    pub max_us: Option<f64>,
+    pub frames_per_s: Option<f64>,
+    pub mb_per_s: Option<f64>,
+    pub shared_memory_frames: f64,
+    pub background_frames_per_s: Option<f64>,
+}
+
+pub(super) fn percentile(sorted: &[i64], p: f64) -> Option<f64> {
+    if sorted.is_empty() {
+        return None;
+    }
+    let i = ((sorted.len() - 1) as f64 * p).round() as usize;
+    Some(sorted[i] as f64 / 1000.0)
+}
+
+/// The median of the values present.
+pub fn median(values: impl IntoIterator<Item = Option<f64>>) -> Option<f64> {
+    let mut v: Vec<f64> = values.into_iter().flatten().filter(|x| x.is_finite()).collect();
+    if v.is_empty() {
+        return None;
+    }
+    v.sort_by(|a, b| a.total_cmp(b));
+    let n = v.len();
+    Some(if n % 2 == 1 { v[n / 2] } else { (v[n / 2 - 1] + v[n / 2]) / 2.0 })
+}
+
+/// One run's figures.
+pub(super) struct RunFigures {
+    pub sent: f64,
+    pub received: f64,
+    lost: f64,
+    pub p50: Option<f64>,
+    p99: Option<f64>,
+    max: Option<f64>,
+    fps: Option<f64>,
+    mbps: Option<f64>,
+    shm: f64,
+    bg_fps: Option<f64>,
+}
+
+pub(super) fn figures(spec: &CaseSpec, s: &SendReport, r: &RecvReport) -> RunFigures {
+    let mut lat = r.latencies_ns.clone();
+    lat.sort_unstable();
+    let throughput = spec.rate_hz.is_none() && r.received >= 2 && r.span_s > 0.0;
+    RunFigures {
+        sent: s.sent as f64,
+        received: r.received as f64,
+        lost: s.sent.saturating_sub(r.received) as f64,
+        p50: percentile(&lat, 0.5),
+        p99: percentile(&lat, 0.99),
+        max: lat.last().map(|x| *x as f64 / 1000.0),
+        fps: throughput.then(|| (r.received - 1) as f64 / r.span_s),
+        mbps: throughput.then(|| r.bytes as f64 / r.span_s / 1e6),
+        shm: r.shared_memory as f64,
+        bg_fps: spec.background.map(|_| r.background_received as f64 / s.elapsed_s.max(1e-3)),
+    }
+}
+
+/// A case's row: the medians of its runs.
+pub(super) fn row(case: &Case, runs: &[RunFigures]) -> Row {
+    let med = |f: &dyn Fn(&RunFigures) -> Option<f64>| median(runs.iter().map(f));
+    Row {
+        id: case.id.clone(),
+        suite: case.id.table.label(),
+        path: case.id.path.label(),
+        runs: runs.len(),
+        sent: med(&|r| Some(r.sent)).unwrap_or(0.0),
+        received: med(&|r| Some(r.received)).unwrap_or(0.0),
+        lost: med(&|r| Some(r.lost)).unwrap_or(0.0),
+        p50_us: med(&|r| r.p50),
+        p99_us: med(&|r| r.p99),
+        max_us: med(&|r| r.max),
+        frames_per_s: med(&|r| r.fps),
+        mb_per_s: med(&|r| r.mbps),
+        shared_memory_frames: med(&|r| Some(r.shm)).unwrap_or(0.0),
+        background_frames_per_s: med(&|r| r.bg_fps),
+    }
+}
