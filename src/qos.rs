@@ -66,6 +66,21 @@ impl From<Reliability> for zenoh::qos::Reliability {
     }
 }
 
+/// Which of a node's two Zenoh sessions carries a topic.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum SessionKind {
+    /// The session with priorities: a queue per priority class and a transmit task that
+    /// batches and fragments; frames, calibration, events, ground truth.
+    Main,
+    /// The low-latency session (Zenoh's low-latency transport): the publishing thread writes
+    /// the socket itself, no transmit task, no priorities, no fragmentation (a message must
+    /// fit one 64 KiB batch); small real-time topics. A node without one (the default: no
+    /// `--low-latency-session`; a client of a router; a plain Zenoh session) sends them on its
+    /// main session.
+    LowLatency,
+}
+
 /// How a subscriber hands messages to its reader.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -100,6 +115,8 @@ pub struct TopicQos {
     /// The publisher keeps its last message (zenoh-ext advanced publisher with a cache of one)
     /// and a subscriber that starts later receives it first: calibration, configuration.
     pub latched: bool,
+    /// The session that publishes and subscribes the topic.
+    pub session: SessionKind,
 }
 
 impl Default for TopicQos {
@@ -112,6 +129,7 @@ impl Default for TopicQos {
             max_rate_hz: None,
             delivery: Delivery::Queue(16),
             latched: false,
+            session: SessionKind::Main,
         }
     }
 }

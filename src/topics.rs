@@ -6,7 +6,7 @@
 use std::marker::PhantomData;
 
 use crate::msg::{self, Message, MessageKind};
-use crate::qos::{Delivery, Priority, TopicQos};
+use crate::qos::{Delivery, Priority, SessionKind, TopicQos};
 
 /// Every topic the system knows.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
@@ -91,14 +91,17 @@ impl Topic {
     /// express (sent at once, never batched behind images), camera frames low priority and
     /// dropped under congestion, read latest-only; events and calibration never dropped and
     /// queued; calibration latched so a late subscriber still gets it.
+    /// The loop's small real-time messages (speed, state, control, clock, detections, the
+    /// ACC's status) ride the low-latency session; the rest the session with priorities.
     pub fn default_qos(self) -> TopicQos {
         let base = TopicQos::default();
+        let low_latency = SessionKind::LowLatency;
         match self {
             Topic::VehicleSpeed | Topic::VehicleControl | Topic::SimClock => {
-                TopicQos { priority: Priority::RealTime, express: true, ..base }
+                TopicQos { priority: Priority::RealTime, express: true, session: low_latency, ..base }
             }
             Topic::VehicleState | Topic::PerceptionObjects => {
-                TopicQos { priority: Priority::InteractiveHigh, express: true, ..base }
+                TopicQos { priority: Priority::InteractiveHigh, express: true, session: low_latency, ..base }
             }
             Topic::CameraFront | Topic::CameraNarrow => TopicQos {
                 priority: Priority::DataLow,
@@ -118,7 +121,7 @@ impl Topic {
             // Ground truth is what a ground-truth controller waits for in lockstep: sent at
             // once, not batched.
             Topic::Objects => TopicQos { express: true, ..base },
-            Topic::AccStatus => base,
+            Topic::AccStatus => TopicQos { session: low_latency, ..base },
         }
     }
 }

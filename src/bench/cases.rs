@@ -80,11 +80,15 @@ pub enum Path {
     RawTcp,
     RawZenoh,
     RawZenohOwnRuntime,
+    /// Raw Zenoh on its low-latency transport: the baseline of the bus's low-latency session.
+    RawZenohLowlatency,
     RawZenohUnix,
     RawZenohTcp,
     RawZenohShm,
     Bus,
     BusOwnRuntime,
+    /// The bus on two sessions (`--low-latency-session`): speed on the low-latency one.
+    BusTwoSessions,
     BusLowlatency,
     BusUnix,
     BusLowlatencyUnix,
@@ -108,6 +112,7 @@ pub enum Path {
     SaturatingQosShmNice,
     SaturatingQosKernelBuffers,
     SaturatingQosOwnRuntime,
+    SaturatingQosTwoSessions,
 }
 
 impl Path {
@@ -121,10 +126,12 @@ impl Path {
             Path::RawTcp => "raw TCP",
             Path::RawZenoh => "raw zenoh",
             Path::RawZenohOwnRuntime => "raw zenoh, zenoh's runtime",
+            Path::RawZenohLowlatency => "raw zenoh, lowlatency transport",
             Path::RawZenohUnix => "raw zenoh, unix socket",
             Path::RawZenohTcp => "raw zenoh, TCP (shm off)",
             Path::RawZenohShm => "raw zenoh, implicit shm",
             Path::Bus => "bus",
+            Path::BusTwoSessions => "bus, two sessions",
             Path::BusOwnRuntime => "bus, zenoh's runtime",
             Path::BusLowlatency => "bus, lowlatency transport",
             Path::BusUnix => "bus, unix socket",
@@ -146,6 +153,7 @@ impl Path {
             Path::SaturatingQosShmNice => "frames saturating, QoS, shm, frame thread at nice 10",
             Path::SaturatingQosKernelBuffers => "frames saturating, QoS, TCP, kernel socket buffers",
             Path::SaturatingQosOwnRuntime => "frames saturating, QoS, TCP, zenoh's runtime",
+            Path::SaturatingQosTwoSessions => "frames saturating, QoS, TCP, two sessions",
         };
         fixed.into()
     }
@@ -206,6 +214,7 @@ pub fn speed_spec(transport: Transport, count: u64) -> CaseSpec {
         peer_exe: None,
         pin_cpu: None,
         subscribers: 1,
+        two_sessions: false,
     }
 }
 
@@ -267,9 +276,14 @@ fn speed_cases(out: &mut Vec<Case>, n: u64, builds: &[OtherBuild], seed: bool) {
     push(Path::RawUdp, speed_spec(Transport::Udp, n));
     push(Path::RawTcp, speed_spec(Transport::Tcp, n));
     push(Path::RawZenoh, speed_spec(Transport::Zenoh, n));
+    push(Path::RawZenohLowlatency, CaseSpec { lowlatency: true, ..speed_spec(Transport::Zenoh, n) });
+    // The bus as users get it (one session with priorities), then with speed on a low-latency
+    // session of its own.
     push(Path::Bus, bus());
+    push(Path::BusTwoSessions, CaseSpec { two_sessions: true, ..bus() });
     push(Path::RawZenohOwnRuntime, CaseSpec { runtime: own(), ..speed_spec(Transport::Zenoh, n) });
     push(Path::BusOwnRuntime, CaseSpec { runtime: own(), ..bus() });
+    // The one session itself on the low-latency transport (no priorities).
     push(Path::BusLowlatency, CaseSpec { lowlatency: true, ..bus() });
     push(Path::RawZenohUnix, CaseSpec { unix_socket: true, ..speed_spec(Transport::Zenoh, n) });
     push(Path::BusUnix, CaseSpec { unix_socket: true, ..bus() });
@@ -339,6 +353,7 @@ fn contention_cases(out: &mut Vec<Case>, n: u64) {
     nice.background = nice.background.map(|b| Background { nice: 10, ..b });
     push(Path::SaturatingQosShmNice, nice);
     push(Path::SaturatingQosKernelBuffers, CaseSpec { tcp_buffer: TcpBuffer::Kernel, ..loaded(None, true, false) });
+    push(Path::SaturatingQosTwoSessions, CaseSpec { two_sessions: true, ..loaded(None, true, false) });
     push(
         Path::SaturatingQosOwnRuntime,
         CaseSpec { runtime: Some(ZENOH_OWN_RUNTIME.into()), ..loaded(None, true, false) },

@@ -142,9 +142,11 @@ pub(super) fn run_groups(specs: &[CaseSpec], router: Option<&str>) -> Result<Vec
         for _ in 0..spec.subscribers.max(1) {
             let mut recv = spawn_peer("recv", spec, &router)?;
             let mut out = BufReader::new(recv.0.stdout.take().context("receiver stdout")?);
-            let ep = read_tagged(&mut out, "READY", Duration::from_secs(20))?;
-            if !eps.contains(&ep) {
-                eps.push(ep);
+            // The receiver's endpoints: its main session's, then its low-latency session's.
+            for ep in read_tagged(&mut out, "READY", Duration::from_secs(20))?.split_whitespace() {
+                if !eps.iter().any(|e| e == ep) {
+                    eps.push(ep.to_string());
+                }
             }
             group.push((recv, out));
         }

@@ -304,11 +304,16 @@ async fn receive_bus(
     stop: &Arc<AtomicBool>,
     r: &mut Receiving,
 ) -> Result<String> {
-    let session = zenoh::open(receiver_config(spec, router)?).await.map_err(anyhow::Error::msg)?;
-    let ep = receiver_endpoint(&session, router).await?;
+    let main = receiver_config(spec, router)?;
+    let low_latency = low_latency_config(spec, &main, &[])?;
     // A name of its own: the sender counts the receivers alive before it starts.
     let node = format!("{RECEIVER_NODE}-{}", std::process::id());
-    let bus = Arc::new(Bus::from_session(session, peer_topics(spec)?, &node).await?);
+    let bus = Arc::new(Bus::open_sessions(main, low_latency, peer_topics(spec)?, &node).await?);
+    let mut ep = receiver_endpoint(bus.session(), router).await?;
+    if let Some(ll) = bus.low_latency_session() {
+        // The sender's low-latency session dials this one (READY's second endpoint).
+        ep = format!("{ep} {LOW_LATENCY_TAG}{}", first_locator(ll).await?);
+    }
     if matches!(spec.payload, Payload::Speed) {
         let answer = match spec.control_echo {
             true => Some(control_echo(&bus, stop, r).await?),
@@ -369,6 +374,20 @@ async fn receive_bus(
     }
     r.keep.push(Box::new(bus));
     Ok(ep)
+}
+
+/// Marks an endpoint of a receiver's low-latency session (in READY and a sender's
+/// `--endpoint` list).
+pub const LOW_LATENCY_TAG: &str = "ll=";
+
+/// A bus peer's low-latency session, as a node derives it (unless the case runs one session
+/// or goes through a router); a sender dials `connect`, the receiver's.
+fn low_latency_config(spec: &CaseSpec, main: &zenoh::Config, connect: &[String]) -> Result<Option<zenoh::Config>> {
+    if !spec.two_sessions {
+        return Ok(None);
+    }
+    let given = crate::config::LowLatencyEndpoints { listen: Vec::new(), connect: connect.to_vec() };
+    Ok(crate::config::low_latency_config(main, &given)?)
 }
 
 /// The receivers' node names start with this (then `-<pid>`).
@@ -567,7 +586,12 @@ async fn send_zenoh(spec: &CaseSpec, endpoints: &[String], max: Duration) -> Res
 async fn send_bus(spec: &CaseSpec, endpoints: &[String], max: Duration) -> Result<SendReport> {
     // Background frames stop with the measured stream; this only bounds them if it hangs.
     let guard = Instant::now() + max + MATCH_WAIT;
-    let bus = Bus::open(peer_config(spec, None, endpoints)?, peer_topics(spec)?, "bench-send").await?;
+    let (main_eps, ll_eps): (Vec<String>, Vec<String>) =
+        endpoints.iter().cloned().partition(|e| !e.starts_with(LOW_LATENCY_TAG));
+    let ll_eps: Vec<String> = ll_eps.iter().map(|e| e.trim_start_matches(LOW_LATENCY_TAG).to_string()).collect();
+    let main = peer_config(spec, None, &main_eps)?;
+    let low_latency = low_latency_config(spec, &main, &ll_eps)?;
+    let bus = Bus::open_sessions(main, low_latency, peer_topics(spec)?, "bench-send").await?;
     wait_receivers(&bus, spec.subscribers).await?;
     let bus = Arc::new(bus);
     let control = Arc::new(Collector::default());

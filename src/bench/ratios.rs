@@ -84,6 +84,7 @@ fn definitions(builds: &[OtherBuild]) -> Vec<RatioDef> {
         Path::SaturatingQosKernelBuffers,
         Path::SaturatingQosShm,
         Path::SaturatingQosShmNice,
+        Path::SaturatingQosTwoSessions,
     ] {
         let num = CaseId { table: Table::Contention, path };
         out.push(RatioDef { num, den: unloaded.clone(), figure: Figure::P99, aim: "<= 3 (with QoS)" });
@@ -98,6 +99,10 @@ fn speed_ratios(out: &mut Vec<RatioDef>, builds: &[OtherBuild]) {
     };
     p50(Path::Bus, Path::SeedPythonUdp, "< 1");
     p50(Path::Bus, Path::RawUdp, "<= 2 (moonshot 1.5)");
+    p50(Path::BusTwoSessions, Path::SeedPythonUdp, "< 1");
+    p50(Path::BusTwoSessions, Path::RawUdp, "<= 2");
+    p50(Path::BusTwoSessions, Path::RawZenohLowlatency, "<= 1.1");
+    p50(Path::BusTwoSessions, Path::Bus, "-");
     p50(Path::BusUnix, Path::Bus, "-");
     p50(Path::BusUnix, Path::SeedPythonUdp, "< 1");
     p50(Path::BusLowlatencyUnix, Path::SeedPythonUdp, "< 1");

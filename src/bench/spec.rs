@@ -110,6 +110,10 @@ pub struct CaseSpec {
     /// Receivers of the measured stream: the sender waits for all of them before it starts.
     #[serde(default = "one")]
     pub subscribers: usize,
+    /// The bus on two sessions (`--low-latency-session`: the small real-time topics on a
+    /// low-latency session of their own) instead of the default one.
+    #[serde(default)]
+    pub two_sessions: bool,
 }
 
 fn one() -> usize {

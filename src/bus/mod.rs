@@ -48,6 +48,8 @@ pub(crate) fn zerr(context: impl Into<String>) -> impl FnOnce(zenoh::Error) -> B
 /// A node's connection to the system: session, topic map, node name and liveliness token.
 pub struct Bus {
     session: zenoh::Session,
+    /// The low-latency session for the topics whose QoS says so; None: all on `session`.
+    low_latency: Option<zenoh::Session>,
     topics: Arc<TopicMap>,
     node: String,
     /// Faults injected into what this node receives (`--faults`); None: none, at no cost.
@@ -74,24 +76,80 @@ impl Bus {
         node: &str,
     ) -> Result<Bus, BusError> {
         let profile = faults.profile()?;
-        let mut bus = Bus::open(connect.zenoh_config()?, connect.topic_map()?, node).await?;
+        let main = connect.zenoh_config()?;
+        let low_latency = connect.low_latency_config(&main)?;
+        let mut bus = Bus::open_sessions(main, low_latency, connect.topic_map()?, node).await?;
         if let Some(p) = profile {
             bus.inject_faults(p);
         }
         Ok(bus)
     }
 
-    /// Joins with an already-open session (tests hand in a loopback session).
+    /// Opens the main session with `main` and, given its config, the low-latency session
+    /// (`ConnectArgs::low_latency_config`), and joins as `node`.
+    pub async fn open_sessions(
+        main: zenoh::Config,
+        low_latency: Option<zenoh::Config>,
+        topics: TopicMap,
+        node: &str,
+    ) -> Result<Bus, BusError> {
+        let session = zenoh::open(main).await.map_err(zerr("open session"))?;
+        let low_latency = match low_latency {
+            Some(mut c) => {
+                // Linked with its own node's main session too: a peer that was given only the
+                // main session's address learns of this one there (gossip) and dials it. (Not
+                // where gossip is off: there only the endpoints given make the mesh.)
+                let gossip = c.get_json("scouting/gossip/enabled").is_ok_and(|g| g == "true");
+                let own: Vec<String> = match gossip {
+                    true => session.info().locators().await.iter().map(|l| l.to_string()).collect(),
+                    false => Vec::new(),
+                };
+                let mut connect: Vec<String> = c
+                    .get_json("connect/endpoints")
+                    .ok()
+                    .and_then(|j| serde_json::from_str(&j).ok())
+                    .unwrap_or_default();
+                connect.extend(own);
+                let list = serde_json::to_string(&connect).unwrap_or_else(|_| "[]".into());
+                c.insert_json5("connect/endpoints", &list).map_err(|e| {
+                    BusError::Config(ConfigError::new(
+                        "the low-latency session",
+                        "connect/endpoints",
+                        e.to_string(),
+                        "run one session (leave out --low-latency-session)",
+                    ))
+                })?;
+                Some(zenoh::open(c).await.map_err(zerr("open the low-latency session"))?)
+            }
+            None => None,
+        };
+        Bus::from_sessions(session, low_latency, topics, node).await
+    }
+
+    /// Joins with an already-open session (tests hand in a loopback session): every topic on it.
     pub async fn from_session(session: zenoh::Session, topics: TopicMap, node: &str) -> Result<Bus, BusError> {
+        Bus::from_sessions(session, None, topics, node).await
+    }
+
+    /// Joins with already-open sessions: the main one, and the one for the topics whose QoS
+    /// names the low-latency session.
+    pub async fn from_sessions(
+        session: zenoh::Session,
+        low_latency: Option<zenoh::Session>,
+        topics: TopicMap,
+        node: &str,
+    ) -> Result<Bus, BusError> {
         let token_key = topics.node_key(node)?;
         let token = session
             .liveliness()
             .declare_token(token_key.clone())
             .await
             .map_err(zerr(format!("declare liveliness token {token_key}")))?;
-        tracing::info!(node, zid = %session.zid(), namespace = topics.namespace(), "joined the bus");
+        let low_latency_zid = low_latency.as_ref().map(|s| s.zid().to_string());
+        tracing::info!(node, zid = %session.zid(), ?low_latency_zid, namespace = topics.namespace(), "joined the bus");
         Ok(Bus {
             session,
+            low_latency,
             topics: Arc::new(topics),
             node: node.to_string(),
             faults: None,
@@ -159,8 +217,23 @@ impl Bus {
         subscriber::Inlet { qos: self.topics.qos(topic), faults }
     }
 
+    /// The main session (priorities; frames, events, liveliness, raw keys).
     pub fn session(&self) -> &zenoh::Session {
         &self.session
+    }
+
+    /// The low-latency session, if this node has one.
+    pub fn low_latency_session(&self) -> Option<&zenoh::Session> {
+        self.low_latency.as_ref()
+    }
+
+    /// The session that carries `topic` here: the one its QoS names, the main one if this
+    /// node has no low-latency session.
+    fn session_for(&self, topic: crate::topics::Topic) -> &zenoh::Session {
+        match (self.topics.qos(topic).session, &self.low_latency) {
+            (crate::qos::SessionKind::LowLatency, Some(ll)) => ll,
+            _ => &self.session,
+        }
     }
 
     pub fn topics(&self) -> &TopicMap {
@@ -173,7 +246,7 @@ impl Bus {
 
     /// A typed publisher on `def`'s key with its configured QoS.
     pub async fn publisher<M: Message>(&self, def: TopicDef<M>) -> Result<Publisher<M>, BusError> {
-        Publisher::declare(&self.session, &self.topics, def.topic, &self.node).await
+        Publisher::declare(self.session_for(def.topic), &self.topics, def.topic, &self.node).await
     }
 
     /// A camera-frame publisher (`def`: camera/front or camera/narrow): renders straight into
@@ -189,7 +262,7 @@ impl Bus {
         M: Message + serde::de::DeserializeOwned + Clone + Send + 'static,
     {
         let sub = Subscriber::declare(
-            &self.session,
+            self.session_for(def.topic),
             self.topics.read_key(def.topic),
             def.topic.name(),
             self.inlet(def.topic),
@@ -217,7 +290,7 @@ impl Bus {
         F: Fn(Received<M>) + Send + Sync + 'static,
     {
         let sub = CallbackSubscriber::declare(
-            &self.session,
+            self.session_for(def.topic),
             self.topics.read_key(def.topic),
             def.topic.name(),
             self.inlet(def.topic),
@@ -334,8 +407,11 @@ impl Bus {
         Ok(NodeWatch { alive, _subscriber: subscriber })
     }
 
-    /// Leaves the bus: undeclares everything and closes the session.
+    /// Leaves the bus: undeclares everything and closes the sessions.
     pub async fn close(self) -> Result<(), BusError> {
+        if let Some(ll) = &self.low_latency {
+            ll.close().await.map_err(zerr("close the low-latency session"))?;
+        }
         self.session.close().await.map_err(zerr("close session"))
     }
 }

@@ -2,6 +2,7 @@
 
 use std::path::{Path, PathBuf};
 
+use super::low_latency::LowLatencyEndpoints;
 use super::{ConfigError, TopicMap};
 
 /// Where binaries look for the Zenoh config when `-c` is not given.
@@ -56,6 +57,23 @@ pub struct ConnectArgs {
     /// Put every key under this namespace (several vehicles or simulators on one network)
     #[arg(short = 'n', long, env = "SLIPSTREAM_NAMESPACE", global = true)]
     pub namespace: Option<String>,
+
+    /// Open a second Zenoh session (peer mode) for the small real-time topics (speed, state,
+    /// control, clock, detections, status; `session` per topic in the topic config) on Zenoh's
+    /// low-latency transport; opt-in, docs/deployment.md "Two sessions per node" says when it
+    /// pays and what it costs
+    #[arg(long, global = true)]
+    pub low_latency_session: bool,
+
+    /// Where the low-latency session listens (repeatable) [default: the --listen endpoints,
+    /// unix sockets with `.ll` appended, TCP/UDP on a port the system picks]
+    #[arg(long, value_name = "ENDPOINT", global = true)]
+    pub low_latency_listen: Vec<String>,
+
+    /// Whom the low-latency session dials (repeatable) [default: the --connect endpoints, unix
+    /// sockets with `.ll` appended]
+    #[arg(long, value_name = "ENDPOINT", global = true)]
+    pub low_latency_connect: Vec<String>,
 }
 
 impl ConnectArgs {
@@ -123,6 +141,17 @@ impl ConnectArgs {
             set(&mut config, key, value.to_string(), "--cfg")?;
         }
         Ok(config)
+    }
+
+    /// The low-latency session's config, derived from `main` (this node's main config) and the
+    /// `--low-latency-*` flags; None without `--low-latency-session` or outside peer mode.
+    pub fn low_latency_config(&self, main: &zenoh::Config) -> Result<Option<zenoh::Config>, ConfigError> {
+        if !self.low_latency_session {
+            return Ok(None);
+        }
+        let given =
+            LowLatencyEndpoints { listen: self.low_latency_listen.clone(), connect: self.low_latency_connect.clone() };
+        super::low_latency::low_latency_config(main, &given)
     }
 
     /// The topic map: file (or default), then `--namespace`.

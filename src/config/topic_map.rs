@@ -8,7 +8,7 @@ use zenoh::key_expr::OwnedKeyExpr;
 
 use super::{parse_json5, ConfigError};
 use crate::msg::ImageEncoding;
-use crate::qos::{Congestion, Delivery, Priority, Reliability, TopicQos};
+use crate::qos::{Congestion, Delivery, Priority, Reliability, SessionKind, TopicQos};
 use crate::topics::{Topic, NODES_PREFIX};
 
 /// The last chunk of a node's inputs report key (`nodes/<name>/inputs`).
@@ -160,6 +160,7 @@ struct RawTopic {
     reliability: Option<Reliability>,
     max_rate_hz: Option<f64>,
     delivery: Option<Delivery>,
+    session: Option<SessionKind>,
     latched: Option<bool>,
 }
 
@@ -285,6 +286,15 @@ impl TopicMap {
             q.congestion_control = over.congestion_control.unwrap_or(q.congestion_control);
             q.reliability = over.reliability.unwrap_or(q.reliability);
             q.latched = over.latched.unwrap_or(q.latched);
+            q.session = over.session.unwrap_or(q.session);
+            if q.session == SessionKind::LowLatency && topic.kind() == crate::msg::MessageKind::CameraFrame {
+                return Err(ConfigError::new(
+                    origin,
+                    format!("{key_path}.session"),
+                    "frames cannot ride the low-latency session: its transport does not fragment, and a frame is larger than one 64 KiB batch",
+                    "leave camera topics on \"main\" (the session with priorities)",
+                ));
+            }
             if let Some(d) = over.delivery {
                 if d == Delivery::Queue(0) {
                     return Err(ConfigError::new(

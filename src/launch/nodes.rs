@@ -200,6 +200,8 @@ struct Endpoints {
     acc: String,
     detect: String,
     sim: String,
+    /// Each node's low-latency session's endpoint, by its main endpoint.
+    low_latency: Vec<(String, String)>,
     /// The unix sockets' directory (removed when the run ends).
     dir: Option<PathBuf>,
 }
@@ -208,8 +210,10 @@ impl Endpoints {
     fn new(link: LinkKind) -> Result<Endpoints> {
         match link {
             LinkKind::Tcp => {
-                let [observer, acc, detect, sim] = free_ports::<4>()?.map(|p| format!("tcp/127.0.0.1:{p}"));
-                Ok(Endpoints { observer, acc, detect, sim, dir: None })
+                let [observer, acc, detect, sim, acc_ll, detect_ll, sim_ll] =
+                    free_ports::<7>()?.map(|p| format!("tcp/127.0.0.1:{p}"));
+                let low_latency = vec![(acc.clone(), acc_ll), (detect.clone(), detect_ll), (sim.clone(), sim_ll)];
+                Ok(Endpoints { observer, acc, detect, sim, low_latency, dir: None })
             }
             LinkKind::Unix => {
                 // Short: a socket's path has at most 107 bytes.
@@ -218,11 +222,13 @@ impl Endpoints {
                 let dir = std::env::temp_dir().join(format!("slipstream-{}-{run}", std::process::id()));
                 std::fs::create_dir_all(&dir).with_context(|| format!("create {}", dir.display()))?;
                 let sock = |name: &str| format!("unixsock-stream/{}", dir.join(format!("{name}.sock")).display());
+                let low_latency = [ACC, DETECT, SIM].iter().map(|n| (sock(n), format!("{}.ll", sock(n)))).collect();
                 Ok(Endpoints {
                     observer: sock("observer"),
                     acc: sock(ACC),
                     detect: sock(DETECT),
                     sim: sock(SIM),
+                    low_latency,
                     dir: Some(dir),
                 })
             }
@@ -421,13 +427,27 @@ impl LoopRun {
         }
     }
 
-    /// The flags of one node: the shared ones, then its own port and whom it dials.
+    /// The flags of one node: the shared ones, then its own port and whom it dials. Its
+    /// low-latency session listens on an endpoint of its own and dials the observer's (main)
+    /// session and the earlier nodes' low-latency sessions, so the loop's real-time topics
+    /// cross low-latency links and the observer still receives them.
     fn flags(&self, own: &str, earlier: &[&str]) -> Vec<String> {
         let mut f = self.base_flags.clone();
         if self.peer {
             f.extend(["-l".into(), own.to_string()]);
             for e in std::iter::once(self.endpoints.observer.as_str()).chain(earlier.iter().copied()) {
                 f.extend(["-e".into(), e.to_string()]);
+            }
+            let ll = |main: &str| self.endpoints.low_latency.iter().find(|(m, _)| m == main).map(|(_, l)| l.clone());
+            if let Some(own_ll) = ll(own) {
+                f.extend(["--low-latency-listen".into(), own_ll]);
+                f.extend(["--low-latency-connect".into(), self.endpoints.observer.clone()]);
+                for e in earlier.iter().filter_map(|e| ll(e)) {
+                    f.extend(["--low-latency-connect".into(), e]);
+                }
+                for e in &self.user_connect {
+                    f.extend(["--low-latency-connect".into(), e.clone()]);
+                }
             }
         }
         for e in &self.user_connect {
@@ -589,6 +609,9 @@ fn user_flags(connect: &ConnectArgs) -> Vec<String> {
     }
     for kv in &connect.cfg {
         base.extend(["--cfg".into(), kv.clone()]);
+    }
+    if connect.low_latency_session {
+        base.push("--low-latency-session".into());
     }
     base
 }

@@ -361,3 +361,88 @@ async fn jpeg_camera_encoding_from_config() {
         slipstream::msg::CameraFrameRef { width: 2, height: 1, encoding: ImageEncoding::Jpeg, data: &[0xff, 0xd8, 0] };
     assert!(bad.to_rgb8().is_err());
 }
+
+/// A node's two sessions as `Bus::open_node` opens them: the low-latency config derived from
+/// a loopback peer config (a unix socket: the twin socket is derived on both sides).
+fn two_session_configs(listen: &str, connect: &[String]) -> (zenoh::Config, Option<zenoh::Config>) {
+    let mut main = zenoh::Config::default();
+    for (k, v) in [
+        ("mode", "\"peer\"".to_string()),
+        ("scouting/multicast/enabled", "false".into()),
+        ("scouting/gossip/enabled", "false".into()),
+        ("listen/endpoints", serde_json::to_string(&[listen]).unwrap()),
+        ("connect/endpoints", serde_json::to_string(connect).unwrap()),
+    ] {
+        main.insert_json5(k, &v).unwrap();
+    }
+    let ll = slipstream::config::low_latency_config(&main, &Default::default()).unwrap();
+    (main, ll)
+}
+
+#[tokio::test(flavor = "multi_thread")]
+async fn real_time_topics_ride_the_low_latency_session_and_plain_sessions_still_see_them() {
+    let dir = std::env::temp_dir().join(format!("slipstream-ll-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let sock = |n: &str| format!("unixsock-stream/{}", dir.join(format!("{n}.sock")).display());
+    let lossless = || map(r#"{ topics: { "vehicle/speed": { congestion_control: "block" } } }"#);
+    let (main_a, ll_a) = two_session_configs(&sock("a"), &[]);
+    let a = slipstream::Bus::open_sessions(main_a, ll_a, lossless(), "node-a").await.unwrap();
+    let (main_b, ll_b) = two_session_configs(&sock("b"), &[sock("a")]);
+    let b = slipstream::Bus::open_sessions(main_b, ll_b, lossless(), "node-b").await.unwrap();
+    let (a_ll, b_ll) = (a.low_latency_session().unwrap(), b.low_latency_session().unwrap());
+
+    // An ordinary Zenoh session (no low-latency transport: what Python, record or a router
+    // run) dials A's low-latency session only, and subscribes to the raw key.
+    let plain = common::connected_session(&format!("{}.ll", sock("a"))).await;
+    let plain_got = Arc::new(AtomicU64::new(0));
+    let counter = plain_got.clone();
+    let _raw = plain.declare_subscriber("vehicle/speed").callback(move |_| {
+        counter.fetch_add(1, Ordering::Relaxed);
+    });
+    let _raw = _raw.await.unwrap();
+
+    let sub = b.subscriber(VEHICLE_SPEED).await.unwrap();
+    let publisher = a.publisher(VEHICLE_SPEED).await.unwrap();
+    assert!(publisher.wait_for_subscriber(TIMEOUT).await);
+    // B's low-latency session is linked with A's (the derived twin sockets), and the speed
+    // comes over that link.
+    let peers: Vec<_> = b_ll.info().peers_zid().await.collect();
+    assert!(peers.contains(&a_ll.zid()), "B's low-latency session is not linked with A's: {peers:?}");
+    within!(async {
+        let mut i = 0u64;
+        while plain_got.load(Ordering::Relaxed) == 0 || sub.stats().snapshot().received == 0 {
+            publisher.put(i * 10_000_000, &Speed { speed_mps: 20.0 }).unwrap();
+            i += 1;
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+    });
+    assert_eq!(within!(sub.recv()).msg.speed_mps, 20.0);
+    // Frames stay on the main session: B (main linked with A's main) gets them, the plain
+    // session linked with A's low-latency session only does not.
+    let plain_frames = Arc::new(AtomicU64::new(0));
+    let counter = plain_frames.clone();
+    let _raw_frames = plain
+        .declare_subscriber("camera/front")
+        .callback(move |_| {
+            counter.fetch_add(1, Ordering::Relaxed);
+        })
+        .await
+        .unwrap();
+    let frames_in = b.frame_subscriber(CAMERA_FRONT).await.unwrap();
+    let frames = a.frame_publisher(CAMERA_FRONT).await.unwrap();
+    assert!(frames.publisher().wait_for_subscriber(TIMEOUT).await);
+    within!(async {
+        let mut i = 0u64;
+        while frames_in.try_recv().is_none() {
+            frames.put_with(i * 50_000_000, 4, 2, ImageEncoding::Rgb8, 24, |px| px[0] = 1).unwrap();
+            i += 1;
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+    });
+    assert_eq!(plain_frames.load(Ordering::Relaxed), 0, "a frame went out on the low-latency session");
+    drop(frames);
+    plain.close().await.unwrap();
+    b.close().await.unwrap();
+    a.close().await.unwrap();
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -117,8 +117,33 @@ fn up_in_realtime_with_ground_truth_paces_the_wall_clock() {
     assert_eq!(names, ["slipstream-acc", "slipstream-sim"], "no detector with ground truth");
     let hops = r["latency"]["hops"].as_array().unwrap();
     assert_eq!(hops[0]["count"], 0, "no detector hop");
-    assert!(hops[2]["count"].as_u64().unwrap() >= 300, "{hops:?}");
+    assert!(hops[2]["count"].as_u64().unwrap() >= 300, "{hops:?} {}", r["topics"]);
     assert!(hops[3]["count"].as_u64().unwrap() >= 60, "{hops:?}");
+}
+
+#[test]
+fn up_with_a_low_latency_session_closes_the_loop_and_the_observer_sees_it() {
+    // Every node with two sessions (`--low-latency-session`): speed, state and control cross
+    // low-latency links between the nodes, and the observer (one session) still receives them.
+    let _serial = common::serial();
+    let dir = temp_dir("up-two-sessions");
+    let mut cmd = bin("slipstream");
+    cmd.args(["--low-latency-session", "-l", &ep(free_port()), "up", "--scenario", "steady-follow"]);
+    cmd.args(["--perception", "ground-truth", "--mode", "lockstep", "--duration", "3", "--report"]).arg(&dir);
+    let out = common::run_with_limit(cmd, Duration::from_secs(120));
+    assert!(out.status.success(), "stderr: {}", String::from_utf8_lossy(&out.stderr));
+    let r = report(&dir);
+    let received = |key: &str| {
+        r["topics"].as_array().unwrap().iter().find(|t| t["key"] == key).map_or(0, |t| t["received"].as_u64().unwrap())
+    };
+    // Lockstep: every step answered, so the loop closed over the low-latency links.
+    assert_eq!(r["ended"], "duration of 3 s reached", "{r}");
+    let sim: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("logs/slipstream-sim.json")).unwrap()).unwrap();
+    assert_eq!((sim["steps"].as_u64(), sim["lockstep_timeouts"].as_u64()), (Some(1500), Some(0)), "{sim}");
+    assert!(received("vehicle/state") > 0 && received("vehicle/control") > 0, "{}", r["topics"]);
+    let log = std::fs::read_to_string(dir.join("logs/slipstream-sim.log")).unwrap();
+    assert!(log.contains("low_latency_zid=Some"), "the simulator opened no low-latency session: {log}");
 }
 
 /// The pids of `parent`'s children, from /proc.
