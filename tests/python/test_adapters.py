@@ -6,6 +6,7 @@ loop around the CARLA adapter."""
 
 import json
 import os
+import socket
 import subprocess
 import sys
 import time
@@ -24,7 +25,27 @@ def carla(endpoint, ns, *args, env=None):
 
 
 def coppelia_server(port, env=None):
-    return Running([sys.executable, str(HERE / "coppeliasim_standin.py"), str(port)], env=env)
+    """The stand-in server, returned once its port accepts connections: the adapter gives up
+    on a server it cannot reach within its --timeout, and a loaded machine starts Python slowly."""
+    server = Running([sys.executable, str(HERE / "coppeliasim_standin.py"), str(port)], env=env)
+    deadline = time.monotonic() + 20
+    while time.monotonic() < deadline and server.proc.poll() is None:
+        try:
+            socket.create_connection(("127.0.0.1", port), timeout=1).close()
+            break
+        except OSError:
+            time.sleep(0.1)
+    return server
+
+
+def other_free_port(taken):
+    """A free loopback port other than `taken` (the next port up may be in use)."""
+    while True:
+        with socket.socket() as s:
+            s.bind(("127.0.0.1", 0))
+            port = s.getsockname()[1]
+        if port != taken:
+            return port
 
 
 def coppelia(server_port, endpoint, ns, *args):
@@ -49,7 +70,7 @@ def test_the_carla_adapter_keeps_the_contract_on_the_stand_in(slipstream_bin, fr
 @pytest.mark.parametrize("mode", ["realtime", "lockstep"])
 def test_the_coppeliasim_adapter_keeps_the_contract_on_the_stand_in(slipstream_bin, free_port, mode):
     endpoint, ns = f"tcp/127.0.0.1:{free_port}", f"coppelia-{mode}"
-    server_port = free_port + 1 if free_port < 65000 else free_port - 1
+    server_port = other_free_port(free_port)
     with coppelia_server(server_port), coppelia(server_port, endpoint, ns, "--mode", mode):
         code, verdicts = conform(slipstream_bin, endpoint, ns, *lockstep_flag(mode))
     assert_keeps_the_contract(code, verdicts)
@@ -63,7 +84,7 @@ def test_an_adapter_that_loses_its_server_says_so_and_exits_non_zero(free_port):
         _, err = run.proc.communicate(timeout=60)
     assert run.proc.returncode == 1 and "lost the CARLA server" in err, err
 
-    server_port = free_port + 1 if free_port < 65000 else free_port - 1
+    server_port = other_free_port(free_port)
     with coppelia_server(server_port, env=env), coppelia(server_port, endpoint, "coppelia-dies", "--mode", "fast") as run:
         _, err = run.proc.communicate(timeout=60)
     assert run.proc.returncode == 1 and "lost CoppeliaSim" in err, err
