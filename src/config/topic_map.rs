@@ -263,62 +263,68 @@ impl TopicMap {
         map.camera.shared_memory = cam.shared_memory.unwrap_or(map.camera.shared_memory);
 
         for (name, over) in raw.topics {
-            let key_path = format!("topics.{name}");
-            let Some(topic) = Topic::from_name(&name) else {
-                let allowed: Vec<_> = Topic::ALL.iter().map(|t| t.name()).collect();
-                return Err(ConfigError::new(
-                    origin,
-                    key_path,
-                    format!("unknown topic `{name}`"),
-                    format!("use one of: {}", allowed.join(", ")),
-                ));
-            };
-            let entry = map.entries.get_mut(&topic).expect("every topic has an entry");
-            if let Some(k) = over.key {
-                let (key, absolute) =
-                    remapped_key(&k).map_err(|(p, f)| ConfigError::new(origin, format!("{key_path}.key"), p, f))?;
-                entry.key = key;
-                entry.absolute = absolute;
-            }
-            let q = &mut entry.qos;
-            q.priority = over.priority.unwrap_or(q.priority);
-            q.express = over.express.unwrap_or(q.express);
-            q.congestion_control = over.congestion_control.unwrap_or(q.congestion_control);
-            q.reliability = over.reliability.unwrap_or(q.reliability);
-            q.latched = over.latched.unwrap_or(q.latched);
-            q.session = over.session.unwrap_or(q.session);
-            if q.session == SessionKind::LowLatency && topic.kind() == crate::msg::MessageKind::CameraFrame {
-                return Err(ConfigError::new(
-                    origin,
-                    format!("{key_path}.session"),
-                    "frames cannot ride the low-latency session: its transport does not fragment, and a frame is larger than one 64 KiB batch",
-                    "leave camera topics on \"main\" (the session with priorities)",
-                ));
-            }
-            if let Some(d) = over.delivery {
-                if d == Delivery::Queue(0) {
-                    return Err(ConfigError::new(
-                        origin,
-                        format!("{key_path}.delivery"),
-                        "a queue of 0",
-                        "use \"latest\" or { queue: N } with N >= 1",
-                    ));
-                }
-                q.delivery = d;
-            }
-            if let Some(r) = over.max_rate_hz {
-                if !(r.is_finite() && r > 0.0) {
-                    return Err(ConfigError::new(
-                        origin,
-                        format!("{key_path}.max_rate_hz"),
-                        format!("{r} is not a positive rate"),
-                        "give a rate in Hz > 0, or leave the key out for no limit",
-                    ));
-                }
-                q.max_rate_hz = Some(r);
-            }
+            map.apply_override(&name, over, origin)?;
         }
         Ok(map)
+    }
+
+    /// One topic's entry of `topics` in the file: key remapping and QoS over the defaults.
+    fn apply_override(&mut self, name: &str, over: RawTopic, origin: &str) -> Result<(), ConfigError> {
+        let key_path = format!("topics.{name}");
+        let Some(topic) = Topic::from_name(name) else {
+            let allowed: Vec<_> = Topic::ALL.iter().map(|t| t.name()).collect();
+            return Err(ConfigError::new(
+                origin,
+                key_path,
+                format!("unknown topic `{name}`"),
+                format!("use one of: {}", allowed.join(", ")),
+            ));
+        };
+        let entry = self.entries.get_mut(&topic).expect("every topic has an entry");
+        if let Some(k) = over.key {
+            let (key, absolute) =
+                remapped_key(&k).map_err(|(p, f)| ConfigError::new(origin, format!("{key_path}.key"), p, f))?;
+            entry.key = key;
+            entry.absolute = absolute;
+        }
+        let q = &mut entry.qos;
+        q.priority = over.priority.unwrap_or(q.priority);
+        q.express = over.express.unwrap_or(q.express);
+        q.congestion_control = over.congestion_control.unwrap_or(q.congestion_control);
+        q.reliability = over.reliability.unwrap_or(q.reliability);
+        q.latched = over.latched.unwrap_or(q.latched);
+        q.session = over.session.unwrap_or(q.session);
+        if q.session == SessionKind::LowLatency && topic.kind() == crate::msg::MessageKind::CameraFrame {
+            return Err(ConfigError::new(
+                origin,
+                format!("{key_path}.session"),
+                "frames cannot ride the low-latency session: its transport does not fragment, and a frame is larger than one 64 KiB batch",
+                "leave camera topics on \"main\" (the session with priorities)",
+            ));
+        }
+        if let Some(d) = over.delivery {
+            if d == Delivery::Queue(0) {
+                return Err(ConfigError::new(
+                    origin,
+                    format!("{key_path}.delivery"),
+                    "a queue of 0",
+                    "use \"latest\" or { queue: N } with N >= 1",
+                ));
+            }
+            q.delivery = d;
+        }
+        if let Some(r) = over.max_rate_hz {
+            if !(r.is_finite() && r > 0.0) {
+                return Err(ConfigError::new(
+                    origin,
+                    format!("{key_path}.max_rate_hz"),
+                    format!("{r} is not a positive rate"),
+                    "give a rate in Hz > 0, or leave the key out for no limit",
+                ));
+            }
+            q.max_rate_hz = Some(r);
+        }
+        Ok(())
     }
 
     /// Replaces the namespace (the `--namespace` flag does this after loading).
