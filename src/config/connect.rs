@@ -147,6 +147,11 @@ impl ConnectArgs {
     /// `--low-latency-*` flags; None without `--low-latency-session` or outside peer mode.
     pub fn low_latency_config(&self, main: &zenoh::Config) -> Result<Option<zenoh::Config>, ConfigError> {
         if !self.low_latency_session {
+            if !self.low_latency_listen.is_empty() || !self.low_latency_connect.is_empty() {
+                tracing::warn!(
+                    "--low-latency-listen/--low-latency-connect without --low-latency-session: one session, the endpoints are not used"
+                );
+            }
             return Ok(None);
         }
         let given =

@@ -439,7 +439,8 @@ impl LoopRun {
                 f.extend(["-e".into(), e.to_string()]);
             }
             let ll = |main: &str| self.endpoints.low_latency.iter().find(|(m, _)| m == main).map(|(_, l)| l.clone());
-            if let Some(own_ll) = ll(own) {
+            let two_sessions = self.base_flags.iter().any(|f| f == "--low-latency-session");
+            if let Some(own_ll) = ll(own).filter(|_| two_sessions) {
                 f.extend(["--low-latency-listen".into(), own_ll]);
                 f.extend(["--low-latency-connect".into(), self.endpoints.observer.clone()]);
                 for e in earlier.iter().filter_map(|e| ll(e)) {
