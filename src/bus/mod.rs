@@ -96,29 +96,8 @@ impl Bus {
         let session = zenoh::open(main).await.map_err(zerr("open session"))?;
         let low_latency = match low_latency {
             Some(mut c) => {
-                // Linked with its own node's main session too: a peer that was given only the
-                // main session's address learns of this one there (gossip) and dials it. (Not
-                // where gossip is off: there only the endpoints given make the mesh.)
-                let gossip = c.get_json("scouting/gossip/enabled").is_ok_and(|g| g == "true");
-                let own: Vec<String> = match gossip {
-                    true => session.info().locators().await.iter().map(|l| l.to_string()).collect(),
-                    false => Vec::new(),
-                };
-                let mut connect: Vec<String> = c
-                    .get_json("connect/endpoints")
-                    .ok()
-                    .and_then(|j| serde_json::from_str(&j).ok())
-                    .unwrap_or_default();
-                connect.extend(own);
-                let list = serde_json::to_string(&connect).unwrap_or_else(|_| "[]".into());
-                c.insert_json5("connect/endpoints", &list).map_err(|e| {
-                    BusError::Config(ConfigError::new(
-                        "the low-latency session",
-                        "connect/endpoints",
-                        e.to_string(),
-                        "run one session (leave out --low-latency-session)",
-                    ))
-                })?;
+                let own: Vec<String> = session.info().locators().await.iter().map(|l| l.to_string()).collect();
+                crate::config::dial_own_main(&mut c, &own)?;
                 Some(zenoh::open(c).await.map_err(zerr("open the low-latency session"))?)
             }
             None => None,

@@ -85,6 +85,27 @@ pub fn low_latency_config(
     Ok(Some(config))
 }
 
+/// Adds the node's own main session (`own`: its listening locators) to what the low-latency
+/// session `config` dials: a peer given only the main session's address learns of the
+/// low-latency one there (gossip) and dials it. Not where gossip is off: there only the
+/// endpoints given make the mesh.
+pub fn dial_own_main(config: &mut zenoh::Config, own: &[String]) -> Result<(), ConfigError> {
+    if !config.get_json("scouting/gossip/enabled").is_ok_and(|g| g == "true") {
+        return Ok(());
+    }
+    let mut connect = endpoints(config, "connect/endpoints");
+    connect.extend(own.iter().cloned());
+    let list = serde_json::to_string(&connect).unwrap_or_else(|_| "[]".into());
+    config.insert_json5("connect/endpoints", &list).map_err(|e| {
+        ConfigError::new(
+            "the low-latency session",
+            "connect/endpoints",
+            e.to_string(),
+            "run one session (leave out --low-latency-session)",
+        )
+    })
+}
+
 fn endpoints(config: &zenoh::Config, key: &str) -> Vec<String> {
     let json = config.get_json(key).ok();
     // A mode-dependent list ({ peer: [...], router: [...] }) has no list for this purpose.
