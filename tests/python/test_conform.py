@@ -53,6 +53,24 @@ def python_sim(script, endpoint, namespace, *args):
                     "--duration", "600"])
 
 
+def hung_run_evidence(timeout, sim, report_dir):
+    """What a run that did not end leaves to read: up's and the simulator's output, the nodes' logs."""
+    def tail(text, n=3000):
+        text = text.decode(errors="replace") if isinstance(text, bytes) else (text or "")
+        return text[-n:]
+    sim.proc.terminate()
+    try:
+        sim_out, sim_err = sim.proc.communicate(timeout=10)
+    except subprocess.TimeoutExpired:
+        sim.proc.kill()
+        sim_out, sim_err = sim.proc.communicate()
+    parts = [f"== up stderr\n{tail(timeout.stderr)}", f"== simulator stdout\n{tail(sim_out)}",
+             f"== simulator stderr\n{tail(sim_err)}"]
+    for log in sorted((report_dir / "logs").glob("*.log")):
+        parts.append(f"== {log.name}\n{tail(log.read_text(errors='replace'), 2000)}")
+    return "\n".join(parts)
+
+
 def assert_keeps_the_contract(code, verdicts):
     failed = {r: v["detail"] for r, v in verdicts.items() if v["outcome"] == "FAIL"}
     assert code == 0 and not failed, failed
@@ -129,11 +147,12 @@ def test_up_closes_the_loop_around_the_python_reference_simulator(slipstream_bin
     sim = Running([sys.executable, str(REFERENCE), "--mode", "lockstep", "--duration", "30", "-e", endpoint,
                    "-n", ns])
     with sim:
-        up = subprocess.run(
-            [slipstream_bin, "-l", endpoint, "-n", ns, "up", "--sim", "external", "--mode", "lockstep", "--plain",
-             "--report", str(report_dir)],
-            capture_output=True, text=True, timeout=240,
-        )
+        argv = [slipstream_bin, "-l", endpoint, "-n", ns, "up", "--sim", "external", "--mode", "lockstep", "--plain",
+                "--report", str(report_dir)]
+        try:
+            up = subprocess.run(argv, capture_output=True, text=True, timeout=240)
+        except subprocess.TimeoutExpired as e:
+            pytest.fail(f"up did not end in 240 s\n{hung_run_evidence(e, sim, report_dir)}")
         sim_out, _ = sim.proc.communicate(timeout=30)
     assert up.returncode == 0, up.stderr[-3000:]
     report = json.loads((report_dir / "report.json").read_text())
