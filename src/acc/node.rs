@@ -39,7 +39,8 @@ pub struct AccStats {
     /// Times the ACC entered Stale or Emergency mode.
     pub stale_episodes: u64,
     pub emergencies: u64,
-    /// Lockstep steps whose perception did not come within lockstep_wait_ms.
+    /// Lockstep steps whose perception did not come within lockstep_wait_ms (after one, the
+    /// frames are not waited for until perception comes again).
     pub lockstep_waits_timed_out: u64,
     /// Outside lockstep: answers whose frame's perception did not come within
     /// perception_wait_ms (answered with the perception there was).
@@ -137,6 +138,11 @@ struct State {
     perception_pub_ns: Option<u64>,
     camera_rate_hz: Option<f64>,
     info_waited: bool,
+    /// Lockstep: a wait for a frame's perception ran out and none has come since. The next
+    /// frames are not waited for until perception comes again: a detector that publishes
+    /// nothing (no camera info, a stuck process) must not cost every frame step
+    /// lockstep_wait_ms and turn the run into a crawl.
+    perception_overdue: bool,
     last_speed_at: Option<Instant>,
     speed_max_age: Duration,
     mode: Option<AccMode>,
@@ -304,11 +310,12 @@ async fn answer_speed(st: &mut State, inputs: &Inputs, settings: &AccSettings, s
     }
     // Something arrived already, even if injected faults hold it back.
     let seen_any = inputs.perception.arrivals().since(0);
-    // The answer waits for the perception of the frame taken at this step: always in lockstep
-    // (the run must not depend on timing), briefly otherwise (the loop reacts to the frame
+    // The answer waits for the perception of the frame taken at this step: in lockstep (the
+    // run must not depend on timing) unless the last wait ran out, briefly otherwise (the loop reacts to the frame
     // now rather than at the next speed message), and not at all in realtime once the
     // detector is known gone (nothing will come; each frame step would lose the wait).
     let wait_ms = match settings.lockstep {
+        true if st.perception_overdue => 0,
         true => settings.lockstep_wait_ms,
         false if !inputs.detector_alive() => 0,
         false => settings.perception_wait_ms,
@@ -399,6 +406,7 @@ async fn await_perception(st: &mut State, perception: &PerceptionSub, wait_ms: u
         }
         perception.arrivals().wait(left, || perception.arrivals().since(t_ns)).await;
     }
+    st.perception_overdue = lockstep;
     let counter = match lockstep {
         true => &mut st.stats.lockstep_waits_timed_out,
         false => &mut st.stats.perception_waits_timed_out,
@@ -410,7 +418,7 @@ async fn await_perception(st: &mut State, perception: &PerceptionSub, wait_ms: u
             t_s,
             waited_ms = wait_ms,
             suppressed = more,
-            "lockstep: no perception for the frame at this step; answering with what there is (is the detector running?)"
+            "lockstep: no perception for the frame at this step; answering with what there is, and not waiting again until perception comes (is the detector running? has it camera info?)"
         );
     } else {
         tracing::info!(
@@ -435,6 +443,7 @@ impl State {
             perception_pub_ns: None,
             camera_rate_hz: None,
             info_waited: false,
+            perception_overdue: false,
             last_speed_at: None,
             mode: None,
             status_tick: None,
@@ -581,6 +590,7 @@ fn take_perception(st: &mut State, frame: &PerceptionFrame, pub_ns: u64) {
         return;
     }
     st.stats.perception_frames += 1;
+    st.perception_overdue = false;
     st.perception_stamp_s = Some(frame.stamp_s);
     st.perception_pub_ns = Some(pub_ns);
     st.ctl.perceive(frame, &st.ego);

@@ -101,6 +101,16 @@ impl FakeSim {
             tokio::time::sleep(Duration::from_millis(2)).await;
         }
     }
+
+    /// `steps` steps without perception, each waiting for the ACC's answer, as a lockstep
+    /// simulator does.
+    async fn lockstep(&mut self, steps: u64, controls: &Collect<ControlCommand>) {
+        for _ in 0..steps {
+            let k = self.step;
+            self.run(1, false).await;
+            until(controls, answer_from(k)).await;
+        }
+    }
 }
 
 /// Everything a topic delivers, kept (a queued subscriber would keep only the newest few).
@@ -333,6 +343,47 @@ async fn a_vanished_detector_is_perception_lost() {
             "{} waits ran out; {frame_steps_until_lost} frame steps came before the detector was known gone (20 after)",
             stats.perception_waits_timed_out
         );
+    });
+}
+
+/// In lockstep each frame step's answer waits for that frame's perception, but a detector that
+/// publishes nothing (alive, without camera info or stuck) costs one wait, not one per frame:
+/// the run goes on instead of crawling at lockstep_wait_ms a frame. Waiting resumes once
+/// perception comes again.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_lockstep_acc_stops_waiting_for_a_detector_that_sends_nothing() {
+    within!(async {
+        let settings = AccSettings {
+            perception: PerceptionSource::Camera,
+            lockstep: true,
+            lockstep_wait_ms: 300,
+            ..truth_settings()
+        };
+        let (task, stop, sim_bus, ep) = acc_and_sim(settings).await;
+        let controls = Collect::new(&sim_bus, topics::VEHICLE_CONTROL).await;
+        // The detector: alive on the bus, silent until told.
+        let detect_bus =
+            Bus::from_session(common::connected_session(&ep).await, TopicMap::default(), "detect").await.unwrap();
+        let detections = detect_bus.publisher(topics::PERCEPTION_OBJECTS).await.unwrap();
+        assert!(detections.wait_for_subscriber(common::TIMEOUT).await);
+        let info_pub = sim_bus.publisher(topics::CAMERA_FRONT_INFO).await.unwrap();
+        let info = slipstream::sim::SimSettings::default().camera_info(slipstream::msg::ImageEncoding::Rgb8);
+        info_pub.put(0, &info).unwrap();
+        let mut sim = FakeSim::new(&sim_bus).await;
+        // A lockstep simulator: each step waits for its answer. 50 steps bring 10 frames.
+        sim.lockstep(50, &controls).await;
+        // Perception comes again (for the frame at this step), then stops again.
+        let k = sim.step;
+        let empty = Detections { frame_seq: k / 5, frame_stamp_pub_ns: 0, detections: vec![] };
+        detections.put(k * 10_000_000, &empty).unwrap();
+        sim.lockstep(50, &controls).await;
+        stop.send(()).unwrap();
+        let stats = task.await.unwrap();
+        assert_eq!(
+            stats.lockstep_waits_timed_out, 2,
+            "one wait ran out before each silence was known, of 20 frame steps without perception"
+        );
+        assert_eq!(stats.perception_frames, 1);
     });
 }
 
