@@ -47,10 +47,11 @@ fn run() -> Result<()> {
             .await
             .context("detect: run")?;
         tracing::info!(
-            "{} frames, {} skipped, {} unusable, {} detections; {} with the narrow camera, {} without its frame",
+            "{} frames, {} skipped, {} unusable, {} before camera info, {} detections; {} with the narrow camera, {} without its frame",
             stats.frames,
             stats.skipped,
             stats.unusable,
+            stats.without_info,
             stats.detections,
             stats.narrow_frames,
             stats.narrow_missing

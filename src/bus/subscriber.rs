@@ -35,11 +35,14 @@ pub struct Received<M> {
     pub source: Option<String>,
 }
 
-/// Bounded hand-over from Zenoh's thread to a reader: drops (and counts) the oldest.
+/// Bounded hand-over from Zenoh's thread to a reader: drops (and counts) the oldest. A task
+/// waits on `notify`; a thread of its own waits on `arrived` (a futex wake, without a trip
+/// through the async runtime's scheduler).
 struct Inbox<T> {
     items: Mutex<VecDeque<T>>,
     capacity: usize,
     notify: tokio::sync::Notify,
+    arrived: parking_lot::Condvar,
 }
 
 impl<T> Inbox<T> {
@@ -48,6 +51,7 @@ impl<T> Inbox<T> {
             items: Mutex::new(VecDeque::with_capacity(delivery.capacity())),
             capacity: delivery.capacity(),
             notify: tokio::sync::Notify::new(),
+            arrived: parking_lot::Condvar::new(),
         }
     }
 
@@ -60,6 +64,7 @@ impl<T> Inbox<T> {
         items.push_back(item);
         drop(items);
         self.notify.notify_one();
+        self.arrived.notify_one();
     }
 
     fn try_pop(&self) -> Option<T> {
@@ -72,6 +77,19 @@ impl<T> Inbox<T> {
                 return item;
             }
             self.notify.notified().await;
+        }
+    }
+
+    fn pop_blocking(&self, timeout: Duration) -> Option<T> {
+        let deadline = std::time::Instant::now() + timeout;
+        let mut items = self.items.lock();
+        loop {
+            if let Some(item) = items.pop_front() {
+                return Some(item);
+            }
+            if self.arrived.wait_until(&mut items, deadline).timed_out() {
+                return items.pop_front();
+            }
         }
     }
 }
@@ -230,6 +248,8 @@ pub struct FrameSample {
     /// The payload joined into one buffer, only when Zenoh delivered it in fragments (a large
     /// frame over the network): the one copy such a frame costs on the way in.
     joined: Option<Vec<u8>>,
+    /// Wall clock (ns since the epoch) when Zenoh handed the sample to this node.
+    arrived_ns: u64,
 }
 
 impl FrameSample {
@@ -265,6 +285,12 @@ impl FrameSample {
         self.sample.attachment().and_then(|a| a.try_to_string().ok()).map(|s| s.into_owned())
     }
 
+    /// Wall clock (ns since the epoch) when Zenoh's receive thread handed the frame over: a
+    /// reader's `now - arrived_ns` is what the hand-off to it took.
+    pub fn arrived_ns(&self) -> u64 {
+        self.arrived_ns
+    }
+
     /// Whether the payload had to be joined from fragments (one copy).
     pub fn was_joined(&self) -> bool {
         self.joined.is_some()
@@ -281,7 +307,7 @@ fn accept_frame(sample: Sample) -> Result<(Header, usize, FrameSample), DecodeEr
         None => payload.slices().next().unwrap_or(&[]),
     };
     let header = msg::decode::<CameraFrameRef>(bytes)?.header;
-    Ok((header, len, FrameSample { sample, header, joined }))
+    Ok((header, len, FrameSample { sample, header, joined, arrived_ns: msg::wall_clock_ns() }))
 }
 
 /// A subscription to one topic whose messages wait in an inbox until the reader takes them.
@@ -332,6 +358,13 @@ impl<T> Subscription<T> {
     /// The next message within `timeout`.
     pub async fn recv_timeout(&self, timeout: Duration) -> Option<T> {
         tokio::time::timeout(timeout, self.recv()).await.ok()
+    }
+
+    /// The next message within `timeout`, blocking the calling thread: for a reader on a
+    /// thread of its own, woken by the receive thread directly (no async runtime between).
+    /// Never call it from an async task.
+    pub fn recv_blocking(&self, timeout: Duration) -> Option<T> {
+        self.inbox.pop_blocking(timeout)
     }
 
     /// A message if one is waiting.

@@ -5,13 +5,15 @@
 //! instant (same stamp) joins each front frame; without it the front frame is used alone.
 
 use std::future::Future;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use serde::Serialize;
 
 use super::detector::DetectorParams;
 use super::rig::CameraRig;
-use crate::bus::{Bus, BusError, Following, FrameSample, FrameSubscriber, Subscriber};
+use crate::bus::{Bus, BusError, Following, FrameSample, FrameSubscriber, Publisher, Subscriber};
 use crate::msg::{CameraFrameRef, CameraInfo, Detections};
 use crate::topics;
 
@@ -29,6 +31,9 @@ pub struct DetectStats {
     pub foreign_inputs: u64,
     /// Front frames detected together with the narrow camera's frame of the same instant.
     pub narrow_frames: u64,
+    /// Front frames that came before any camera/front/info (not usable: the detector needs the
+    /// camera's intrinsics). Many means the latched info never reached this node.
+    pub without_info: u64,
     /// Front frames whose narrow frame did not come in time (with a narrow camera known).
     pub narrow_missing: u64,
     /// Wall time spent detecting, fusing and tracking (not waiting for frames), seconds.
@@ -66,88 +71,150 @@ impl InfoInput {
     }
 }
 
-/// Runs until `shutdown` completes.
+/// How often the reader thread looks up from an empty inbox to see whether the node stops.
+const STOP_POLL: Duration = Duration::from_millis(100);
+
+/// Runs until `shutdown` completes. Frames are read and detected on a thread of its own,
+/// woken by Zenoh's receive thread directly: waking an async task instead costs a trip
+/// through the runtime's scheduler on every frame (docs/performance.md, the frame hop table),
+/// and detection is CPU work that must not hold an async worker.
 pub async fn run(
     bus: &Bus,
     params: DetectorParams,
     shutdown: impl Future<Output = ()>,
 ) -> Result<DetectStats, BusError> {
-    let frames = bus.frame_subscriber(topics::CAMERA_FRONT).await?;
-    let narrow_frames = bus.frame_subscriber(topics::CAMERA_NARROW).await?;
-    let mut info = InfoInput::new(bus.subscriber(topics::CAMERA_FRONT_INFO).await?, "camera/front/info");
-    let mut narrow_info = InfoInput::new(bus.subscriber(topics::CAMERA_NARROW_INFO).await?, "camera/narrow/info");
-    let out = bus.publisher(topics::PERCEPTION_OBJECTS).await?;
-    let mut stats = DetectStats::default();
-    let mut rig: Option<CameraRig> = None;
-    let mut waiting_logged = false;
-    // One camera set: frames from the publisher that named itself first.
-    let mut frames_from = Following::new("camera/front");
-    let mut narrow_from = Following::new("camera/narrow");
-    let mut narrow_held: Option<FrameSample> = None;
-    tokio::pin!(shutdown);
-    loop {
-        let sample = tokio::select! {
-            _ = &mut shutdown => break,
-            s = frames.recv() => s,
+    let inputs = Inputs {
+        frames: bus.frame_subscriber(topics::CAMERA_FRONT).await?,
+        narrow_frames: bus.frame_subscriber(topics::CAMERA_NARROW).await?,
+        info: InfoInput::new(bus.subscriber(topics::CAMERA_FRONT_INFO).await?, "camera/front/info"),
+        narrow_info: InfoInput::new(bus.subscriber(topics::CAMERA_NARROW_INFO).await?, "camera/narrow/info"),
+        out: bus.publisher(topics::PERCEPTION_OBJECTS).await?,
+    };
+    let stop = Arc::new(AtomicBool::new(false));
+    let flag = stop.clone();
+    let mut reader = tokio::task::spawn_blocking(move || inputs.run(params, &flag));
+    let joined = |done: Result<Result<DetectStats, BusError>, tokio::task::JoinError>| match done {
+        Ok(done) => done,
+        Err(e) => std::panic::resume_unwind(e.into_panic()),
+    };
+    tokio::select! {
+        _ = shutdown => {}
+        // It ends on its own only on an error (a publish that failed).
+        done = &mut reader => return joined(done),
+    }
+    stop.store(true, Ordering::Relaxed);
+    joined(reader.await)
+}
+
+/// The detector's subscriptions and its publisher.
+struct Inputs {
+    frames: FrameSubscriber,
+    narrow_frames: FrameSubscriber,
+    info: InfoInput,
+    narrow_info: InfoInput,
+    out: Publisher<Detections>,
+}
+
+/// What the reader keeps from frame to frame.
+struct Reading {
+    stats: DetectStats,
+    rig: Option<CameraRig>,
+    waiting_logged: bool,
+    /// One camera set: frames from the publisher that named itself first.
+    frames_from: Following,
+    narrow_from: Following,
+    narrow_held: Option<FrameSample>,
+}
+
+impl Inputs {
+    /// Reads frames until `stop` (a blocking loop: call it on a thread of its own).
+    fn run(mut self, params: DetectorParams, stop: &AtomicBool) -> Result<DetectStats, BusError> {
+        let mut r = Reading {
+            stats: DetectStats::default(),
+            rig: None,
+            waiting_logged: false,
+            frames_from: Following::new("camera/front"),
+            narrow_from: Following::new("camera/narrow"),
+            narrow_held: None,
         };
-        if !frames_from.accept(sample.source().as_deref(), Instant::now()) {
-            continue;
-        }
-        let changed = info.poll() | narrow_info.poll();
-        if info.known.is_none() {
-            if !waiting_logged {
-                tracing::info!("waiting for camera/front/info before using frames");
-                waiting_logged = true;
+        while !stop.load(Ordering::Relaxed) {
+            let Some(sample) = self.frames.recv_blocking(STOP_POLL) else { continue };
+            if r.frames_from.accept(sample.source().as_deref(), Instant::now()) {
+                self.detect(&sample, params, &mut r)?;
             }
-            // The info is latched: it comes soon after start. The frame in hand is used then
-            // (a lockstep controller waits for its detections).
-            if let Some(i) = info.sub.recv_timeout(Duration::from_millis(500)).await {
-                if info.from.accept(i.source.as_deref(), Instant::now()) {
-                    info.known = Some(i.msg);
+        }
+        let mut stats = r.stats;
+        stats.skipped = self.frames.stats().snapshot().skipped;
+        stats.foreign_inputs = r.frames_from.rejected()
+            + r.narrow_from.rejected()
+            + self.info.from.rejected()
+            + self.narrow_info.from.rejected();
+        Ok(stats)
+    }
+
+    /// The camera info in force; waits briefly for the first one (latched: it comes soon after
+    /// start, and the frame in hand is used then: a lockstep controller waits for its
+    /// detections). None while there is none.
+    fn front_info(&mut self, r: &mut Reading) -> Option<CameraInfo> {
+        let changed = self.info.poll() | self.narrow_info.poll();
+        if self.info.known.is_none() {
+            if !r.waiting_logged {
+                tracing::info!("waiting for camera/front/info before using frames");
+                r.waiting_logged = true;
+            }
+            if let Some(i) = self.info.sub.recv_blocking(Duration::from_millis(500)) {
+                if self.info.from.accept(i.source.as_deref(), Instant::now()) {
+                    self.info.known = Some(i.msg);
                 }
             }
-            narrow_info.poll();
-            if info.known.is_none() {
-                continue;
+            self.narrow_info.poll();
+            self.info.known.as_ref()?;
+            r.rig = None;
+        }
+        if changed {
+            r.rig = None;
+        }
+        self.info.known.clone()
+    }
+
+    /// One front frame: its narrow partner, detection, tracking, the Detections message.
+    fn detect(&mut self, sample: &FrameSample, params: DetectorParams, r: &mut Reading) -> Result<(), BusError> {
+        let Some(front_info) = self.front_info(r) else {
+            r.stats.without_info += 1;
+            if r.stats.without_info.is_power_of_two() && r.stats.without_info >= 8 {
+                tracing::warn!(frames = r.stats.without_info, "still no camera/front/info: frames are not used");
             }
-            rig = None;
-        }
-        let front_info = info.known.as_ref().expect("camera info is known here");
-        if changed || rig.is_none() {
-            rig = Some(CameraRig::new(front_info, narrow_info.known.as_ref(), params));
-        }
-        let rig = rig.as_mut().expect("the rig is built here");
+            return Ok(());
+        };
+        let rig = r.rig.get_or_insert_with(|| CameraRig::new(&front_info, self.narrow_info.known.as_ref(), params));
         let frame = sample.frame();
         let header = frame.header;
-        let Some(rgb) = usable(&frame.msg, front_info, header.seq, &mut stats) else { continue };
+        let Some(rgb) = usable(&frame.msg, &front_info, header.seq, &mut r.stats) else { return Ok(()) };
         let narrow_sample = match rig.narrow() {
             Some(_) => {
-                let found = narrow_at(&narrow_frames, &mut narrow_held, &mut narrow_from, header.stamp_sim_ns).await;
-                stats.narrow_missing += found.is_none() as u64;
+                let found = narrow_at(&self.narrow_frames, &mut r.narrow_held, &mut r.narrow_from, header.stamp_sim_ns);
+                r.stats.narrow_missing += found.is_none() as u64;
                 found
             }
             None => None,
         };
         let narrow_frame = narrow_sample.as_ref().map(|s| s.frame());
         let narrow_rgb = match (&narrow_frame, rig.narrow()) {
-            (Some(f), Some(i)) => usable(&f.msg, i, f.header.seq, &mut stats),
+            (Some(f), Some(i)) => usable(&f.msg, i, f.header.seq, &mut r.stats),
             _ => None,
         };
-        stats.narrow_frames += narrow_rgb.is_some() as u64;
+        r.stats.narrow_frames += narrow_rgb.is_some() as u64;
         let started = Instant::now();
         let detections = rig.update(&rgb, narrow_rgb.as_deref(), header.stamp_sim_ns as f64 / 1e9);
-        stats.busy_s += started.elapsed().as_secs_f64();
-        stats.frames += 1;
-        stats.detections += detections.len() as u64;
-        out.put(
+        r.stats.busy_s += started.elapsed().as_secs_f64();
+        r.stats.frames += 1;
+        r.stats.detections += detections.len() as u64;
+        self.out.put(
             header.stamp_sim_ns,
             &Detections { frame_seq: header.seq, frame_stamp_pub_ns: header.stamp_pub_ns, detections },
         )?;
+        Ok(())
     }
-    stats.skipped = frames.stats().snapshot().skipped;
-    stats.foreign_inputs =
-        frames_from.rejected() + narrow_from.rejected() + info.from.rejected() + narrow_info.from.rejected();
-    Ok(stats)
 }
 
 /// A frame's pixels as RGB8 when it has the size its camera's info states and decodes; else
@@ -179,7 +246,7 @@ fn usable<'a>(
 
 /// The narrow camera's frame stamped `stamp_ns`: already in, or in within [`NARROW_WAIT`];
 /// None when it does not come or a later one replaced it.
-async fn narrow_at(
+fn narrow_at(
     frames: &FrameSubscriber,
     held: &mut Option<FrameSample>,
     from: &mut Following,
@@ -199,7 +266,7 @@ async fn narrow_at(
             _ => {}
         }
         waited = true;
-        if let Some(s) = frames.recv_timeout(NARROW_WAIT).await {
+        if let Some(s) = frames.recv_blocking(NARROW_WAIT) {
             if from.accept(s.source().as_deref(), Instant::now()) {
                 *held = Some(s);
             }
