@@ -3,7 +3,7 @@
 
 use serde::Serialize;
 
-use super::spec::{Background, CaseSpec, Payload, TcpBuffer, Transport};
+use super::spec::{Background, CaseSpec, FrameReader, Payload, TcpBuffer, Transport};
 use super::Suite;
 
 /// ZENOH_RUNTIME value that gives Zenoh's own thread layout (a pool per role) instead of
@@ -100,6 +100,7 @@ pub enum Path {
     BusShm,
     BusShmUnix,
     BusShmUnixCallback,
+    BusShmUnixThread,
     BusTcp,
     BusShmOwnRuntime,
     BusTcpOwnRuntime,
@@ -141,6 +142,7 @@ impl Path {
             Path::BusShm => "bus, shared memory",
             Path::BusShmUnix => "bus, shared memory, unix socket",
             Path::BusShmUnixCallback => "bus, shared memory, unix socket, callback reader",
+            Path::BusShmUnixThread => "bus, shared memory, unix socket, reader thread",
             Path::BusTcp => "bus, TCP (shm off)",
             Path::BusShmOwnRuntime => "bus, shared memory, zenoh's runtime",
             Path::BusTcpOwnRuntime => "bus, TCP (shm off), zenoh's runtime",
@@ -210,7 +212,7 @@ pub fn speed_spec(transport: Transport, count: u64) -> CaseSpec {
         via_router: false,
         namespace: None,
         control_echo: false,
-        callback_reader: false,
+        reader: FrameReader::Task,
         peer_exe: None,
         pin_cpu: None,
         subscribers: 1,
@@ -321,7 +323,13 @@ fn frame_cases(out: &mut Vec<Case>, size: FrameSize, phase: Phase, quick: bool, 
         // to the application's task adds.
         push(
             Path::BusShmUnixCallback,
-            CaseSpec { unix_socket: true, callback_reader: true, ..frame(Transport::Bus, true) },
+            CaseSpec { unix_socket: true, reader: FrameReader::Callback, ..frame(Transport::Bus, true) },
+        );
+        // Read by a thread of its own, woken by the receive thread directly: the detector's
+        // reader.
+        push(
+            Path::BusShmUnixThread,
+            CaseSpec { unix_socket: true, reader: FrameReader::Thread, ..frame(Transport::Bus, true) },
         );
     }
     push(Path::BusTcp, frame(Transport::Bus, false));

@@ -26,6 +26,10 @@ pub struct Row {
     pub mb_per_s: Option<f64>,
     pub shared_memory_frames: f64,
     pub background_frames_per_s: Option<f64>,
+    /// Frames handed from Zenoh's receive callback to a reader: p50 of publish -> callback
+    /// (the link) and of callback -> reader (the hand-off), us.
+    pub link_p50_us: Option<f64>,
+    pub handoff_p50_us: Option<f64>,
 }
 
 pub(super) fn percentile(sorted: &[i64], p: f64) -> Option<f64> {
@@ -59,6 +63,8 @@ pub(super) struct RunFigures {
     mbps: Option<f64>,
     shm: f64,
     bg_fps: Option<f64>,
+    link_p50: Option<f64>,
+    handoff_p50: Option<f64>,
 }
 
 pub(super) fn figures(spec: &CaseSpec, s: &SendReport, r: &RecvReport) -> RunFigures {
@@ -76,7 +82,22 @@ pub(super) fn figures(spec: &CaseSpec, s: &SendReport, r: &RecvReport) -> RunFig
         mbps: throughput.then(|| r.bytes as f64 / r.span_s / 1e6),
         shm: r.shared_memory as f64,
         bg_fps: spec.background.map(|_| r.background_received as f64 / s.elapsed_s.max(1e-3)),
+        link_p50: hops(r).map(|(link, _)| link),
+        handoff_p50: hops(r).map(|(_, handoff)| handoff),
     }
+}
+
+/// A reader's frames split in two hops, p50 of each (us): publish -> receive callback, and
+/// callback -> reader. None unless every measured frame has its hand-off.
+fn hops(r: &RecvReport) -> Option<(f64, f64)> {
+    if r.handoff_ns.is_empty() || r.handoff_ns.len() != r.latencies_ns.len() {
+        return None;
+    }
+    let mut link: Vec<i64> = r.latencies_ns.iter().zip(&r.handoff_ns).map(|(l, h)| l - h).collect();
+    let mut handoff = r.handoff_ns.clone();
+    link.sort_unstable();
+    handoff.sort_unstable();
+    Some((percentile(&link, 0.5)?, percentile(&handoff, 0.5)?))
 }
 
 /// A case's row: the medians of its runs.
@@ -97,5 +118,26 @@ pub(super) fn row(case: &Case, runs: &[RunFigures]) -> Row {
         mb_per_s: med(&|r| r.mbps),
         shared_memory_frames: med(&|r| Some(r.shm)).unwrap_or(0.0),
         background_frames_per_s: med(&|r| r.bg_fps),
+        link_p50_us: med(&|r| r.link_p50),
+        handoff_p50_us: med(&|r| r.handoff_p50),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_readers_frames_split_into_link_and_hand_off_per_frame() {
+        let r = RecvReport {
+            latencies_ns: vec![300_000, 400_000, 500_000],
+            handoff_ns: vec![100_000, 50_000, 80_000],
+            ..RecvReport::default()
+        };
+        // Per frame: link 200, 350, 420 us; hand-off 100, 50, 80 us.
+        assert_eq!(hops(&r), Some((350.0, 80.0)));
+        // A frame without its hand-off: no split rather than a wrong one.
+        let partial = RecvReport { handoff_ns: vec![100_000], ..r };
+        assert_eq!(hops(&partial), None);
     }
 }

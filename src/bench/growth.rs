@@ -377,6 +377,7 @@ mod tests {
             background_received: 0,
             shared_memory: 0,
             skipped: 0,
+            handoff_ns: Vec::new(),
         }
     }
 

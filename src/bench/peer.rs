@@ -16,7 +16,7 @@ use parking_lot::Mutex;
 use zenoh::bytes::ZBytes;
 use zenoh::Wait;
 
-use super::spec::{Background, CaseSpec, Payload, RecvReport, SendReport, TcpBuffer, Transport};
+use super::spec::{Background, CaseSpec, FrameReader, Payload, RecvReport, SendReport, TcpBuffer, Transport};
 use crate::bus::Bus;
 use crate::config::TopicMap;
 use crate::msg::{wall_clock_ns, ControlCommand, ImageEncoding, Speed};
@@ -50,6 +50,7 @@ struct Collector {
     background: AtomicU64,
     shm: AtomicU64,
     skipped: AtomicU64,
+    handoffs: Mutex<Vec<i64>>,
 }
 
 impl Collector {
@@ -75,6 +76,7 @@ impl Collector {
             background_received: self.background.load(Ordering::Relaxed),
             shared_memory: self.shm.load(Ordering::Relaxed),
             skipped: self.skipped.load(Ordering::Relaxed),
+            handoff_ns: self.handoffs.lock().clone(),
         }
     }
 }
@@ -295,8 +297,7 @@ async fn receiver_endpoint(session: &zenoh::Session, router: Option<&str>) -> Re
     }
 }
 
-/// The bus: speed by a callback subscriber; frames by a callback (throughput) or by the
-/// application's latest-only reader (latency, background load).
+/// The bus: speed by a callback subscriber; frames as [`read_frames`] says.
 async fn receive_bus(
     spec: &CaseSpec,
     router: Option<&str>,
@@ -331,49 +332,75 @@ async fn receive_bus(
         r.keep.push(Box::new(sub));
     }
     let frames_measured = matches!(spec.payload, Payload::Frame { .. });
-    if frames_measured && (spec.rate_hz.is_none() || spec.callback_reader) {
-        // Throughput (or a latency case that asks for it): count frames where raw zenoh
-        // does, in the receive callback (validated, zero-copy), touching the last byte.
+    if frames_measured || spec.background.is_some() {
+        read_frames(&bus, spec, col, stop, r).await?;
+    }
+    r.keep.push(Box::new(bus));
+    Ok(ep)
+}
+
+/// Frames at the receiver: counted in the receive callback (throughput, or a latency case that
+/// asks for it: validated, zero-copy, touching the last byte, where raw zenoh counts them), or
+/// taken from the application's latest-only `FrameSubscriber` by a task or a thread of its own
+/// (latency, background load).
+async fn read_frames(
+    bus: &Bus,
+    spec: &CaseSpec,
+    col: &Arc<Collector>,
+    stop: &Arc<AtomicBool>,
+    r: &mut Receiving,
+) -> Result<()> {
+    let measured = matches!(spec.payload, Payload::Frame { .. });
+    let reader = if measured && spec.rate_hz.is_none() { FrameReader::Callback } else { spec.reader };
+    let handed_off = reader != FrameReader::Callback;
+    let take = {
         let c = col.clone();
-        let sub = bus
-            .subscribe_frames_with(crate::topics::CAMERA_FRONT, move |s| {
-                let f = s.frame();
-                let _ = std::hint::black_box(f.msg.data.last());
-                if s.is_shared_memory() {
-                    c.shm.fetch_add(1, Ordering::Relaxed);
-                }
+        move |s: &crate::bus::FrameSample| {
+            let f = s.frame();
+            let _ = std::hint::black_box(f.msg.data.last());
+            if s.is_shared_memory() {
+                c.shm.fetch_add(1, Ordering::Relaxed);
+            }
+            if measured {
                 c.record(f.header.seq, f.header.stamp_pub_ns, s.bytes().len());
-            })
-            .await?;
+                if handed_off {
+                    c.handoffs.lock().push(wall_clock_ns() as i64 - s.arrived_ns() as i64);
+                }
+            } else {
+                c.background.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+    };
+    if reader == FrameReader::Callback {
+        let sub = bus.subscribe_frames_with(crate::topics::CAMERA_FRONT, move |s| take(&s)).await?;
         r.keep.push(Box::new(sub));
-    } else if frames_measured || spec.background.is_some() {
-        // Latency and background load: the application's path, a latest-only
-        // FrameSubscriber read by its own task.
-        let sub = bus.frame_subscriber(crate::topics::CAMERA_FRONT).await?;
-        let (c, stop, measured) = (col.clone(), stop.clone(), frames_measured);
-        let skipped = col.clone();
-        let stats = sub.stats().clone();
-        r.on_stop.push(Box::new(move || {
-            skipped.skipped.store(stats.snapshot().skipped, Ordering::Relaxed);
+        return Ok(());
+    }
+    let sub = bus.frame_subscriber(crate::topics::CAMERA_FRONT).await?;
+    let (skipped, stats) = (col.clone(), sub.stats().clone());
+    r.on_stop.push(Box::new(move || {
+        skipped.skipped.store(stats.snapshot().skipped, Ordering::Relaxed);
+    }));
+    let stop = stop.clone();
+    const POLL: Duration = Duration::from_millis(100);
+    if reader == FrameReader::Thread {
+        r.threads.push(std::thread::spawn(move || {
+            while !stop.load(Ordering::Relaxed) {
+                if let Some(s) = sub.recv_blocking(POLL) {
+                    take(&s);
+                }
+            }
         }));
+    } else {
         tokio::spawn(async move {
             while !stop.load(Ordering::Relaxed) {
-                let Some(s) = sub.recv_timeout(Duration::from_millis(100)).await else { continue };
-                let f = s.frame();
-                let _ = std::hint::black_box(f.msg.data.last());
-                if s.is_shared_memory() {
-                    c.shm.fetch_add(1, Ordering::Relaxed);
-                }
-                if measured {
-                    c.record(f.header.seq, f.header.stamp_pub_ns, s.bytes().len());
-                } else {
-                    c.background.fetch_add(1, Ordering::Relaxed);
+                if let Some(s) = sub.recv_timeout(POLL).await {
+                    take(&s);
                 }
             }
         });
     }
-    r.keep.push(Box::new(bus));
-    Ok(ep)
+    Ok(())
 }
 
 /// Marks an endpoint of a receiver's low-latency session (in READY and a sender's

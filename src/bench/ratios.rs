@@ -136,6 +136,7 @@ fn frame_ratios(out: &mut Vec<RatioDef>, size: FrameSize) {
     push(latency(Path::BusShmUnix), latency(Path::SeedPythonTcpPickle), Figure::P50, "< 1");
     push(latency(Path::BusTcp), latency(Path::SeedPythonTcpPickle), Figure::P50, "< 1");
     push(latency(Path::BusShmUnixCallback), latency(Path::BusShmUnix), Figure::P50, "-");
+    push(latency(Path::BusShmUnixThread), latency(Path::BusShmUnix), Figure::P50, "-");
 }
 
 /// The ratios whose tables ran; a needed row that is absent is named in `missing`.
@@ -205,6 +206,8 @@ mod tests {
             mb_per_s: None,
             shared_memory_frames: 0.0,
             background_frames_per_s: None,
+            link_p50_us: None,
+            handoff_p50_us: None,
         }
     }
 

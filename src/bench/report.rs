@@ -48,6 +48,7 @@ pub fn markdown(report: &BenchReport) -> String {
             fmt_opt(r.background_frames_per_s, 1),
         ));
     }
+    s.push_str(&hops_markdown(&report.rows));
     if !report.sim.is_empty() {
         s.push_str("\n### d. simulator (in process)\n\n| what | value | unit | aim |\n|---|---|---|---|\n");
         for f in &report.sim {
@@ -72,6 +73,29 @@ pub fn markdown(report: &BenchReport) -> String {
             };
             s.push_str(&format!("| {} | {} | {} |\n", r.what, value, r.aim));
         }
+    }
+    s
+}
+
+/// The frame rows read through a hand-off, hop by hop (p50): publish -> Zenoh's receive
+/// callback (the link), callback -> the reader (the hand-off), and the whole way.
+fn hops_markdown(rows: &[Row]) -> String {
+    let hops: Vec<&Row> = rows.iter().filter(|r| r.handoff_p50_us.is_some()).collect();
+    if hops.is_empty() {
+        return String::new();
+    }
+    let mut s = String::from(
+        "\n### Frame hops, p50 us\n\n| table | path | publish -> receive callback | callback -> reader | publish -> reader |\n|---|---|---|---|---|\n",
+    );
+    for r in hops {
+        s.push_str(&format!(
+            "| {} | {} | {} | {} | {} |\n",
+            r.suite,
+            r.path,
+            fmt_opt(r.link_p50_us, 0),
+            fmt_opt(r.handoff_p50_us, 0),
+            fmt_opt(r.p50_us, 0)
+        ));
     }
     s
 }

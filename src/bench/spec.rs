@@ -61,6 +61,19 @@ pub enum TcpBuffer {
     Bytes(u32),
 }
 
+/// The reader of a latency case's frames: the hand-off from Zenoh's receive thread to the
+/// application is what the rows tell apart.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub enum FrameReader {
+    /// A latest-only `FrameSubscriber` awaited by a task of the async runtime.
+    #[default]
+    Task,
+    /// The same subscriber read by a thread of its own (`recv_blocking`), as the detector does.
+    Thread,
+    /// Zenoh's receive callback itself: no hand-off.
+    Callback,
+}
+
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct CaseSpec {
     pub transport: Transport,
@@ -96,10 +109,10 @@ pub struct CaseSpec {
     /// controller would; the sender receives the commands and reports their latency.
     #[serde(default)]
     pub control_echo: bool,
-    /// Frames at a fixed rate are read in Zenoh's receive callback instead of by the
-    /// application's latest-only reader on its own task: measures that reader's hand-off.
+    /// Who reads frames sent at a fixed rate at the receiver (throughput cases always count
+    /// them in Zenoh's receive callback).
     #[serde(default)]
-    pub callback_reader: bool,
+    pub reader: FrameReader,
     /// Run both peers from this slipstream binary instead of the running one (another build,
     /// e.g. with Zenoh's io_uring receive path: `bench --with-build`).
     #[serde(default)]
@@ -138,6 +151,10 @@ pub struct RecvReport {
     /// it read them): counted in `received`'s shortfall, not lost in transport.
     #[serde(default)]
     pub skipped: u64,
+    /// Frames read by a task or a thread: each one's hand-off from Zenoh's receive callback to
+    /// the reader, ns (in the order of `latencies_ns`).
+    #[serde(default)]
+    pub handoff_ns: Vec<i64>,
 }
 
 /// The sender's report.
