@@ -89,6 +89,7 @@ pub enum Path {
     BusOwnRuntime,
     /// The bus on two sessions (`--low-latency-session`): speed on the low-latency one.
     BusTwoSessions,
+    BusTwoSessionsUnix,
     BusLowlatency,
     BusUnix,
     BusLowlatencyUnix,
@@ -133,6 +134,7 @@ impl Path {
             Path::RawZenohShm => "raw zenoh, implicit shm",
             Path::Bus => "bus",
             Path::BusTwoSessions => "bus, two sessions",
+            Path::BusTwoSessionsUnix => "bus, two sessions, unix socket",
             Path::BusOwnRuntime => "bus, zenoh's runtime",
             Path::BusLowlatency => "bus, lowlatency transport",
             Path::BusUnix => "bus, unix socket",
@@ -291,6 +293,8 @@ fn speed_cases(out: &mut Vec<Case>, n: u64, builds: &[OtherBuild], seed: bool) {
     push(Path::BusUnix, CaseSpec { unix_socket: true, ..bus() });
     // Zenoh's low-latency transport (no priorities, so not for frames) over the one-host link.
     push(Path::BusLowlatencyUnix, CaseSpec { lowlatency: true, unix_socket: true, ..bus() });
+    // Two sessions over the link `up` and `eval` give the loop's processes on one host.
+    push(Path::BusTwoSessionsUnix, CaseSpec { two_sessions: true, unix_socket: true, ..bus() });
     // Issue 17's other leads for the speed path. (Batching off, `transport/link/tx/queue/
     // batching/enabled: false`, is not a row: Zenoh 1.10 then closes the transport before
     // the peers match, "Unable to push non droppable network message".)

@@ -103,6 +103,9 @@ fn speed_ratios(out: &mut Vec<RatioDef>, builds: &[OtherBuild]) {
     p50(Path::BusTwoSessions, Path::RawUdp, "<= 2");
     p50(Path::BusTwoSessions, Path::RawZenohLowlatency, "<= 1.1");
     p50(Path::BusTwoSessions, Path::Bus, "-");
+    p50(Path::BusTwoSessionsUnix, Path::SeedPythonUdp, "< 1");
+    p50(Path::BusTwoSessionsUnix, Path::BusUnix, "-");
+    p50(Path::BusTwoSessionsUnix, Path::RawUdp, "<= 2");
     p50(Path::BusUnix, Path::Bus, "-");
     p50(Path::BusUnix, Path::SeedPythonUdp, "< 1");
     p50(Path::BusLowlatencyUnix, Path::SeedPythonUdp, "< 1");
