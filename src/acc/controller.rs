@@ -789,23 +789,7 @@ impl Controller {
                 Some(l) => l.offset_m(o.distance_m, o.lateral_m),
                 None => o.lateral_m - kappa * o.distance_m * o.distance_m / 2.0,
             };
-            // The rate of that same offset: in a bend a car standing in the next lane sweeps
-            // across the ego's own frame as the ego turns, not across its lane.
-            let track = match self.tracks.get(&o.id) {
-                Some(t) if frame.stamp_s > t.stamp_s => {
-                    let lat_rate = ((off - t.lateral_m) / (frame.stamp_s - t.stamp_s))
-                        .clamp(-MAX_LATERAL_RATE_MPS, MAX_LATERAL_RATE_MPS);
-                    Track {
-                        stamp_s: frame.stamp_s,
-                        lateral_m: off,
-                        lateral_rate_mps: t.lateral_rate_mps + RATE_FILTER * (lat_rate - t.lateral_rate_mps),
-                        seen: t.seen.saturating_add(1),
-                    }
-                }
-                Some(t) => *t,
-                None => Track { stamp_s: frame.stamp_s, lateral_m: off, lateral_rate_mps: 0.0, seen: 1 },
-            };
-            self.tracks.insert(o.id, track);
+            let track = Self::track(&mut self.tracks, o.id, off, frame.stamp_s);
 
             let gap = o.distance_m - front;
             if o.distance_m <= 0.0 || gap > lane.range_m {
@@ -865,8 +849,36 @@ impl Controller {
             self.lead = None;
             return;
         };
+        self.follow(o, gap, ego, frame.stamp_s, current);
+    }
+
+    /// The track of object `id` seen at lateral offset `off` at `stamp_s`, updated and kept:
+    /// the rate of that same offset (in a bend a car standing in the next lane sweeps across
+    /// the ego's own frame as the ego turns, not across its lane).
+    fn track(tracks: &mut HashMap<u32, Track>, id: u32, off: f64, stamp_s: f64) -> Track {
+        let track = match tracks.get(&id) {
+            Some(t) if stamp_s > t.stamp_s => {
+                let lat_rate =
+                    ((off - t.lateral_m) / (stamp_s - t.stamp_s)).clamp(-MAX_LATERAL_RATE_MPS, MAX_LATERAL_RATE_MPS);
+                Track {
+                    stamp_s,
+                    lateral_m: off,
+                    lateral_rate_mps: t.lateral_rate_mps + RATE_FILTER * (lat_rate - t.lateral_rate_mps),
+                    seen: t.seen.saturating_add(1),
+                }
+            }
+            Some(t) => *t,
+            None => Track { stamp_s, lateral_m: off, lateral_rate_mps: 0.0, seen: 1 },
+        };
+        tracks.insert(id, track);
+        track
+    }
+
+    /// Follows `o` at `gap` as the lead: updates its estimate, or starts a new one when the
+    /// lead changed (`current` was the lead before this frame).
+    fn follow(&mut self, o: &Object, gap: f64, ego: &EgoNow, stamp_s: f64, current: Option<u32>) {
         let n = self.noise;
-        let t = ego.t_s.max(frame.stamp_s);
+        let t = ego.t_s.max(stamp_s);
         let speed = ego.speed_mps + o.relative_speed_mps;
         // The speed's noise is the model's for this range (the figures the ride was tuned
         // with); while a lead is new, perception's own estimate when larger: a new track's
@@ -878,7 +890,7 @@ impl Controller {
             Some(f) if f.id == o.id => {
                 f.predict(t, ego.speed_mps, n.jerk_sigma_mps3);
                 f.brake_lights(o.brake_lights);
-                f.seen_s = frame.stamp_s;
+                f.seen_s = stamp_s;
                 f.update(0, gap, n.gap_sigma(gap));
                 f.update_speed(speed, speed_sigma(f.settled()), n.speed_steady(gap));
             }
@@ -898,39 +910,7 @@ impl Controller {
         let mut warnings: Vec<AccWarning> = warnings.to_vec();
         let stale = !warnings.is_empty();
 
-        // The lead now: its gap moved on from the frame's time at the measured relative speed.
-        // Not while stale: the watchdog's clock is a guess, and the estimate is not used then
-        // (it catches up when fresh data return).
-        if let Some(f) = self.lead.as_mut().filter(|_| !stale) {
-            f.predict(ego.t_s, v, self.noise.jerk_sigma_mps3);
-        }
-        let lead = self.lead.filter(|_| !stale).map(|f| LeadNow {
-            id: f.id,
-            gap_m: f.x[0],
-            speed_mps: f.x[1].max(0.0),
-            accel_mps2: f.x[2],
-            speed_sigma_mps: f.p[(1, 1)].max(0.0).sqrt(),
-            accel_sigma_mps2: f.p[(2, 2)].max(0.0).sqrt(),
-            brake_lights: f.brake_lights,
-            lamps_vouch: f.lamps_vouch(),
-            lit_for_s: f.lit_for_s(),
-            settled: f.settled(),
-            followed_s: f.t_s - f.since_s,
-            speed_noise_mps: f.speed_noise_mps(),
-        });
-        if let Some(l) = lead {
-            tracing::trace!(
-                t_s = ego.t_s,
-                gap_m = l.gap_m,
-                speed_mps = l.speed_mps,
-                accel_mps2 = l.accel_mps2,
-                accel_sigma_mps2 = l.accel_sigma_mps2,
-                brake_lights = l.brake_lights,
-                speed_noise_mps = l.speed_noise_mps,
-                last_target_mps2 = self.accel_cmd,
-                "lead"
-            );
-        }
+        let lead = self.lead_now(ego.t_s, v, stale);
         let desired_gap = self.s.standstill_m + self.time_gap_s * v;
         let revealed = self.next_in_lane.filter(|_| lead.is_some()).map(|r| {
             let rel = r.relative_speed_mps;
@@ -974,66 +954,7 @@ impl Controller {
             match threat.filter(|_| self.emergency) {
                 Some(t) => (AccMode::Emergency, -self.emergency_decel(&t, hard)),
                 None => {
-                    // A new lead's speed is still being measured (far ahead, a camera needs a
-                    // few tenths of a second): comfort braking plans for it being slower by
-                    // UNMEASURED_SIGMAS of its uncertainty, so a standing car seen at the edge
-                    // of range is braked for from the first frames, not once its speed is
-                    // known. Only where comfort braking could cope with that case: a car
-                    // cutting in near, its speed not yet measured, is no standing car to brake
-                    // hard for. An emergency still needs the estimate itself.
-                    //
-                    // Likewise for LIT_ANTICIPATION_S after a lead's brake lights come on:
-                    // the lamps say the pedal is pressed, its speed says how hard only some
-                    // tenths of a second later (a camera's range moves by centimetres while
-                    // the deceleration builds). Comfort braking plans for the lead braking at
-                    // the comfort limit meanwhile, so the ego eases into braking with the lamps
-                    // instead of once the deceleration shows; the estimate decides after. Only
-                    // where such a brake would need much of the comfort braking (at speed, or
-                    // close): slow and far back, a late answer costs nothing, and braking for
-                    // every touch of the lead's pedal would cost the time gap.
-                    let decel = self.s.limits.decel_at(v);
-                    let worse_within_comfort = |t: Threat, worse: Threat| {
-                        if worse.needed_decel_mps2 <= decel {
-                            t.or_worse(&worse)
-                        } else {
-                            t
-                        }
-                    };
-                    let guard = match lead {
-                        Some(l) if !l.settled => {
-                            let slower_mps = (l.speed_mps - UNMEASURED_SIGMAS * l.speed_sigma_mps).max(0.0);
-                            let slower = |gap_m: f64| self::threat(gap_m, v, slower_mps, l.threat_accel());
-                            // A new lead beyond twice the time gap is braked for before it is
-                            // settled only where waiting would cost comfort: were it that slow,
-                            // the room the wait takes must leave the stop well within the
-                            // comfort limit. Far away a lead may be no vehicle: in a bend, two
-                            // cars standing in the lanes either side 200 m ahead merged in the
-                            // image into one in the ego's lane for half a second, read as
-                            // standing, and drew 1.2-1.4 m/s2 for nothing. The follow law still
-                            // answers it, and an emergency still reads the threat itself. The
-                            // price: a car standing far ahead is braked for up to a second
-                            // later and harder (cut-out-revealing-stopped-car 3.1 -> 4.0 m/s2,
-                            // within the limit at its speed). Nearer, nothing waits.
-                            let far = l.gap_m > self.s.standstill_m + FAR_TIME_GAPS * self.time_gap_s * v;
-                            let wait_s = (SETTLE_S - l.followed_s).max(0.0);
-                            let waited = slower(l.gap_m - (v - slower_mps).max(0.0) * wait_s);
-                            if far && waited.needed_decel_mps2 <= UNSETTLED_WAIT_SHARE * decel {
-                                revealed
-                            } else {
-                                threat.map(|t| worse_within_comfort(t, slower(l.gap_m)))
-                            }
-                        }
-                        Some(l) if l.lit_for_s.is_some_and(|s| s < LIT_ANTICIPATION_S) => threat.map(|t| {
-                            let braking = l.threat_accel().min(-self.s.limits.decel_mps2);
-                            let hard = self::threat(l.gap_m, v, l.speed_mps, braking);
-                            if hard.needed_decel_mps2 >= LIT_NEED_SHARE * decel {
-                                worse_within_comfort(t, hard)
-                            } else {
-                                t
-                            }
-                        }),
-                        _ => threat,
-                    };
+                    let guard = self.comfort_guard(lead, threat, revealed, v);
                     self.comfort_target(v, lead, guard.as_ref(), desired_gap, dt)
                 }
             }
@@ -1062,6 +983,115 @@ impl Controller {
             warnings,
         };
         Output { throttle, brake, status }
+    }
+
+    /// The lead now: its gap moved on from the frame's time at the measured relative speed.
+    /// None while stale: the watchdog's clock is a guess, and the estimate is not used then
+    /// (it catches up when fresh data return).
+    fn lead_now(&mut self, t_s: f64, v: f64, stale: bool) -> Option<LeadNow> {
+        if stale {
+            return None;
+        }
+        let f = self.lead.as_mut()?;
+        f.predict(t_s, v, self.noise.jerk_sigma_mps3);
+        let f = *f;
+        let l = LeadNow {
+            id: f.id,
+            gap_m: f.x[0],
+            speed_mps: f.x[1].max(0.0),
+            accel_mps2: f.x[2],
+            speed_sigma_mps: f.p[(1, 1)].max(0.0).sqrt(),
+            accel_sigma_mps2: f.p[(2, 2)].max(0.0).sqrt(),
+            brake_lights: f.brake_lights,
+            lamps_vouch: f.lamps_vouch(),
+            lit_for_s: f.lit_for_s(),
+            settled: f.settled(),
+            followed_s: f.t_s - f.since_s,
+            speed_noise_mps: f.speed_noise_mps(),
+        };
+        tracing::trace!(
+            t_s,
+            gap_m = l.gap_m,
+            speed_mps = l.speed_mps,
+            accel_mps2 = l.accel_mps2,
+            accel_sigma_mps2 = l.accel_sigma_mps2,
+            brake_lights = l.brake_lights,
+            speed_noise_mps = l.speed_noise_mps,
+            last_target_mps2 = self.accel_cmd,
+            "lead"
+        );
+        Some(l)
+    }
+
+    /// What comfort braking plans for: the threat, or a worse one while the lead's speed or
+    /// its braking is not yet measured (below).
+    fn comfort_guard(
+        &self,
+        lead: Option<LeadNow>,
+        threat: Option<Threat>,
+        revealed: Option<Threat>,
+        v: f64,
+    ) -> Option<Threat> {
+        // A new lead's speed is still being measured (far ahead, a camera needs a
+        // few tenths of a second): comfort braking plans for it being slower by
+        // UNMEASURED_SIGMAS of its uncertainty, so a standing car seen at the edge
+        // of range is braked for from the first frames, not once its speed is
+        // known. Only where comfort braking could cope with that case: a car
+        // cutting in near, its speed not yet measured, is no standing car to brake
+        // hard for. An emergency still needs the estimate itself.
+        //
+        // Likewise for LIT_ANTICIPATION_S after a lead's brake lights come on:
+        // the lamps say the pedal is pressed, its speed says how hard only some
+        // tenths of a second later (a camera's range moves by centimetres while
+        // the deceleration builds). Comfort braking plans for the lead braking at
+        // the comfort limit meanwhile, so the ego eases into braking with the lamps
+        // instead of once the deceleration shows; the estimate decides after. Only
+        // where such a brake would need much of the comfort braking (at speed, or
+        // close): slow and far back, a late answer costs nothing, and braking for
+        // every touch of the lead's pedal would cost the time gap.
+        let decel = self.s.limits.decel_at(v);
+        let worse_within_comfort = |t: Threat, worse: Threat| {
+            if worse.needed_decel_mps2 <= decel {
+                t.or_worse(&worse)
+            } else {
+                t
+            }
+        };
+        match lead {
+            Some(l) if !l.settled => {
+                let slower_mps = (l.speed_mps - UNMEASURED_SIGMAS * l.speed_sigma_mps).max(0.0);
+                let slower = |gap_m: f64| self::threat(gap_m, v, slower_mps, l.threat_accel());
+                // A new lead beyond twice the time gap is braked for before it is
+                // settled only where waiting would cost comfort: were it that slow,
+                // the room the wait takes must leave the stop well within the
+                // comfort limit. Far away a lead may be no vehicle: in a bend, two
+                // cars standing in the lanes either side 200 m ahead merged in the
+                // image into one in the ego's lane for half a second, read as
+                // standing, and drew 1.2-1.4 m/s2 for nothing. The follow law still
+                // answers it, and an emergency still reads the threat itself. The
+                // price: a car standing far ahead is braked for up to a second
+                // later and harder (cut-out-revealing-stopped-car 3.1 -> 4.0 m/s2,
+                // within the limit at its speed). Nearer, nothing waits.
+                let far = l.gap_m > self.s.standstill_m + FAR_TIME_GAPS * self.time_gap_s * v;
+                let wait_s = (SETTLE_S - l.followed_s).max(0.0);
+                let waited = slower(l.gap_m - (v - slower_mps).max(0.0) * wait_s);
+                if far && waited.needed_decel_mps2 <= UNSETTLED_WAIT_SHARE * decel {
+                    revealed
+                } else {
+                    threat.map(|t| worse_within_comfort(t, slower(l.gap_m)))
+                }
+            }
+            Some(l) if l.lit_for_s.is_some_and(|s| s < LIT_ANTICIPATION_S) => threat.map(|t| {
+                let braking = l.threat_accel().min(-self.s.limits.decel_mps2);
+                let hard = self::threat(l.gap_m, v, l.speed_mps, braking);
+                if hard.needed_decel_mps2 >= LIT_NEED_SHARE * decel {
+                    worse_within_comfort(t, hard)
+                } else {
+                    t
+                }
+            }),
+            _ => threat,
+        }
     }
 
     /// The forward-collision warning: TTC below its threshold, or closing within

@@ -17,95 +17,8 @@ type Line = (String, plotters::style::RGBColor, Vec<(f64, f64)>);
 type Panel = (String, String, bool, Vec<Line>);
 
 pub fn growth(report: &BenchReport, path: &Path) -> Result<()> {
-    use plotters::prelude::*;
-    let blue = RGBColor(31, 119, 180);
-    let orange = RGBColor(255, 127, 14);
-    let green = RGBColor(44, 160, 44);
-    let grey = RGBColor(140, 140, 140);
-    let mut rows: Vec<[Panel; 2]> = Vec::new();
-    if !report.scale.is_empty() {
-        let pts = |f: &dyn Fn(&super::scale::ScaleRow) -> Option<f64>| -> Vec<(f64, f64)> {
-            report.scale.iter().filter_map(|r| f(r).map(|v| (r.loops as f64, v))).collect()
-        };
-        rows.push([
-            (
-                "e. complete loops side by side: real-time factor".into(),
-                "real-time factor".into(),
-                false,
-                vec![
-                    ("slowest loop".into(), blue, pts(&|r| Some(r.rtf_min))),
-                    ("aim (real time)".into(), grey, pts(&|_| Some(super::scale::MIN_RTF))),
-                ],
-            ),
-            (
-                "e. frame published -> command applied".into(),
-                "ms".into(),
-                false,
-                vec![
-                    ("p50 (median loop)".into(), blue, pts(&|r| r.loop_p50_ms)),
-                    ("p99 (worst loop)".into(), orange, pts(&|r| r.loop_p99_ms)),
-                    ("aim p50".into(), grey, pts(&|_| Some(super::scale::MAX_LOOP_P50_MS))),
-                ],
-            ),
-        ]);
-    }
-    if !report.fanout.is_empty() {
-        let pts = |p: FanoutPath, f: &dyn Fn(&super::growth::FanoutRow) -> Option<f64>| -> Vec<(f64, f64)> {
-            report
-                .fanout
-                .iter()
-                .filter(|r| r.path == p)
-                .filter_map(|r| f(r).map(|v| (r.subscribers as f64, v)))
-                .collect()
-        };
-        let (shm, router) = (FanoutPath::SharedMemory, FanoutPath::Router);
-        rows.push([
-            (
-                "f. camera fan-out: frames/s each subscriber gets (slowest)".into(),
-                "frames/s (log)".into(),
-                true,
-                vec![
-                    (shm.name().into(), blue, pts(shm, &|r| r.per_subscriber_min)),
-                    (router.name().into(), orange, pts(router, &|r| r.per_subscriber_min)),
-                ],
-            ),
-            (
-                "f. camera fan-out at 20 Hz: one-way latency p50".into(),
-                "us".into(),
-                false,
-                vec![
-                    (shm.name().into(), blue, pts(shm, &|r| r.p50_us)),
-                    (router.name().into(), orange, pts(router, &|r| r.p50_us)),
-                ],
-            ),
-        ]);
-    }
-    if !report.router.is_empty() {
-        let pts = |f: &dyn Fn(&super::growth::RouterRow) -> Option<f64>| -> Vec<(f64, f64)> {
-            report.router.iter().filter(|r| r.via_router).filter_map(|r| f(r).map(|v| (r.vehicles as f64, v))).collect()
-        };
-        rows.push([
-            (
-                "g. a router for N vehicles: messages/s forwarded and its CPU".into(),
-                "messages/s, CPU % x 10".into(),
-                false,
-                vec![
-                    ("messages/s".into(), blue, pts(&|r| Some(r.messages_per_s))),
-                    ("router CPU (% of a core x 10)".into(), green, pts(&|r| r.router_cpu_percent.map(|c| c * 10.0))),
-                ],
-            ),
-            (
-                "g. speed one-way through the router".into(),
-                "us".into(),
-                false,
-                vec![
-                    ("p50".into(), blue, pts(&|r| r.speed_p50_us)),
-                    ("added p50 (vs direct)".into(), orange, pts(&|r| r.added_p50_us)),
-                    ("control p50".into(), grey, pts(&|r| r.control_p50_us)),
-                ],
-            ),
-        ]);
-    }
+    let rows: Vec<[Panel; 2]> =
+        [scale_panels(report), fanout_panels(report), router_panels(report)].into_iter().flatten().collect();
     anyhow::ensure!(!rows.is_empty(), "--plot draws scale, fanout or router: run one of them");
     let (w, h) = (1300u32, 420 * rows.len() as u32 + 40);
     // The command without the binary's directory.
@@ -118,6 +31,111 @@ pub fn growth(report: &BenchReport, path: &Path) -> Result<()> {
         }
         Ok(())
     })
+}
+
+/// e. Complete loops side by side: real-time factor and loop latency.
+fn scale_panels(report: &BenchReport) -> Option<[Panel; 2]> {
+    use plotters::prelude::*;
+    let blue = RGBColor(31, 119, 180);
+    let orange = RGBColor(255, 127, 14);
+    let grey = RGBColor(140, 140, 140);
+    if report.scale.is_empty() {
+        return None;
+    }
+    let pts = |f: &dyn Fn(&super::scale::ScaleRow) -> Option<f64>| -> Vec<(f64, f64)> {
+        report.scale.iter().filter_map(|r| f(r).map(|v| (r.loops as f64, v))).collect()
+    };
+    Some([
+        (
+            "e. complete loops side by side: real-time factor".into(),
+            "real-time factor".into(),
+            false,
+            vec![
+                ("slowest loop".into(), blue, pts(&|r| Some(r.rtf_min))),
+                ("aim (real time)".into(), grey, pts(&|_| Some(super::scale::MIN_RTF))),
+            ],
+        ),
+        (
+            "e. frame published -> command applied".into(),
+            "ms".into(),
+            false,
+            vec![
+                ("p50 (median loop)".into(), blue, pts(&|r| r.loop_p50_ms)),
+                ("p99 (worst loop)".into(), orange, pts(&|r| r.loop_p99_ms)),
+                ("aim p50".into(), grey, pts(&|_| Some(super::scale::MAX_LOOP_P50_MS))),
+            ],
+        ),
+    ])
+}
+
+/// f. Camera fan-out: frames/s per subscriber and latency at 20 Hz.
+fn fanout_panels(report: &BenchReport) -> Option<[Panel; 2]> {
+    use plotters::prelude::*;
+    let blue = RGBColor(31, 119, 180);
+    let orange = RGBColor(255, 127, 14);
+    if report.fanout.is_empty() {
+        return None;
+    }
+    let pts = |p: FanoutPath, f: &dyn Fn(&super::growth::FanoutRow) -> Option<f64>| -> Vec<(f64, f64)> {
+        report.fanout.iter().filter(|r| r.path == p).filter_map(|r| f(r).map(|v| (r.subscribers as f64, v))).collect()
+    };
+    let (shm, router) = (FanoutPath::SharedMemory, FanoutPath::Router);
+    Some([
+        (
+            "f. camera fan-out: frames/s each subscriber gets (slowest)".into(),
+            "frames/s (log)".into(),
+            true,
+            vec![
+                (shm.name().into(), blue, pts(shm, &|r| r.per_subscriber_min)),
+                (router.name().into(), orange, pts(router, &|r| r.per_subscriber_min)),
+            ],
+        ),
+        (
+            "f. camera fan-out at 20 Hz: one-way latency p50".into(),
+            "us".into(),
+            false,
+            vec![
+                (shm.name().into(), blue, pts(shm, &|r| r.p50_us)),
+                (router.name().into(), orange, pts(router, &|r| r.p50_us)),
+            ],
+        ),
+    ])
+}
+
+/// g. A router for N vehicles: what it forwards, its CPU, and the latency through it.
+fn router_panels(report: &BenchReport) -> Option<[Panel; 2]> {
+    use plotters::prelude::*;
+    let blue = RGBColor(31, 119, 180);
+    let orange = RGBColor(255, 127, 14);
+    let green = RGBColor(44, 160, 44);
+    let grey = RGBColor(140, 140, 140);
+    if report.router.is_empty() {
+        return None;
+    }
+    let pts = |f: &dyn Fn(&super::growth::RouterRow) -> Option<f64>| -> Vec<(f64, f64)> {
+        report.router.iter().filter(|r| r.via_router).filter_map(|r| f(r).map(|v| (r.vehicles as f64, v))).collect()
+    };
+    Some([
+        (
+            "g. a router for N vehicles: messages/s forwarded and its CPU".into(),
+            "messages/s, CPU % x 10".into(),
+            false,
+            vec![
+                ("messages/s".into(), blue, pts(&|r| Some(r.messages_per_s))),
+                ("router CPU (% of a core x 10)".into(), green, pts(&|r| r.router_cpu_percent.map(|c| c * 10.0))),
+            ],
+        ),
+        (
+            "g. speed one-way through the router".into(),
+            "us".into(),
+            false,
+            vec![
+                ("p50".into(), blue, pts(&|r| r.speed_p50_us)),
+                ("added p50 (vs direct)".into(), orange, pts(&|r| r.added_p50_us)),
+                ("control p50".into(), grey, pts(&|r| r.control_p50_us)),
+            ],
+        ),
+    ])
 }
 
 /// Counts on a log2 axis (labelled 1, 2, 4, ...), values linear or on a log10 axis: the

@@ -264,19 +264,7 @@ fn run(cli: Cli) -> Result<ExitCode> {
         Command::Convert(args) => {
             code(connect.topic_map().map_err(Into::into).and_then(|t| slipstream::tools::convert::command(&args, &t)))
         }
-        Command::Record(args) => {
-            let rt = tokio::runtime::Runtime::new()?;
-            let summary = rt.block_on(async {
-                let bus = slipstream::Bus::open(connect.zenoh_config()?, connect.topic_map()?, "record").await?;
-                let summary = slipstream::tools::record::run(&bus, &args).await;
-                let closed = tokio::time::timeout(slipstream::launch::CLOSE_TIMEOUT, bus.close()).await;
-                if !matches!(closed, Ok(Ok(()))) {
-                    tracing::warn!("the recorder's session did not close cleanly");
-                }
-                summary
-            })?;
-            Ok(if summary.lost_anything() { ExitCode::FAILURE } else { ExitCode::SUCCESS })
-        }
+        Command::Record(args) => record(&args, connect),
         Command::Play(args) => done(on_bus(connect, "play", |bus| async move {
             // The player paces with blocking sleeps and puts: on a thread of its own.
             let bus = std::sync::Arc::new(bus);
@@ -319,69 +307,14 @@ fn run(cli: Cli) -> Result<ExitCode> {
             }
             Ok(ExitCode::SUCCESS)
         }
-        Command::Eval(EvalCommand::Detect { scenarios, seconds, json, settings, frames, jpeg_quality }) => {
-            use slipstream::eval::{detect, link_codec::LinkCodec};
-            let names: Vec<String> = if scenarios.is_empty() { detect::standard() } else { scenarios };
-            let settings = slipstream::sim::SimSettings::load_or_default(settings.as_deref())?;
-            let codec = match frames.as_deref() {
-                None => None,
-                Some(name) => {
-                    let Some(e) = slipstream::config::CameraEncoding::ALL.into_iter().find(|e| e.name() == name) else {
-                        anyhow::bail!("--frames {name}: not a frame encoding (use raw, lz4, jpeg or png)");
-                    };
-                    Some(LinkCodec::new(e, jpeg_quality))
-                }
-            };
-            let report = detect::evaluate(&names, seconds, &settings, codec)?;
-            print_report(json, &report, detect::markdown)?;
-            Ok(ExitCode::SUCCESS)
-        }
-        Command::Eval(EvalCommand::Acc(args)) => {
-            use slipstream::eval::acc;
-            let report = acc::run(&args, connect)?;
-            print_report(args.json, &report, acc::markdown)?;
-            let failed = report.results.iter().filter(|r| !r.metrics.pass || r.lockstep_timeouts > 0).count();
-            if failed > 0 {
-                anyhow::bail!("{failed} of {} scenarios missed an aim", report.results.len());
-            }
-            Ok(ExitCode::SUCCESS)
-        }
-        Command::Eval(EvalCommand::Faults(args)) => {
-            use slipstream::eval::faults;
-            let report = faults::run(&args, connect)?;
-            print_report(args.json, &report, faults::markdown)?;
-            Ok(ExitCode::SUCCESS)
-        }
+        Command::Eval(e) => eval_command(e, connect),
         Command::Completions { shell } => {
             clap_complete::generate(shell, &mut Cli::command(), "slipstream", &mut std::io::stdout());
             Ok(ExitCode::SUCCESS)
         }
         Command::Man { dir } => done(write_man_pages(&dir)),
-        Command::WireExamples => {
-            let all: Vec<_> = slipstream::msg::examples()
-                .into_iter()
-                .map(|(kind, bytes)| serde_json::json!({ "kind": kind.name(), "hex": slipstream::msg::hex_lines(&bytes).replace('\n', " ") }))
-                .collect();
-            println!("{}", serde_json::to_string_pretty(&all)?);
-            Ok(ExitCode::SUCCESS)
-        }
-        Command::WireCheck => {
-            use std::io::BufRead;
-            for line in std::io::stdin().lock().lines() {
-                let line = line?;
-                let bytes: Result<Vec<u8>, _> = (0..line.len())
-                    .step_by(2)
-                    .map(|i| u8::from_str_radix(line.get(i..i + 2).unwrap_or("zz"), 16))
-                    .collect();
-                let verdict = match bytes.map(|b| slipstream::msg::decode_json(&b)) {
-                    Ok(Ok((kind, _, _))) => serde_json::json!({ "kind": kind.name() }),
-                    Ok(Err(e)) => serde_json::json!({ "error": e.to_string() }),
-                    Err(_) => serde_json::json!({ "error": format!("not hex: {line}") }),
-                };
-                println!("{verdict}");
-            }
-            Ok(ExitCode::SUCCESS)
-        }
+        Command::WireExamples => wire_examples(),
+        Command::WireCheck => wire_check(),
         Command::BenchFleetWatch(args) => {
             let rt = tokio::runtime::Runtime::new()?;
             let seen = rt.block_on(slipstream::bench::fleet_watch::watch(connect, args))?;
@@ -399,6 +332,88 @@ fn run(cli: Cli) -> Result<ExitCode> {
             }))
         }
     }
+}
+
+/// `eval detect`, `eval acc`, `eval faults`: the report, and failure when an aim was missed
+/// (acc).
+fn eval_command(command: EvalCommand, connect: &ConnectArgs) -> Result<ExitCode> {
+    match command {
+        EvalCommand::Detect { scenarios, seconds, json, settings, frames, jpeg_quality } => {
+            use slipstream::eval::{detect, link_codec::LinkCodec};
+            let names: Vec<String> = if scenarios.is_empty() { detect::standard() } else { scenarios };
+            let settings = slipstream::sim::SimSettings::load_or_default(settings.as_deref())?;
+            let codec = match frames.as_deref() {
+                None => None,
+                Some(name) => {
+                    let Some(e) = slipstream::config::CameraEncoding::ALL.into_iter().find(|e| e.name() == name) else {
+                        anyhow::bail!("--frames {name}: not a frame encoding (use raw, lz4, jpeg or png)");
+                    };
+                    Some(LinkCodec::new(e, jpeg_quality))
+                }
+            };
+            let report = detect::evaluate(&names, seconds, &settings, codec)?;
+            print_report(json, &report, detect::markdown)?;
+            Ok(ExitCode::SUCCESS)
+        }
+        EvalCommand::Acc(args) => {
+            use slipstream::eval::acc;
+            let report = acc::run(&args, connect)?;
+            print_report(args.json, &report, acc::markdown)?;
+            let failed = report.results.iter().filter(|r| !r.metrics.pass || r.lockstep_timeouts > 0).count();
+            if failed > 0 {
+                anyhow::bail!("{failed} of {} scenarios missed an aim", report.results.len());
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        EvalCommand::Faults(args) => {
+            use slipstream::eval::faults;
+            let report = faults::run(&args, connect)?;
+            print_report(args.json, &report, faults::markdown)?;
+            Ok(ExitCode::SUCCESS)
+        }
+    }
+}
+
+/// `wire-examples`: every message kind's example encoding, as JSON (for the wire doc's test).
+fn wire_examples() -> Result<ExitCode> {
+    let all: Vec<_> = slipstream::msg::examples()
+        .into_iter()
+        .map(|(kind, bytes)| serde_json::json!({ "kind": kind.name(), "hex": slipstream::msg::hex_lines(&bytes).replace('\n', " ") }))
+        .collect();
+    println!("{}", serde_json::to_string_pretty(&all)?);
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `wire-check`: decodes each hex line of stdin, printing its kind or why it is refused.
+fn wire_check() -> Result<ExitCode> {
+    use std::io::BufRead;
+    for line in std::io::stdin().lock().lines() {
+        let line = line?;
+        let bytes: Result<Vec<u8>, _> =
+            (0..line.len()).step_by(2).map(|i| u8::from_str_radix(line.get(i..i + 2).unwrap_or("zz"), 16)).collect();
+        let verdict = match bytes.map(|b| slipstream::msg::decode_json(&b)) {
+            Ok(Ok((kind, _, _))) => serde_json::json!({ "kind": kind.name() }),
+            Ok(Err(e)) => serde_json::json!({ "error": e.to_string() }),
+            Err(_) => serde_json::json!({ "error": format!("not hex: {line}") }),
+        };
+        println!("{verdict}");
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `record` (slipstream's profile): fails when anything was lost on the way to the file.
+fn record(args: &slipstream::tools::record::RecordArgs, connect: &ConnectArgs) -> Result<ExitCode> {
+    let rt = tokio::runtime::Runtime::new()?;
+    let summary = rt.block_on(async {
+        let bus = slipstream::Bus::open(connect.zenoh_config()?, connect.topic_map()?, "record").await?;
+        let summary = slipstream::tools::record::run(&bus, args).await;
+        let closed = tokio::time::timeout(slipstream::launch::CLOSE_TIMEOUT, bus.close()).await;
+        if !matches!(closed, Ok(Ok(()))) {
+            tracing::warn!("the recorder's session did not close cleanly");
+        }
+        summary
+    })?;
+    Ok(if summary.lost_anything() { ExitCode::FAILURE } else { ExitCode::SUCCESS })
 }
 
 /// `conform sim`: as the lockstep node it answers for, or as a watcher of its own name.

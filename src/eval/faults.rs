@@ -230,8 +230,9 @@ pub fn judge(baseline: &Metrics, run: &Metrics, lockstep_timeouts: u64) -> Optio
     None
 }
 
-pub fn run(args: &EvalFaultsArgs, connect: &crate::config::ConnectArgs) -> Result<FaultsReport> {
-    connect.topic_map()?;
+/// The sweep's flags, checked before any run starts: every value of every axis rises and makes
+/// a valid fault profile.
+fn check_args(args: &EvalFaultsArgs) -> Result<()> {
     anyhow::ensure!(args.timeout > 0.0, "--timeout must be > 0");
     anyhow::ensure!(args.burst_len >= 1.0, "--burst-len must be >= 1 (messages)");
     for axis in Axis::ALL {
@@ -247,6 +248,12 @@ pub fn run(args: &EvalFaultsArgs, connect: &crate::config::ConnectArgs) -> Resul
                 .with_context(|| format!("{} = {x}", axis.title(args.burst_len)))?;
         }
     }
+    Ok(())
+}
+
+pub fn run(args: &EvalFaultsArgs, connect: &crate::config::ConnectArgs) -> Result<FaultsReport> {
+    connect.topic_map()?;
+    check_args(args)?;
     let names: Vec<String> = if args.scenarios.is_empty() {
         STANDARD.iter().map(|s| s.to_string()).collect()
     } else {

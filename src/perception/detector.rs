@@ -309,6 +309,30 @@ impl Detector {
 
     /// Connected components of the pixels darker than `dark`, below the horizon.
     fn dark_components(&mut self, w: usize, h: usize, first_row: usize, dark: u8) -> Vec<Component> {
+        let row_start = self.dark_runs(w, h, first_row, dark);
+        self.join_runs(&row_start);
+        let (kept, cols) = self.contact_profiles();
+        let mut out = Vec::new();
+        let mut merged: Vec<(u32, u32, u32)> = Vec::new();
+        for (k, &(_, first, offset)) in kept.iter().enumerate() {
+            let end = kept.get(k + 1).map_or(cols.len(), |c| c.2);
+            // (column, lowest row, highest row) per column.
+            merged.clear();
+            merged.extend(
+                cols[offset..end]
+                    .iter()
+                    .enumerate()
+                    .filter(|(_, c)| c.1 != u32::MAX)
+                    .map(|(j, &(lo, hi))| (first + j as u32, lo, hi)),
+            );
+            split_profile(&merged, &mut out);
+        }
+        out
+    }
+
+    /// The horizontal runs of dark pixels, row by row from `first_row`, into `self.runs`;
+    /// returns where each row's runs start (and, last, their count).
+    fn dark_runs(&mut self, w: usize, h: usize, first_row: usize, dark: u8) -> Vec<usize> {
         self.runs.clear();
         let mut row_start = Vec::with_capacity(h - first_row + 1);
         for v in first_row..h {
@@ -328,9 +352,13 @@ impl Detector {
             }
         }
         row_start.push(self.runs.len());
+        row_start
+    }
+
+    /// Joins runs that touch runs of the row above (4-connected) in `self.parent`.
+    fn join_runs(&mut self, row_start: &[usize]) {
         self.parent.clear();
         self.parent.extend(0..self.runs.len() as u32);
-        // Join runs that touch runs of the row above (4-connected).
         for r in 1..row_start.len() - 1 {
             let (above, here) = (row_start[r - 1]..row_start[r], row_start[r]..row_start[r + 1]);
             let mut a = above.start;
@@ -346,9 +374,15 @@ impl Detector {
                 }
             }
         }
-        // Per component, the lowest and the highest dark row of each column it covers: the
-        // contact profile. Components are numbered by their root, their columns laid out in
-        // one buffer: one pass over the runs, no per-pixel allocation or sort.
+    }
+
+    /// Per component of at least three pixels, the lowest and the highest dark row of each
+    /// column it covers: the contact profile. Returns the components in root order as (root,
+    /// first column, offset of its columns) and the columns of all of them in one buffer
+    /// ((0, u32::MAX) where a component has no pixel): one pass over the runs, no per-pixel
+    /// allocation or sort.
+    #[allow(clippy::type_complexity)]
+    fn contact_profiles(&mut self) -> (Vec<(u32, u32, usize)>, Vec<(u32, u32)>) {
         let mut roots = Vec::with_capacity(self.runs.len());
         let mut extent: std::collections::HashMap<u32, (u32, u32, u32)> = std::collections::HashMap::new();
         for i in 0..self.runs.len() {
@@ -360,8 +394,6 @@ impl Detector {
             e.1 = e.1.max(r.u1);
             e.2 += r.u1 - r.u0 + 1;
         }
-        // Components of at least three pixels in root order: (root, first column, offset of
-        // its columns in `cols`).
         let mut kept: Vec<(u32, u32, u32)> =
             extent.iter().filter(|e| e.1 .2 >= 3).map(|(&r, e)| (r, e.0, e.1)).collect();
         kept.sort_unstable();
@@ -374,7 +406,6 @@ impl Detector {
                 (root, u0, offset)
             })
             .collect();
-        // (lowest row, highest row) per column; NONE where the component has no pixel.
         const NONE: (u32, u32) = (0, u32::MAX);
         let mut cols = vec![NONE; len];
         for (r, root) in self.runs.iter().zip(&roots) {
@@ -385,67 +416,7 @@ impl Detector {
                 c.1 = c.1.min(r.row);
             }
         }
-        let mut out = Vec::new();
-        let mut merged: Vec<(u32, u32, u32)> = Vec::new();
-        for (k, &(_, first, offset)) in kept.iter().enumerate() {
-            let end = kept.get(k + 1).map_or(len, |c| c.2);
-            // (column, lowest row, highest row) per column.
-            merged.clear();
-            merged.extend(
-                cols[offset..end]
-                    .iter()
-                    .enumerate()
-                    .filter(|(_, c)| c.1 != u32::MAX)
-                    .map(|(j, &(lo, hi))| (first + j as u32, lo, hi)),
-            );
-            // Split where the contact row jumps or a column is missing: two vehicles whose
-            // dark bands touch in the image stand at different distances.
-            let mut start = 0;
-            for i in 1..=merged.len() {
-                let split = i == merged.len()
-                    || merged[i].0 != merged[i - 1].0 + 1
-                    || (merged[i].1 as i64 - merged[i - 1].1 as i64).abs() > JUMP_PX
-                    || thin_meets_tall(merged[i - 1], merged[i]);
-                if split {
-                    let seg = &merged[start..i];
-                    if seg.len() >= 2 {
-                        // The flat lowest part is the rear edge (the side, if seen, rises
-                        // away from it): it gives the width and the centre.
-                        let v1 = seg.iter().map(|c| c.1).max().unwrap_or(0);
-                        let flat = seg.iter().filter(|c| c.1 + FLAT_PX >= v1);
-                        let (fu0, fu1) = flat.fold((u32::MAX, 0), |(a, b), c| (a.min(c.0), b.max(c.0)));
-                        // Dark columns joined to it on either side that end higher: the body
-                        // over its wheels (a bumper, a chassis), split off by the jump.
-                        let above = |c: &(u32, u32, u32)| c.1 <= v1;
-                        let mut reach_u0 = seg[0].0;
-                        for j in (0..start).rev() {
-                            if merged[j].0 + 1 != reach_u0 || !above(&merged[j]) {
-                                break;
-                            }
-                            reach_u0 = merged[j].0;
-                        }
-                        let mut reach_u1 = seg[seg.len() - 1].0;
-                        for c in &merged[i..] {
-                            if c.0 != reach_u1 + 1 || !above(c) {
-                                break;
-                            }
-                            reach_u1 = c.0;
-                        }
-                        out.push(Component {
-                            u0: seg[0].0,
-                            u1: seg[seg.len() - 1].0,
-                            v1,
-                            flat_u0: fu0,
-                            flat_u1: fu1,
-                            reach_u0,
-                            reach_u1,
-                        });
-                    }
-                    start = i;
-                }
-            }
-        }
-        out
+        (kept, cols)
     }
 
     /// Far away the band under a vehicle is thinner than a row: blended with the road, it is
@@ -521,83 +492,12 @@ impl Detector {
         let px_per_m = self.camera.info.fx_px / (contact.x - origin.x).max(0.5);
         let width_m = (bu1 - bu0 + 1) as f64 / px_per_m;
         let (u0, u1) = (c.u0.min(bu0) as usize, c.u1.max(bu1) as usize);
-        let max_rows = (p.max_height_m * px_per_m) as usize;
-        // The background columns just outside a0..=a1, where the image has them.
-        let beside = |a0: usize, a1: usize| [a0.checked_sub(FLANK_PX), (a1 + FLANK_PX < w).then_some(a1 + FLANK_PX)];
-        let flanks = beside(u0, u1);
-        let height_from = |flanks: [Option<usize>; 2]| -> Result<(usize, f64), String> {
-            let top = self
-                .top_row(rgb, w, (u0, u1), (c.v1 as usize, max_rows), flanks)
-                .ok_or("nothing rises above the contact")?;
-            let height_m = (contact_v - top as f64) / px_per_m;
-            if height_m < p.min_height_m || height_m > p.max_height_m {
-                return Err(format!("height {height_m:.2} m"));
-            }
-            Ok((top, height_m))
-        };
-        // The background just beside the band can be the vehicle's own body where it overhangs
-        // its wheels (a truck's bumper, seen when the shadow under it is too thin to show):
-        // where dark columns of the same region adjoin the band, the height is measured beside
-        // them (as far as a body overhangs), and beside the band only if that fails.
-        let overhang_px = (MAX_OVERHANG_M * px_per_m).ceil() as u32;
-        let (r0, r1) = (
-            c.reach_u0.max((u0 as u32).saturating_sub(overhang_px)) as usize,
-            c.reach_u1.min(u1 as u32 + overhang_px) as usize,
-        );
-        let outside_body = beside(r0, r1);
-        // Seen from behind, the band is the rear's. A vehicle turned from the line of sight (in
-        // a bend) also shows one side, receding beside its rear: the band is wider than any
-        // rear, and the vehicle is placed by its rear's outer edge.
-        if width_m < p.min_width_m {
-            return Err(format!("width {width_m:.2} m"));
-        }
-        let side = if width_m > MAX_REAR_WIDTH_M { self.receding_side(w, h, c) } else { None };
-        let oblique = if side.is_some() && width_m <= MAX_OBLIQUE_WIDTH_M {
-            side
-        } else if width_m <= p.max_width_m.max(MAX_LEVEL_OBLIQUE_WIDTH_M) {
-            // A rear, or one with a side too level to show: placed by the band's centre (off by
-            // at most half the side's width).
-            None
-        } else {
-            return Err(format!("width {width_m:.2} m"));
-        };
-        // Last, beside the widest overhang a body can have (a van's box over its wheels, with
-        // no dark chassis under it to show where it ends).
-        let beyond_overhang = match u0.checked_sub(overhang_px as usize) {
-            Some(o0) => beside(o0, u1 + overhang_px as usize),
-            // The image's side is within the overhang: no background on that side.
-            None => [None, beside(0, u1 + overhang_px as usize)[1]],
-        };
-        let (top, height_m) = if (r0, r1) != (u0, u1) {
-            height_from(outside_body).or_else(|_| height_from(flanks))
-        } else {
-            height_from(flanks)
-        }
-        .or_else(|why| height_from(beyond_overhang).map_err(|_| why))?;
-        // A band narrower than any car's, seen whole (not cut by the image's side), under
-        // something as tall as a rider: a motorcycle.
+        let oblique = self.oblique_side(w, h, c, width_m)?;
+        let (top, height_m, (r0, r1)) = self.height(rgb, w, c, (u0, u1), contact_v, px_per_m)?;
+        // Not cut by the image's side.
         let whole = bu0 > 0 && (bu1 as usize) + 1 < w;
-        let class = if height_m > 2.9 {
-            ObjectClass::Truck
-        } else if height_m > 1.9 {
-            ObjectClass::Van
-        } else if whole && width_m < MOTORCYCLE_MAX_WIDTH_M {
-            ObjectClass::Motorcycle
-        } else {
-            ObjectClass::Car
-        };
-        let plausible = |x: f64, lo: f64, hi: f64| {
-            if x < lo {
-                x / lo
-            } else if x > hi {
-                hi / x
-            } else {
-                1.0
-            }
-        };
-        let widths = if class == ObjectClass::Motorcycle { (0.6, 1.2) } else { (1.4, 2.8) };
-        let confidence =
-            (plausible(width_m, widths.0, widths.1) * plausible(height_m, 1.1, 3.8)).clamp(0.05, 1.0) as f32;
+        let class = class_of(width_m, height_m, whole);
+        let confidence = confidence_of(class, width_m, height_m);
         // A vehicle cut by the image's side (one being passed): the band's centre is the visible
         // part's, metres inside the vehicle's own, which would put a car of the next lane into
         // the ego's. Its inner side is measured: the centre lies half its class's width beyond.
@@ -644,6 +544,78 @@ impl Detector {
             confidence,
             brake_lights,
         })
+    }
+
+    /// The vehicle's top row and height above the contact line at `contact_v`, over the columns
+    /// `u0..=u1`, measured against the background beside them; and the columns its body may
+    /// reach beyond the band (r0, r1). The background just beside the band can be the
+    /// vehicle's own body where it overhangs its wheels (a truck's bumper, seen when the shadow
+    /// under it is too thin to show): where dark columns of the same region adjoin the band,
+    /// the height is measured beside them (as far as a body overhangs), and beside the band
+    /// only if that fails; last, beside the widest overhang a body can have (a van's box over
+    /// its wheels, with no dark chassis under it to show where it ends).
+    fn height(
+        &self,
+        rgb: &[u8],
+        w: usize,
+        c: &Component,
+        (u0, u1): (usize, usize),
+        contact_v: f64,
+        px_per_m: f64,
+    ) -> Result<(usize, f64, (usize, usize)), String> {
+        let p = &self.params;
+        let max_rows = (p.max_height_m * px_per_m) as usize;
+        // The background columns just outside a0..=a1, where the image has them.
+        let beside = |a0: usize, a1: usize| [a0.checked_sub(FLANK_PX), (a1 + FLANK_PX < w).then_some(a1 + FLANK_PX)];
+        let flanks = beside(u0, u1);
+        let height_from = |flanks: [Option<usize>; 2]| -> Result<(usize, f64), String> {
+            let top = self
+                .top_row(rgb, w, (u0, u1), (c.v1 as usize, max_rows), flanks)
+                .ok_or("nothing rises above the contact")?;
+            let height_m = (contact_v - top as f64) / px_per_m;
+            if height_m < p.min_height_m || height_m > p.max_height_m {
+                return Err(format!("height {height_m:.2} m"));
+            }
+            Ok((top, height_m))
+        };
+        let overhang_px = (MAX_OVERHANG_M * px_per_m).ceil() as u32;
+        let (r0, r1) = (
+            c.reach_u0.max((u0 as u32).saturating_sub(overhang_px)) as usize,
+            c.reach_u1.min(u1 as u32 + overhang_px) as usize,
+        );
+        let outside_body = beside(r0, r1);
+        let beyond_overhang = match u0.checked_sub(overhang_px as usize) {
+            Some(o0) => beside(o0, u1 + overhang_px as usize),
+            // The image's side is within the overhang: no background on that side.
+            None => [None, beside(0, u1 + overhang_px as usize)[1]],
+        };
+        let (top, height_m) = if (r0, r1) != (u0, u1) {
+            height_from(outside_body).or_else(|_| height_from(flanks))
+        } else {
+            height_from(flanks)
+        }
+        .or_else(|why| height_from(beyond_overhang).map_err(|_| why))?;
+        Ok((top, height_m, (r0, r1)))
+    }
+
+    /// Seen from behind, the band is the rear's. A vehicle turned from the line of sight (in a
+    /// bend) also shows one side, receding beside its rear: the band is wider than any rear,
+    /// and the vehicle is placed by its rear's outer edge. Returns that side, None for a rear
+    /// (or one whose side is too level to show: placed by the band's centre, off by at most
+    /// half the side's width), or why a band of `width_m` is no vehicle.
+    fn oblique_side(&self, w: usize, h: usize, c: &Component, width_m: f64) -> Result<Option<Side>, String> {
+        let p = &self.params;
+        if width_m < p.min_width_m {
+            return Err(format!("width {width_m:.2} m"));
+        }
+        let side = if width_m > MAX_REAR_WIDTH_M { self.receding_side(w, h, c) } else { None };
+        if side.is_some() && width_m <= MAX_OBLIQUE_WIDTH_M {
+            Ok(side)
+        } else if width_m <= p.max_width_m.max(MAX_LEVEL_OBLIQUE_WIDTH_M) {
+            Ok(None)
+        } else {
+            Err(format!("width {width_m:.2} m"))
+        }
     }
 
     /// A contact distance's expected error: the edge is located to about EDGE_SIGMA_ROWS of a
@@ -970,6 +942,83 @@ fn road_luma(luma: &[u8], w: usize, h: usize, first_row: usize) -> u8 {
     }
     let mode = hist.iter().enumerate().max_by_key(|(_, n)| **n).map(|(i, _)| i).unwrap_or(32);
     (mode * 4 + 2) as u8
+}
+
+/// The class a band's size says: by height, and a band narrower than any car's, seen whole
+/// (not cut by the image's side), under something as tall as a rider is a motorcycle.
+fn class_of(width_m: f64, height_m: f64, whole: bool) -> ObjectClass {
+    if height_m > 2.9 {
+        ObjectClass::Truck
+    } else if height_m > 1.9 {
+        ObjectClass::Van
+    } else if whole && width_m < MOTORCYCLE_MAX_WIDTH_M {
+        ObjectClass::Motorcycle
+    } else {
+        ObjectClass::Car
+    }
+}
+
+/// How plausible the size is for the class: 1 inside its width and height ranges, falling
+/// with the ratio outside them, at least 0.05.
+fn confidence_of(class: ObjectClass, width_m: f64, height_m: f64) -> f32 {
+    let plausible = |x: f64, lo: f64, hi: f64| {
+        if x < lo {
+            x / lo
+        } else if x > hi {
+            hi / x
+        } else {
+            1.0
+        }
+    };
+    let widths = if class == ObjectClass::Motorcycle { (0.6, 1.2) } else { (1.4, 2.8) };
+    (plausible(width_m, widths.0, widths.1) * plausible(height_m, 1.1, 3.8)).clamp(0.05, 1.0) as f32
+}
+
+/// Splits one component's contact profile ((column, lowest row, highest row) per column) where
+/// the contact row jumps or a column is missing: two vehicles whose dark bands touch in the
+/// image stand at different distances. Stretches of two columns or more go to `out`.
+fn split_profile(merged: &[(u32, u32, u32)], out: &mut Vec<Component>) {
+    let mut start = 0;
+    for i in 1..=merged.len() {
+        let split = i == merged.len()
+            || merged[i].0 != merged[i - 1].0 + 1
+            || (merged[i].1 as i64 - merged[i - 1].1 as i64).abs() > JUMP_PX
+            || thin_meets_tall(merged[i - 1], merged[i]);
+        if split {
+            if i - start >= 2 {
+                out.push(component_of(merged, start, i));
+            }
+            start = i;
+        }
+    }
+}
+
+/// The stretch `merged[start..end]` of a contact profile as a component.
+fn component_of(merged: &[(u32, u32, u32)], start: usize, end: usize) -> Component {
+    let seg = &merged[start..end];
+    // The flat lowest part is the rear edge (the side, if seen, rises away from it): it gives
+    // the width and the centre.
+    let v1 = seg.iter().map(|c| c.1).max().unwrap_or(0);
+    let flat = seg.iter().filter(|c| c.1 + FLAT_PX >= v1);
+    let (fu0, fu1) = flat.fold((u32::MAX, 0), |(a, b), c| (a.min(c.0), b.max(c.0)));
+    // Dark columns joined to it on either side that end higher: the body over its wheels (a
+    // bumper, a chassis), split off by the jump.
+    let above = |c: &(u32, u32, u32)| c.1 <= v1;
+    let mut reach_u0 = seg[0].0;
+    for j in (0..start).rev() {
+        if merged[j].0 + 1 != reach_u0 || !above(&merged[j]) {
+            break;
+        }
+        reach_u0 = merged[j].0;
+    }
+    let mut reach_u1 = seg[seg.len() - 1].0;
+    for c in &merged[end..] {
+        if c.0 != reach_u1 + 1 || !above(c) {
+            break;
+        }
+        reach_u1 = c.0;
+    }
+    Component { u0: seg[0].0, u1: seg[seg.len() - 1].0, v1, flat_u0: fu0, flat_u1: fu1, reach_u0, reach_u1 }
 }
 
 fn find(parent: &mut [u32], mut i: u32) -> u32 {

@@ -396,70 +396,11 @@ impl World {
     pub fn step(&mut self, input: EgoInput) -> StepEvents {
         let dt = 1.0 / self.physics_hz as f64;
         let t_s = self.step as f64 * dt;
-        let neighbours: Vec<Neighbour> = self
-            .views
-            .iter()
-            .zip(&self.bodies)
-            .map(|(v, b)| Neighbour {
-                id: v.id,
-                rear_m: v.s_rear_m(),
-                front_m: v.s_front_m(),
-                lane: v.lane,
-                target_lane: b.driver.as_ref().map_or(v.lane, |d| d.lane() as i32),
-                speed_mps: v.forward_speed_mps(),
-            })
-            .collect();
-
         // Each driver decides from the same snapshot, so the order of vehicles does not matter.
+        let neighbours = self.neighbours();
         let mut actuations = Vec::with_capacity(self.bodies.len());
-        let ego = self.views[0];
-        let ego_params = self.bodies[0].params;
-        let lane_keep = |world: &World| -> f64 {
-            if !world.scenario.ego.lane_keeping {
-                return 0.0;
-            }
-            let lane = if ego.lane >= 0 { ego.lane as u32 } else { world.scenario.ego.lane };
-            pursue(&ego_params, &world.road, &ego.observation(), world.road.lane_center_d(lane))
-        };
-        let ego_act = match input {
-            EgoInput::Cruise | EgoInput::Follow => {
-                let lead = if input == EgoInput::Follow { self.lead_of(0) } else { None };
-                let (throttle, brake) = self.ego_cruise.longitudinal(&ego_params, ego.forward_speed_mps(), lead, dt);
-                self.ego_applied =
-                    ControlCommand { throttle: throttle as f32, brake: brake as f32, ..ControlCommand::NEUTRAL };
-                Actuation { throttle, brake, steer: lane_keep(self) }
-            }
-            EgoInput::Command(cmd) => {
-                self.ego_applied = cmd;
-                Actuation {
-                    throttle: cmd.throttle as f64,
-                    brake: cmd.brake as f64,
-                    steer: (cmd.steer as f64 + lane_keep(self)).clamp(-1.0, 1.0),
-                }
-            }
-        };
-        actuations.push(ego_act);
-        for i in 1..self.bodies.len() {
-            let lead = self.lead_of(i);
-            let view = self.views[i];
-            let gap_to_ego = bumper_gap_m(&ego, &view);
-            let params = self.bodies[i].params;
-            let Some(driver) = self.bodies[i].driver.as_mut() else {
-                actuations.push(Actuation::default());
-                continue;
-            };
-            actuations.push(driver.drive(
-                &params,
-                &self.road,
-                &view.observation(),
-                lead,
-                gap_to_ego,
-                &neighbours,
-                t_s,
-                dt,
-            ));
-        }
-
+        actuations.push(self.ego_input(input, dt));
+        self.traffic_actuations(&neighbours, t_s, dt, &mut actuations);
         for (b, act) in self.bodies.iter_mut().zip(&actuations) {
             let lag = b.params.actuator_lag_s;
             b.applied.throttle = lag_toward(b.applied.throttle, act.throttle.clamp(0.0, 1.0), lag, dt);
@@ -480,7 +421,90 @@ impl World {
         let accel_world = (ego_now.velocity_mps - before[0].velocity_mps) / dt;
         self.ego_accel_body = Rotation2::new(-ego_now.yaw_rad) * accel_world;
 
-        let mut events = StepEvents::default();
+        let mut events = StepEvents { collisions: self.collisions(started, &before), ..StepEvents::default() };
+        if self.end.is_none() {
+            self.end = self.check_end(&events);
+            events.ended = self.end.clone();
+        }
+        events
+    }
+
+    /// Every vehicle as the drivers see it before this step.
+    fn neighbours(&self) -> Vec<Neighbour> {
+        self.views
+            .iter()
+            .zip(&self.bodies)
+            .map(|(v, b)| Neighbour {
+                id: v.id,
+                rear_m: v.s_rear_m(),
+                front_m: v.s_front_m(),
+                lane: v.lane,
+                target_lane: b.driver.as_ref().map_or(v.lane, |d| d.lane() as i32),
+                speed_mps: v.forward_speed_mps(),
+            })
+            .collect()
+    }
+
+    /// The ego's pedals and steering for this step: its own cruise controller (`Cruise`,
+    /// `Follow`) or the command received, plus lane keeping when the scenario asks for it.
+    fn ego_input(&mut self, input: EgoInput, dt: f64) -> Actuation {
+        let ego = self.views[0];
+        let ego_params = self.bodies[0].params;
+        let lane_keep = |world: &World| -> f64 {
+            if !world.scenario.ego.lane_keeping {
+                return 0.0;
+            }
+            let lane = if ego.lane >= 0 { ego.lane as u32 } else { world.scenario.ego.lane };
+            pursue(&ego_params, &world.road, &ego.observation(), world.road.lane_center_d(lane))
+        };
+        match input {
+            EgoInput::Cruise | EgoInput::Follow => {
+                let lead = if input == EgoInput::Follow { self.lead_of(0) } else { None };
+                let (throttle, brake) = self.ego_cruise.longitudinal(&ego_params, ego.forward_speed_mps(), lead, dt);
+                self.ego_applied =
+                    ControlCommand { throttle: throttle as f32, brake: brake as f32, ..ControlCommand::NEUTRAL };
+                Actuation { throttle, brake, steer: lane_keep(self) }
+            }
+            EgoInput::Command(cmd) => {
+                self.ego_applied = cmd;
+                Actuation {
+                    throttle: cmd.throttle as f64,
+                    brake: cmd.brake as f64,
+                    steer: (cmd.steer as f64 + lane_keep(self)).clamp(-1.0, 1.0),
+                }
+            }
+        }
+    }
+
+    /// Each traffic vehicle's driver decides (a vehicle without one coasts), appended to
+    /// `actuations` in body order.
+    fn traffic_actuations(&mut self, neighbours: &[Neighbour], t_s: f64, dt: f64, actuations: &mut Vec<Actuation>) {
+        let ego = self.views[0];
+        for i in 1..self.bodies.len() {
+            let lead = self.lead_of(i);
+            let view = self.views[i];
+            let gap_to_ego = bumper_gap_m(&ego, &view);
+            let params = self.bodies[i].params;
+            let Some(driver) = self.bodies[i].driver.as_mut() else {
+                actuations.push(Actuation::default());
+                continue;
+            };
+            actuations.push(driver.drive(
+                &params,
+                &self.road,
+                &view.observation(),
+                lead,
+                gap_to_ego,
+                neighbours,
+                t_s,
+                dt,
+            ));
+        }
+    }
+
+    /// The contacts that started this step, with their relative speed before it, counted.
+    fn collisions(&mut self, started: Vec<(u32, u32)>, before: &[VehicleView]) -> Vec<Collision> {
+        let mut out = Vec::new();
         for (a, b) in started {
             let va = before.iter().find(|v| v.id == a).map(|v| v.velocity_mps).unwrap_or_default();
             let vb = before.iter().find(|v| v.id == b).map(|v| v.velocity_mps).unwrap_or_default();
@@ -490,13 +514,9 @@ impl World {
             } else {
                 self.traffic_collisions += 1;
             }
-            events.collisions.push(collision);
+            out.push(collision);
         }
-        if self.end.is_none() {
-            self.end = self.check_end(&events);
-            events.ended = self.end.clone();
-        }
-        events
+        out
     }
 
     fn check_end(&self, events: &StepEvents) -> Option<End> {

@@ -243,37 +243,7 @@ pub fn run(args: &SoakArgs, connect: &crate::config::ConnectArgs) -> Result<Soak
             processes.iter().map(|(n, p)| format!("{n} ({p})")).collect::<Vec<_>>().join(", "),
             dir.display()
         );
-        let started = Instant::now();
-        let every = Duration::from_secs_f64(args.sample_s);
-        let mut next = started;
-        let mut samples = Vec::new();
-        let mut sim_time_s = 0.0;
-        let ctrl_c = crate::cli::stop_requested();
-        tokio::pin!(ctrl_c);
-        let progress = loop {
-            while let Some(c) = clock.try_recv() {
-                sim_time_s = c.header.stamp_sim_ns as f64 / 1e9;
-            }
-            let now = Instant::now();
-            let t_min = now.duration_since(started).as_secs_f64() / 60.0;
-            if now >= next {
-                let usage = processes.iter().map(|(_, pid)| usage(*pid)).collect();
-                samples.push(Sample { t_min, sim_time_s, usage });
-                next += every;
-                eprintln!("  {t_min:6.2} min  sim {sim_time_s:8.0} s  {}", line(&processes, samples.last()));
-            }
-            let progress = lp.check();
-            if progress.over() || t_min >= args.minutes {
-                break progress;
-            }
-            tokio::select! {
-                signal = &mut ctrl_c => { eprintln!("{signal}: stopping"); break lp.check() },
-                _ = tokio::time::sleep(NODE_POLL.max(Duration::from_millis(200))) => {}
-            }
-        };
-        // The last sample before anything stops.
-        let t_min = started.elapsed().as_secs_f64() / 60.0;
-        samples.push(Sample { t_min, sim_time_s, usage: processes.iter().map(|(_, pid)| usage(*pid)).collect() });
+        let (progress, samples, sim_time_s) = sample_until_over(&mut lp, &clock, &processes, args).await;
         stop_garbage.store(true, Ordering::SeqCst);
         let garbage_sent = match garbage {
             Some(task) => task.await.unwrap_or(0),
@@ -313,6 +283,49 @@ pub fn run(args: &SoakArgs, connect: &crate::config::ConnectArgs) -> Result<Soak
     })?;
     write_outputs(&report, &dir)?;
     Ok(report)
+}
+
+/// Samples every process's usage every `sample_s` until the loop is over, `minutes` have
+/// passed or a stop request comes. Returns how the loop stood then, the samples (the last
+/// one taken before anything stops) and the newest simulated time.
+async fn sample_until_over(
+    lp: &mut LoopRun,
+    clock: &crate::bus::Subscriber<crate::msg::SimClock>,
+    processes: &[(String, u32)],
+    args: &SoakArgs,
+) -> (crate::launch::nodes::Progress, Vec<Sample>, f64) {
+    let started = Instant::now();
+    let every = Duration::from_secs_f64(args.sample_s);
+    let mut next = started;
+    let mut samples = Vec::new();
+    let mut sim_time_s = 0.0;
+    let ctrl_c = crate::cli::stop_requested();
+    tokio::pin!(ctrl_c);
+    let progress = loop {
+        while let Some(c) = clock.try_recv() {
+            sim_time_s = c.header.stamp_sim_ns as f64 / 1e9;
+        }
+        let now = Instant::now();
+        let t_min = now.duration_since(started).as_secs_f64() / 60.0;
+        if now >= next {
+            let usage = processes.iter().map(|(_, pid)| usage(*pid)).collect();
+            samples.push(Sample { t_min, sim_time_s, usage });
+            next += every;
+            eprintln!("  {t_min:6.2} min  sim {sim_time_s:8.0} s  {}", line(processes, samples.last()));
+        }
+        let progress = lp.check();
+        if progress.over() || t_min >= args.minutes {
+            break progress;
+        }
+        tokio::select! {
+            signal = &mut ctrl_c => { eprintln!("{signal}: stopping"); break lp.check() },
+            _ = tokio::time::sleep(NODE_POLL.max(Duration::from_millis(200))) => {}
+        }
+    };
+    // The last sample before anything stops.
+    let t_min = started.elapsed().as_secs_f64() / 60.0;
+    samples.push(Sample { t_min, sim_time_s, usage: processes.iter().map(|(_, pid)| usage(*pid)).collect() });
+    (progress, samples, sim_time_s)
 }
 
 fn line(processes: &[(String, u32)], s: Option<&Sample>) -> String {
