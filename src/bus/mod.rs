@@ -8,6 +8,7 @@
 pub mod faults;
 mod follow;
 mod frame_copies;
+mod frame_publisher;
 mod publisher;
 mod stats;
 mod subscriber;
@@ -16,7 +17,8 @@ use std::sync::Arc;
 
 pub use faults::NodeClock;
 pub use follow::{Following, FOLLOW_SWITCH_AFTER};
-pub use publisher::{FramePublisher, FrameSent, Publisher};
+pub use frame_publisher::{FramePublisher, FrameSent};
+pub use publisher::Publisher;
 pub use stats::{StatsSnapshot, TopicStats};
 pub use subscriber::{
     Arrivals, CallbackSubscriber, Declared, FrameSample, FrameSubscriber, Received, Subscriber, Subscription,

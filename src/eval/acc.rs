@@ -3,7 +3,7 @@
 //! in lockstep, slipstream-detect (camera perception only) and slipstream-acc as separate
 //! processes on loopback ports and a namespace of their own ([`Network::Isolated`]), records
 //! vehicle/state, acc/status, objects and sim/events from a session of its own, and judges the
-//! run against the ground truth ([`super::trace::judge`], [`super::Metrics`]).
+//! run against the ground truth ([`super::judge::judge`], [`super::Metrics`]).
 //!
 //! The nodes' logs go to a directory per scenario and perception under `--logs` (default: a temporary
 //! directory, removed when every scenario passed and kept, with its path printed, when not).
@@ -14,8 +14,9 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, Context, Result};
 use serde::Serialize;
 
+use super::judge::judge;
 use super::metrics::{aims, Metrics};
-use super::trace::{judge, Recorder};
+use super::trace::Recorder;
 use super::{fmt_opt, plot};
 use crate::acc::PerceptionSource;
 use crate::config::{FaultArgs, FaultProfile};

@@ -10,6 +10,8 @@
 //! - [`trace`]: the recorder of a run on the bus and the trace built from it (one sample per
 //!   vehicle/state with the ACC's status and the true lead); trace.csv.
 //! - [`metrics`]: the ACC's figures against ground truth and its aims.
+//! - [`judge`]: a finished run judged (recording -> trace -> metrics), the one tail of `up`
+//!   and `eval acc`.
 //! - [`latency`]: the loop's latency hop by hop from the message stamps; the string-stability
 //!   bound.
 //! - [`plot`]: PNG plots of a trace and of the loop latency.
@@ -25,6 +27,7 @@
 pub mod acc;
 pub mod detect;
 pub mod faults;
+pub mod judge;
 pub mod latency;
 pub mod link_codec;
 pub mod metrics;

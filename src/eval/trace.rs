@@ -11,13 +11,9 @@ use anyhow::Context;
 use parking_lot::Mutex;
 use serde::Serialize;
 
-use super::metrics::Metrics;
-use crate::acc::AccSettings;
 use crate::bus::{Bus, CallbackSubscriber, Received};
 use crate::msg::{SimEvent, SimEventKind};
-use crate::sim::{Scenario, SimReport};
 use crate::topics;
-use crate::vehicle::VehicleParams;
 
 use crate::msg::{AccMode, AccStatus, GroundTruthObjects, VehicleState};
 
@@ -193,31 +189,4 @@ impl Trace {
         }
         std::fs::write(path, out).with_context(|| format!("write {}", path.display()))
     }
-}
-
-/// Fewer samples than this and a run is not judged (it hardly ran).
-pub const MIN_SAMPLES: usize = 10;
-
-/// A finished run of the loop on the bus, judged: the one tail of `slipstream up` and
-/// `eval acc` (recording -> trace -> metrics).
-#[derive(Debug, Clone)]
-pub struct Judged {
-    pub trace: Trace,
-    /// None when the run has fewer than [`MIN_SAMPLES`] samples.
-    pub metrics: Option<Metrics>,
-}
-
-/// Builds the trace of `scenario` from what was recorded and the simulator's report (its
-/// collision count and end reason win over the recorder's, which may miss the last events),
-/// and judges it. `end_if_unknown` names the end when the simulator said nothing.
-pub fn judge(rec: &Recorded, scenario: &Scenario, sim: Option<&SimReport>, end_if_unknown: &str) -> Judged {
-    let ego = VehicleParams::of_class(scenario.ego.class.into());
-    let front_m = ego.size_m[0] - ego.rear_overhang_m;
-    let mut trace = build_trace(rec, front_m, AccSettings::default().standstill_m);
-    trace.collisions = sim.map_or(0, |s| s.ego_collisions).max(rec.collisions);
-    trace.traffic_collisions = sim.map_or(0, |s| s.traffic_collisions);
-    trace.min_gap_aim_m = scenario.expect.min_gap_m;
-    trace.end = sim.and_then(|s| s.end.as_ref()).map_or_else(|| end_if_unknown.to_string(), |e| e.reason.clone());
-    let metrics = (trace.samples.len() > MIN_SAMPLES).then(|| Metrics::of(&trace));
-    Judged { trace, metrics }
 }

@@ -18,6 +18,7 @@ mod acc;
 mod any;
 mod camera;
 mod codec;
+mod image_encoding;
 mod objects;
 mod pixels;
 mod road;
@@ -26,8 +27,9 @@ mod vehicle;
 
 pub use acc::{AccCommand, AccMode, AccStatus, AccWarning, LeadInfo};
 pub use any::{decode_json, peek_kind};
-pub use camera::{frame_prefix, CameraFrame, CameraFrameRef, CameraInfo, ImageEncoding};
+pub use camera::{frame_prefix, CameraFrame, CameraFrameRef, CameraInfo};
 pub use codec::{decode, decode_header, encode, encode_into, DecodeError, Stamped};
+pub use image_encoding::ImageEncoding;
 pub use objects::{BoundingBox2d, Detection, Detections, GroundTruthObject, GroundTruthObjects, ObjectClass};
 pub use pixels::{check_size as check_frame_size, decode as decode_pixels, encode as encode_pixels, MAX_FRAME_PIXELS};
 pub use road::{Curve, LaneEnd, RoadSpec};

@@ -13,7 +13,7 @@ use std::io::Cursor;
 
 use image::ImageEncoder as _;
 
-use super::camera::ImageEncoding;
+use super::image_encoding::ImageEncoding;
 
 /// The most pixels a frame may have (8192 x 8192, 192 MiB of RGB8): a frame stating more is
 /// refused before it is decoded.
