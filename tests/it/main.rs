@@ -20,5 +20,6 @@ mod layering;
 mod record;
 mod sim_node;
 mod sim_world;
+mod structure;
 mod tools;
 mod wire;

@@ -1,0 +1,282 @@
+//! The code's shape, read from its sources: no function in src/ runs over 100 lines (tests
+//! excepted), and no two files of one module import each other, directly or round a longer
+//! circle. A change that breaks either fails here, naming the function or the circle.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::{Path, PathBuf};
+
+/// The longest a function in src/ may be, its signature and closing brace included.
+const MAX_FN_LINES: usize = 100;
+
+fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
+    for entry in std::fs::read_dir(dir).unwrap() {
+        let path = entry.unwrap().path();
+        if path.is_dir() {
+            rust_files(&path, out);
+        } else if path.extension().is_some_and(|e| e == "rs") {
+            out.push(path);
+        }
+    }
+}
+
+fn sources() -> Vec<(PathBuf, String)> {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut files = Vec::new();
+    rust_files(&src, &mut files);
+    files.sort();
+    files
+        .into_iter()
+        .map(|f| (f.strip_prefix(&src).unwrap().to_path_buf(), std::fs::read_to_string(&f).unwrap()))
+        .collect()
+}
+
+/// The source with comments, string and character literals blanked (newlines kept), so that
+/// braces and keywords are counted only where they are code.
+fn code_only(text: &str) -> Vec<u8> {
+    let b = text.as_bytes();
+    let mut out = b.to_vec();
+    let blank = |out: &mut Vec<u8>, from: usize, to: usize| {
+        for c in &mut out[from..to.min(b.len())] {
+            if *c != b'\n' {
+                *c = b' ';
+            }
+        }
+    };
+    let mut i = 0;
+    while i < b.len() {
+        match b[i] {
+            b'/' if b.get(i + 1) == Some(&b'/') => {
+                let end = b[i..].iter().position(|&c| c == b'\n').map_or(b.len(), |p| i + p);
+                blank(&mut out, i, end);
+                i = end;
+            }
+            b'/' if b.get(i + 1) == Some(&b'*') => {
+                let (mut depth, mut j) = (1, i + 2);
+                while j < b.len() && depth > 0 {
+                    if b[j] == b'/' && b.get(j + 1) == Some(&b'*') {
+                        depth += 1;
+                        j += 1;
+                    } else if b[j] == b'*' && b.get(j + 1) == Some(&b'/') {
+                        depth -= 1;
+                        j += 1;
+                    }
+                    j += 1;
+                }
+                blank(&mut out, i, j);
+                i = j;
+            }
+            b'r' if matches!(b.get(i + 1), Some(b'#') | Some(b'"')) && (i == 0 || !is_ident(b[i - 1])) => {
+                let hashes = b[i + 1..].iter().take_while(|&&c| c == b'#').count();
+                if b.get(i + 1 + hashes) != Some(&b'"') {
+                    i += 1;
+                    continue;
+                }
+                let close: Vec<u8> = std::iter::once(b'"').chain(std::iter::repeat_n(b'#', hashes)).collect();
+                let start = i + 2 + hashes;
+                let end = b[start..]
+                    .windows(close.len())
+                    .position(|w| w == close.as_slice())
+                    .map_or(b.len(), |p| start + p + close.len());
+                blank(&mut out, i, end);
+                i = end;
+            }
+            b'"' => {
+                let mut j = i + 1;
+                while j < b.len() && b[j] != b'"' {
+                    j += if b[j] == b'\\' { 2 } else { 1 };
+                }
+                blank(&mut out, i, j + 1);
+                i = j + 1;
+            }
+            // A character literal ('x', '\n', '\u{..}'), not a lifetime ('a).
+            b'\'' => {
+                let end = if b.get(i + 1) == Some(&b'\\') {
+                    b[i + 2..].iter().position(|&c| c == b'\'').map(|p| i + 2 + p)
+                } else if b.get(i + 2) == Some(&b'\'') {
+                    Some(i + 2)
+                } else {
+                    let ch_len = text[i + 1..].chars().next().map_or(1, char::len_utf8);
+                    (b.get(i + 1 + ch_len) == Some(&b'\'')).then_some(i + 1 + ch_len)
+                };
+                match end {
+                    Some(e) => {
+                        blank(&mut out, i, e + 1);
+                        i = e + 1;
+                    }
+                    None => i += 1,
+                }
+            }
+            _ => i += 1,
+        }
+    }
+    out
+}
+
+fn is_ident(c: u8) -> bool {
+    c.is_ascii_alphanumeric() || c == b'_'
+}
+
+/// Every function with a body: (name, first line, line count). Functions inside a
+/// `#[cfg(test)]` module are left out.
+fn functions(text: &str) -> Vec<(String, usize, usize)> {
+    let code = code_only(text);
+    let line_of = |pos: usize| code[..pos].iter().filter(|&&c| c == b'\n').count() + 1;
+    let test_from = text.find("#[cfg(test)]").unwrap_or(text.len());
+    let mut out = Vec::new();
+    let mut i = 0;
+    while let Some(p) = code[i..].windows(3).position(|w| w == b"fn ") {
+        let at = i + p;
+        i = at + 3;
+        if at >= test_from || (at > 0 && is_ident(code[at - 1])) {
+            continue;
+        }
+        let name: String = code[at + 3..].iter().take_while(|&&c| is_ident(c)).map(|&c| c as char).collect();
+        // The body starts at the first `{` before any `;` (a declaration without a body).
+        let Some(open) = code[at..].iter().position(|&c| c == b'{' || c == b';') else { break };
+        if code[at + open] == b';' {
+            continue;
+        }
+        let mut depth = 0i32;
+        let mut end = at + open;
+        for (k, &c) in code[at + open..].iter().enumerate() {
+            depth += (c == b'{') as i32 - (c == b'}') as i32;
+            if depth == 0 {
+                end = at + open + k;
+                break;
+            }
+        }
+        let (first, last) = (line_of(at), line_of(end));
+        out.push((name, first, last - first + 1));
+    }
+    out
+}
+
+#[test]
+fn the_function_finder_counts_code_not_text() {
+    let text = "fn a() {\n    let s = \"}\";\n    let c = '{';\n    // }\n    x::<'a>();\n}\n\nfn b();\nfn c(x: u8) -> u8 {\n    x\n}\n";
+    assert_eq!(functions(text), vec![("a".to_string(), 1, 6), ("c".to_string(), 9, 3)]);
+}
+
+#[test]
+fn no_function_in_src_runs_over_100_lines() {
+    let mut long = Vec::new();
+    for (file, text) in sources() {
+        for (name, line, lines) in functions(&text) {
+            if lines > MAX_FN_LINES {
+                long.push(format!("src/{}:{line} {name} ({lines} lines)", file.display()));
+            }
+        }
+    }
+    assert!(long.is_empty(), "functions over {MAX_FN_LINES} lines (split them by concern):\n{}", long.join("\n"));
+}
+
+/// The sibling files a file names: `super::x` and `crate::<its module path>::x`, where x is a
+/// file of the same directory.
+fn sibling_refs(file: &Path, text: &str, siblings: &BTreeSet<String>) -> BTreeSet<String> {
+    let dir: Vec<String> = file
+        .parent()
+        .into_iter()
+        .flat_map(|p| p.components())
+        .map(|c| c.as_os_str().to_string_lossy().into_owned())
+        .collect();
+    let own = file.file_stem().unwrap().to_string_lossy().into_owned();
+    let in_mod = own == "mod";
+    let mut prefixes = vec![format!("crate::{}", dir.join("::"))];
+    if !in_mod {
+        prefixes.push("super".to_string());
+    }
+    let code = String::from_utf8(code_only(text)).unwrap();
+    let code = &code[..code.find("#[cfg(test)]").unwrap_or(code.len())];
+    let mut refs = BTreeSet::new();
+    for prefix in prefixes.iter().filter(|p| p.as_str() != "crate::") {
+        let mut rest = code;
+        while let Some(i) = rest.find(prefix.as_str()) {
+            rest = &rest[i + prefix.len()..];
+            let Some(after) = rest.strip_prefix("::") else { continue };
+            let names: Vec<String> = match after.strip_prefix('{') {
+                Some(group) => group.split('}').next().unwrap_or("").split(',').map(|s| s.trim().to_string()).collect(),
+                None => vec![after.to_string()],
+            };
+            for n in names {
+                let name: String = n.chars().take_while(|c| c.is_alphanumeric() || *c == '_').collect();
+                if siblings.contains(&name) && name != own {
+                    refs.insert(name);
+                }
+            }
+        }
+    }
+    refs
+}
+
+#[test]
+fn no_two_files_of_a_module_import_each_other() {
+    let files = sources();
+    let mut by_dir: BTreeMap<PathBuf, Vec<(String, &str, &Path)>> = BTreeMap::new();
+    for (file, text) in &files {
+        let stem = file.file_stem().unwrap().to_string_lossy().into_owned();
+        by_dir.entry(file.parent().unwrap().to_path_buf()).or_default().push((stem, text, file));
+    }
+    let mut circles = Vec::new();
+    for (dir, members) in by_dir {
+        let names: BTreeSet<String> = members.iter().map(|(n, _, _)| n.clone()).filter(|n| n != "mod").collect();
+        let graph: BTreeMap<String, BTreeSet<String>> = members
+            .iter()
+            .filter(|(n, _, _)| n != "mod")
+            .map(|(n, text, file)| (n.clone(), sibling_refs(file, text, &names)))
+            .collect();
+        // Each circle once, whichever of its files it was found from.
+        let mut found: BTreeMap<BTreeSet<String>, Vec<String>> = BTreeMap::new();
+        for start in graph.keys() {
+            if let Some(path) = circle_through(&graph, start) {
+                found.entry(path.iter().cloned().collect()).or_insert(path);
+            }
+        }
+        for path in found.into_values() {
+            circles.push(format!("src/{}: {}", dir.display(), path.join(" -> ")));
+        }
+    }
+    assert!(
+        circles.is_empty(),
+        "files that import each other (move what both need into a file of its own):\n{}",
+        circles.join("\n")
+    );
+}
+
+/// A path from `start` back to itself, if the graph has one.
+fn circle_through(graph: &BTreeMap<String, BTreeSet<String>>, start: &str) -> Option<Vec<String>> {
+    let mut stack = vec![vec![start.to_string()]];
+    let mut seen = BTreeSet::new();
+    while let Some(path) = stack.pop() {
+        let last = path.last().unwrap();
+        for next in graph.get(last).into_iter().flatten() {
+            if next == start {
+                let mut p = path.clone();
+                p.push(start.to_string());
+                return Some(p);
+            }
+            if seen.insert(next.clone()) {
+                let mut p = path.clone();
+                p.push(next.clone());
+                stack.push(p);
+            }
+        }
+    }
+    None
+}
+
+#[test]
+fn the_circle_finder_finds_a_circle_and_nothing_in_a_tree() {
+    let g = |edges: &[(&str, &str)]| {
+        let mut m: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+        for (a, b) in edges {
+            m.entry(a.to_string()).or_default().insert(b.to_string());
+            m.entry(b.to_string()).or_default();
+        }
+        m
+    };
+    let circle = g(&[("metrics", "trace"), ("trace", "metrics"), ("judge", "trace")]);
+    assert_eq!(circle_through(&circle, "metrics"), Some(vec!["metrics".into(), "trace".into(), "metrics".into()]));
+    assert_eq!(circle_through(&circle, "judge"), None, "judge is on no circle");
+    let tree = g(&[("judge", "trace"), ("judge", "metrics"), ("metrics", "trace")]);
+    assert!(tree.keys().all(|k| circle_through(&tree, k).is_none()));
+}
