@@ -278,6 +278,20 @@ async fn stale_speed_makes_the_watchdog_brake_until_speed_returns() {
     });
 }
 
+/// A detector node of its own dialling the ACC at `ep` (its perception/objects publisher,
+/// matched by the ACC), and camera/front/info at 20 Hz (every fifth step) from the simulator's
+/// bus, so the ACC knows which steps bring a frame.
+async fn detector_and_camera_info(ep: &str, sim_bus: &Bus) -> (Bus, slipstream::bus::Publisher<Detections>) {
+    let detect_bus =
+        Bus::from_session(common::connected_session(ep).await, TopicMap::default(), "detect").await.unwrap();
+    let detections = detect_bus.publisher(topics::PERCEPTION_OBJECTS).await.unwrap();
+    assert!(detections.wait_for_subscriber(common::TIMEOUT).await);
+    let info_pub = sim_bus.publisher(topics::CAMERA_FRONT_INFO).await.unwrap();
+    let info = slipstream::sim::SimSettings::default().camera_info(slipstream::msg::ImageEncoding::Rgb8);
+    info_pub.put(0, &info).unwrap();
+    (detect_bus, detections)
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_vanished_detector_is_perception_lost() {
     within!(async {
@@ -285,14 +299,7 @@ async fn a_vanished_detector_is_perception_lost() {
         let (task, stop, sim_bus, ep) = acc_and_sim(settings).await;
         let statuses = Collect::new(&sim_bus, topics::ACC_STATUS).await;
         // The detector: a node of its own, publishing detections of the lead.
-        let detect_bus =
-            Bus::from_session(common::connected_session(&ep).await, TopicMap::default(), "detect").await.unwrap();
-        let detections = detect_bus.publisher(topics::PERCEPTION_OBJECTS).await.unwrap();
-        assert!(detections.wait_for_subscriber(common::TIMEOUT).await);
-        // Frames at 20 Hz (every fifth step), so the ACC knows which steps bring one.
-        let info_pub = sim_bus.publisher(topics::CAMERA_FRONT_INFO).await.unwrap();
-        let info = slipstream::sim::SimSettings::default().camera_info(slipstream::msg::ImageEncoding::Rgb8);
-        info_pub.put(0, &info).unwrap();
+        let (detect_bus, detections) = detector_and_camera_info(&ep, &sim_bus).await;
         let mut sim = FakeSim::new(&sim_bus).await;
         let detect_step = |step: u64| Detections {
             frame_seq: step / 5,
@@ -362,13 +369,7 @@ async fn a_lockstep_acc_stops_waiting_for_a_detector_that_sends_nothing() {
         let (task, stop, sim_bus, ep) = acc_and_sim(settings).await;
         let controls = Collect::new(&sim_bus, topics::VEHICLE_CONTROL).await;
         // The detector: alive on the bus, silent until told.
-        let detect_bus =
-            Bus::from_session(common::connected_session(&ep).await, TopicMap::default(), "detect").await.unwrap();
-        let detections = detect_bus.publisher(topics::PERCEPTION_OBJECTS).await.unwrap();
-        assert!(detections.wait_for_subscriber(common::TIMEOUT).await);
-        let info_pub = sim_bus.publisher(topics::CAMERA_FRONT_INFO).await.unwrap();
-        let info = slipstream::sim::SimSettings::default().camera_info(slipstream::msg::ImageEncoding::Rgb8);
-        info_pub.put(0, &info).unwrap();
+        let (_detect_bus, detections) = detector_and_camera_info(&ep, &sim_bus).await;
         let mut sim = FakeSim::new(&sim_bus).await;
         // A lockstep simulator: each step waits for its answer. 50 steps bring 10 frames.
         sim.lockstep(50, &controls).await;

@@ -3,7 +3,7 @@
 //! alone on the contract, the shared vehicle model and the road geometry (the ACC never links
 //! the simulator, nor the detector). A new import that breaks this fails here, naming the file and line.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// Every top-level module and its layer (0 = contract, the lowest).
 const LAYER_OF: &[(&str, u8)] = &[
@@ -41,17 +41,6 @@ const ROOT_REEXPORTS: &[(&str, &str)] =
 
 fn layer(module: &str) -> Option<u8> {
     LAYER_OF.iter().find(|(m, _)| *m == module).map(|(_, l)| *l)
-}
-
-fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
-    for entry in std::fs::read_dir(dir).unwrap() {
-        let path = entry.unwrap().path();
-        if path.is_dir() {
-            rust_files(&path, out);
-        } else if path.extension().is_some_and(|e| e == "rs") {
-            out.push(path);
-        }
-    }
 }
 
 /// The top-level module a file under src/ belongs to (None: lib.rs and the binaries).
@@ -116,7 +105,7 @@ fn violation(from: &str, to: &str) -> Option<String> {
 fn imports_point_down_the_layers_and_the_domain_modules_stand_alone() {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
     let mut files = Vec::new();
-    rust_files(&src, &mut files);
+    crate::common::rust_files(&src, &mut files);
     files.sort();
     let mut problems = Vec::new();
     let mut checked = 0;

@@ -8,21 +8,10 @@ use std::path::{Path, PathBuf};
 /// The longest a function in src/ may be, its signature and closing brace included.
 const MAX_FN_LINES: usize = 100;
 
-fn rust_files(dir: &Path, out: &mut Vec<PathBuf>) {
-    for entry in std::fs::read_dir(dir).unwrap() {
-        let path = entry.unwrap().path();
-        if path.is_dir() {
-            rust_files(&path, out);
-        } else if path.extension().is_some_and(|e| e == "rs") {
-            out.push(path);
-        }
-    }
-}
-
 fn sources() -> Vec<(PathBuf, String)> {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
     let mut files = Vec::new();
-    rust_files(&src, &mut files);
+    crate::common::rust_files(&src, &mut files);
     files.sort();
     files
         .into_iter()
