@@ -30,6 +30,7 @@ pub fn judge(rec: &Recorded, scenario: &Scenario, sim: Option<&SimReport>, end_i
     trace.collisions = sim.map_or(0, |s| s.ego_collisions).max(rec.collisions);
     trace.traffic_collisions = sim.map_or(0, |s| s.traffic_collisions);
     trace.min_gap_aim_m = scenario.expect.min_gap_m;
+    trace.braking_warranted = scenario.expect.braking;
     trace.end = sim.and_then(|s| s.end.as_ref()).map_or_else(|| end_if_unknown.to_string(), |e| e.reason.clone());
     let metrics = (trace.samples.len() > MIN_SAMPLES).then(|| Metrics::of(&trace));
     Judged { trace, metrics }

@@ -7,6 +7,7 @@ use super::fmt_opt;
 use super::trace::{Sample, Trace, TruthLead};
 use crate::acc::settings::{comfort_decel_at, COMFORT_HIGH_SPEED_MPS, COMFORT_LOW_SPEED_MPS};
 use crate::msg::AccMode;
+use crate::sim::scenario::Warranted;
 
 /// The aims of issue 5 (docs/control.md).
 pub mod aims {
@@ -43,6 +44,9 @@ const EMERGENCY_MARGIN_S: (f64, f64) = (0.1, 1.5);
 /// within PHANTOM_GRACE_S before.
 const PHANTOM_DECEL_MPS2: f64 = 1.0;
 const PHANTOM_GRACE_S: f64 = 1.0;
+/// Phantom braking this far apart is one event: a driver feels one false brake, not each
+/// dip of it.
+const PHANTOM_EVENT_GAP_S: f64 = 2.0;
 /// A vehicle farther than that still warrants braking when matching its speed short of it
 /// needs this much.
 const WARRANTED_BRAKING_MPS2: f64 = 0.5;
@@ -110,6 +114,11 @@ pub struct Metrics {
     pub unwarranted_emergencies: u64,
     /// Seconds of braking beyond 1 m/s2 with nothing in the lane within twice the time gap.
     pub phantom_braking_s: f64,
+    /// Those seconds as events: stretches of phantom braking, PHANTOM_EVENT_GAP_S apart at
+    /// least (the rate a sweep reports per 1,000 km).
+    pub phantom_braking_events: u64,
+    /// How far the ego drove, metres (the sweep's rates are per distance).
+    pub distance_m: f64,
     /// Seconds standing still with nothing ahead to wait for.
     pub standstill_for_nothing_s: f64,
     /// Settled behind a lead that holds its speed (within 0.3 m/s for 10 s): the largest
@@ -219,6 +228,9 @@ struct Feel {
     last_near_t: Option<f64>,
     last_ahead_t: Option<f64>,
     phantom_s: f64,
+    phantom_events: u64,
+    /// The last sample of phantom braking.
+    last_phantom_t: Option<f64>,
     standstill_s: f64,
     /// Behind a lead that has held its speed for SETTLED_S: |ego's - lead's acceleration|.
     max_swing: Option<f64>,
@@ -301,8 +313,15 @@ impl Tally {
     /// What a driver would feel at sample `i` (`dt` apart): emergencies nothing in the lane
     /// warranted, braking beyond PHANTOM_DECEL_MPS2 with nothing within twice the time gap,
     /// standing still with nothing ahead.
-    fn feel(&mut self, s: &[Sample], i: usize, dt: f64, standstill_m: f64, lead_accel: Option<f64>) {
-        let x = &s[i];
+    fn feel(&mut self, s: &[Sample], i: usize, dt: f64, trace: &Trace, lead_accel: Option<f64>) {
+        let (x, standstill_m) = (&s[i], trace.standstill_m);
+        // What the scenario declares (generated scenarios do) overrides the reading of the
+        // truth: no braking where its lane stays clear, no emergency where comfort suffices.
+        let (clear_lane, comfort_suffices) = match trace.braking_warranted {
+            Some(Warranted::None) => (true, true),
+            Some(Warranted::Comfort) => (false, true),
+            Some(Warranted::Emergency) | None => (false, false),
+        };
         let f = &mut self.feel;
         if let Some(tl) = x.truth {
             let closing = -tl.relative_speed_mps;
@@ -338,7 +357,7 @@ impl Tally {
         let since = |t: Option<f64>| t.map_or(f64::INFINITY, |t| x.t_s - t);
         // Emergencies: judged at their end, warranted by need from just before their start.
         if x.mode == AccMode::Emergency {
-            let needed = since(f.last_needed_t) <= EMERGENCY_LOOKBACK_S;
+            let needed = since(f.last_needed_t) <= EMERGENCY_LOOKBACK_S && !comfort_suffices;
             f.emergency = Some(f.emergency.unwrap_or(false) || needed);
         } else if let Some(warranted) = f.emergency.take() {
             f.unwarranted_emergencies += u64::from(!warranted);
@@ -350,9 +369,11 @@ impl Tally {
         if x.accel_mps2 < -PHANTOM_DECEL_MPS2
             && x.speed_mps > COMFORT_MIN_SPEED_MPS
             && !deliberate
-            && since(f.last_near_t) > PHANTOM_GRACE_S
+            && (clear_lane || since(f.last_near_t) > PHANTOM_GRACE_S)
         {
             f.phantom_s += dt;
+            f.phantom_events += u64::from(since(f.last_phantom_t) > PHANTOM_EVENT_GAP_S);
+            f.last_phantom_t = Some(x.t_s);
         }
         if x.speed_mps < 0.5
             && x.mode != AccMode::Off
@@ -538,7 +559,7 @@ impl Metrics {
             tally.lead(s, i, trace.standstill_m);
             tally.speed_mode(s, i);
             tally.comfort(s, i, jerk_lag, near_emergency(s[i].t_s));
-            tally.feel(s, i, dt, trace.standstill_m, lead_accel[i]);
+            tally.feel(s, i, dt, trace, lead_accel[i]);
             tally.hard_braking(&s[i], lead_accel[i]);
         }
         tally.hard.end(s.last().map_or(0.0, |x| x.t_s));
@@ -564,6 +585,8 @@ impl Metrics {
             max_decel_in_emergency_mps2: tally.max_em_decel,
             unwarranted_emergencies: tally.feel.unwarranted_emergencies,
             phantom_braking_s: tally.feel.phantom_s,
+            phantom_braking_events: tally.feel.phantom_events,
+            distance_m: s.iter().map(|x| x.speed_mps * dt).sum(),
             standstill_for_nothing_s: tally.feel.standstill_s,
             max_accel_swing_mps2: tally.feel.max_swing,
             traffic_collisions: trace.traffic_collisions,
@@ -659,6 +682,45 @@ mod tests {
         assert!(failed(&far).contains(&"unwarranted emergencies"));
         let closing = Metrics::of(&trace(20.0, |t| (25.0, 0.0, mode(t), Some((30.0, -15.0)))));
         assert_eq!(closing.unwarranted_emergencies, 0);
+    }
+
+    #[test]
+    fn phantom_braking_is_counted_in_events_and_the_distance_driven_is_kept() {
+        // Brakes at 10-11 s and 11.5-12 s: one event (closer than PHANTOM_EVENT_GAP_S); a
+        // third at 20-21 s: another.
+        let braking = |t: f64| {
+            if (10.0..11.0).contains(&t) || (11.5..12.0).contains(&t) || (20.0..21.0).contains(&t) {
+                -2.0
+            } else {
+                0.0
+            }
+        };
+        let m = Metrics::of(&trace(30.0, |t| (25.0, braking(t), AccMode::Follow, None)));
+        assert_eq!(m.phantom_braking_events, 2);
+        assert!((m.phantom_braking_s - 2.5).abs() < 0.05, "{}", m.phantom_braking_s);
+        assert!((m.distance_m - 750.0).abs() < 1.0, "{}", m.distance_m);
+    }
+
+    #[test]
+    fn what_a_scenario_declares_warranted_overrides_the_reading_of_the_truth() {
+        // Braking for a car 40 m ahead reads as warranted; the scenario says its lane stays
+        // clear (the car is in the next lane, say, and the judge's truth lead is wrong).
+        let braking = |t: f64| if (10.0..12.0).contains(&t) { -2.0 } else { 0.0 };
+        let mut near = trace(30.0, |t| (25.0, braking(t), AccMode::Follow, Some((40.0, 0.0))));
+        assert_eq!(Metrics::of(&near).phantom_braking_s, 0.0);
+        near.braking_warranted = Some(Warranted::None);
+        let declared = Metrics::of(&near);
+        assert!((declared.phantom_braking_s - 2.0).abs() < 0.05, "{}", declared.phantom_braking_s);
+        assert_eq!(declared.phantom_braking_events, 1);
+        near.braking_warranted = Some(Warranted::Comfort);
+        assert_eq!(Metrics::of(&near).phantom_braking_s, 0.0);
+        // An emergency for a car closing fast: warranted, unless comfort braking sufficed.
+        let mode = |t: f64| if (10.0..11.0).contains(&t) { AccMode::Emergency } else { AccMode::Follow };
+        let mut closing = trace(20.0, |t| (25.0, 0.0, mode(t), Some((30.0, -15.0))));
+        closing.braking_warranted = Some(Warranted::Emergency);
+        assert_eq!(Metrics::of(&closing).unwarranted_emergencies, 0);
+        closing.braking_warranted = Some(Warranted::Comfort);
+        assert_eq!(Metrics::of(&closing).unwarranted_emergencies, 1);
     }
 
     #[test]

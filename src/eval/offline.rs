@@ -40,13 +40,14 @@ impl Camera {
 /// `physics_hz`, perception at `camera_hz`.
 pub fn run(scenario: Scenario, settings: AccSettings, physics_hz: u32, camera_hz: f64) -> Trace {
     let seed = scenario.seed;
-    let (standstill_m, min_gap_aim_m) = (settings.standstill_m, scenario.expect.min_gap_m);
+    let (standstill_m, min_gap_aim_m, braking_warranted) =
+        (settings.standstill_m, scenario.expect.min_gap_m, scenario.expect.braking);
     let mut world = World::new(scenario, seed, physics_hz);
     let mut camera = (settings.perception == PerceptionSource::Camera).then(|| Camera::new(&world));
     let mut ctl = Controller::new(settings);
     // The road's map, as the simulator's sim/road gives it to slipstream-acc.
     ctl.set_road(world.road().spec());
-    let mut trace = Trace { standstill_m, min_gap_aim_m, ..Default::default() };
+    let mut trace = Trace { standstill_m, min_gap_aim_m, braking_warranted, ..Default::default() };
     let mut truth = None;
     loop {
         let k = world.step_count();

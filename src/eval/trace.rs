@@ -13,6 +13,7 @@ use serde::Serialize;
 
 use crate::bus::{Bus, CallbackSubscriber, Received};
 use crate::msg::{SimEvent, SimEventKind};
+use crate::sim::scenario::Warranted;
 use crate::topics;
 
 use crate::msg::{AccMode, AccStatus, GroundTruthObjects, VehicleState};
@@ -89,6 +90,9 @@ pub struct Trace {
     pub end: String,
     /// The smallest gap the scenario asks to keep (its `expect.min_gap_m`); None: any gap > 0.
     pub min_gap_aim_m: Option<f64>,
+    /// The most braking the scenario declares warranted (its `expect.braking`); None: not
+    /// declared.
+    pub braking_warranted: Option<Warranted>,
 }
 
 /// What the recorder keeps, in arrival order.

@@ -104,6 +104,23 @@ pub struct Expect {
     /// The smallest bumper-to-bumper gap to the lead the controller keeps, metres (the
     /// standard aim: any gap above 0).
     pub min_gap_m: Option<f64>,
+    /// The most braking the scenario's own physics warrants: `none` (the ego's lane stays
+    /// clear: braking beyond 1 m/s2 at speed is phantom braking whatever the judge reads from
+    /// the ground truth), `comfort` (any emergency is unwarranted) or `emergency`; absent: the
+    /// judge's reading of the ground truth alone. Generated scenarios (`eval sweep`) declare it.
+    pub braking: Option<Warranted>,
+}
+
+/// How much braking a scenario warrants (its `expect.braking`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Deserialize, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Warranted {
+    /// Nothing comes into the ego's lane near enough to brake for.
+    None,
+    /// Comfort braking suffices for everything that does.
+    Comfort,
+    /// An emergency may be needed.
+    Emergency,
 }
 
 #[derive(Debug, Clone, PartialEq, Deserialize)]
