@@ -205,6 +205,19 @@ enum EvalCommand {
     ///   slipstream eval faults --scenario cut-in --plot envelope.png
     #[command(verbatim_doc_comment)]
     Faults(slipstream::eval::faults::EvalFaultsArgs),
+    /// Driving judged at scale: generates --count scenarios (default 1,000) from parameterised
+    /// families (Euro NCAP car-to-car rear, cut-ins, cut-outs, braking leads, the edge of
+    /// range, bends with vehicles in the next lanes, lane ends, dense traffic), each declaring
+    /// what its physics warrants, runs each like `eval acc` and reports collisions,
+    /// unwarranted emergencies and phantom braking per 1,000 km by family, comfort violations
+    /// and the time-gap error, with the worst runs named (their files replay with `eval acc
+    /// --scenario FILE`). Writes the scenarios, sweep.json and rates.png under --out; exits
+    /// with 1 when a family misses the bar (no collision, no unwarranted emergency, at most
+    /// one phantom-braking event per 1,000 km). Example:
+    ///
+    ///   slipstream eval sweep --count 40 --seed 7 --out /tmp/sweep
+    #[command(verbatim_doc_comment)]
+    Sweep(slipstream::eval::sweep::EvalSweepArgs),
 }
 
 /// Opens a bus as `node`, runs `f` with it, closes it.
@@ -362,6 +375,23 @@ fn eval_command(command: EvalCommand, connect: &ConnectArgs) -> Result<ExitCode>
             let failed = report.results.iter().filter(|r| !r.metrics.pass || r.lockstep_timeouts > 0).count();
             if failed > 0 {
                 anyhow::bail!("{failed} of {} scenarios missed an aim", report.results.len());
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        EvalCommand::Sweep(args) => {
+            use slipstream::eval::sweep;
+            let report = sweep::run(&args, connect)?;
+            let json = serde_json::to_string_pretty(&report)?;
+            let file = args.out.join("sweep.json");
+            std::fs::write(&file, &json).with_context(|| format!("write {}", file.display()))?;
+            print_report(args.json, &report, sweep::markdown)?;
+            eprintln!(
+                "report: {}; plot: {}",
+                file.display(),
+                report.plot.as_ref().map_or("none".into(), |p| p.display().to_string())
+            );
+            if !report.pass {
+                anyhow::bail!("the sweep missed the bar (table above)");
             }
             Ok(ExitCode::SUCCESS)
         }

@@ -79,6 +79,26 @@ pub struct ScenarioResult {
     pub time: RunTime,
 }
 
+impl ScenarioResult {
+    /// A result with these metrics and nothing else to say (the sweep's unit tests).
+    #[cfg(test)]
+    pub(crate) fn for_tests(name: &str, metrics: Metrics) -> ScenarioResult {
+        ScenarioResult {
+            scenario: name.into(),
+            perception: PerceptionSource::Camera,
+            set_speed_mps: 25.0,
+            metrics,
+            lockstep_timeouts: 0,
+            end: "duration".into(),
+            wall_time_s: 1.0,
+            plot: None,
+            faults: None,
+            inputs: Vec::new(),
+            time: RunTime::default(),
+        }
+    }
+}
+
 /// Where one run's wall time went, in seconds.
 #[derive(Debug, Clone, Copy, Default, Serialize)]
 pub struct RunTime {
@@ -165,12 +185,53 @@ pub fn run(args: &EvalAccArgs, connect: &crate::config::ConnectArgs) -> Result<A
     }
     .min(names.len().max(1));
     let suite_started = Instant::now();
+    let runs: Vec<(String, Scenario)> = names.iter().cloned().zip(scenarios).collect();
+    let total = runs.len();
+    let perception = args.perception;
+    let results = run_all(runs, args, faults, connect.topics.clone(), &logs, jobs, |done, name, result| {
+        if let Ok(r) = result {
+            eprintln!(
+                "[{done}/{total}] {name} ({} perception): {} in {:.1} s ({:.0} s simulated){}",
+                perception.name(),
+                if r.metrics.pass { "pass" } else { "FAIL" },
+                r.time.wall_s,
+                r.time.simulated_s,
+                r.plot.as_ref().map_or(String::new(), |p| format!(", plot {}", p.display()))
+            );
+        }
+    })?;
+    let results = results.into_iter().collect::<Result<Vec<_>>>()?;
+    let wall_s = suite_started.elapsed().as_secs_f64();
+    let pass = results.iter().all(|r| r.metrics.pass && r.lockstep_timeouts == 0);
+    if pass && args.logs.is_none() {
+        let _ = std::fs::remove_dir_all(&logs);
+    } else {
+        eprintln!("node logs: {}", logs.display());
+    }
+    Ok(AccReport { command: std::env::args().collect::<Vec<_>>().join(" "), results, pass, jobs, wall_s })
+}
+
+/// Runs each of `runs` (the simulator's `--scenario` argument: a built-in name or a file, and
+/// the scenario it names) through [`run_one`], `jobs` at once, each in its own processes,
+/// ports and namespace; its logs in `logs/<scenario>-<perception>`. `done` hears of each as it
+/// ends (how many have, its name, its result). The results in the order of `runs`; one run's
+/// failure does not stop the others.
+pub(crate) fn run_all(
+    runs: Vec<(String, Scenario)>,
+    args: &EvalAccArgs,
+    faults: Option<FaultProfile>,
+    topics: Option<PathBuf>,
+    logs: &Path,
+    jobs: usize,
+    mut done: impl FnMut(usize, &str, &Result<ScenarioResult>),
+) -> Result<Vec<Result<ScenarioResult>>> {
+    let total = runs.len();
     let rt = tokio::runtime::Runtime::new()?;
-    let results = rt.block_on(async {
-        let slots = std::sync::Arc::new(tokio::sync::Semaphore::new(jobs));
+    rt.block_on(async {
+        let slots = std::sync::Arc::new(tokio::sync::Semaphore::new(jobs.max(1)));
         let mut running = tokio::task::JoinSet::new();
-        for (i, (arg, scenario)) in names.iter().cloned().zip(scenarios).enumerate() {
-            let (args, faults, topics) = (args.clone(), faults.clone(), connect.topics.clone());
+        for (i, (arg, scenario)) in runs.into_iter().enumerate() {
+            let (args, faults, topics) = (args.clone(), faults.clone(), topics.clone());
             // Named by perception too: runs with camera and ground truth into one directory
             // keep both.
             let run_logs = logs.join(format!("{}-{}", scenario.name, args.perception.name()));
@@ -184,33 +245,16 @@ pub fn run(args: &EvalAccArgs, connect: &crate::config::ConnectArgs) -> Result<A
                 (i, name, result)
             });
         }
-        let mut results: Vec<Option<ScenarioResult>> = vec![None; names.len()];
-        let mut done = 0;
+        let mut results: Vec<Option<Result<ScenarioResult>>> = (0..total).map(|_| None).collect();
+        let mut finished = 0;
         while let Some(joined) = running.join_next().await {
             let (i, name, result) = joined.context("a scenario's task failed")?;
-            done += 1;
-            let result = result?;
-            eprintln!(
-                "[{done}/{}] {name} ({} perception): {} in {:.1} s ({:.0} s simulated){}",
-                names.len(),
-                args.perception.name(),
-                if result.metrics.pass { "pass" } else { "FAIL" },
-                result.time.wall_s,
-                result.time.simulated_s,
-                result.plot.as_ref().map_or(String::new(), |p| format!(", plot {}", p.display()))
-            );
+            finished += 1;
+            done(finished, &name, &result);
             results[i] = Some(result);
         }
-        anyhow::Ok(results.into_iter().flatten().collect::<Vec<_>>())
-    })?;
-    let wall_s = suite_started.elapsed().as_secs_f64();
-    let pass = results.iter().all(|r| r.metrics.pass && r.lockstep_timeouts == 0);
-    if pass && args.logs.is_none() {
-        let _ = std::fs::remove_dir_all(&logs);
-    } else {
-        eprintln!("node logs: {}", logs.display());
-    }
-    Ok(AccReport { command: std::env::args().collect::<Vec<_>>().join(" "), results, pass, jobs, wall_s })
+        Ok(results.into_iter().flatten().collect())
+    })
 }
 
 /// One scenario through the launch layer, judged; `faults` injected by every node.

@@ -17,6 +17,8 @@
 //! - [`plot`]: PNG plots of a trace and of the loop latency.
 //! - [`acc`]: `slipstream eval acc`, the scenario suite over separate processes (through
 //!   [`crate::launch`]).
+//! - [`sweep`]: `slipstream eval sweep`, generated scenarios by the thousand, judged as
+//!   rates per 1,000 km (runs of [`acc`]).
 //! - [`faults`]: `slipstream eval faults`, the ACC's safety envelope under injected network
 //!   faults (runs of [`acc`] with fault profiles).
 //! - [`detect`]: `slipstream eval detect`, the detector scored against ground truth, in process.
@@ -34,6 +36,7 @@ pub mod metrics;
 pub mod offline;
 pub mod plot;
 pub mod resim;
+pub mod sweep;
 pub mod trace;
 
 pub use metrics::Metrics;

@@ -21,5 +21,6 @@ mod record;
 mod sim_node;
 mod sim_world;
 mod structure;
+mod sweep;
 mod tools;
 mod wire;
