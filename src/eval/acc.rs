@@ -157,6 +157,15 @@ pub struct AccReport {
     pub wall_s: f64,
 }
 
+/// Runs at once: `--jobs`, else one per CPU core, at most [`MAX_DEFAULT_JOBS`].
+pub(crate) fn jobs(arg: Option<usize>) -> Result<usize> {
+    match arg {
+        Some(0) => bail!("--jobs must be at least 1"),
+        Some(n) => Ok(n),
+        None => Ok(std::thread::available_parallelism().map_or(1, |n| n.get()).min(MAX_DEFAULT_JOBS)),
+    }
+}
+
 /// Runs the suite; progress goes to stderr. The nodes and the recorder use the topic config
 /// of `connect` (-t, SLIPSTREAM_CONFIG or ./config/slipstream.json5) under a namespace of the
 /// run's own; the connection flags do not apply (each run has its own loopback ports).
@@ -178,12 +187,7 @@ pub fn run(args: &EvalAccArgs, connect: &crate::config::ConnectArgs) -> Result<A
         Some(dir) => dir.clone(),
         None => std::env::temp_dir().join(format!("slipstream-eval-acc-{}", std::process::id())),
     };
-    let jobs = match args.jobs {
-        Some(0) => bail!("--jobs must be at least 1"),
-        Some(n) => n,
-        None => std::thread::available_parallelism().map_or(1, |n| n.get()).min(MAX_DEFAULT_JOBS),
-    }
-    .min(names.len().max(1));
+    let jobs = jobs(args.jobs)?.min(names.len().max(1));
     let suite_started = Instant::now();
     let runs: Vec<(String, Scenario)> = names.iter().cloned().zip(scenarios).collect();
     let total = runs.len();

@@ -13,10 +13,10 @@ pub mod warrant;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use serde::Serialize;
 
-use super::acc::{run_all, EvalAccArgs, MAX_DEFAULT_JOBS};
+use super::acc::{jobs, run_all, EvalAccArgs};
 use crate::acc::PerceptionSource;
 use crate::config::FaultArgs;
 use crate::launch::LinkKind;
@@ -113,11 +113,7 @@ pub fn run(args: &EvalSweepArgs, connect: &crate::config::ConnectArgs) -> Result
     connect.topic_map()?;
     anyhow::ensure!(args.count > 0, "--count must be at least 1");
     anyhow::ensure!(args.timeout > 0.0, "--timeout must be > 0");
-    let jobs = match args.jobs {
-        Some(0) => bail!("--jobs must be at least 1"),
-        Some(n) => n,
-        None => std::thread::available_parallelism().map_or(1, |n| n.get()).min(MAX_DEFAULT_JOBS),
-    };
+    let jobs = jobs(args.jobs)?;
     let generated = write_scenarios(args)?;
     let logs = args.out.join("logs");
     let acc_args = EvalAccArgs {

@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use super::rates::Rates;
-use crate::eval::plot::png;
+use crate::eval::plot::{draw_legend, png};
 
 /// Draws the rates of `families` into a PNG at `path`.
 pub fn rates(families: &[Rates], path: &Path) -> anyhow::Result<()> {
@@ -51,13 +51,6 @@ pub fn rates(families: &[Rates], path: &Path) -> anyhow::Result<()> {
                 .label(*name)
                 .legend(move |(x, y)| Rectangle::new([(x, y - 5), (x + 12, y + 5)], color.filled()));
         }
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.85))
-            .border_style(BLACK)
-            .label_font(("sans-serif", 14))
-            .position(SeriesLabelPosition::UpperRight)
-            .draw()?;
-        Ok(())
+        draw_legend(&mut chart)
     })
 }
