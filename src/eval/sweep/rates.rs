@@ -134,12 +134,24 @@ pub fn faults_of(run: &SweepRun) -> String {
     }
 }
 
-/// The `n` worst runs that missed something, worst first.
+/// The `n` worst runs that missed something: the worst of each family first (worst first), then
+/// each family's second worst, and so on, so that one family's many failures do not hide
+/// another's few.
 pub fn worst(runs: &[SweepRun], n: usize) -> Vec<&SweepRun> {
     let mut bad: Vec<&SweepRun> = runs.iter().filter(|r| badness(r) > 0.0).collect();
     bad.sort_by(|a, b| badness(b).total_cmp(&badness(a)));
-    bad.truncate(n);
-    bad
+    // Each run's place within its family.
+    let mut seen: std::collections::HashMap<Family, usize> = Default::default();
+    let mut ranked: Vec<(usize, &SweepRun)> = bad
+        .into_iter()
+        .map(|r| {
+            let k = seen.entry(r.family).or_default();
+            *k += 1;
+            (*k, r)
+        })
+        .collect();
+    ranked.sort_by(|(ka, a), (kb, b)| ka.cmp(kb).then(badness(b).total_cmp(&badness(a))));
+    ranked.into_iter().take(n).map(|(_, r)| r).collect()
 }
 
 #[cfg(test)]
@@ -182,13 +194,16 @@ mod tests {
     }
 
     #[test]
-    fn the_worst_runs_are_the_unwarranted_emergencies_before_phantom_braking() {
-        let runs = vec![
+    fn the_worst_runs_are_each_familys_worst_first() {
+        let mut runs = vec![
             run("clean", metrics(1.0, 0, 0)),
             run("phantom", metrics(1.0, 3, 0)),
             run("emergency", metrics(1.0, 0, 1)),
+            run("two-emergencies", metrics(1.0, 0, 2)),
         ];
+        runs[1].family = Family::BendNeighbours;
         let names: Vec<&str> = worst(&runs, 5).iter().map(|r| r.name.as_str()).collect();
-        assert_eq!(names, ["emergency", "phantom"]);
+        assert_eq!(names, ["two-emergencies", "phantom", "emergency"]);
+        assert_eq!(worst(&runs, 1).len(), 1);
     }
 }
