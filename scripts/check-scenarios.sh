@@ -3,8 +3,9 @@
 # docs/simulator.md alone: phantom-braking layouts, far and slow leads, hard braking, dense
 # traffic, other egos, noisy sensors) with each perception, and prints the result tables.
 # Lockstep, so deterministic; about 5 minutes on 2 cores. Needs a release build
-# (cargo build --release). Not part of scripts/test.sh: the built-in scenarios are, through
-# the integration tests; these are a wider net to run before changing the ACC or the detector.
+# (cargo build --release). scripts/test.sh runs a seeded sample of eight of them with both
+# perceptions (tests/it/sweep.rs, the seed printed); this runs them all, before changing the
+# ACC or the detector.
 # Usage: scripts/check-scenarios.sh [OUT_DIR] (logs of failing runs are kept there)
 # PERCEPTIONS="camera" limits the run to one perception.
 set -euo pipefail

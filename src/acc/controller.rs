@@ -1,179 +1,24 @@
 //! The ACC's decisions, free of any I/O: lead selection, the spacing law, collision warning and
 //! emergency braking, the stale-data fallback and the low-level loop from target acceleration
-//! to throttle and brake. The node (`super::node`) feeds it; tests drive it directly.
+//! to throttle and brake. The node (`super::node`) feeds it; tests drive it directly. Its
+//! parts each have a file: the ego's motion ([`super::ego`]), the objects it is fed
+//! ([`super::objects`]), the lane ahead ([`super::lane`]), the lead estimate
+//! ([`super::lead_filter`]) and the threat ([`super::threat`]).
 //!
 //! Units: seconds of simulated time, metres, m/s, m/s2. The ego's body frame: x forward from the
 //! rear axle, y left.
 
 use std::collections::HashMap;
 
-use nalgebra::{Matrix3, Vector2, Vector3};
-
+use super::ego::EgoNow;
+use super::lane::LaneAhead;
+use super::lead_filter::{LeadFilter, Noise, SETTLE_S};
+use super::objects::{Object, PerceptionFrame};
 use super::settings::{AccSettings, PerceptionSource, TIME_GAP_RANGE_S};
-use crate::msg::{AccCommand, AccMode, AccStatus, AccWarning, Detections, GroundTruthObjects, LeadInfo, RoadSpec};
+use super::threat::{threat, Threat, THREAT_MARGIN_M};
+use crate::msg::{AccCommand, AccMode, AccStatus, AccWarning, LeadInfo, RoadSpec};
 use crate::road::Road;
 use crate::vehicle::{actuate_acceleration, VehicleParams};
-
-/// A vehicle ahead, as perception (or ground truth) reports it.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Object {
-    pub id: u32,
-    /// From the ego's origin (rear axle) to the object's rear, along ego x.
-    pub distance_m: f64,
-    /// The object's centre, ego y (positive left).
-    pub lateral_m: f64,
-    /// Object speed minus ego speed along ego x (negative: closing in).
-    pub relative_speed_mps: f64,
-    /// Its expected error as perception reports it (0: exact, as ground truth).
-    pub relative_speed_sigma_mps: f64,
-    /// Its brake lights are on.
-    pub brake_lights: bool,
-}
-
-/// The objects of one camera frame.
-#[derive(Debug, Clone, PartialEq, Default)]
-pub struct PerceptionFrame {
-    /// Simulation time of the frame.
-    pub stamp_s: f64,
-    pub objects: Vec<Object>,
-}
-
-impl PerceptionFrame {
-    pub fn from_detections(stamp_s: f64, d: &Detections) -> Self {
-        let objects = d
-            .detections
-            .iter()
-            .map(|d| Object {
-                id: d.track_id,
-                distance_m: d.distance_m,
-                lateral_m: d.lateral_offset_m,
-                relative_speed_mps: d.relative_speed_mps,
-                relative_speed_sigma_mps: d.relative_speed_sigma_mps,
-                brake_lights: d.brake_lights,
-            })
-            .collect();
-        PerceptionFrame { stamp_s, objects }
-    }
-
-    /// Ground truth as perception: every vehicle ahead of the ego's origin.
-    pub fn from_ground_truth(stamp_s: f64, gt: &GroundTruthObjects) -> Self {
-        let objects = gt
-            .objects
-            .iter()
-            .filter(|o| o.position_in_ego_m[0] > 0.0)
-            .map(|o| Object {
-                id: o.id,
-                distance_m: o.position_in_ego_m[0],
-                lateral_m: o.position_in_ego_m[1],
-                relative_speed_mps: o.velocity_in_ego_mps[0],
-                relative_speed_sigma_mps: 0.0,
-                brake_lights: o.brake_lights,
-            })
-            .collect();
-        PerceptionFrame { stamp_s, objects }
-    }
-}
-
-/// The ego now: from vehicle/speed and vehicle/state.
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct EgoNow {
-    pub t_s: f64,
-    pub speed_mps: f64,
-    /// Measured longitudinal acceleration.
-    pub accel_mps2: f64,
-    pub yaw_rate_radps: f64,
-    /// Where the ego is, when known (vehicle/state): with the road's map it gives the lane
-    /// ahead.
-    pub pose: Option<Pose>,
-}
-
-/// The ego's speed as the ACC uses it: vehicle/speed carried forward by the measured
-/// acceleration and pulled toward each new reading over EGO_SPEED_TAU_S (a complementary
-/// filter). A wheel-speed reading's noise would otherwise reach everything the ACC derives
-/// from the speed: with 0.05 m/s of it (busy-traffic's), a lead braking at 2.5 m/s2 was
-/// estimated anywhere between 0 and -4.1 from one 50 ms frame to the next with ground truth,
-/// and drew emergencies. Carried by the acceleration it does not lag a braking car. Without an
-/// acceleration (no vehicle/state yet) the reading is taken as it is; a jump beyond
-/// EGO_SPEED_RESET_MPS (a replay starting over, a reset vehicle) is too.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct EgoSpeedFilter {
-    last: Option<(f64, f64)>,
-}
-
-/// How long the filter takes to follow a reading (the noise it leaves is about a sixth of a
-/// 100 Hz reading's).
-const EGO_SPEED_TAU_S: f64 = 0.2;
-const EGO_SPEED_RESET_MPS: f64 = 2.0;
-
-impl EgoSpeedFilter {
-    /// The speed at `t_s` from the reading `measured_mps` and the acceleration measured since
-    /// the last reading, when there is one.
-    pub fn update(&mut self, t_s: f64, measured_mps: f64, accel_mps2: Option<f64>) -> f64 {
-        let v = match (self.last, accel_mps2) {
-            (Some((t0, v0)), Some(a)) if t_s > t0 => {
-                let dt = t_s - t0;
-                let predicted = v0 + a * dt;
-                if (measured_mps - predicted).abs() > EGO_SPEED_RESET_MPS {
-                    measured_mps
-                } else {
-                    (predicted + dt / (EGO_SPEED_TAU_S + dt) * (measured_mps - predicted)).max(0.0)
-                }
-            }
-            (Some((t0, v0)), Some(_)) if t_s == t0 => v0,
-            _ => measured_mps,
-        };
-        self.last = Some((t_s, v));
-        v
-    }
-}
-
-/// The ego's rear-axle position and heading in the road's frame (vehicle/state's world frame).
-#[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct Pose {
-    pub x_m: f64,
-    pub y_m: f64,
-    pub yaw_rad: f64,
-}
-
-impl Pose {
-    pub fn of(state: &crate::msg::VehicleState) -> Pose {
-        let p = state.position_in_world_m;
-        Pose { x_m: p[0], y_m: p[1], yaw_rad: state.yaw_in_world_rad }
-    }
-}
-
-/// The ego's lane on the map now: where a point in the ego's frame lies across that lane.
-struct LaneAhead<'a> {
-    road: &'a Road,
-    pose: Pose,
-    s_m: f64,
-    centre_d_m: f64,
-}
-
-impl LaneAhead<'_> {
-    /// The ego's lane on `road`, when the pose is known and on the road; `last_s_m` (the ego's
-    /// last place along it, a search hint) moves on.
-    fn find<'a>(road: Option<&'a Road>, last_s_m: &mut Option<f64>, ego: &EgoNow) -> Option<LaneAhead<'a>> {
-        let (road, pose) = (road?, ego.pose?);
-        let p = Vector2::new(pose.x_m, pose.y_m);
-        let (s, d) = match *last_s_m {
-            Some(hint) => road.project(p, hint),
-            None => road.project_anywhere(p),
-        };
-        *last_s_m = Some(s);
-        let lane = u32::try_from(road.lane_at(d)).ok()?;
-        Some(LaneAhead { road, pose, s_m: s, centre_d_m: road.lane_center_d(lane) })
-    }
-
-    /// How far left of the ego lane's centre a point (ego frame: `x` forward, `y` left) is,
-    /// measured across the road where the point is: a bend ahead bends the lane with it.
-    fn offset_m(&self, x_m: f64, y_m: f64) -> f64 {
-        let (sin, cos) = self.pose.yaw_rad.sin_cos();
-        let p = Vector2::new(self.pose.x_m + x_m * cos - y_m * sin, self.pose.y_m + x_m * sin + y_m * cos);
-        let (_, d) = self.road.project(p, self.s_m + x_m);
-        d - self.centre_d_m
-    }
-}
 
 /// What one control step decided.
 #[derive(Debug, Clone, PartialEq)]
@@ -193,234 +38,6 @@ struct Track {
     seen: u32,
 }
 
-/// The lead's gap, speed and acceleration, estimated by a Kalman filter on the relative
-/// motion: the gap shrinks by the ego's travel (its speed is known exactly) and grows by the
-/// lead's, whose acceleration is a random walk (white jerk). Perception measures the gap
-/// and the relative speed. This smooths a camera's coarse range (one image row is metres
-/// at 50 m) and gives the lead's acceleration for the threat assessment.
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct LeadFilter {
-    id: u32,
-    t_s: f64,
-    /// Gap (bumper to bumper), lead speed, lead acceleration.
-    x: Vector3<f64>,
-    p: Matrix3<f64>,
-    /// Fading average of the normalised speed innovations: noise has both signs, a lead that
-    /// starts (or stops) braking pushes it one way.
-    drift: f64,
-    /// Fading mean square of the speed innovations while the lead is followed steadily (settled,
-    /// no manoeuvre, lamps off): how noisy its speed reads, measured (m2/s2).
-    speed_noise_var: f64,
-    /// When this lead was first taken: a new track's speed still converges (the tracker starts
-    /// it at the ego's), so manoeuvres count only after SETTLE_S.
-    since_s: f64,
-    /// Until then the lead counts as manoeuvring: its speed is followed closely.
-    manoeuvre_until_s: f64,
-    /// Its brake lights were on in the last frame.
-    brake_lights: bool,
-    /// When its brake lights came on, after being off for RELIT_S at least, on a lead not yet
-    /// seen slowing; when they were last seen lit.
-    lit_from_s: Option<f64>,
-    lit_last_s: f64,
-    /// Since when its brake lights have been lit in every frame, while they are.
-    lit_run_from_s: f64,
-    /// The frame it was last measured in.
-    seen_s: f64,
-}
-
-impl LeadFilter {
-    fn new(id: u32, t_s: f64, gap_m: f64, lead_speed_mps: f64, speed_sigma_mps: f64, n: &Noise) -> Self {
-        let p = Matrix3::from_diagonal(&Vector3::new(
-            n.gap_sigma(gap_m).powi(2),
-            speed_sigma_mps.max(n.speed_steady_mps).powi(2),
-            NEW_LEAD_ACCEL_SIGMA_MPS2.powi(2),
-        ));
-        LeadFilter {
-            id,
-            t_s,
-            x: Vector3::new(gap_m, lead_speed_mps, 0.0),
-            p,
-            drift: 0.0,
-            speed_noise_var: speed_sigma_mps.max(n.speed_sigma(gap_m)).powi(2),
-            since_s: t_s,
-            manoeuvre_until_s: t_s,
-            brake_lights: false,
-            lit_from_s: None,
-            lit_last_s: f64::NEG_INFINITY,
-            lit_run_from_s: t_s,
-            seen_s: t_s,
-        }
-    }
-
-    /// A measurement of the lead's speed. The filter assumes a slowly changing acceleration
-    /// (smooth following behind a noisy camera range); when the speed innovations drift one
-    /// way, the lead has changed what it does (a hard brake, say) and the acceleration's
-    /// uncertainty is opened up, so the next frames measure it anew within a few frames
-    /// instead of the seconds the slow model would take.
-    ///
-    /// `sigma` is the measurement's noise, used to detect a manoeuvre and while one lasts;
-    /// otherwise the filter smooths with at least `steady_sigma`.
-    fn update_speed(&mut self, z: f64, sigma: f64, steady_sigma: f64) {
-        // Against the measurement's own noise: the estimate's spread, wide while smoothing,
-        // would hide the lead's first braking.
-        let nu = (z - self.x[1]) / sigma;
-        self.drift += MANOEUVRE_DRIFT_GAIN * (nu - self.drift);
-        if self.settled() && self.t_s >= self.manoeuvre_until_s && !self.brake_lights {
-            self.speed_noise_var += SPEED_NOISE_GAIN * ((z - self.x[1]).powi(2) - self.speed_noise_var);
-        }
-        if self.settled() && self.drift.abs() > MANOEUVRE_DRIFT {
-            tracing::debug!(id = self.id, t_s = self.t_s, drift = self.drift, "lead manoeuvre");
-            self.manoeuvre();
-        }
-        let sigma = if self.t_s < self.manoeuvre_until_s || !self.settled() { sigma } else { sigma.max(steady_sigma) };
-        self.update(1, z, sigma);
-        if !self.settled() {
-            self.unknown_accel();
-        }
-    }
-
-    /// While a new lead's speed converges on what perception measures (from the ego's speed
-    /// at first, over tenths of a second far away), that change is the measurement's, not
-    /// the lead's: the acceleration stays unknown (zero, at its first uncertainty) until the
-    /// lead is settled. Taken as the lead's, a car standing 175 m ahead read as braking at
-    /// 4.2 m/s2 when followed for a second and drew an emergency 7.8 s from it.
-    fn unknown_accel(&mut self) {
-        self.x[2] = 0.0;
-        for i in 0..2 {
-            self.p[(i, 2)] = 0.0;
-            self.p[(2, i)] = 0.0;
-        }
-        self.p[(2, 2)] = NEW_LEAD_ACCEL_SIGMA_MPS2.powi(2);
-    }
-
-    /// The lead changed what it does: the acceleration's uncertainty (and the speed's that
-    /// builds over a window of it) is opened up and its speed followed closely for a while.
-    fn manoeuvre(&mut self) {
-        self.p[(2, 2)] += MANOEUVRE_ACCEL_SIGMA_MPS2 * MANOEUVRE_ACCEL_SIGMA_MPS2;
-        self.p[(1, 1)] += (MANOEUVRE_ACCEL_SIGMA_MPS2 * MANOEUVRE_WINDOW_S).powi(2);
-        self.drift = 0.0;
-        self.manoeuvre_until_s = self.t_s + MANOEUVRE_HOLD_S;
-    }
-
-    /// The lead's brake lights in a frame: coming on, they start a manoeuvre at once (the
-    /// pedal is pressed before the deceleration builds, and before the speed innovations
-    /// could say so).
-    fn brake_lights(&mut self, on: bool) {
-        // A brake application starting: not a frame or two of the lamps missed in a long one,
-        // nor a driver dabbing the pedal to hold a speed (lamps flickering every few frames: a
-        // car ending its braking 170 m ahead, each flash a new manoeuvre, had its speed followed
-        // at the range's noise for seconds and read as braking at 13 m/s2).
-        if on && !self.brake_lights && self.settled() && self.t_s - self.lit_last_s >= RELIT_S {
-            tracing::debug!(id = self.id, t_s = self.t_s, "lead brake lights on");
-            self.manoeuvre();
-            // Not for the lamps of a lead already seen slowing: its deceleration is measured,
-            // the lamps add nothing to it.
-            self.lit_from_s = (self.x[2] >= SLOWING_MPS2).then_some(self.t_s);
-        }
-        if on && !self.brake_lights {
-            self.lit_run_from_s = self.t_s;
-        }
-        if on {
-            self.lit_last_s = self.t_s;
-        }
-        self.brake_lights = on;
-    }
-
-    /// How noisy its speed reads (`speed_noise_var`), m/s.
-    fn speed_noise_mps(&self) -> f64 {
-        self.speed_noise_var.sqrt()
-    }
-
-    /// Its brake lights vouch for its estimated acceleration (`LeadNow::lamps_vouch`).
-    fn lamps_vouch(&self) -> bool {
-        self.brake_lights
-            && self.t_s - self.lit_run_from_s >= LIT_HELD_S - 1e-9
-            && self.speed_noise_mps() <= LAMPS_VOUCH_NOISE_MPS
-    }
-
-    /// How long ago the lead's brake lights came on, while they are on.
-    fn lit_for_s(&self) -> Option<f64> {
-        self.lit_from_s.filter(|_| self.brake_lights).map(|from| self.t_s - from)
-    }
-
-    /// Moves the estimate to `t_s` with the ego at `ego_speed_mps`.
-    fn predict(&mut self, t_s: f64, ego_speed_mps: f64, jerk_sigma: f64) {
-        let dt = t_s - self.t_s;
-        if dt <= 0.0 {
-            return;
-        }
-        // A lead whose brake lights came on builds its deceleration: for the manoeuvre's
-        // hold its acceleration may change as fast as a brake application makes it.
-        let jerk_sigma = if self.brake_lights && self.t_s < self.manoeuvre_until_s {
-            jerk_sigma.max(BRAKING_JERK_SIGMA_MPS3)
-        } else {
-            jerk_sigma
-        };
-        self.t_s = t_s;
-        let f = Matrix3::new(1.0, dt, dt * dt / 2.0, 0.0, 1.0, dt, 0.0, 0.0, 1.0);
-        self.x = f * self.x;
-        self.x[0] -= ego_speed_mps * dt;
-        // A stopped lead does not roll backwards.
-        if self.x[1] < 0.0 {
-            self.x[1] = 0.0;
-            self.x[2] = self.x[2].max(0.0);
-        }
-        let (d2, d3, d4, d5) = (dt * dt, dt.powi(3), dt.powi(4), dt.powi(5));
-        let q = Matrix3::new(d5 / 20.0, d4 / 8.0, d3 / 6.0, d4 / 8.0, d3 / 3.0, d2 / 2.0, d3 / 6.0, d2 / 2.0, dt)
-            * (jerk_sigma * jerk_sigma);
-        self.p = f * self.p * f.transpose() + q;
-    }
-
-    /// Followed long enough for its speed and acceleration to mean something.
-    fn settled(&self) -> bool {
-        self.t_s - self.since_s >= SETTLE_S
-    }
-
-    /// A scalar measurement of state component `i`.
-    fn update(&mut self, i: usize, z: f64, sigma: f64) {
-        let s = self.p[(i, i)] + sigma * sigma;
-        let k: Vector3<f64> = self.p.column(i) / s;
-        self.x += k * (z - self.x[i]);
-        let mut kh = Matrix3::zeros();
-        kh.set_column(i, &k);
-        self.p = (Matrix3::identity() - kh) * self.p;
-    }
-}
-
-/// Measurement noise of the perception source.
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct Noise {
-    gap_base_m: f64,
-    gap_per_m2: f64,
-    speed_base_mps: f64,
-    speed_per_m2: f64,
-    /// Outside manoeuvres the speed is smoothed as if this noisy.
-    speed_steady_mps: f64,
-    jerk_sigma_mps3: f64,
-    /// How far the lead's estimated deceleration may overshoot the true one.
-    hard_braking_margin_mps2: f64,
-}
-
-impl Noise {
-    fn gap_sigma(&self, gap_m: f64) -> f64 {
-        self.gap_base_m + self.gap_per_m2 * gap_m.max(0.0).powi(2)
-    }
-
-    fn speed_sigma(&self, gap_m: f64) -> f64 {
-        self.speed_base_mps + self.speed_per_m2 * gap_m.max(0.0).powi(2)
-    }
-
-    /// The steady smoothing of the lead's speed at this gap: the setting's from
-    /// STEADY_FULL_GAP_M on, less nearer, with the square of the gap (as the range's error),
-    /// never below the measurement's own noise.
-    fn speed_steady(&self, gap_m: f64) -> f64 {
-        let share = (gap_m.max(0.0) / STEADY_FULL_GAP_M).powi(2).min(1.0);
-        (self.speed_steady_mps * share).max(self.speed_sigma(gap_m))
-    }
-}
-
-/// From this gap on the lead's speed is smoothed at the estimator's steady_speed_sigma_mps.
-const STEADY_FULL_GAP_M: f64 = 50.0;
 /// The lane width the settings' in-lane limits are for.
 const SETTINGS_LANE_WIDTH_M: f64 = 3.5;
 /// Filter constant for the per-track lateral speed, per perception frame.
@@ -430,10 +47,6 @@ const RATE_FILTER: f64 = 0.3;
 /// image's side, is measured on what of it is still in view), not the vehicle: it counts
 /// as this much.
 const MAX_LATERAL_RATE_MPS: f64 = 3.0;
-/// Margin kept when computing the deceleration that still avoids a collision.
-const THREAT_MARGIN_M: f64 = 2.0;
-/// Lead deceleration below which the threat assessment assumes it brakes to a stop.
-const LEAD_BRAKING_MPS2: f64 = -0.5;
 /// The collision-avoidance guard on the follow law takes over above this needed deceleration.
 const NEEDED_GUARD_MPS2: f64 = 1.0;
 /// A threat farther than this many time gaps, not closing fast (matching its speed needs less
@@ -447,37 +60,11 @@ const FAR_DECEL_MPS2: f64 = 0.8;
 /// settling reads as braking (a car 170 m ahead at 22 m/s, -3.8 m/s2 for a second against a
 /// sigma of 1.4, drew 1.3 s of phantom braking at up to 1.9 m/s2).
 const FAR_BRAKING_MPS2: f64 = 2.5;
-/// The gain per frame of the lead's measured speed noise (a fading mean square).
-const SPEED_NOISE_GAIN: f64 = 0.1;
-/// Brake lights vouch for the estimate of a lead whose speed reads within this (steady, before
-/// the lamps): an order of magnitude from either side of what was measured, 0.0003-0.08 m/s for
-/// cars, motorcycles and trucks 50-120 m ahead whose estimates followed their braking, 1.4 and
-/// 8.6 m/s for cars 143 and 176 m ahead whose estimates swung by 6 m/s2 and more.
-const LAMPS_VOUCH_NOISE_MPS: f64 = 0.5;
-/// Manoeuvre detection on the lead's speed: the fading average's gain per frame, the level
-/// that says the lead changed its acceleration, and the acceleration uncertainty (and the
-/// speed uncertainty that builds over a window of it) opened up then.
-const MANOEUVRE_DRIFT_GAIN: f64 = 0.5;
-const MANOEUVRE_DRIFT: f64 = 2.0;
-const MANOEUVRE_ACCEL_SIGMA_MPS2: f64 = 6.0;
-const MANOEUVRE_WINDOW_S: f64 = 0.1;
-/// The lead's jerk (white-noise sigma) for MANOEUVRE_HOLD_S after its brake lights came on: a
-/// brake application builds deceleration at some 10 m/s3, far beyond the steady model's.
-const BRAKING_JERK_SIGMA_MPS3: f64 = 10.0;
 /// For this long after a lead's brake lights come on, before its speed can say how hard it
 /// brakes, comfort braking plans for it braking at the comfort limit (`Controller::step`).
 pub(super) const LIT_ANTICIPATION_S: f64 = 0.5;
 /// ...where a lead braking at the comfort limit would need at least this share of it.
 const LIT_NEED_SHARE: f64 = 0.4;
-/// Brake lights lit in every frame for this long are held on (`LeadNow::lamps_vouch`): four
-/// frames at 20 Hz. Far away a detector misses lit lamps in a frame now and then (some 3%):
-/// such a miss costs this long again.
-const LIT_HELD_S: f64 = 0.15;
-/// Lamps seen lit again within this long of the last frame they were lit in are the same
-/// brake application (a frame or two of them missed).
-const RELIT_S: f64 = 0.5;
-/// A lead whose estimated acceleration is below this is seen slowing already.
-const SLOWING_MPS2: f64 = -0.3;
 /// While a new lead's speed is still being measured, comfort braking plans for it being this
 /// many of its standard deviations slower.
 const UNMEASURED_SIGMAS: f64 = 2.0;
@@ -491,12 +78,6 @@ const STANDING_COAST_S: f64 = 2.0;
 const STANDING_LEAD_MPS: f64 = 1.0;
 /// A vehicle counts as beyond the lead from this far past it (not the lead seen twice).
 const BEYOND_LEAD_M: f64 = 3.0;
-/// How long after a manoeuvre the lead's speed is followed closely.
-const MANOEUVRE_HOLD_S: f64 = 1.0;
-/// A lead is judged on its acceleration (manoeuvres, braking hard) once followed this long.
-const SETTLE_S: f64 = 1.0;
-/// A new lead's acceleration uncertainty (until SETTLE_S).
-const NEW_LEAD_ACCEL_SIGMA_MPS2: f64 = 2.0;
 /// With ground truth a lead counts as braking beyond comfort when its estimated deceleration
 /// exceeds the comfort limit by this much (the camera's margin is a setting): the estimate
 /// converges on the true deceleration from below, so this only keeps a lead braking at the
@@ -601,65 +182,6 @@ struct Revealed {
     stamp_s: f64,
     gap_m: f64,
     relative_speed_mps: f64,
-}
-
-/// The threat a lead poses now.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Threat {
-    pub ttc_s: Option<f64>,
-    /// Deceleration (positive) that keeps THREAT_MARGIN_M to the lead.
-    pub needed_decel_mps2: f64,
-    /// What it was computed from: the gap less THREAT_MARGIN_M, the lead's speed and
-    /// acceleration.
-    pub room_m: f64,
-    pub lead_speed_mps: f64,
-    pub lead_accel_mps2: f64,
-}
-
-impl Threat {
-    /// The worse of two threats: the shorter TTC and the larger need.
-    fn or_worse(&self, other: &Threat) -> Threat {
-        let ttc_s = match (self.ttc_s, other.ttc_s) {
-            (Some(a), Some(b)) => Some(a.min(b)),
-            (a, b) => a.or(b),
-        };
-        let worse = if other.needed_decel_mps2 > self.needed_decel_mps2 { other } else { self };
-        Threat { ttc_s, ..*worse }
-    }
-}
-
-/// Time to collision and the deceleration that still avoids one, from the gap, the speeds and
-/// the lead's acceleration (a braking lead is assumed to brake to a stop).
-pub fn threat(gap_m: f64, ego_speed_mps: f64, lead_speed_mps: f64, lead_accel_mps2: f64) -> Threat {
-    let closing = ego_speed_mps - lead_speed_mps;
-    let ttc_s = (closing > 0.1).then(|| gap_m.max(0.0) / closing);
-    let room = (gap_m - THREAT_MARGIN_M).max(0.1);
-    let lead_decel = (-lead_accel_mps2).max(0.0);
-    // Both keep braking until the speeds match: the relative motion decides.
-    let matching = if closing > 0.0 { lead_decel + closing * closing / (2.0 * room) } else { 0.0 };
-    let lead_speed = lead_speed_mps.max(0.0);
-    let of = |needed_decel_mps2: f64| Threat {
-        ttc_s,
-        needed_decel_mps2,
-        room_m: gap_m - THREAT_MARGIN_M,
-        lead_speed_mps: lead_speed,
-        lead_accel_mps2,
-    };
-    if lead_accel_mps2 >= LEAD_BRAKING_MPS2 {
-        return of(matching);
-    }
-    // A braking lead: does it stop before the speeds would match?
-    let lead_stops_first = closing <= 0.0 || {
-        let t_match = closing / (matching - lead_decel).max(1e-6);
-        lead_speed_mps - lead_decel * t_match <= 0.0
-    };
-    if lead_stops_first {
-        // Then stop behind where it stops (v_L^2 / 2|a_L| on).
-        let lead_stop = lead_speed.powi(2) / (2.0 * lead_decel);
-        of(ego_speed_mps.powi(2) / (2.0 * (room + lead_stop)))
-    } else {
-        of(matching)
-    }
 }
 
 impl Controller {

@@ -16,7 +16,9 @@ use std::time::{Duration, Instant};
 
 use serde::Serialize;
 
-use super::controller::{Controller, EgoNow, EgoSpeedFilter, Output, PerceptionFrame, Pose};
+use super::controller::{Controller, Output};
+use super::ego::{EgoNow, EgoSpeedFilter, Pose};
+use super::objects::PerceptionFrame;
 use super::settings::{AccSettings, PerceptionSource};
 use crate::bus::{Arrivals, Bus, BusError, Following, NodeWatch, Received, StatsSnapshot, Subscriber};
 use crate::config::ConfigError;

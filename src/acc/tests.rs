@@ -2,7 +2,10 @@
 //! loop with the simulator is tested in the eval layer (src/eval/offline.rs).
 
 use super::controller::*;
+use super::ego::*;
+use super::objects::*;
 use super::settings::AccSettings;
+use super::threat::*;
 use crate::msg::{AccCommand, AccMode, AccWarning};
 
 const DT: f64 = 0.01;
