@@ -158,7 +158,9 @@ enum Command {
 enum EvalCommand {
     /// Vehicle detection: runs scenarios in process (world, camera, detector and tracker; the
     /// ego keeps its start speed and slows for the vehicle ahead), matches detections to the ground truth of the same frame, and reports
-    /// precision, recall and distance/lateral errors by range
+    /// precision, recall and distance/lateral errors by range, and the lateral error 80-200 m
+    /// ahead by range and the bend it is seen through (--family bend-neighbours scores the
+    /// bends of `eval sweep`)
     Detect {
         /// Scenarios to run (names or files) [default: the standard set]
         #[arg(long = "scenario", value_name = "NAME")]
@@ -181,6 +183,16 @@ enum EvalCommand {
         /// JPEG quality for --frames jpeg, 1..100
         #[arg(long, default_value_t = 85, value_parser = clap::value_parser!(u8).range(1..=100))]
         jpeg_quality: u8,
+        /// Also score --count scenarios of this `eval sweep` family (the sweep's own, with
+        /// --seed), e.g. bend-neighbours for the lateral error far ahead in bends
+        #[arg(long, value_enum)]
+        family: Option<slipstream::eval::sweep::families::Family>,
+        /// How many scenarios of --family
+        #[arg(long, default_value_t = 20)]
+        count: usize,
+        /// The sweep seed the --family scenarios come from
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
     },
     /// Adaptive cruise control: runs slipstream-sim (lockstep, fast), slipstream-detect and
     /// slipstream-acc as separate processes over Zenoh through each scenario and reports
@@ -351,9 +363,9 @@ fn run(cli: Cli) -> Result<ExitCode> {
 /// (acc).
 fn eval_command(command: EvalCommand, connect: &ConnectArgs) -> Result<ExitCode> {
     match command {
-        EvalCommand::Detect { scenarios, seconds, json, settings, frames, jpeg_quality } => {
+        EvalCommand::Detect { scenarios, seconds, json, settings, frames, jpeg_quality, family, count, seed } => {
             use slipstream::eval::{detect, link_codec::LinkCodec};
-            let names: Vec<String> = if scenarios.is_empty() { detect::standard() } else { scenarios };
+            let scenarios = detect::scenarios(&scenarios, family, count, seed)?;
             let settings = slipstream::sim::SimSettings::load_or_default(settings.as_deref())?;
             let codec = match frames.as_deref() {
                 None => None,
@@ -364,7 +376,7 @@ fn eval_command(command: EvalCommand, connect: &ConnectArgs) -> Result<ExitCode>
                     Some(LinkCodec::new(e, jpeg_quality))
                 }
             };
-            let report = detect::evaluate(&names, seconds, &settings, codec)?;
+            let report = detect::evaluate(scenarios, seconds, &settings, codec);
             print_report(json, &report, detect::markdown)?;
             Ok(ExitCode::SUCCESS)
         }

@@ -11,6 +11,7 @@
 
 use serde::Serialize;
 
+use super::bend_lateral::{self, LateralCell};
 use super::link_codec::{LinkCodec, LinkCost};
 use crate::msg::{Detection, GroundTruthObject};
 use crate::perception::{CameraRig, DetectorParams};
@@ -62,6 +63,10 @@ pub struct MatchError {
     /// |estimated - true| / true.
     pub distance_rel: f64,
     pub lateral_abs_m: f64,
+    /// Estimated - true lateral offset, positive left.
+    pub lateral_signed_m: f64,
+    /// The tightest bend (|radius|, m) between the ego and the vehicle; None on a straight.
+    pub bend_radius_m: Option<f64>,
     /// |estimated - true| relative speed, m/s, for tracks seen at least 3 times.
     pub relative_speed_abs_mps: Option<f64>,
 }
@@ -117,8 +122,15 @@ pub struct Tally {
 }
 
 impl Tally {
-    /// Scores one frame: greedy matching by IoU, best pairs first.
-    pub fn add_frame(&mut self, dets: &[Detection], truth: &[GroundTruthObject], max_range_m: f64, min_visible: f32) {
+    /// Scores one frame: greedy matching by IoU, best pairs first; `bend` names the bend each
+    /// vehicle is seen through.
+    pub fn add_frame(
+        &mut self,
+        dets: &[Detection],
+        truth: &[GroundTruthObject],
+        (max_range_m, min_visible): (f64, f32),
+        bend: &dyn Fn(&GroundTruthObject) -> Option<f64>,
+    ) {
         self.frames += 1;
         self.detections += dets.len() as u64;
         let in_view: Vec<&GroundTruthObject> =
@@ -159,6 +171,8 @@ impl Tally {
                     true_distance_m: truth_x,
                     distance_rel: (d.distance_m - truth_x).abs() / truth_x,
                     lateral_abs_m: (d.lateral_offset_m - o.position_in_ego_m[1]).abs(),
+                    lateral_signed_m: d.lateral_offset_m - o.position_in_ego_m[1],
+                    bend_radius_m: bend(o),
                     relative_speed_abs_mps: (settled && d.relative_speed_mps != 0.0)
                         .then(|| (d.relative_speed_mps - o.velocity_in_ego_mps[0]).abs()),
                 });
@@ -255,10 +269,32 @@ pub fn evaluate_scenario(
                     rig.update(&front, narrow.as_deref(), t_s)
                 }
             };
-            tally.add_frame(&dets, &truth.objects, 60.0, 0.5);
+            let road = world.road();
+            let ego_s = bend_lateral::ego_s(road, world.ego_state().position_in_world_m);
+            tally.add_frame(&dets, &truth.objects, (60.0, 0.5), &|o| bend_lateral::bend_of(road, ego_s, o));
         }
         world.step(EgoInput::Follow);
     }
+}
+
+/// The scenarios to score: `names` (built-in or files), then `count` generated ones of
+/// `family` (the sweep's, with `seed`); none at all: the standard set.
+pub fn scenarios(
+    names: &[String],
+    family: Option<super::sweep::families::Family>,
+    count: usize,
+    seed: u64,
+) -> Result<Vec<Scenario>, crate::config::ConfigError> {
+    let mut out: Vec<Scenario> = names.iter().map(|n| Scenario::find(n)).collect::<Result<_, _>>()?;
+    if let Some(f) = family {
+        for j in 0..count {
+            out.push(super::sweep::families::nth(f, seed, j).parse()?);
+        }
+    }
+    if out.is_empty() {
+        out = standard().iter().map(|n| Scenario::find(n)).collect::<Result<_, _>>()?;
+    }
+    Ok(out)
 }
 
 /// The standard scenarios for detection scores: every built-in one.
@@ -274,6 +310,8 @@ pub struct DetectReport {
     pub frames_through: Option<LinkCost>,
     pub scenarios: Vec<ScenarioScore>,
     pub overall: ScenarioScore,
+    /// The lateral error 80-200 m ahead by range band and bend ([`bend_lateral`]).
+    pub lateral_in_bends: Vec<LateralCell>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -329,28 +367,37 @@ impl ScenarioScore {
     }
 }
 
-/// Evaluates the named scenarios (each for at most `seconds` simulated); progress on stderr.
+/// Evaluates `scenarios` (each for at most `seconds` simulated); progress on stderr.
 pub fn evaluate(
-    names: &[String],
+    scenarios: Vec<Scenario>,
     seconds: f64,
     settings: &SimSettings,
     mut codec: Option<LinkCodec>,
-) -> Result<DetectReport, crate::config::ConfigError> {
+) -> DetectReport {
     let mut overall = Tally::default();
-    let mut scenarios = Vec::new();
-    for name in names {
-        let scenario = Scenario::find(name)?;
+    let mut scores = Vec::new();
+    let total = scenarios.len();
+    for (i, scenario) in scenarios.into_iter().enumerate() {
         let seed = scenario.seed;
         let mut t = Tally::default();
         let started = std::time::Instant::now();
-        evaluate_scenario(scenario.clone(), seed, settings, seconds, &mut t, codec.as_mut());
-        eprintln!("{name}: {} frames in {:.1} s", t.frames, started.elapsed().as_secs_f64());
-        scenarios.push(ScenarioScore::from_tally(&scenario.name, &t));
+        let name = scenario.name.clone();
+        evaluate_scenario(scenario, seed, settings, seconds, &mut t, codec.as_mut());
+        eprintln!("[{}/{total}] {name}: {} frames in {:.1} s", i + 1, t.frames, started.elapsed().as_secs_f64());
+        scores.push(ScenarioScore::from_tally(&name, &t));
         overall.merge(t);
     }
     let command = std::env::args().collect::<Vec<_>>().join(" ");
     let frames_through = codec.map(|c| c.cost());
-    Ok(DetectReport { command, frames_through, scenarios, overall: ScenarioScore::from_tally("all", &overall) })
+    let lateral_in_bends =
+        bend_lateral::table(overall.errors.iter().map(|e| (e.true_distance_m, e.bend_radius_m, e.lateral_signed_m)));
+    DetectReport {
+        command,
+        frames_through,
+        scenarios: scores,
+        overall: ScenarioScore::from_tally("all", &overall),
+        lateral_in_bends,
+    }
 }
 
 impl Tally {
@@ -399,7 +446,8 @@ pub fn markdown(report: &DetectReport) -> String {
             r.brake_lights.unlit,
         ));
     }
-    s.push_str("\nErrors: median / p90 over matched detections (relative speed: tracks seen twice or more).\n");
+    s.push_str("\nErrors: median / p90 over matched detections (relative speed: tracks seen twice or more).\n\n");
+    s.push_str(&bend_lateral::markdown(&report.lateral_in_bends));
     if let Some(c) = &report.frames_through {
         let quality = if c.encoding == "jpeg" { format!(" at quality {}", c.jpeg_quality) } else { String::new() };
         s.push_str(&format!(

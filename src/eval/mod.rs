@@ -21,12 +21,14 @@
 //!   rates per 1,000 km (runs of [`acc`]).
 //! - [`faults`]: `slipstream eval faults`, the ACC's safety envelope under injected network
 //!   faults (runs of [`acc`] with fault profiles).
-//! - [`detect`]: `slipstream eval detect`, the detector scored against ground truth, in process.
+//! - [`detect`]: `slipstream eval detect`, the detector scored against ground truth, in process;
+//!   [`bend_lateral`]: its lateral error far ahead by range and bend.
 //! - [`offline`]: the closed loop in one process without the bus (tests and tuning).
 //! - [`resim`]: a recording in place of the simulator: today's detector and ACC answer the
 //!   recorded inputs, and their outputs are compared with the recorded ones (`up --from`).
 
 pub mod acc;
+pub mod bend_lateral;
 pub mod detect;
 pub mod faults;
 pub mod judge;

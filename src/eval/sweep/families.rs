@@ -125,6 +125,20 @@ pub fn generate(family: Family, seed: u64, index: usize) -> Generated {
     Generated { name, family, warranted, scenario }
 }
 
+/// The `j`-th scenario of `family` in a sweep over every family with `seed` (`eval sweep`
+/// deals the families in turn): `eval detect --family` measures the same scenarios.
+pub fn nth(family: Family, seed: u64, j: usize) -> Generated {
+    let place = Family::ALL.iter().position(|f| *f == family).expect("every family is in ALL");
+    generate(family, seed, place + j * Family::ALL.len())
+}
+
+impl Generated {
+    /// The scenario itself, checked as a file of it would be.
+    pub fn parse(&self) -> Result<crate::sim::Scenario, crate::config::ConfigError> {
+        crate::sim::Scenario::parse(&self.scenario.to_string(), &self.name)
+    }
+}
+
 /// Two decimals: the files stay readable.
 fn round(x: f64) -> f64 {
     (x * 100.0).round() / 100.0
@@ -497,6 +511,13 @@ mod tests {
                 assert_eq!(generate(family, 7, index).scenario, g.scenario);
             }
             assert_ne!(generate(family, 7, 0).scenario, generate(family, 8, 0).scenario);
+            // The n-th of a family is the sweep's: dealt in turn.
+            let third = nth(family, 7, 2);
+            assert_eq!(
+                third.scenario,
+                generate(family, 7, third.name[third.name.len() - 4..].parse().unwrap()).scenario
+            );
+            assert!(third.parse().is_ok());
         }
     }
 
