@@ -236,6 +236,43 @@ struct Feel {
     max_swing: Option<f64>,
 }
 
+impl Feel {
+    /// A vehicle in the ego's lane at sample `x` (its acceleration when known): when it last
+    /// needed an emergency, was near enough to brake for, was just ahead.
+    fn vehicle(&mut self, x: &Sample, tl: &TruthLead, lead_accel: Option<f64>, standstill_m: f64) {
+        let f = self;
+        let closing = -tl.relative_speed_mps;
+        // A lead braking beyond the comfort limit warrants an emergency when stopping behind
+        // it needs real braking.
+        // What stopping behind a braking lead needs, were it to brake on to a stop.
+        let braking_need = lead_accel.filter(|a| *a < 0.0).map_or(0.0, |a| needed_behind(tl, x.speed_mps, a));
+        let hard = lead_accel.is_some_and(|a| a < -aims::MAX_DECEL_MPS2) && braking_need > PHANTOM_DECEL_MPS2;
+        if hard
+            || ttc(tl).is_some_and(|t| t < WARRANTED_TTC_S)
+            || tl.gap_m < standstill_m + 0.5 * x.time_gap_s * x.speed_mps
+        {
+            f.last_needed_t = Some(x.t_s);
+        }
+        // Near enough to brake for: within twice the time gap, or closing so fast that
+        // matching its speed short of the standstill distance needs real braking (a
+        // stopped car far ahead at motorway speed), or braking so that stopping behind it
+        // would need real braking (a truck 120 m ahead at 30 m/s braking at 5 m/s2: its
+        // emergency was warranted, the braking in it and just before read as phantom; one
+        // 200 m ahead braking at 1 m/s2 needs 0.7 and is not braked for).
+        let room = (tl.gap_m - standstill_m).max(0.1);
+        let needed = if closing > 0.0 { closing * closing / (2.0 * room) } else { 0.0 };
+        if braking_need > PHANTOM_DECEL_MPS2
+            || tl.gap_m <= standstill_m + 2.0 * x.time_gap_s * x.speed_mps
+            || needed >= WARRANTED_BRAKING_MPS2
+        {
+            f.last_near_t = Some(x.t_s);
+        }
+        if tl.gap_m <= standstill_m + STANDSTILL_CLEAR_M {
+            f.last_ahead_t = Some(x.t_s);
+        }
+    }
+}
+
 /// Time to collision with the true lead, when it closes in (faster than 0.1 m/s).
 fn ttc(tl: &TruthLead) -> Option<f64> {
     let closing = -tl.relative_speed_mps;
@@ -323,36 +360,13 @@ impl Tally {
             Some(Warranted::Emergency) | None => (false, false),
         };
         let f = &mut self.feel;
+        // The true lead, and the next vehicle in the lane beyond it (one the lead hides from a
+        // camera, but not from the truth: a car standing beyond a lead about to move out).
         if let Some(tl) = x.truth {
-            let closing = -tl.relative_speed_mps;
-            // A lead braking beyond the comfort limit warrants an emergency when stopping behind
-            // it needs real braking.
-            // What stopping behind a braking lead needs, were it to brake on to a stop.
-            let braking_need = lead_accel.filter(|a| *a < 0.0).map_or(0.0, |a| needed_behind(&tl, x.speed_mps, a));
-            let hard = lead_accel.is_some_and(|a| a < -aims::MAX_DECEL_MPS2) && braking_need > PHANTOM_DECEL_MPS2;
-            if hard
-                || ttc(&tl).is_some_and(|t| t < WARRANTED_TTC_S)
-                || tl.gap_m < standstill_m + 0.5 * x.time_gap_s * x.speed_mps
-            {
-                f.last_needed_t = Some(x.t_s);
-            }
-            // Near enough to brake for: within twice the time gap, or closing so fast that
-            // matching its speed short of the standstill distance needs real braking (a
-            // stopped car far ahead at motorway speed), or braking so that stopping behind it
-            // would need real braking (a truck 120 m ahead at 30 m/s braking at 5 m/s2: its
-            // emergency was warranted, the braking in it and just before read as phantom; one
-            // 200 m ahead braking at 1 m/s2 needs 0.7 and is not braked for).
-            let room = (tl.gap_m - standstill_m).max(0.1);
-            let needed = if closing > 0.0 { closing * closing / (2.0 * room) } else { 0.0 };
-            if braking_need > PHANTOM_DECEL_MPS2
-                || tl.gap_m <= standstill_m + 2.0 * x.time_gap_s * x.speed_mps
-                || needed >= WARRANTED_BRAKING_MPS2
-            {
-                f.last_near_t = Some(x.t_s);
-            }
-            if tl.gap_m <= standstill_m + STANDSTILL_CLEAR_M {
-                f.last_ahead_t = Some(x.t_s);
-            }
+            f.vehicle(x, &tl, lead_accel, standstill_m);
+        }
+        if let Some(tl) = x.beyond {
+            f.vehicle(x, &tl, None, standstill_m);
         }
         let since = |t: Option<f64>| t.map_or(f64::INFINITY, |t| x.t_s - t);
         // Emergencies: judged at their end, warranted by need from just before their start.
@@ -624,6 +638,7 @@ mod tests {
                         relative_speed_mps,
                         speed_mps: speed_mps + relative_speed_mps,
                     }),
+                    beyond: None,
                 }
             })
             .collect();
@@ -721,6 +736,19 @@ mod tests {
         assert_eq!(Metrics::of(&closing).unwarranted_emergencies, 0);
         closing.braking_warranted = Some(Warranted::Comfort);
         assert_eq!(Metrics::of(&closing).unwarranted_emergencies, 1);
+    }
+
+    #[test]
+    fn braking_for_a_vehicle_standing_beyond_the_lead_is_warranted() {
+        // The lead pulls away 60 m ahead (beyond twice the time gap at 15 m/s); a car stands
+        // in the lane 95 m ahead beyond it: stopping short of it needs 1.3 m/s2.
+        let braking = |t: f64| if (10.0..12.0).contains(&t) { -1.2 } else { 0.0 };
+        let mut run = trace(30.0, |t| (15.0, braking(t), AccMode::Follow, Some((60.0, 3.0))));
+        assert!(Metrics::of(&run).phantom_braking_s > 1.9, "the lead alone does not warrant it");
+        for x in &mut run.samples {
+            x.beyond = Some(TruthLead { id: 2, gap_m: 95.0, relative_speed_mps: -15.0, speed_mps: 0.0 });
+        }
+        assert_eq!(Metrics::of(&run).phantom_braking_s, 0.0);
     }
 
     #[test]

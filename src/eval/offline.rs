@@ -3,7 +3,7 @@
 //! controller at every step. Deterministic and fast; the tests tune and check the control law
 //! with it. `slipstream eval acc` runs the real processes instead.
 
-use super::trace::{truth_lead, Sample, Trace};
+use super::trace::{truth_in_lane, Sample, Trace};
 use crate::acc::{AccSettings, Controller, EgoNow, PerceptionFrame, PerceptionSource, Pose};
 use crate::msg::{due, ControlCommand};
 use crate::perception::{CameraRig, DetectorParams};
@@ -48,7 +48,7 @@ pub fn run(scenario: Scenario, settings: AccSettings, physics_hz: u32, camera_hz
     // The road's map, as the simulator's sim/road gives it to slipstream-acc.
     ctl.set_road(world.road().spec());
     let mut trace = Trace { standstill_m, min_gap_aim_m, braking_warranted, ..Default::default() };
-    let mut truth = None;
+    let mut truth = (None, None);
     loop {
         let k = world.step_count();
         let t_s = world.time_ns() as f64 / 1e9;
@@ -62,7 +62,7 @@ pub fn run(scenario: Scenario, settings: AccSettings, physics_hz: u32, camera_hz
         };
         if due(k, camera_hz, physics_hz) {
             let gt = ground_truth(&world, &[]);
-            truth = truth_lead(&gt, state.lane, ctl.settings().vehicle.front_overhang_from_origin_m);
+            truth = truth_in_lane(&gt, state.lane, ctl.settings().vehicle.front_overhang_from_origin_m);
             let frame = match camera.as_mut() {
                 Some(camera) => camera.perceive(&world, t_s),
                 None => PerceptionFrame::from_ground_truth(t_s, &gt),

@@ -33,13 +33,23 @@ pub struct TruthLead {
     pub speed_mps: f64,
 }
 
-pub fn truth_lead(gt: &GroundTruthObjects, ego_lane: i32, ego_front_m: f64) -> Option<TruthLead> {
-    gt.nearest_ahead_in_lane(ego_lane).map(|o| TruthLead {
+/// The nearest two vehicles ahead whose centres are in the ego's lane: the true lead and the
+/// next beyond it.
+pub fn truth_in_lane(
+    gt: &GroundTruthObjects,
+    ego_lane: i32,
+    ego_front_m: f64,
+) -> (Option<TruthLead>, Option<TruthLead>) {
+    let mut ahead: Vec<&crate::msg::GroundTruthObject> =
+        gt.objects.iter().filter(|o| o.lane == ego_lane && ego_lane >= 0 && o.position_in_ego_m[0] > 0.0).collect();
+    ahead.sort_by(|a, b| a.position_in_ego_m[0].total_cmp(&b.position_in_ego_m[0]));
+    let of = |o: &&crate::msg::GroundTruthObject| TruthLead {
         id: o.id,
         gap_m: o.position_in_ego_m[0] - ego_front_m,
         relative_speed_mps: o.velocity_in_ego_mps[0],
         speed_mps: o.velocity_in_world_mps[0].hypot(o.velocity_in_world_mps[1]),
-    })
+    };
+    (ahead.first().map(of), ahead.get(1).map(of))
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -54,10 +64,18 @@ pub struct Sample {
     /// The gap the ACC measured to its lead.
     pub acc_gap_m: Option<f64>,
     pub truth: Option<TruthLead>,
+    /// The next vehicle in the ego's lane beyond the true lead.
+    pub beyond: Option<TruthLead>,
 }
 
 impl Sample {
-    pub fn new(t_s: f64, state: &VehicleState, status: &AccStatus, truth: Option<TruthLead>) -> Self {
+    /// `truth`: the true lead and the next vehicle in the lane beyond it.
+    pub fn new(
+        t_s: f64,
+        state: &VehicleState,
+        status: &AccStatus,
+        truth: (Option<TruthLead>, Option<TruthLead>),
+    ) -> Self {
         Sample {
             t_s,
             speed_mps: state.speed_mps,
@@ -67,7 +85,8 @@ impl Sample {
             set_speed_mps: status.set_speed_mps,
             time_gap_s: status.time_gap_s,
             acc_gap_m: status.lead.map(|l| l.gap_m),
-            truth,
+            truth: truth.0,
+            beyond: truth.1,
         }
     }
 
@@ -157,11 +176,12 @@ pub fn build_trace(rec: &Recorded, ego_front: f64, standstill_m: f64) -> Trace {
             oi += 1;
         }
         let Some(status) = statuses.get(si).filter(|s| s.header.stamp_sim_ns <= t) else { continue };
-        let truth = objects.get(oi).filter(|o| o.header.stamp_sim_ns <= t).and_then(|o| {
-            let lead = truth_lead(&o.msg, st.msg.lane, ego_front)?;
+        let truth = objects.get(oi).filter(|o| o.header.stamp_sim_ns <= t).map_or((None, None), |o| {
+            let (lead, beyond) = truth_in_lane(&o.msg, st.msg.lane, ego_front);
             // Moved on from the frame's time at the relative speed.
             let ahead = (t - o.header.stamp_sim_ns) as f64 / 1e9;
-            Some(TruthLead { gap_m: lead.gap_m + lead.relative_speed_mps * ahead, ..lead })
+            let on = |v: TruthLead| TruthLead { gap_m: v.gap_m + v.relative_speed_mps * ahead, ..v };
+            (lead.map(on), beyond.map(on))
         });
         samples.push(Sample::new(t as f64 / 1e9, &st.msg, &status.msg, truth));
     }
