@@ -50,6 +50,7 @@ fi
 .venv/bin/python -c 'import zenoh; print("eclipse-zenoh", zenoh.__version__ if hasattr(zenoh, "__version__") else "installed")'
 
 step "rust build and tests (cargo test --release)"
+rm -f target/test-reports/scenario-sample.txt target/test-reports/sweep-40.txt
 SECONDS=0
 cargo build --release
 echo "build: ${SECONDS} s"
@@ -60,6 +61,13 @@ echo "rust tests (compile included): ${SECONDS} s"
 step "python tests (against target/release/slipstream)"
 rm -f target/test-reports/netns.json
 SLIPSTREAM_BIN="$PWD/target/release/slipstream" .venv/bin/python -m pytest -q -rs tests/python
+
+for f in target/test-reports/scenario-sample.txt target/test-reports/sweep-40.txt; do
+  if [ -f "$f" ]; then
+    step "$(basename "$f" .txt) (tests/it/sweep.rs)"
+    cat "$f"
+  fi
+done
 
 if [ -f target/test-reports/netns.json ]; then
   step "namespace test: recovery times (docs/deployment.md)"

@@ -20,6 +20,14 @@ fn run(cmd: Command, limit: Duration) -> Output {
     common::run_with_limit(cmd, limit)
 }
 
+/// Writes `text` to target/test-reports/`name` (scripts/test.sh prints it): what a run of the
+/// suite measured, for the reader of its log.
+fn write_report(name: &str, text: &str) {
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/test-reports");
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(dir.join(name), text).unwrap();
+}
+
 fn f(v: &Value) -> f64 {
     v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"))
 }
@@ -39,8 +47,7 @@ fn a_sweep_of_forty_covers_every_family_sums_rates_and_keeps_replayable_files() 
     let _serial = common::serial();
     let out = std::env::temp_dir().join(format!("slipstream-sweep-{}", std::process::id()));
     let (report, done) = sweep(&out, &["--count", "40", "--seed", "3"]);
-    // The table a reader of CI's log sees.
-    eprintln!("{}", String::from_utf8_lossy(&done.stderr).lines().rev().take(3).collect::<Vec<_>>().join("\n"));
+
     let all = &report["all"];
     assert_eq!((all["runs"].as_u64(), all["errors"].as_u64()), (Some(40), Some(0)), "{all}");
     let families = report["families"].as_array().unwrap();
@@ -57,6 +64,19 @@ fn a_sweep_of_forty_covers_every_family_sums_rates_and_keeps_replayable_files() 
         km += f(&fam["km"]);
     }
     assert!((km - f(&all["km"])).abs() < 1e-6);
+    let rows: Vec<String> = families
+        .iter()
+        .chain(std::iter::once(all))
+        .map(|r| {
+            let p = &r["per_1000_km"];
+            format!(
+                "{:16} runs {:>2} passed {:>2} km {:>5.1} collisions {} unwarranted emergencies {} ({:.0}/1000 km) phantom events {} ({:.0}/1000 km)",
+                r["family"].as_str().unwrap(), r["runs"], r["passed"], f(&r["km"]), r["collisions"],
+                r["unwarranted_emergencies"], f(&p["unwarranted_emergencies"]), r["phantom_braking_events"], f(&p["phantom_braking_events"])
+            )
+        })
+        .collect();
+    write_report("sweep-40.txt", &format!("eval sweep --count 40 --seed 3 (camera):\n{}\n", rows.join("\n")));
     // The exit status says what the report says.
     assert_eq!(done.status.success(), report["pass"].as_bool().unwrap(), "{}", report["pass"]);
     assert!(out.join("sweep.json").is_file() && out.join("rates.png").is_file());
@@ -119,7 +139,9 @@ fn a_seeded_sample_of_the_wider_net_passes_with_both_perceptions() {
         sample.push(pick);
     }
     let names: Vec<String> = sample.iter().map(|p| p.file_stem().unwrap().to_string_lossy().into_owned()).collect();
-    eprintln!("tests/scenarios sample (SLIPSTREAM_SAMPLE_SEED={seed}): {}", names.join(", "));
+    let drawn = format!("tests/scenarios sample (SLIPSTREAM_SAMPLE_SEED={seed}): {}", names.join(", "));
+    eprintln!("{drawn}");
+    write_report("scenario-sample.txt", &format!("{drawn}\n"));
     for perception in ["camera", "ground-truth"] {
         let mut c = slipstream();
         c.args(["eval", "acc", "--json", "--perception", perception]);
