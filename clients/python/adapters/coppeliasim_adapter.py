@@ -14,9 +14,11 @@ and objects at --camera-hz, camera/front/info latched, and hands each vehicle/co
 ego's script: `slipstream_control(throttle, brake, steer)` in the script attached to --ego (a
 vehicle's actuation is the model's own: README.md has a script for a car with wheel joints).
 
-Clock modes: lockstep and fast use CoppeliaSim's stepping mode (one `sim.step()` per step;
-lockstep steps once the loop has answered); realtime starts the simulation free-running and
-publishes each new simulation time it sees, on the step grid. The step rate is CoppeliaSim's
+Clock modes: every mode uses CoppeliaSim's stepping mode (one `sim.step()` per step), so that
+the remote calls reading one step (the ego's pose, each vehicle's) all see that step; lockstep
+steps once the loop has answered, fast as soon as it can, realtime paced to the wall clock (a
+free-running simulation moved on between those calls: the vehicles' positions and the stamp
+disagreed by metres under load). The step rate is CoppeliaSim's
 time step (Simulation settings): the contract asks for vehicle/speed at >= 50 Hz, so use a
 time step of 10 or 20 ms, not the 50 ms default.
 
@@ -140,28 +142,22 @@ class CoppeliaAdapter:
         self.every = max(1, round(hz / self.args.camera_hz))
         side.start(self.info, None, scenario="coppeliasim")
         steps, rtf, k = round(self.args.duration * hz), RealTimeFactor(), 0
-        if side.mode == "realtime":
-            sim.setStepping(False)
-            sim.startSimulation()
-            last = -1
-            while k < steps and not stop.is_set():
-                k = round(sim.getSimulationTime() * hz)
-                if k <= last:
-                    time.sleep(dt / 4)
-                    continue
-                last = k
-                self.publish(k, dt, rtf(k * dt))
-                self.apply(side.control(k))
-        else:
-            sim.setStepping(True)
-            sim.startSimulation()
-            while k <= steps and not stop.is_set():
-                self.publish(k, dt, rtf(k * dt))
-                if k == steps:
-                    break
-                self.apply(side.control(k))
-                sim.step()
-                k += 1
+        sim.setStepping(True)
+        sim.startSimulation()
+        started = time.monotonic()
+        while k <= steps and not stop.is_set():
+            self.publish(k, dt, rtf(k * dt))
+            if k == steps:
+                break
+            self.apply(side.control(k))
+            sim.step()
+            k += 1
+            if side.mode == "realtime":
+                # Paced here: behind the wall clock it steps on at once (the real-time factor
+                # says so), ahead of it waits.
+                ahead = started + k * dt - time.monotonic()
+                if ahead > 0:
+                    time.sleep(ahead)
         side.end(k, "stopped" if stop.is_set() else "duration reached")
         return k
 
