@@ -21,6 +21,10 @@ pub mod aims {
     pub const MAX_DECEL_MPS2: f64 = 3.5;
     pub const MAX_DECEL_LOW_SPEED_MPS2: f64 = 5.0;
     pub const MAX_JERK_MPS3: f64 = 2.5;
+    /// Easing off braking (the deceleration shrinking) is judged apart: braking for a target
+    /// that has gone is to be released at once, and a released brake is felt far less than an
+    /// applied one. The ACC's own release jerk (tuning.command.release_jerk_mps3) is 10.
+    pub const MAX_RELEASE_JERK_MPS3: f64 = 12.0;
     /// A lead braking beyond the comfort limit is answered within this long (issue 16). Reported
     /// in every run, not judged: the camera ACC answers leads braking at 6-7 m/s2 in 0.35 s
     /// (their brake lights), those just beyond comfort (3.7-4.5 m/s2) in 0.30 s median but
@@ -107,7 +111,10 @@ pub struct Metrics {
     pub max_decel_mps2: f64,
     /// The same as a share of the comfort limit at the speed it happened (1: at the limit).
     pub max_decel_share: f64,
+    /// Outside emergencies and at speed, except while easing off braking.
     pub max_jerk_mps3: f64,
+    /// While easing off braking (decelerating less and less), outside emergencies.
+    pub max_release_jerk_mps3: f64,
     pub emergency_s: f64,
     pub max_decel_in_emergency_mps2: f64,
     /// Emergencies with no vehicle in the ego's lane (ground truth) that needed one.
@@ -149,6 +156,7 @@ struct Tally {
     max_decel: f64,
     max_decel_share: f64,
     max_jerk: f64,
+    max_release_jerk: f64,
     max_em_decel: f64,
     /// Start of the current stretch with the same truth lead, and of the current stretch in
     /// speed mode at the same set speed: (lead id or set speed, sample index).
@@ -460,7 +468,11 @@ impl Tally {
         {
             let p = &s[i - jerk_lag];
             let j = (x.accel_mps2 - p.accel_mps2) / (x.t_s - p.t_s).max(1e-6);
-            self.max_jerk = self.max_jerk.max(j.abs());
+            if p.accel_mps2 < 0.0 && j > 0.0 {
+                self.max_release_jerk = self.max_release_jerk.max(j);
+            } else {
+                self.max_jerk = self.max_jerk.max(j.abs());
+            }
         }
     }
 
@@ -512,12 +524,18 @@ impl Tally {
             pass: self.max_decel_share <= tol,
         });
         // Jerk is judged strictly: the controller's own limit sits below the aim, with room for
-        // the vehicle's response.
+        // the vehicle's response. Easing off braking has an aim of its own.
         checks.push(Check {
             name: "max jerk outside emergencies (m/s3)".into(),
             value: Some(self.max_jerk),
             aim: format!("<= {}", aims::MAX_JERK_MPS3),
             pass: self.max_jerk <= aims::MAX_JERK_MPS3,
+        });
+        checks.push(Check {
+            name: "max jerk easing off braking (m/s3)".into(),
+            value: Some(self.max_release_jerk),
+            aim: format!("<= {}", aims::MAX_RELEASE_JERK_MPS3),
+            pass: self.max_release_jerk <= aims::MAX_RELEASE_JERK_MPS3,
         });
         // What a driver feels (issue 16): each must be zero.
         let f = &self.feel;
@@ -595,6 +613,7 @@ impl Metrics {
             max_decel_mps2: tally.max_decel,
             max_decel_share: tally.max_decel_share,
             max_jerk_mps3: tally.max_jerk,
+            max_release_jerk_mps3: tally.max_release_jerk,
             emergency_s: emergency_times.len() as f64 * dt,
             max_decel_in_emergency_mps2: tally.max_em_decel,
             unwarranted_emergencies: tally.feel.unwarranted_emergencies,
@@ -660,6 +679,28 @@ mod tests {
         let decel_failed = |m: &Metrics| failed(m).iter().any(|c| c.starts_with("max decel outside emergencies"));
         assert!(!decel_failed(&slow), "{:?}", failed(&slow));
         assert!(decel_failed(&fast), "{:?}", failed(&fast));
+    }
+
+    #[test]
+    fn easing_off_braking_is_judged_on_its_own_jerk_aim() {
+        // Braking at 3 m/s2 at 25 m/s, applied at 2 m/s3, then released at `release` m/s3.
+        let run = |release: f64| {
+            Metrics::of(&trace(20.0, move |t| {
+                let a =
+                    if t < 10.0 { -(2.0 * (t - 8.5)).clamp(0.0, 3.0) } else { (-3.0 + release * (t - 10.0)).min(0.0) };
+                (25.0, a, AccMode::Follow, Some((40.0, 0.0)))
+            }))
+        };
+        let (quick, abrupt) = (run(8.0), run(30.0));
+        assert!((quick.max_release_jerk_mps3 - 8.0).abs() < 0.5, "{}", quick.max_release_jerk_mps3);
+        assert!(quick.max_jerk_mps3 <= 2.0 + 1e-9, "{}", quick.max_jerk_mps3);
+        assert!(failed(&quick).is_empty(), "{:?}", failed(&quick));
+        assert!(failed(&abrupt).contains(&"max jerk easing off braking (m/s3)"), "{:?}", failed(&abrupt));
+        // Applying the brake that fast is still judged on the comfort jerk.
+        let applied = Metrics::of(&trace(20.0, |t| {
+            (25.0, -(8.0 * (t - 10.0)).clamp(0.0, 3.0), AccMode::Follow, Some((40.0, 0.0)))
+        }));
+        assert!(failed(&applied).contains(&"max jerk outside emergencies (m/s3)"), "{:?}", failed(&applied));
     }
 
     #[test]
