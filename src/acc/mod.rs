@@ -2,12 +2,14 @@
 //! vehicle/state and the vehicles ahead (perception/objects, or the simulator's ground truth),
 //! takes acc/command, and drives the ego through vehicle/control while reporting acc/status.
 //!
-//! - [`controller`]: the decisions, free of I/O (lead selection, spacing law, warning and
-//!   emergency braking, stale-data fallback, low-level loop), from its parts:
-//!   [`ego`] (the ego's motion), [`objects`] (the vehicles ahead it is fed), [`lane`] (the
-//!   lane ahead on the map), [`lead_filter`] (the lead estimate) and [`threat`];
+//! - [`controller`]: the decisions, free of I/O, wiring its parts: [`ego`] (the ego's
+//!   motion), [`objects`] (the vehicles ahead it is fed), [`lane`] (the lane ahead on the
+//!   map), [`select`] (lead selection), [`lead_filter`] (the lead estimate), [`belief`] (what
+//!   the lead plausibly does), [`threat`], [`decision`] (comfort braking or an emergency),
+//!   [`command`] (the comfort command, jerk limit and release) and [`low_level`] (throttle
+//!   and brake);
 //! - [`node`]: the controller on the bus (lockstep answers, input health, watchdog);
-//! - [`settings`]: config/acc.json5;
+//! - [`settings`]: config/acc.json5, with [`tuning`] (every behavioural number);
 //! - [`args`]: slipstream-acc's command-line flags.
 //!
 //! It knows the vehicle it drives through the shared model ([`crate::vehicle`]) and the
@@ -18,14 +20,20 @@
 //! The control law and its numbers: docs/control.md.
 
 pub mod args;
+mod belief;
+mod command;
 pub mod controller;
+mod decision;
 pub mod ego;
 mod lane;
 mod lead_filter;
+mod low_level;
 pub mod node;
 pub mod objects;
+mod select;
 pub mod settings;
 pub mod threat;
+pub mod tuning;
 
 pub use args::VehicleClass;
 pub use controller::Controller;

@@ -5,6 +5,7 @@ use std::path::Path;
 
 use serde::Deserialize;
 
+use super::tuning::Tuning;
 use crate::config::{parse_layered, read_config, ConfigError};
 use crate::vehicle::VehicleParams;
 
@@ -56,6 +57,7 @@ pub struct AccSettings {
     pub estimator: Estimator,
     pub vehicle: Vehicle,
     pub status_hz: f64,
+    pub tuning: Tuning,
 }
 
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -222,7 +224,8 @@ impl AccSettings {
     /// Ranges and relations serde cannot check: (key, problem, fix) of the first one off.
     pub fn check(&self) -> Result<(), (String, String, String)> {
         self.check_law()?;
-        self.check_inputs_and_vehicle()
+        self.check_inputs_and_vehicle()?;
+        self.tuning.check()
     }
 
     /// The control law: speeds, gaps, comfort limits, gains, emergency and stale thresholds.

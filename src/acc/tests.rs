@@ -355,17 +355,20 @@ fn the_lead_estimate_smooths_a_camera_range_quantised_to_image_rows() {
 /// (7 m/s2, and 4 m/s2 just beyond it) they are answered at once, within it (3 m/s2) and at a
 /// steady speed never with an emergency.
 #[test]
-fn a_lead_braking_beyond_comfort_is_answered_at_once_and_one_within_it_never() {
+fn a_lead_braking_beyond_comfort_is_answered_at_once_where_comfort_braking_cannot_cope() {
     // (the lead's acceleration, the longest answer, the least deceleration asked then)
-    // Stopping 2 m behind where the lead stops needs 900 / (2 (57 + 64)) = 3.7 m/s2 at 7 m/s2
-    // and 900 / (2 (57 + 112.5)) = 2.7 m/s2 at 4 m/s2.
-    for (a_lead, answer) in [(-7.0, Some((0.3, 3.7))), (-4.0, Some((0.5, 2.7))), (-3.0, None), (0.0, None)] {
+    // Stopping 2 m behind where the lead stops needs 900 / (2 (57 + 64)) = 3.7 m/s2 at
+    // 7 m/s2: more than the comfort limit of 3.5 at 30 m/s, an emergency. At 4 m/s2 it needs
+    // 900 / (2 (57 + 112.5)) = 2.7 m/s2, which comfort braking gives (ramping at the jerk
+    // limit, up to 5 m/s2 as the speed falls): no emergency, and no more than the limit.
+    for (a_lead, answer) in [(-7.0, Some((0.3, 3.7))), (-4.0, None), (-3.0, None), (0.0, None)] {
         let mut c = Controller::new(AccSettings { set_speed_mps: 32.0, ..truth() });
+        let limits = c.settings().limits.clone();
         let t_brake = 10.0;
         let lead_speed = |t: f64| if t > t_brake { (30.0 + a_lead * (t - t_brake)).max(0.0) } else { 30.0 };
         let (mut t, mut v, mut gap) = (0.0, 30.0, 59.0);
-        let mut first_emergency = None;
-        while t < 16.0 {
+        let (mut first_emergency, mut over_comfort) = (None, 0.0f64);
+        while t < 20.0 {
             if ((t / DT).round() as i64) % 5 == 0 {
                 c.perceive(&frame(t, vec![obj(1, gap, 0.0, lead_speed(t) - v)]), &ego(t, v));
             }
@@ -373,15 +376,19 @@ fn a_lead_braking_beyond_comfort_is_answered_at_once_and_one_within_it_never() {
             if o.status.mode == AccMode::Emergency && first_emergency.is_none() {
                 first_emergency = Some((t, o.status.target_accel_mps2));
             }
+            if o.status.mode != AccMode::Emergency {
+                over_comfort = over_comfort.max(-o.status.target_accel_mps2 - limits.decel_at(v));
+            }
             v = (v + o.status.target_accel_mps2 * DT).max(0.0);
             gap += (lead_speed(t) - v) * DT;
             t += DT;
         }
+        assert!(gap > 2.0, "{a_lead}: gap {gap}");
+        assert!(over_comfort <= 1e-9, "{a_lead}: {over_comfort} m/s2 beyond the comfort limit outside an emergency");
         match (answer, first_emergency) {
             (Some((within, needed)), Some((t_em, a))) => {
                 assert!(t_em - t_brake <= within, "{a_lead}: answered {:.2} s after the lead braked", t_em - t_brake);
                 assert!(a <= -needed, "{a_lead}: asked for {a} m/s2");
-                assert!(gap > 2.0, "{a_lead}: gap {gap}");
             }
             (Some(_), None) => panic!("no answer to a lead braking at {a_lead} m/s2"),
             (None, Some(e)) => panic!("an emergency behind a lead braking at {a_lead} m/s2: {e:?}"),
@@ -616,7 +623,10 @@ fn brake_lights_coming_on_start_comfort_braking_before_the_speed_shows_it() {
     // LIT_ANTICIPATION_S, and 3 s on the ego brakes as without the lamps.
     let deepest = |ts: &[(f64, f64, AccMode)]| ts.iter().map(|(_, a, _)| *a).fold(0.0, f64::min);
     let gentle = behind_lead_at(30.0, pressed, pressed_at_10_s(0.5));
-    let (gentle_deepest, ramp) = (deepest(&gentle), AccSettings::default().limits.jerk_mps3 * LIT_ANTICIPATION_S);
+    let (gentle_deepest, ramp) = (
+        deepest(&gentle),
+        AccSettings::default().limits.jerk_mps3 * AccSettings::default().tuning.belief.lit_anticipation_s,
+    );
     assert!(gentle_deepest > -ramp - 0.15, "deepest {gentle_deepest:.2} m/s2 for a lead at 0.5 (ramp {ramp:.2})");
     let unlit = behind_lead_at(30.0, never, pressed_at_10_s(0.5));
     let (a, b) = (target_at(&gentle, 13.5), target_at(&unlit, 13.5));
@@ -873,7 +883,7 @@ fn an_emergency_for_a_hard_braking_lead_does_not_flicker_with_a_noisy_estimate()
         let steps = behind_lead_with(truth(), 28.0, |t| t > 10.0, pressed_at_10_s(decel), noise);
         let modes: Vec<bool> = steps.iter().map(|(_, _, m)| *m == AccMode::Emergency).collect();
         let entries = modes.windows(2).filter(|w| !w[0] && w[1]).count();
-        assert_eq!(entries, 1, "a lead braking at {decel} m/s2: {entries} emergencies");
+        assert!(entries <= 1, "a lead braking at {decel} m/s2: {entries} emergencies");
     }
 }
 
@@ -1055,4 +1065,60 @@ fn a_standing_lead_hidden_for_a_moment_is_still_braked_for() {
     assert!(hidden_max < -1.0, "eased to {hidden_max:.2} m/s2 while the standing car was hidden");
     assert!(!emergency, "an emergency for a car standing 170 m ahead");
     assert!(gap > 2.0 && v < 0.2, "ends {gap:.1} m behind at {v:.2} m/s");
+}
+
+/// Braking for a lead that has left the lane is released at the release jerk, not the comfort
+/// jerk: a target that has gone costs tenths of a second of braking, not seconds. Braking for a
+/// lead still there eases off at the comfort jerk.
+#[test]
+fn braking_for_a_lead_that_has_gone_is_released_at_the_release_jerk() {
+    let s = AccSettings { set_speed_mps: 25.0, ..truth() };
+    let (jerk, release) = (s.limits.jerk_mps3, s.tuning.command.release_jerk_mps3);
+    assert!(release > 2.0 * jerk, "the release jerk is not much larger than the comfort jerk");
+    // Braking at least 2 m/s2 for a car closing at 10 m/s from 70 to 40 m; then, at 3 s, the
+    // car is seen 4 m to the side (it has moved out), or it drives away at 10 m/s (still the
+    // lead).
+    for moved_out in [true, false] {
+        let mut c = Controller::new(s.clone());
+        let (mut t, mut gap, mut braking, mut released_after) = (0.0, 70.0, 0.0f64, None);
+        while t < 6.0 && released_after.is_none() {
+            let (lateral, rel) = if t < 3.0 {
+                (0.0, -10.0)
+            } else if moved_out {
+                (4.0, -10.0)
+            } else {
+                (0.0, 10.0)
+            };
+            if ((t / DT).round() as i64) % 5 == 0 {
+                c.perceive(&frame(t, vec![obj(1, gap, lateral, rel)]), &ego(t, 25.0));
+            }
+            gap += rel * DT;
+            let a = c.step(&ego(t, 25.0), &[]).status.target_accel_mps2;
+            if t < 3.0 {
+                braking = braking.min(a);
+            } else if a >= 0.0 {
+                released_after = Some(t - 3.0);
+            }
+            t += DT;
+        }
+        assert!(braking <= -2.0, "braked only {braking} m/s2");
+        let after = released_after.expect("never released");
+        if moved_out {
+            assert!(after <= -braking / release + 0.05, "released {after:.2} s after the lead moved out");
+        } else {
+            assert!(after >= -braking / jerk - 0.05, "released {after:.2} s after the lead drove away: not at comfort");
+        }
+    }
+}
+
+/// The tuning group is read from a settings file, checked, and named in the error.
+#[test]
+fn the_tuning_group_is_overridable_and_checked() {
+    let s = AccSettings::parse("{ tuning: { command: { release_jerk_mps3: 20 } } }", "mine.json5").unwrap();
+    assert_eq!(s.tuning.command.release_jerk_mps3, 20.0);
+    assert_eq!(s.tuning.decision, AccSettings::default().tuning.decision);
+    let e = AccSettings::parse("{ tuning: { belief: { lit_need_share: 1.5 } } }", "mine.json5").unwrap_err();
+    let text = e.to_string();
+    assert!(text.contains("mine.json5") && text.contains("tuning.belief.lit_need_share"), "{text}");
+    assert!(AccSettings::parse("{ tuning: { select: { lead_coast: 1 } } }", "mine.json5").is_err());
 }

@@ -1,0 +1,148 @@
+//! The lead belief: what the lead plausibly does, in one place. The lead estimate (the Kalman
+//! filter) gives a speed and an acceleration with their uncertainty; its brake lamps, its age
+//! and how noisy its speed reads say how far to trust them. From these the belief gives the
+//! ranges the rest of the ACC reads, instead of each part keeping a rule of its own:
+//!
+//! - the lead's acceleration: **likely** (the estimate), **mildest** (the least braking it
+//!   plausibly does: the estimate less one standard deviation toward zero, unless held lamps
+//!   vouch for it) and, for the moment after its lamps come on, **hardest** (braking at the
+//!   comfort limit at least, before its speed can say);
+//! - its speed: the estimate, and while a new lead's speed is still being measured the
+//!   **slowest** it plausibly is;
+//! - whether it **brakes beyond the comfort limit** (its mildest deceleration past the limit by
+//!   the perception's margin, held until it brakes less than the limit).
+//!
+//! The threat is judged on the mildest acceleration, comfort braking plans for the slowest speed
+//! and the hardest braking where comfort can cope with them, and an emergency for a lead braking
+//! hard is decided on the likely one (`super::decision`).
+
+use super::lead_filter::LeadFilter;
+use super::settings::AccSettings;
+use super::threat::{threat, Threat};
+
+/// The lead as believed now.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct LeadBelief {
+    pub(super) id: u32,
+    pub(super) gap_m: f64,
+    pub(super) speed_mps: f64,
+    /// The estimate of its acceleration, and that estimate's standard deviation.
+    pub(super) accel_mps2: f64,
+    accel_sigma_mps2: f64,
+    speed_sigma_mps: f64,
+    pub(super) brake_lights: bool,
+    /// Its lamps are held on, on a lead whose speed reads finely (`LeadFilter::lamps_vouch`).
+    lamps_vouch: bool,
+    /// How long ago they came on (a settled lead's, while on).
+    lit_for_s: Option<f64>,
+    pub(super) settled: bool,
+    /// How long it has been the lead.
+    followed_s: f64,
+}
+
+impl LeadBelief {
+    pub(super) fn of(f: &LeadFilter) -> Self {
+        LeadBelief {
+            id: f.id,
+            gap_m: f.x[0],
+            speed_mps: f.x[1].max(0.0),
+            accel_mps2: f.x[2],
+            accel_sigma_mps2: f.p[(2, 2)].max(0.0).sqrt(),
+            speed_sigma_mps: f.p[(1, 1)].max(0.0).sqrt(),
+            brake_lights: f.brake_lights,
+            lamps_vouch: f.lamps_vouch(),
+            lit_for_s: f.lit_for_s(),
+            settled: f.settled(),
+            followed_s: f.t_s - f.since_s,
+        }
+    }
+
+    /// The least braking the lead plausibly does. Far away a camera's ranges leave the
+    /// estimate wandering within its uncertainty (-1.1 m/s2 against a sigma of 1.3 for a van
+    /// 165 m ahead at constant speed), and taken as it was that drew comfort braking for a lead
+    /// that did not brake. Held lamps on a lead whose speed reads finely vouch for the estimate;
+    /// a flash of them does not (a driver dabbing the pedal to hold a speed 170 m ahead), nor
+    /// lamps on a lead whose speed reads coarsely (143 m ahead, estimated at -6.6 m/s2 half a
+    /// second after its pedal where stopping behind it needed 0.8).
+    pub(super) fn mildest_accel(&self) -> f64 {
+        if self.lamps_vouch {
+            return self.accel_mps2;
+        }
+        self.accel_mps2.signum() * (self.accel_mps2.abs() - self.accel_sigma_mps2).max(0.0)
+    }
+
+    /// The threat judged on the mildest braking.
+    pub(super) fn threat(&self, v: f64) -> Threat {
+        threat(self.gap_m, v, self.speed_mps, self.mildest_accel())
+    }
+
+    /// The threat judged on the likely braking (the estimate itself).
+    pub(super) fn likely_threat(&self, v: f64) -> Threat {
+        threat(self.gap_m, v, self.speed_mps, self.accel_mps2)
+    }
+
+    /// Whether the lead brakes beyond the comfort limit: its mildest deceleration past the
+    /// limit by `margin`, or, when it was found so before (`was_hard`), its estimate still
+    /// within `hard_braking_release_mps2` of the limit (without the hold, an estimate wandering
+    /// about the threshold while the deceleration builds made an emergency flicker). Never a
+    /// lead that is not settled or is nearly standing.
+    pub(super) fn brakes_hard(&self, s: &AccSettings, margin: f64, was_hard: bool) -> bool {
+        let b = &s.tuning.belief;
+        let limit = s.limits.decel_mps2;
+        self.settled
+            && self.speed_mps > b.hard_braking_min_speed_mps
+            && (self.mildest_accel() < -limit - margin
+                || (was_hard && self.accel_mps2 < -limit + b.hard_braking_release_mps2))
+    }
+
+    /// Whether the lead is seen braking harder than `decel` with its lamps lit.
+    pub(super) fn seen_braking(&self, decel: f64) -> bool {
+        self.brake_lights && self.mildest_accel() <= -decel
+    }
+
+    /// What comfort braking plans for: `threat`, or a worse one while the lead's speed or its
+    /// braking is not yet measured, where comfort braking could cope with that case.
+    ///
+    /// - A new lead's speed is still being measured (far ahead, a camera needs a few tenths of
+    ///   a second): comfort braking plans for it being its slowest, so a standing car seen at
+    ///   the edge of range is braked for from the first frames. Beyond twice the time gap only
+    ///   where waiting would cost comfort: far away a "lead" may be no vehicle (in a bend, two
+    ///   cars standing either side 200 m ahead merged into one in the ego's lane for half a
+    ///   second). There the vehicle it hides or reveals (`revealed`) is planned for alone.
+    /// - For a moment after its lamps come on, the pedal is pressed but its speed cannot yet
+    ///   say how hard: comfort braking plans for it braking at the comfort limit, where that
+    ///   would need much of the comfort braking (slow and far back, a late answer costs
+    ///   nothing, and braking for every touch of the pedal would cost the time gap).
+    pub(super) fn comfort_plan(
+        &self,
+        s: &AccSettings,
+        threat: Threat,
+        revealed: Option<Threat>,
+        v: f64,
+        time_gap_s: f64,
+    ) -> Option<Threat> {
+        let b = &s.tuning.belief;
+        let decel = s.limits.decel_at(v);
+        let within_comfort =
+            |worse: Threat| if worse.needed_decel_mps2 <= decel { threat.or_worse(&worse) } else { threat };
+        if !self.settled {
+            let slowest = (self.speed_mps - b.unmeasured_sigmas * self.speed_sigma_mps).max(0.0);
+            let slower = |gap_m: f64| self::threat(gap_m, v, slowest, self.mildest_accel());
+            let far = self.gap_m > s.standstill_m + s.tuning.command.far_time_gaps * time_gap_s * v;
+            let wait_s = (super::lead_filter::SETTLE_S - self.followed_s).max(0.0);
+            let waited = slower(self.gap_m - (v - slowest).max(0.0) * wait_s);
+            if far && waited.needed_decel_mps2 <= b.unsettled_wait_share * decel {
+                return revealed;
+            }
+            return Some(within_comfort(slower(self.gap_m)));
+        }
+        if self.lit_for_s.is_some_and(|t| t < b.lit_anticipation_s) {
+            let hardest = self.mildest_accel().min(-s.limits.decel_mps2);
+            let hard = self::threat(self.gap_m, v, self.speed_mps, hardest);
+            if hard.needed_decel_mps2 >= b.lit_need_share * decel {
+                return Some(within_comfort(hard));
+            }
+        }
+        Some(threat)
+    }
+}

@@ -1,0 +1,120 @@
+//! The ACC's tuning: every behavioural number of its parts, by the part that reads it, so that
+//! none hides in the code and any can be tried from a settings file (`tuning` in
+//! config/acc.json5, which gives each one's unit, meaning and why it has its value).
+
+use serde::Deserialize;
+
+/// The `tuning` settings group.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Tuning {
+    pub select: SelectTuning,
+    pub belief: BeliefTuning,
+    pub decision: DecisionTuning,
+    pub command: CommandTuning,
+    pub low_level: LowLevelTuning,
+}
+
+/// Lead selection: the tracks' lateral speed, a lead missing from a frame, the lane beyond it.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SelectTuning {
+    pub lateral_rate_filter: f64,
+    pub max_lateral_rate_mps: f64,
+    pub lead_coast_s: f64,
+    pub standing_coast_s: f64,
+    pub standing_lead_mps: f64,
+    pub beyond_lead_m: f64,
+}
+
+/// The lead belief: what the lead plausibly does, from its estimate, lamps and age.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BeliefTuning {
+    pub unmeasured_sigmas: f64,
+    pub unsettled_wait_share: f64,
+    pub lit_anticipation_s: f64,
+    pub lit_need_share: f64,
+    pub hard_braking_min_speed_mps: f64,
+    pub hard_braking_release_mps2: f64,
+    pub ground_truth_hard_braking_margin_mps2: f64,
+}
+
+/// The decision between comfort braking and an emergency.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DecisionTuning {
+    pub needed_guard_mps2: f64,
+    pub emergency_factor: f64,
+    pub under_braking_s: f64,
+}
+
+/// The comfort command: the far cap and the release of braking.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CommandTuning {
+    pub far_time_gaps: f64,
+    pub far_closing_mps2: f64,
+    pub far_decel_mps2: f64,
+    pub far_braking_mps2: f64,
+    pub release_jerk_mps3: f64,
+}
+
+/// The low-level loop from target acceleration to throttle and brake.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LowLevelTuning {
+    pub standstill_mps: f64,
+    pub hold_brake: f64,
+    pub integral_gain_per_s: f64,
+    pub integral_max_mps2: f64,
+}
+
+impl Tuning {
+    /// Every number by its key, for the settings' check.
+    pub fn entries(&self) -> Vec<(&'static str, f64)> {
+        let (s, b, d, c, l) = (&self.select, &self.belief, &self.decision, &self.command, &self.low_level);
+        vec![
+            ("tuning.select.lateral_rate_filter", s.lateral_rate_filter),
+            ("tuning.select.max_lateral_rate_mps", s.max_lateral_rate_mps),
+            ("tuning.select.lead_coast_s", s.lead_coast_s),
+            ("tuning.select.standing_coast_s", s.standing_coast_s),
+            ("tuning.select.standing_lead_mps", s.standing_lead_mps),
+            ("tuning.select.beyond_lead_m", s.beyond_lead_m),
+            ("tuning.belief.unmeasured_sigmas", b.unmeasured_sigmas),
+            ("tuning.belief.unsettled_wait_share", b.unsettled_wait_share),
+            ("tuning.belief.lit_anticipation_s", b.lit_anticipation_s),
+            ("tuning.belief.lit_need_share", b.lit_need_share),
+            ("tuning.belief.hard_braking_min_speed_mps", b.hard_braking_min_speed_mps),
+            ("tuning.belief.hard_braking_release_mps2", b.hard_braking_release_mps2),
+            ("tuning.belief.ground_truth_hard_braking_margin_mps2", b.ground_truth_hard_braking_margin_mps2),
+            ("tuning.decision.needed_guard_mps2", d.needed_guard_mps2),
+            ("tuning.decision.emergency_factor", d.emergency_factor),
+            ("tuning.decision.under_braking_s", d.under_braking_s),
+            ("tuning.command.far_time_gaps", c.far_time_gaps),
+            ("tuning.command.far_closing_mps2", c.far_closing_mps2),
+            ("tuning.command.far_decel_mps2", c.far_decel_mps2),
+            ("tuning.command.far_braking_mps2", c.far_braking_mps2),
+            ("tuning.command.release_jerk_mps3", c.release_jerk_mps3),
+            ("tuning.low_level.standstill_mps", l.standstill_mps),
+            ("tuning.low_level.hold_brake", l.hold_brake),
+            ("tuning.low_level.integral_gain_per_s", l.integral_gain_per_s),
+            ("tuning.low_level.integral_max_mps2", l.integral_max_mps2),
+        ]
+    }
+
+    /// (key, problem, fix) of the first number that is not a finite, non-negative value, or of
+    /// a share or a filter constant above 1.
+    pub fn check(&self) -> Result<(), (String, String, String)> {
+        for (key, v) in self.entries() {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err((key.into(), format!("{v}"), "give a finite value >= 0".into()));
+            }
+            let unit_interval = key.ends_with("_share") || key.ends_with("_filter") || key.ends_with("hold_brake");
+            if unit_interval && v > 1.0 {
+                return Err((key.into(), format!("{v}"), "give a value from 0 to 1".into()));
+            }
+        }
+        Ok(())
+    }
+}
