@@ -39,6 +39,16 @@ def layout_references():
     return topics, fields
 
 
+def test_the_layouts_panels_use_the_current_title_key():
+    """Foxglove names a panel by `foxglovePanelTitle`; a Plot's `title` is the legacy key."""
+    panels = json.loads(LAYOUT.read_text())["configById"]
+    plots = {k: v for k, v in panels.items() if k.startswith("Plot!")}
+    assert plots, "the layout has no Plot panel"
+    for name, config in plots.items():
+        assert "title" not in config, f"{name} uses the legacy key `title`"
+        assert config.get("foxglovePanelTitle"), f"{name} has no foxglovePanelTitle"
+
+
 def protobuf_fields(data):
     """Top-level fields of a protobuf message: {tag: [values]} (ints for varint/fixed, bytes
     for length-delimited). Enough to check Foxglove's schemas without their generated code."""
