@@ -36,8 +36,9 @@ pub(super) struct LeadBelief {
     /// How long ago they came on (a settled lead's, while on).
     lit_for_s: Option<f64>,
     pub(super) settled: bool,
-    /// How long it has been the lead.
+    /// How long it has been the lead, and from its first to its last measured frame.
     followed_s: f64,
+    measured_for_s: f64,
 }
 
 impl LeadBelief {
@@ -54,6 +55,7 @@ impl LeadBelief {
             lit_for_s: f.lit_for_s(),
             settled: f.settled(),
             followed_s: f.t_s - f.since_s,
+            measured_for_s: f.seen_s - f.since_s,
         }
     }
 
@@ -93,6 +95,13 @@ impl LeadBelief {
             && self.speed_mps > b.hard_braking_min_speed_mps
             && (self.mildest_accel() < -limit - margin
                 || (was_hard && self.accel_mps2 < -limit + b.hard_braking_release_mps2))
+    }
+
+    /// Whether the lead has been measured over `confirm_s` (in more than one frame; a lead
+    /// predicted through missed frames is not measured): a vehicle in the lane for one frame
+    /// may be a lane changer's measurement, not a lead.
+    pub(super) fn confirmed(&self, confirm_s: f64) -> bool {
+        self.measured_for_s >= confirm_s - 1e-9
     }
 
     /// Whether the lead is seen braking harder than `decel` with its lamps lit.

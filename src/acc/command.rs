@@ -17,8 +17,9 @@ const RELEASE_FROM_MPS2: f64 = -0.05;
 pub(super) struct Command {
     /// The target acceleration of the last step (jerk-limited outside emergencies).
     pub(super) accel_cmd: f64,
-    /// The lead the last command braked for (None: not braking, or braking for no lead).
-    braking_for: Option<u32>,
+    /// The lead the last command braked for, and its gap then (None: not braking, or braking
+    /// for no lead).
+    braking_for: Option<(u32, f64)>,
 }
 
 /// What the comfort command reads this step.
@@ -37,10 +38,10 @@ impl Command {
     /// Remembers the command of this step, and the lead its braking is for: the lead it
     /// follows, kept while that braking is released after the lead has gone; none once the
     /// command no longer brakes, or outside Speed and Follow.
-    pub(super) fn set(&mut self, accel: f64, mode: AccMode, lead: Option<u32>) {
+    pub(super) fn set(&mut self, accel: f64, mode: AccMode, lead: Option<&LeadBelief>) {
         self.braking_for = match mode {
             _ if accel >= RELEASE_FROM_MPS2 => None,
-            AccMode::Follow => lead.or(self.braking_for),
+            AccMode::Follow => lead.map(|l| (l.id, l.gap_m)).or(self.braking_for),
             AccMode::Speed => self.braking_for,
             _ => None,
         };
@@ -48,9 +49,10 @@ impl Command {
     }
 
     /// The comfort target and its mode, jerk-limited from the last command: at the comfort
-    /// jerk, except that braking for a lead that is no longer the lead (it left the lane, or
-    /// was never there) is released at `release_jerk_mps3` toward the new target, up to no
-    /// braking at all.
+    /// jerk, except that braking for a lead that has gone (no lead now, or a new one beyond
+    /// where it was: it left the lane, or was never there) is released at `release_jerk_mps3`
+    /// toward the new target, up to no braking at all. A new lead where the old one was is the
+    /// same vehicle tracked anew, not a target gone.
     pub(super) fn comfort(&self, x: &Inputs) -> (AccMode, f64) {
         let (g, lim) = (&x.s.gains, &x.s.limits);
         let v = x.v;
@@ -63,7 +65,9 @@ impl Command {
         };
         let target = target.clamp(-decel, lim.accel_mps2);
         let step = lim.jerk_mps3 * x.dt;
-        let gone = self.braking_for.is_some() && self.braking_for != x.lead.map(|l| l.id);
+        let beyond_m = x.s.tuning.select.beyond_lead_m;
+        let gone =
+            self.braking_for.is_some_and(|(id, gap)| x.lead.is_none_or(|l| l.id != id && l.gap_m > gap + beyond_m));
         let up = if gone {
             let release = x.s.tuning.command.release_jerk_mps3 * x.dt;
             (self.accel_cmd + release).min(target.min(0.0)).max(self.accel_cmd + step)

@@ -172,12 +172,14 @@ impl Controller {
         };
         // The actuators lag: ask for the target plus lag x its rate of change, so the applied
         // acceleration follows a ramping target instead of trailing it (a jump, as into an
-        // emergency, is not anticipated beyond twice the jerk limit).
-        let rate_limit = 2.0 * self.s.limits.jerk_mps3;
+        // emergency, is not anticipated beyond twice the jerk limit; a release up to its jerk,
+        // so that it ends where the target does instead of overshooting it).
+        let down = 2.0 * self.s.limits.jerk_mps3;
+        let up = down.max(self.s.tuning.command.release_jerk_mps3);
         let from = self.command.accel_cmd;
-        let rate = if dt > 0.0 { ((accel - from) / dt).clamp(-rate_limit, rate_limit) } else { 0.0 };
+        let rate = if dt > 0.0 { ((accel - from) / dt).clamp(-down, up) } else { 0.0 };
         let lag_lead = self.params.actuator_lag_s * rate;
-        self.command.set(accel, mode, lead.map(|l| l.id));
+        self.command.set(accel, mode, lead.as_ref());
         let (throttle, brake) =
             self.low_level.actuate(&self.s, &self.params, mode, accel, lag_lead, v, ego.accel_mps2, dt);
         let status = AccStatus {
@@ -213,7 +215,15 @@ impl Controller {
         let hard = lead.filter(|l| l.brakes_hard(&self.s, margin, was_hard(l)));
         self.decision.hard_lead = hard.map(|l| l.id);
         let accel_cmd = self.command.accel_cmd;
-        let situation = Situation { s: &self.s, threat, hard: hard.map(|l| l.likely_threat(v)), v, accel_cmd, t_s };
+        // What may start an emergency for being beyond comfort: the threat of a lead, and of a
+        // vehicle it hides or reveals, each seen in more than one frame.
+        let confirm_s = self.s.tuning.decision.confirm_s;
+        let confirmed = lead.filter(|l| l.confirmed(confirm_s)).map(|l| {
+            let t = l.threat(v);
+            self.select.revealed_for(t_s, v, confirm_s).map_or(t, |r| t.or_worse(&r))
+        });
+        let hard = hard.map(|l| l.likely_threat(v));
+        let situation = Situation { s: &self.s, threat, hard, confirmed, v, accel_cmd, t_s };
         self.decision.update(&situation);
         if let Some(t) = threat.filter(|_| self.decision.emergency) {
             return (AccMode::Emergency, -self.decision.decel(&self.s, &t));

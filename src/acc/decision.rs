@@ -1,7 +1,8 @@
 //! The decision between comfort braking and an emergency, and the emergency's deceleration.
 //! Comfort braking (the comfort limits, the jerk limit) answers what it can; an emergency
-//! starts only where the belief says it cannot: a collision closing fast while the ego brakes
-//! less than it needs, a threat that comfort braking from now on would not keep clear of, or
+//! starts only where the belief says it cannot, and only for what has been measured in more
+//! than one frame: a collision closing fast while the ego brakes less than it needs, a threat
+//! that comfort braking from now on would not keep clear of, or
 //! a lead braking beyond the comfort limit that comfort braking would not keep clear of were it
 //! braking as its estimate says.
 
@@ -23,6 +24,8 @@ pub(super) struct Situation<'a> {
     pub(super) threat: Option<Threat>,
     /// The threat on the lead's likely braking, when it brakes beyond the comfort limit.
     pub(super) hard: Option<Threat>,
+    /// The threat of what has been seen in more than one frame (`LeadBelief::confirmed`).
+    pub(super) confirmed: Option<Threat>,
     pub(super) v: f64,
     /// The command of the last step (negative: braking).
     pub(super) accel_cmd: f64,
@@ -45,7 +48,8 @@ impl Decision {
         let (s, v) = (x.s, x.v);
         let (e, lim, d) = (&s.emergency, &s.limits, &s.tuning.decision);
         let ttc = t.ttc_s.unwrap_or(f64::INFINITY);
-        let beyond_comfort = beyond_comfort(s, t, v, x.accel_cmd);
+        // An emergency starts only for what has been measured in more than one frame.
+        let beyond_comfort = x.confirmed.is_some_and(|c| beyond_comfort(s, &c, v, x.accel_cmd));
         let hard_lead = x.hard.is_some();
         // The lead brakes hard: an emergency only where comfort braking would not keep clear
         // were it braking as estimated (a lead braking at 6 m/s2 40 m ahead of an ego at
@@ -57,8 +61,10 @@ impl Decision {
         // A short TTC alone is no emergency while the ego already brakes about as hard as the
         // threat needs: in a planned stop the TTC (at constant speeds) falls below any
         // threshold as the car comes to rest behind the lead.
-        let behind_need = t.needed_decel_mps2 > -x.accel_cmd + d.under_braking_s * lim.jerk_mps3;
-        let closing_fast = ttc < e.brake_ttc_s && behind_need;
+        let closing_fast = x.confirmed.is_some_and(|c| {
+            let behind_need = c.needed_decel_mps2 > -x.accel_cmd + d.under_braking_s * lim.jerk_mps3;
+            c.ttc_s.is_some_and(|ttc| ttc < e.brake_ttc_s) && behind_need
+        });
         if !self.emergency && (closing_fast || beyond_comfort || hard_and_needed) {
             tracing::warn!(
                 t_s = x.t_s,

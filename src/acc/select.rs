@@ -35,6 +35,9 @@ struct Track {
 /// A vehicle in the lane beyond the lead, or one a leaving lead reveals, as last measured.
 #[derive(Debug, Clone, Copy, PartialEq)]
 struct Revealed {
+    id: u32,
+    /// Since when it has been the vehicle revealed, frame after frame.
+    since_s: f64,
     stamp_s: f64,
     gap_m: f64,
     relative_speed_mps: f64,
@@ -71,7 +74,14 @@ impl LeadSelect {
     /// The threat of the vehicle the lead hides or reveals, moved on to `t_s` at its measured
     /// relative speed (it is not filtered: it counts as a vehicle holding its speed).
     pub(super) fn revealed(&self, t_s: f64, v: f64) -> Option<Threat> {
-        self.next_in_lane.filter(|_| self.lead.is_some()).map(|r| {
+        self.revealed_for(t_s, v, 0.0)
+    }
+
+    /// As [`Self::revealed`], only once it has been the vehicle revealed for `confirm_s`
+    /// (seen in more than one frame): what may start an emergency.
+    pub(super) fn revealed_for(&self, t_s: f64, v: f64, confirm_s: f64) -> Option<Threat> {
+        let confirmed = |r: &Revealed| r.stamp_s - r.since_s >= confirm_s - 1e-9;
+        self.next_in_lane.filter(|r| self.lead.is_some() && confirmed(r)).map(|r| {
             let rel = r.relative_speed_mps;
             let gap = r.gap_m + rel * (t_s - r.stamp_s).max(0.0);
             threat(gap, v, (v + rel).max(0.0), 0.0)
@@ -98,7 +108,13 @@ impl LeadSelect {
             (Some((b, _)), Some(e)) if e.0.id != b.id => Some(e),
             _ => beyond,
         }
-        .map(|(o, gap_m)| Revealed { stamp_s: frame.stamp_s, gap_m, relative_speed_mps: o.relative_speed_mps });
+        .map(|(o, gap_m)| {
+            let since_s = match self.next_in_lane {
+                Some(r) if r.id == o.id => r.since_s,
+                _ => frame.stamp_s,
+            };
+            Revealed { id: o.id, since_s, stamp_s: frame.stamp_s, gap_m, relative_speed_mps: o.relative_speed_mps }
+        });
         self.tracks.retain(|_, t| frame.stamp_s - t.stamp_s < TRACK_MEMORY_S);
         if self.coasting(s, frame, best) {
             return;

@@ -203,9 +203,11 @@ fn stop_and_go_holds_at_standstill_and_moves_off_after_the_lead() {
 
 #[test]
 fn closing_fast_warns_then_brakes_beyond_comfort_then_fully() {
-    // One look at a lead closing at 10 m/s, from a fresh controller.
+    // Two looks (an emergency starts only for what is measured in more than one frame) at a
+    // lead closing at 10 m/s, from a fresh controller.
     let at = |gap: f64| {
         let mut c = Controller::new(truth());
+        c.perceive(&frame(-0.05, vec![obj(1, gap + 0.5, 0.0, -10.0)]), &ego(-0.05, 25.0));
         c.perceive(&frame(0.0, vec![obj(1, gap, 0.0, -10.0)]), &ego(0.0, 25.0));
         let o = c.step(&ego(0.0, 25.0), &[]);
         (c, o)
@@ -620,7 +622,7 @@ fn brake_lights_coming_on_start_comfort_braking_before_the_speed_shows_it() {
     let (a, b) = (target_at(&with, 10.8), target_at(&without, 10.8));
     assert!(a < b - 0.5, "0.8 s after the pedal: {a:.2} m/s2 with the lamps, {b:.2} without");
     // A lead braking at 0.5 m/s2: the start goes no deeper than the comfort ramp over
-    // LIT_ANTICIPATION_S, and 3 s on the ego brakes as without the lamps.
+    // tuning.belief.lit_anticipation_s, and 3 s on the ego brakes as without the lamps.
     let deepest = |ts: &[(f64, f64, AccMode)]| ts.iter().map(|(_, a, _)| *a).fold(0.0, f64::min);
     let gentle = behind_lead_at(30.0, pressed, pressed_at_10_s(0.5));
     let (gentle_deepest, ramp) = (
@@ -1121,4 +1123,30 @@ fn the_tuning_group_is_overridable_and_checked() {
     let text = e.to_string();
     assert!(text.contains("mine.json5") && text.contains("tuning.belief.lit_need_share"), "{text}");
     assert!(AccSettings::parse("{ tuning: { select: { lead_coast: 1 } } }", "mine.json5").is_err());
+}
+
+/// A vehicle in the lane for a single frame, beyond comfort but not closing fast, starts no
+/// emergency (in dense traffic a lane changer read in the lane for one frame did); seen again
+/// in the next frame, it does.
+#[test]
+fn a_vehicle_seen_for_one_frame_starts_no_emergency_but_one_seen_again_does() {
+    for frames in [1, 3] {
+        let mut c = Controller::new(AccSettings { set_speed_mps: 28.0, ..truth() });
+        let (mut t, mut k, mut emergency) = (0.0, 0, false);
+        while t < 8.0 {
+            if ((t / DT).round() as i64) % 5 == 0 {
+                // A steady lead 80 m ahead; from 5 s a car 28 m ahead closing at 15 m/s (TTC
+                // 1.9 s; stopping short of it needs about 4.3 m/s2), for `frames` frames.
+                let mut objects = vec![obj(1, 80.0, 0.0, 0.0)];
+                if t >= 5.0 && k < frames {
+                    objects.push(obj(2, 28.0 - 15.0 * 0.05 * k as f64, 0.0, -15.0));
+                    k += 1;
+                }
+                c.perceive(&frame(t, objects), &ego(t, 28.0));
+            }
+            emergency |= c.step(&ego(t, 28.0), &[]).status.mode == AccMode::Emergency;
+            t += DT;
+        }
+        assert_eq!(emergency, frames > 1, "{frames} frames");
+    }
 }

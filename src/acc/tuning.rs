@@ -47,6 +47,7 @@ pub struct DecisionTuning {
     pub needed_guard_mps2: f64,
     pub emergency_factor: f64,
     pub under_braking_s: f64,
+    pub confirm_s: f64,
 }
 
 /// The comfort command: the far cap and the release of braking.
@@ -91,6 +92,7 @@ impl Tuning {
             ("tuning.decision.needed_guard_mps2", d.needed_guard_mps2),
             ("tuning.decision.emergency_factor", d.emergency_factor),
             ("tuning.decision.under_braking_s", d.under_braking_s),
+            ("tuning.decision.confirm_s", d.confirm_s),
             ("tuning.command.far_time_gaps", c.far_time_gaps),
             ("tuning.command.far_closing_mps2", c.far_closing_mps2),
             ("tuning.command.far_decel_mps2", c.far_decel_mps2),
