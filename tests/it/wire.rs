@@ -415,7 +415,8 @@ fn the_wire_format_doc_quotes_every_example() {
 }
 
 /// One version everywhere the doc states it: its title, the envelope table a reader is
-/// written from, every encoding schema and the first byte of every worked example.
+/// written from, every encoding schema, the first byte of every worked example, the worked
+/// example's byte table and the decoding rules.
 #[test]
 fn the_wire_format_doc_states_one_version_everywhere() {
     let doc = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/docs/wire-format.md")).unwrap();
@@ -430,6 +431,13 @@ fn the_wire_format_doc_states_one_version_everywhere() {
     }
     for (kind, bytes) in examples() {
         assert_eq!(bytes[0], v, "{} example", kind.name());
+    }
+    // The worked example's byte table and the decoding rules say it too.
+    assert!(doc.contains(&format!("| `{v:02x}` | version | {v} |")), "the worked example's version row");
+    let refused: Vec<&str> = doc.match_indices("a version other than ").map(|(i, m)| &doc[i + m.len()..]).collect();
+    assert!(!refused.is_empty(), "the decoding rules name the version refused");
+    for rest in refused {
+        assert!(rest.starts_with(&format!("{v};")), "the decoding rules refuse a version other than {rest:.3}");
     }
 }
 
