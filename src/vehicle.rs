@@ -2,7 +2,7 @@
 //! and the inverse longitudinal model (the throttle or brake that gives an acceleration).
 //!
 //! It sits below both: the simulator's forces (src/sim/dynamics.rs) and the ACC's low-level
-//! loop (src/acc/controller.rs) read the same numbers, and the ACC links none of the simulator.
+//! loop (src/acc/low_level.rs) read the same numbers, and the ACC links none of the simulator.
 //!
 //! Longitudinally, per vehicle:
 //! - drive force = throttle * min(max_drive_force, max_power / speed), along the heading;

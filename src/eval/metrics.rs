@@ -26,9 +26,8 @@ pub mod aims {
     /// applied one. The ACC's own release jerk (tuning.command.release_jerk_mps3) is 10.
     pub const MAX_RELEASE_JERK_MPS3: f64 = 12.0;
     /// A lead braking beyond the comfort limit is answered within this long (issue 16). Reported
-    /// in every run, not judged: the camera ACC answers leads braking at 6-7 m/s2 in 0.35 s
-    /// (their brake lights), those just beyond comfort (3.7-4.5 m/s2) in 0.30 s median but
-    /// up to 0.65 s; with ground truth all within 0.20 s (docs/control.md).
+    /// in every run, not judged: where comfort braking keeps clear of such a lead, the ACC
+    /// answers with the comfort ramp, which takes longer (docs/control.md, results).
     pub const HARD_BRAKING_RESPONSE_S: f64 = 0.5;
     /// Tolerance on the measured acceleration and deceleration: the vehicle's response to a
     /// limited target overshoots a little (tyre and suspension dynamics of the physics
