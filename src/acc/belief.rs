@@ -138,7 +138,7 @@ impl LeadBelief {
             let slowest = (self.speed_mps - b.unmeasured_sigmas * self.speed_sigma_mps).max(0.0);
             let slower = |gap_m: f64| self::threat(gap_m, v, slowest, self.mildest_accel());
             let far = self.gap_m > s.standstill_m + s.tuning.command.far_time_gaps * time_gap_s * v;
-            let wait_s = (super::lead_filter::SETTLE_S - self.followed_s).max(0.0);
+            let wait_s = (s.tuning.filter.settle_s - self.followed_s).max(0.0);
             let waited = slower(self.gap_m - (v - slowest).max(0.0) * wait_s);
             if far && waited.needed_decel_mps2 <= b.unsettled_wait_share * decel {
                 return revealed;

@@ -19,7 +19,7 @@ use super::lead_filter::Noise;
 use super::low_level::LowLevel;
 use super::objects::PerceptionFrame;
 use super::select::LeadSelect;
-use super::settings::{AccSettings, PerceptionSource, TIME_GAP_RANGE_S};
+use super::settings::{AccSettings, TIME_GAP_RANGE_S};
 use super::threat::Threat;
 use crate::msg::{AccCommand, AccMode, AccStatus, AccWarning, LeadInfo, RoadSpec};
 use crate::road::Road;
@@ -48,28 +48,7 @@ pub struct Controller {
 
 impl Controller {
     pub fn new(settings: AccSettings) -> Self {
-        let e = &settings.estimator;
-        let noise = match settings.perception {
-            PerceptionSource::Camera => Noise {
-                gap_base_m: e.gap_sigma_m,
-                gap_per_m2: e.gap_sigma_per_m2,
-                speed_base_mps: e.speed_sigma_mps,
-                speed_per_m2: e.speed_sigma_per_m2,
-                speed_steady_mps: e.steady_speed_sigma_mps,
-                jerk_sigma_mps3: e.lead_jerk_sigma_mps3,
-                hard_braking_margin_mps2: e.hard_braking_margin_mps2,
-            },
-            // Exact measurements: the filter follows them.
-            PerceptionSource::GroundTruth => Noise {
-                gap_base_m: 0.05,
-                gap_per_m2: 0.0,
-                speed_base_mps: 0.05,
-                speed_per_m2: 0.0,
-                speed_steady_mps: 0.05,
-                jerk_sigma_mps3: e.lead_jerk_sigma_mps3,
-                hard_braking_margin_mps2: settings.tuning.belief.ground_truth_hard_braking_margin_mps2,
-            },
-        };
+        let noise = Noise::of(&settings);
         Controller {
             params: settings.vehicle.params(),
             enabled: settings.enabled,
@@ -226,7 +205,7 @@ impl Controller {
         let situation = Situation { s: &self.s, threat, hard, confirmed, v, accel_cmd, t_s };
         self.decision.update(&situation);
         if let Some(t) = threat.filter(|_| self.decision.emergency) {
-            return (AccMode::Emergency, -self.decision.decel(&self.s, &t));
+            return (AccMode::Emergency, -self.decision.decel(&self.s, &t, v));
         }
         let plan = match (lead, threat) {
             (Some(l), Some(t)) => l.comfort_plan(&self.s, t, revealed, v, self.time_gap_s),

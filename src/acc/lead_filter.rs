@@ -4,6 +4,9 @@
 
 use nalgebra::{Matrix3, Vector3};
 
+use super::settings::{AccSettings, PerceptionSource};
+use super::tuning::FilterTuning;
+
 /// The lead's gap, speed and acceleration, estimated by a Kalman filter on the relative
 /// motion: the gap shrinks by the ego's travel (its speed is known exactly) and grows by the
 /// lead's, whose acceleration is a random walk (white jerk). Perception measures the gap
@@ -23,13 +26,13 @@ pub(super) struct LeadFilter {
     /// no manoeuvre, lamps off): how noisy its speed reads, measured (m2/s2).
     pub(super) speed_noise_var: f64,
     /// When this lead was first taken: a new track's speed still converges (the tracker starts
-    /// it at the ego's), so manoeuvres count only after SETTLE_S.
+    /// it at the ego's), so manoeuvres count only after `tuning.filter.settle_s`.
     pub(super) since_s: f64,
     /// Until then the lead counts as manoeuvring: its speed is followed closely.
     pub(super) manoeuvre_until_s: f64,
     /// Its brake lights were on in the last frame.
     pub(super) brake_lights: bool,
-    /// When its brake lights came on, after being off for RELIT_S at least, on a lead not yet
+    /// When its brake lights came on, after being off for `tuning.filter.relit_s` at least, on a lead not yet
     /// seen slowing; when they were last seen lit.
     pub(super) lit_from_s: Option<f64>,
     pub(super) lit_last_s: f64,
@@ -37,6 +40,8 @@ pub(super) struct LeadFilter {
     pub(super) lit_run_from_s: f64,
     /// The frame it was last measured in.
     pub(super) seen_s: f64,
+    /// Its tuning.
+    pub(super) k: FilterTuning,
 }
 
 impl LeadFilter {
@@ -44,7 +49,7 @@ impl LeadFilter {
         let p = Matrix3::from_diagonal(&Vector3::new(
             n.gap_sigma(gap_m).powi(2),
             speed_sigma_mps.max(n.speed_steady_mps).powi(2),
-            NEW_LEAD_ACCEL_SIGMA_MPS2.powi(2),
+            n.filter.new_lead_accel_sigma_mps2.powi(2),
         ));
         LeadFilter {
             id,
@@ -60,6 +65,7 @@ impl LeadFilter {
             lit_last_s: f64::NEG_INFINITY,
             lit_run_from_s: t_s,
             seen_s: t_s,
+            k: n.filter,
         }
     }
 
@@ -75,11 +81,11 @@ impl LeadFilter {
         // Against the measurement's own noise: the estimate's spread, wide while smoothing,
         // would hide the lead's first braking.
         let nu = (z - self.x[1]) / sigma;
-        self.drift += MANOEUVRE_DRIFT_GAIN * (nu - self.drift);
+        self.drift += self.k.manoeuvre_drift_gain * (nu - self.drift);
         if self.settled() && self.t_s >= self.manoeuvre_until_s && !self.brake_lights {
-            self.speed_noise_var += SPEED_NOISE_GAIN * ((z - self.x[1]).powi(2) - self.speed_noise_var);
+            self.speed_noise_var += self.k.speed_noise_gain * ((z - self.x[1]).powi(2) - self.speed_noise_var);
         }
-        if self.settled() && self.drift.abs() > MANOEUVRE_DRIFT {
+        if self.settled() && self.drift.abs() > self.k.manoeuvre_drift {
             tracing::debug!(id = self.id, t_s = self.t_s, drift = self.drift, "lead manoeuvre");
             self.manoeuvre();
         }
@@ -101,16 +107,16 @@ impl LeadFilter {
             self.p[(i, 2)] = 0.0;
             self.p[(2, i)] = 0.0;
         }
-        self.p[(2, 2)] = NEW_LEAD_ACCEL_SIGMA_MPS2.powi(2);
+        self.p[(2, 2)] = self.k.new_lead_accel_sigma_mps2.powi(2);
     }
 
     /// The lead changed what it does: the acceleration's uncertainty (and the speed's that
     /// builds over a window of it) is opened up and its speed followed closely for a while.
     pub(super) fn manoeuvre(&mut self) {
-        self.p[(2, 2)] += MANOEUVRE_ACCEL_SIGMA_MPS2 * MANOEUVRE_ACCEL_SIGMA_MPS2;
-        self.p[(1, 1)] += (MANOEUVRE_ACCEL_SIGMA_MPS2 * MANOEUVRE_WINDOW_S).powi(2);
+        self.p[(2, 2)] += self.k.manoeuvre_accel_sigma_mps2 * self.k.manoeuvre_accel_sigma_mps2;
+        self.p[(1, 1)] += (self.k.manoeuvre_accel_sigma_mps2 * self.k.manoeuvre_window_s).powi(2);
         self.drift = 0.0;
-        self.manoeuvre_until_s = self.t_s + MANOEUVRE_HOLD_S;
+        self.manoeuvre_until_s = self.t_s + self.k.manoeuvre_hold_s;
     }
 
     /// The lead's brake lights in a frame: coming on, they start a manoeuvre at once (the
@@ -121,12 +127,12 @@ impl LeadFilter {
         // nor a driver dabbing the pedal to hold a speed (lamps flickering every few frames: a
         // car ending its braking 170 m ahead, each flash a new manoeuvre, had its speed followed
         // at the range's noise for seconds and read as braking at 13 m/s2).
-        if on && !self.brake_lights && self.settled() && self.t_s - self.lit_last_s >= RELIT_S {
+        if on && !self.brake_lights && self.settled() && self.t_s - self.lit_last_s >= self.k.relit_s {
             tracing::debug!(id = self.id, t_s = self.t_s, "lead brake lights on");
             self.manoeuvre();
             // Not for the lamps of a lead already seen slowing: its deceleration is measured,
             // the lamps add nothing to it.
-            self.lit_from_s = (self.x[2] >= SLOWING_MPS2).then_some(self.t_s);
+            self.lit_from_s = (self.x[2] >= -self.k.slowing_mps2).then_some(self.t_s);
         }
         if on && !self.brake_lights {
             self.lit_run_from_s = self.t_s;
@@ -145,8 +151,8 @@ impl LeadFilter {
     /// Its brake lights vouch for its estimated acceleration (`LeadNow::lamps_vouch`).
     pub(super) fn lamps_vouch(&self) -> bool {
         self.brake_lights
-            && self.t_s - self.lit_run_from_s >= LIT_HELD_S - 1e-9
-            && self.speed_noise_mps() <= LAMPS_VOUCH_NOISE_MPS
+            && self.t_s - self.lit_run_from_s >= self.k.lit_held_s - 1e-9
+            && self.speed_noise_mps() <= self.k.lamps_vouch_noise_mps
     }
 
     /// How long ago the lead's brake lights came on, while they are on.
@@ -163,7 +169,7 @@ impl LeadFilter {
         // A lead whose brake lights came on builds its deceleration: for the manoeuvre's
         // hold its acceleration may change as fast as a brake application makes it.
         let jerk_sigma = if self.brake_lights && self.t_s < self.manoeuvre_until_s {
-            jerk_sigma.max(BRAKING_JERK_SIGMA_MPS3)
+            jerk_sigma.max(self.k.braking_jerk_sigma_mps3)
         } else {
             jerk_sigma
         };
@@ -184,7 +190,7 @@ impl LeadFilter {
 
     /// Followed long enough for its speed and acceleration to mean something.
     pub(super) fn settled(&self) -> bool {
-        self.t_s - self.since_s >= SETTLE_S
+        self.t_s - self.since_s >= self.k.settle_s
     }
 
     /// A scalar measurement of state component `i`.
@@ -210,9 +216,39 @@ pub(super) struct Noise {
     pub(super) jerk_sigma_mps3: f64,
     /// How far the lead's estimated deceleration may overshoot the true one.
     pub(super) hard_braking_margin_mps2: f64,
+    /// The filter's tuning.
+    pub(super) filter: FilterTuning,
 }
 
 impl Noise {
+    /// The perception source's noise, from the settings: the camera's from the estimator
+    /// group; ground truth's exact measurements, which the filter follows.
+    pub(super) fn of(s: &AccSettings) -> Self {
+        let e = &s.estimator;
+        match s.perception {
+            PerceptionSource::Camera => Noise {
+                gap_base_m: e.gap_sigma_m,
+                gap_per_m2: e.gap_sigma_per_m2,
+                speed_base_mps: e.speed_sigma_mps,
+                speed_per_m2: e.speed_sigma_per_m2,
+                speed_steady_mps: e.steady_speed_sigma_mps,
+                jerk_sigma_mps3: e.lead_jerk_sigma_mps3,
+                hard_braking_margin_mps2: e.hard_braking_margin_mps2,
+                filter: s.tuning.filter,
+            },
+            PerceptionSource::GroundTruth => Noise {
+                gap_base_m: 0.05,
+                gap_per_m2: 0.0,
+                speed_base_mps: 0.05,
+                speed_per_m2: 0.0,
+                speed_steady_mps: 0.05,
+                jerk_sigma_mps3: e.lead_jerk_sigma_mps3,
+                hard_braking_margin_mps2: s.tuning.belief.ground_truth_hard_braking_margin_mps2,
+                filter: s.tuning.filter,
+            },
+        }
+    }
+
     pub(super) fn gap_sigma(&self, gap_m: f64) -> f64 {
         self.gap_base_m + self.gap_per_m2 * gap_m.max(0.0).powi(2)
     }
@@ -222,45 +258,10 @@ impl Noise {
     }
 
     /// The steady smoothing of the lead's speed at this gap: the setting's from
-    /// STEADY_FULL_GAP_M on, less nearer, with the square of the gap (as the range's error),
+    /// `tuning.filter.steady_full_gap_m` on, less nearer, with the square of the gap (as the range's error),
     /// never below the measurement's own noise.
     pub(super) fn speed_steady(&self, gap_m: f64) -> f64 {
-        let share = (gap_m.max(0.0) / STEADY_FULL_GAP_M).powi(2).min(1.0);
+        let share = (gap_m.max(0.0) / self.filter.steady_full_gap_m).powi(2).min(1.0);
         (self.speed_steady_mps * share).max(self.speed_sigma(gap_m))
     }
 }
-
-/// From this gap on the lead's speed is smoothed at the estimator's steady_speed_sigma_mps.
-const STEADY_FULL_GAP_M: f64 = 50.0;
-/// The gain per frame of the lead's measured speed noise (a fading mean square).
-const SPEED_NOISE_GAIN: f64 = 0.1;
-/// Brake lights vouch for the estimate of a lead whose speed reads within this (steady, before
-/// the lamps): an order of magnitude from either side of what was measured, 0.0003-0.08 m/s for
-/// cars, motorcycles and trucks 50-120 m ahead whose estimates followed their braking, 1.4 and
-/// 8.6 m/s for cars 143 and 176 m ahead whose estimates swung by 6 m/s2 and more.
-const LAMPS_VOUCH_NOISE_MPS: f64 = 0.5;
-/// The lead's jerk (white-noise sigma) for MANOEUVRE_HOLD_S after its brake lights came on: a
-/// brake application builds deceleration at some 10 m/s3, far beyond the steady model's.
-const BRAKING_JERK_SIGMA_MPS3: f64 = 10.0;
-/// Brake lights lit in every frame for this long are held on (`LeadNow::lamps_vouch`): four
-/// frames at 20 Hz. Far away a detector misses lit lamps in a frame now and then (some 3%):
-/// such a miss costs this long again.
-const LIT_HELD_S: f64 = 0.15;
-/// Lamps seen lit again within this long of the last frame they were lit in are the same
-/// brake application (a frame or two of them missed).
-const RELIT_S: f64 = 0.5;
-/// A lead whose estimated acceleration is below this is seen slowing already.
-const SLOWING_MPS2: f64 = -0.3;
-/// How long after a manoeuvre the lead's speed is followed closely.
-const MANOEUVRE_HOLD_S: f64 = 1.0;
-/// A lead is judged on its acceleration (manoeuvres, braking hard) once followed this long.
-pub(super) const SETTLE_S: f64 = 1.0;
-/// A new lead's acceleration uncertainty (until SETTLE_S).
-const NEW_LEAD_ACCEL_SIGMA_MPS2: f64 = 2.0;
-/// Manoeuvre detection on the lead's speed: the fading average's gain per frame, the level
-/// that says the lead changed its acceleration, and the acceleration uncertainty (and the
-/// speed uncertainty that builds over a window of it) opened up then.
-const MANOEUVRE_DRIFT_GAIN: f64 = 0.5;
-const MANOEUVRE_DRIFT: f64 = 2.0;
-const MANOEUVRE_ACCEL_SIGMA_MPS2: f64 = 6.0;
-const MANOEUVRE_WINDOW_S: f64 = 0.1;

@@ -9,6 +9,8 @@ pub struct Object {
     pub id: u32,
     /// From the ego's origin (rear axle) to the object's rear, along ego x.
     pub distance_m: f64,
+    /// Its expected error as perception reports it (0: exact, as ground truth).
+    pub distance_sigma_m: f64,
     /// The object's centre, ego y (positive left).
     pub lateral_m: f64,
     /// Object speed minus ego speed along ego x (negative: closing in).
@@ -35,6 +37,7 @@ impl PerceptionFrame {
             .map(|d| Object {
                 id: d.track_id,
                 distance_m: d.distance_m,
+                distance_sigma_m: d.distance_sigma_m,
                 lateral_m: d.lateral_offset_m,
                 relative_speed_mps: d.relative_speed_mps,
                 relative_speed_sigma_mps: d.relative_speed_sigma_mps,
@@ -53,6 +56,7 @@ impl PerceptionFrame {
             .map(|o| Object {
                 id: o.id,
                 distance_m: o.position_in_ego_m[0],
+                distance_sigma_m: 0.0,
                 lateral_m: o.position_in_ego_m[1],
                 relative_speed_mps: o.velocity_in_ego_mps[0],
                 relative_speed_sigma_mps: 0.0,

@@ -9,6 +9,7 @@ use serde::Deserialize;
 #[serde(deny_unknown_fields)]
 pub struct Tuning {
     pub select: SelectTuning,
+    pub filter: FilterTuning,
     pub belief: BeliefTuning,
     pub decision: DecisionTuning,
     pub command: CommandTuning,
@@ -25,6 +26,27 @@ pub struct SelectTuning {
     pub standing_coast_s: f64,
     pub standing_lead_mps: f64,
     pub beyond_lead_m: f64,
+}
+
+/// The lead estimate (the Kalman filter): manoeuvre detection, the lamps, a new lead's
+/// settling and the measured noise of its speed.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct FilterTuning {
+    pub settle_s: f64,
+    pub new_lead_accel_sigma_mps2: f64,
+    pub manoeuvre_drift_gain: f64,
+    pub manoeuvre_drift: f64,
+    pub manoeuvre_accel_sigma_mps2: f64,
+    pub manoeuvre_window_s: f64,
+    pub manoeuvre_hold_s: f64,
+    pub braking_jerk_sigma_mps3: f64,
+    pub slowing_mps2: f64,
+    pub relit_s: f64,
+    pub lit_held_s: f64,
+    pub lamps_vouch_noise_mps: f64,
+    pub speed_noise_gain: f64,
+    pub steady_full_gap_m: f64,
 }
 
 /// The lead belief: what the lead plausibly does, from its estimate, lamps and age.
@@ -48,6 +70,8 @@ pub struct DecisionTuning {
     pub emergency_factor: f64,
     pub under_braking_s: f64,
     pub confirm_s: f64,
+    pub wait_s: f64,
+    pub planned_emergency_mps2: f64,
 }
 
 /// The comfort command: the far cap and the release of braking.
@@ -74,7 +98,8 @@ pub struct LowLevelTuning {
 impl Tuning {
     /// Every number by its key, for the settings' check.
     pub fn entries(&self) -> Vec<(&'static str, f64)> {
-        let (s, b, d, c, l) = (&self.select, &self.belief, &self.decision, &self.command, &self.low_level);
+        let (s, f, b, d, c, l) =
+            (&self.select, &self.filter, &self.belief, &self.decision, &self.command, &self.low_level);
         vec![
             ("tuning.select.lateral_rate_filter", s.lateral_rate_filter),
             ("tuning.select.max_lateral_rate_mps", s.max_lateral_rate_mps),
@@ -82,6 +107,20 @@ impl Tuning {
             ("tuning.select.standing_coast_s", s.standing_coast_s),
             ("tuning.select.standing_lead_mps", s.standing_lead_mps),
             ("tuning.select.beyond_lead_m", s.beyond_lead_m),
+            ("tuning.filter.settle_s", f.settle_s),
+            ("tuning.filter.new_lead_accel_sigma_mps2", f.new_lead_accel_sigma_mps2),
+            ("tuning.filter.manoeuvre_drift_gain", f.manoeuvre_drift_gain),
+            ("tuning.filter.manoeuvre_drift", f.manoeuvre_drift),
+            ("tuning.filter.manoeuvre_accel_sigma_mps2", f.manoeuvre_accel_sigma_mps2),
+            ("tuning.filter.manoeuvre_window_s", f.manoeuvre_window_s),
+            ("tuning.filter.manoeuvre_hold_s", f.manoeuvre_hold_s),
+            ("tuning.filter.braking_jerk_sigma_mps3", f.braking_jerk_sigma_mps3),
+            ("tuning.filter.slowing_mps2", f.slowing_mps2),
+            ("tuning.filter.relit_s", f.relit_s),
+            ("tuning.filter.lit_held_s", f.lit_held_s),
+            ("tuning.filter.lamps_vouch_noise_mps", f.lamps_vouch_noise_mps),
+            ("tuning.filter.speed_noise_gain", f.speed_noise_gain),
+            ("tuning.filter.steady_full_gap_m", f.steady_full_gap_m),
             ("tuning.belief.unmeasured_sigmas", b.unmeasured_sigmas),
             ("tuning.belief.unsettled_wait_share", b.unsettled_wait_share),
             ("tuning.belief.lit_anticipation_s", b.lit_anticipation_s),
@@ -93,6 +132,8 @@ impl Tuning {
             ("tuning.decision.emergency_factor", d.emergency_factor),
             ("tuning.decision.under_braking_s", d.under_braking_s),
             ("tuning.decision.confirm_s", d.confirm_s),
+            ("tuning.decision.wait_s", d.wait_s),
+            ("tuning.decision.planned_emergency_mps2", d.planned_emergency_mps2),
             ("tuning.command.far_time_gaps", c.far_time_gaps),
             ("tuning.command.far_closing_mps2", c.far_closing_mps2),
             ("tuning.command.far_decel_mps2", c.far_decel_mps2),
@@ -112,7 +153,10 @@ impl Tuning {
             if !(v.is_finite() && v >= 0.0) {
                 return Err((key.into(), format!("{v}"), "give a finite value >= 0".into()));
             }
-            let unit_interval = key.ends_with("_share") || key.ends_with("_filter") || key.ends_with("hold_brake");
+            let unit_interval = key.ends_with("_share")
+                || key.ends_with("_filter")
+                || key.ends_with("_gain")
+                || key.ends_with("hold_brake");
             if unit_interval && v > 1.0 {
                 return Err((key.into(), format!("{v}"), "give a value from 0 to 1".into()));
             }

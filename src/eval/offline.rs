@@ -123,20 +123,22 @@ mod tests {
         }
     }
 
-    /// A lead braking at 7 m/s2 from 30 m/s at the 1.8 s gap, in the loop with the simulator:
-    /// no collision and at least 5 m left with the camera and with ground truth, and each asks
-    /// for what stopping behind it needs soon. The emergency starts once comfort braking would
-    /// not keep clear of the lead braking as estimated (docs/control.md): 0.2 s after the
-    /// lead passes the comfort limit with ground truth, 0.50-0.55 s with the camera, whose
-    /// estimate of the lead's deceleration needs the ranges of a few frames.
+    /// A lead braking at 7 m/s2 from 30 m/s at the 1.8 s gap to a stop, in the loop with the
+    /// simulator: no collision and at least 5 m left with the camera and with ground truth.
+    /// Comfort braking answers first; the emergency comes at the last responsible moment
+    /// (docs/control.md), once comfort braking and then an emergency would no longer keep
+    /// clear: 3.05 s after the lead passed the comfort limit with ground truth, 3.10 with the
+    /// camera (within 3.5 s here), not within 0.5 s as when any lead braking beyond comfort
+    /// started one at once.
     #[test]
     fn a_hard_braking_lead_is_answered_and_5_m_kept() {
-        for (perception, within) in [(PerceptionSource::GroundTruth, 0.3), (PerceptionSource::Camera, 0.6)] {
+        for perception in [PerceptionSource::GroundTruth, PerceptionSource::Camera] {
             let scenario = Scenario::find("lead-brakes-hard").unwrap();
             let settings = settings_for(&scenario, perception);
             let m = Metrics::of(&super::run(scenario, settings, 100, 20.0));
             let answer = m.hard_braking_response_s.expect("the lead brakes beyond comfort");
-            assert!(answer <= within, "{perception:?}: answered after {answer:.2} s");
+            assert!(m.emergency_s > 0.0, "{perception:?}: no emergency behind a lead braking to a stop at 7 m/s2");
+            assert!(answer <= 3.5, "{perception:?}: answered after {answer:.2} s");
             assert!(m.min_gap_m.is_some_and(|g| g >= 5.0), "{perception:?}: min gap {:?}", m.min_gap_m);
             assert!(m.pass, "{perception:?}: {:?}", m.checks.iter().filter(|c| !c.pass).collect::<Vec<_>>());
         }
