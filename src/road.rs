@@ -56,6 +56,18 @@ impl Road {
         self.spec.lane_width_m
     }
 
+    /// The tightest bend (|radius|, m) between road positions `from_s` and `to_s`, in either
+    /// order; None on a straight.
+    pub fn tightest_radius_between(&self, from_s: f64, to_s: f64) -> Option<f64> {
+        let (lo, hi) = if from_s <= to_s { (from_s, to_s) } else { (to_s, from_s) };
+        self.spec
+            .curves
+            .iter()
+            .filter(|c| c.start_m < hi && c.start_m + c.length_m > lo)
+            .map(|c| c.radius_m.abs())
+            .reduce(f64::min)
+    }
+
     pub fn half_width_m(&self) -> f64 {
         self.spec.lanes as f64 * self.spec.lane_width_m / 2.0
     }

@@ -4,7 +4,8 @@
 //!
 //! - [`controller`]: the decisions, free of I/O, wiring its parts: [`ego`] (the ego's
 //!   motion), [`objects`] (the vehicles ahead it is fed), [`lane`] (the lane ahead on the
-//!   map), [`select`] (lead selection), [`lead_filter`] (the lead estimate), [`belief`] (what
+//!   map), [`in_lane`] (a track's place in the lane as a probability), [`select`] (lead
+//!   selection), [`lead_filter`] (the lead estimate), [`belief`] (what
 //!   the lead plausibly does), [`threat`], [`decision`] (comfort braking or an emergency),
 //!   [`command`] (the comfort command, jerk limit and release) and [`low_level`] (throttle
 //!   and brake);
@@ -25,6 +26,7 @@ mod command;
 pub mod controller;
 mod decision;
 pub mod ego;
+pub mod in_lane;
 mod lane;
 mod lead_filter;
 mod low_level;

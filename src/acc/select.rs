@@ -7,10 +7,11 @@
 use std::collections::HashMap;
 
 use super::ego::EgoNow;
+use super::in_lane;
 use super::lane::LaneAhead;
 use super::lead_filter::{LeadFilter, Noise};
 use super::objects::{Object, PerceptionFrame};
-use super::settings::AccSettings;
+use super::settings::{AccSettings, PerceptionSource};
 use super::threat::{threat, Threat};
 use super::tuning::SelectTuning;
 use crate::road::Road;
@@ -29,7 +30,17 @@ struct Track {
     /// Its offset from the ego's lane centre (or predicted path, without a map).
     lateral_m: f64,
     lateral_rate_mps: f64,
+    /// Fading mean square of the raw rates about the filtered one (m2/s2).
+    rate_scatter: f64,
     seen: u32,
+}
+
+impl Track {
+    /// The filtered lateral rate's standard deviation: a low-pass of gain k over readings
+    /// scattered by `rate_scatter` keeps k / (2 - k) of their variance.
+    fn rate_sigma_mps(&self, k: f64) -> f64 {
+        (self.rate_scatter * k / (2.0 - k).max(1.0)).sqrt()
+    }
 }
 
 /// A vehicle in the lane beyond the lead, or one a leaving lead reveals, as last measured.
@@ -159,20 +170,35 @@ impl LeadSelect {
             if o.distance_m <= 0.0 || gap > lane.range_m {
                 continue;
             }
-            let predicted = if track.seen >= RATE_AFTER_FRAMES {
-                off + track.lateral_rate_mps * lane.lateral_lookahead_s
-            } else {
-                off
-            };
             let limit = if current == Some(o.id) { stay_in_lane_m } else { in_lane_m };
-            let off = off.abs().min(predicted.abs());
-            if off >= limit {
+            let sigma = match (s.perception, &lane_ahead) {
+                (PerceptionSource::GroundTruth, _) => 0.0,
+                (_, Some(l)) => {
+                    lane.offset_sigma.at(o.distance_m, l.road.tightest_radius_between(l.s_m, l.s_m + o.distance_m))
+                }
+                (_, None) => lane.offset_sigma.at(o.distance_m, (kappa.abs() > 1e-5).then(|| 1.0 / kappa)),
+            };
+            // Where it is, and where its lateral speed takes it within lateral_lookahead_s,
+            // with that prediction's own uncertainty (the rate's scatter: small for a car
+            // cutting in near, large for one far round a bend whose offset reads noisily).
+            let rate_sigma = if sigma > 0.0 { track.rate_sigma_mps(s.tuning.select.lateral_rate_filter) } else { 0.0 };
+            let predicted = (track.seen >= RATE_AFTER_FRAMES).then(|| {
+                let ahead_s = lane.lateral_lookahead_s;
+                (off + track.lateral_rate_mps * ahead_s, sigma.hypot(rate_sigma * ahead_s))
+            });
+            let within = |half_m: f64| {
+                let p = lane.in_lane_probability;
+                in_lane::probability(off, half_m, sigma) >= p
+                    || predicted.is_some_and(|(at, sd)| in_lane::probability(at, half_m, sd) >= p)
+            };
+            tracing::trace!(t_s = frame.stamp_s, id = o.id, x_m = o.distance_m, offset_m = off, sigma_m = sigma, predicted = ?predicted, "placed");
+            if !within(limit) {
                 continue;
             }
             if best.is_none_or(|b| gap < b.1) {
                 best = Some((o, gap));
             }
-            if off < in_lane_m {
+            if within(in_lane_m) {
                 in_lane.push((o, gap));
             }
         }
@@ -224,21 +250,24 @@ impl LeadSelect {
 
 /// The track of object `id` seen at lateral offset `off` at `stamp_s`, updated and kept:
 /// the rate of that same offset (in a bend a car standing in the next lane sweeps across
-/// the ego's own frame as the ego turns, not across its lane).
+/// the ego's own frame as the ego turns, not across its lane), and how much that rate's
+/// frame-to-frame readings scatter about it.
 fn track(tracks: &mut HashMap<u32, Track>, t: &SelectTuning, id: u32, off: f64, stamp_s: f64) -> Track {
     let track = match tracks.get(&id) {
         Some(p) if stamp_s > p.stamp_s => {
             let max = t.max_lateral_rate_mps;
             let lat_rate = ((off - p.lateral_m) / (stamp_s - p.stamp_s)).clamp(-max, max);
+            let k = t.lateral_rate_filter;
             Track {
                 stamp_s,
                 lateral_m: off,
-                lateral_rate_mps: p.lateral_rate_mps + t.lateral_rate_filter * (lat_rate - p.lateral_rate_mps),
+                lateral_rate_mps: p.lateral_rate_mps + k * (lat_rate - p.lateral_rate_mps),
+                rate_scatter: p.rate_scatter + k * ((lat_rate - p.lateral_rate_mps).powi(2) - p.rate_scatter),
                 seen: p.seen.saturating_add(1),
             }
         }
         Some(p) => *p,
-        None => Track { stamp_s, lateral_m: off, lateral_rate_mps: 0.0, seen: 1 },
+        None => Track { stamp_s, lateral_m: off, lateral_rate_mps: 0.0, rate_scatter: 0.0, seen: 1 },
     };
     tracks.insert(id, track);
     track

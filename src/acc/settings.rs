@@ -5,6 +5,7 @@ use std::path::Path;
 
 use serde::Deserialize;
 
+use super::in_lane::OffsetSigma;
 use super::tuning::Tuning;
 use crate::config::{parse_layered, read_config, ConfigError};
 use crate::vehicle::VehicleParams;
@@ -121,6 +122,8 @@ pub struct Stale {
 pub struct Lane {
     pub in_lane_m: f64,
     pub stay_in_lane_m: f64,
+    pub in_lane_probability: f64,
+    pub offset_sigma: OffsetSigma,
     pub lateral_lookahead_s: f64,
     pub range_m: f64,
 }
@@ -322,6 +325,16 @@ impl AccSettings {
                 format!("{n:?}"),
                 "in_lane_m > 0, stay_in_lane_m >= in_lane_m, range_m > 0, lookahead >= 0",
             );
+        }
+        if !(n.in_lane_probability > 0.0 && n.in_lane_probability < 1.0) {
+            return err(
+                "lane.in_lane_probability",
+                format!("{}", n.in_lane_probability),
+                "give a value between 0 and 1",
+            );
+        }
+        if let Err((problem, fix)) = n.offset_sigma.check() {
+            return err("lane.offset_sigma", problem, &fix);
         }
         let e = &self.estimator;
         for (key, x) in [

@@ -11,7 +11,7 @@
 
 use serde::Serialize;
 
-use super::bend_lateral::{self, LateralCell};
+use super::bend_lateral::{self, LateralCell, RoadView};
 use super::link_codec::{LinkCodec, LinkCost};
 use crate::msg::{Detection, GroundTruthObject};
 use crate::perception::{CameraRig, DetectorParams};
@@ -67,6 +67,9 @@ pub struct MatchError {
     pub lateral_signed_m: f64,
     /// The tightest bend (|radius|, m) between the ego and the vehicle; None on a straight.
     pub bend_radius_m: Option<f64>,
+    /// Estimated - true place across the road (on the road's map, where each point falls),
+    /// positive left.
+    pub across_signed_m: f64,
     /// |estimated - true| relative speed, m/s, for tracks seen at least 3 times.
     pub relative_speed_abs_mps: Option<f64>,
 }
@@ -122,14 +125,14 @@ pub struct Tally {
 }
 
 impl Tally {
-    /// Scores one frame: greedy matching by IoU, best pairs first; `bend` names the bend each
-    /// vehicle is seen through.
+    /// Scores one frame: greedy matching by IoU, best pairs first; `view` names the bend each
+    /// vehicle is seen through and places points across the road.
     pub fn add_frame(
         &mut self,
         dets: &[Detection],
         truth: &[GroundTruthObject],
         (max_range_m, min_visible): (f64, f32),
-        bend: &dyn Fn(&GroundTruthObject) -> Option<f64>,
+        view: &RoadView,
     ) {
         self.frames += 1;
         self.detections += dets.len() as u64;
@@ -172,7 +175,9 @@ impl Tally {
                     distance_rel: (d.distance_m - truth_x).abs() / truth_x,
                     lateral_abs_m: (d.lateral_offset_m - o.position_in_ego_m[1]).abs(),
                     lateral_signed_m: d.lateral_offset_m - o.position_in_ego_m[1],
-                    bend_radius_m: bend(o),
+                    bend_radius_m: view.bend_of(o),
+                    across_signed_m: view.across_m(d.distance_m, d.lateral_offset_m)
+                        - view.across_m(truth_x, o.position_in_ego_m[1]),
                     relative_speed_abs_mps: (settled && d.relative_speed_mps != 0.0)
                         .then(|| (d.relative_speed_mps - o.velocity_in_ego_mps[0]).abs()),
                 });
@@ -269,9 +274,9 @@ pub fn evaluate_scenario(
                     rig.update(&front, narrow.as_deref(), t_s)
                 }
             };
-            let road = world.road();
-            let ego_s = bend_lateral::ego_s(road, world.ego_state().position_in_world_m);
-            tally.add_frame(&dets, &truth.objects, (60.0, 0.5), &|o| bend_lateral::bend_of(road, ego_s, o));
+            let ego = world.ego_state();
+            let view = RoadView::new(world.road(), ego.position_in_world_m, ego.yaw_in_world_rad);
+            tally.add_frame(&dets, &truth.objects, (60.0, 0.5), &view);
         }
         world.step(EgoInput::Follow);
     }
@@ -310,8 +315,11 @@ pub struct DetectReport {
     pub frames_through: Option<LinkCost>,
     pub scenarios: Vec<ScenarioScore>,
     pub overall: ScenarioScore,
-    /// The lateral error 80-200 m ahead by range band and bend ([`bend_lateral`]).
+    /// The lateral error 40-200 m ahead by range band and bend ([`bend_lateral`]).
     pub lateral_in_bends: Vec<LateralCell>,
+    /// The error of the place across the road, the same way: what the ACC's in-lane
+    /// probability reads (config/acc.json5, lane.offset_sigma_m).
+    pub across_in_bends: Vec<LateralCell>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -391,12 +399,15 @@ pub fn evaluate(
     let frames_through = codec.map(|c| c.cost());
     let lateral_in_bends =
         bend_lateral::table(overall.errors.iter().map(|e| (e.true_distance_m, e.bend_radius_m, e.lateral_signed_m)));
+    let across_in_bends =
+        bend_lateral::table(overall.errors.iter().map(|e| (e.true_distance_m, e.bend_radius_m, e.across_signed_m)));
     DetectReport {
         command,
         frames_through,
         scenarios: scores,
         overall: ScenarioScore::from_tally("all", &overall),
         lateral_in_bends,
+        across_in_bends,
     }
 }
 
@@ -447,7 +458,14 @@ pub fn markdown(report: &DetectReport) -> String {
         ));
     }
     s.push_str("\nErrors: median / p90 over matched detections (relative speed: tracks seen twice or more).\n\n");
-    s.push_str(&bend_lateral::markdown(&report.lateral_in_bends));
+    s.push_str(&bend_lateral::markdown(
+        &report.lateral_in_bends,
+        "Lateral error of matched detections (ego y), metres: standard deviation (bias, count), by true distance and the tightest bend between the ego and the vehicle.\n",
+    ));
+    s.push_str(&bend_lateral::markdown(
+        &report.across_in_bends,
+        "Error of the place across the road (each point projected on the road's map where it falls: the range's error counts too in a bend), metres, the same way.\n",
+    ));
     if let Some(c) = &report.frames_through {
         let quality = if c.encoding == "jpeg" { format!(" at quality {}", c.jpeg_quality) } else { String::new() };
         s.push_str(&format!(

@@ -249,7 +249,7 @@ fn bench_quick_every_path_delivers() {
 }
 
 #[test]
-fn eval_detect_measures_the_lateral_error_far_ahead_in_the_sweeps_bends() {
+fn eval_detect_measures_the_lateral_and_across_road_errors_far_ahead_in_the_sweeps_bends() {
     let mut cmd = bin();
     cmd.args(["eval", "detect", "--family", "bend-neighbours", "--count", "2", "--seconds", "12", "--json"]);
     let out = run(cmd, Duration::from_secs(300));
@@ -259,13 +259,16 @@ fn eval_detect_measures_the_lateral_error_far_ahead_in_the_sweeps_bends() {
     let names: Vec<&str> =
         report["scenarios"].as_array().unwrap().iter().map(|s| s["scenario"].as_str().unwrap()).collect();
     assert_eq!(names, ["bend-neighbours-0007", "bend-neighbours-0017"]);
-    let cells = report["lateral_in_bends"].as_array().unwrap();
-    assert_eq!(cells.len(), 12, "three range bands by four bend bands");
-    let counted: u64 = cells.iter().map(|c| c["count"].as_u64().unwrap()).sum();
-    assert!(counted > 0, "vehicles 80-200 m ahead were matched: {cells:?}");
-    for c in cells.iter().filter(|c| c["count"].as_u64().unwrap() > 1) {
-        let sigma = c["sigma_m"].as_f64().unwrap();
-        assert!(sigma >= 0.0 && sigma < 3.5, "a lane's width at most: {c}");
+    // The lateral error (ego y) and the error of the place across the road.
+    for table in ["lateral_in_bends", "across_in_bends"] {
+        let cells = report[table].as_array().unwrap();
+        assert_eq!(cells.len(), 16, "{table}: four range bands by four bend bands");
+        let counted: u64 = cells.iter().map(|c| c["count"].as_u64().unwrap()).sum();
+        assert!(counted > 0, "{table}: vehicles 40-200 m ahead were matched: {cells:?}");
+        for c in cells.iter().filter(|c| c["count"].as_u64().unwrap() > 1) {
+            let sigma = c["sigma_m"].as_f64().unwrap();
+            assert!(sigma >= 0.0 && sigma < 3.5, "{table}: a lane's width at most: {c}");
+        }
     }
 }
 
