@@ -443,6 +443,41 @@ fn with_the_road_map_the_lead_is_in_the_ego_lane_round_a_bend() {
     assert_eq!(lead_of(false), Some(1), "on the yaw rate alone: the car on the straight-ahead line");
 }
 
+/// A vehicle's place in the lane is a probability with the camera: one read 1.4 m off the
+/// lane's centre 190 m into a bend (where the camera's offset has a sigma of half a metre) may
+/// as well be in the next lane and is not the lead, while one read near the centre there is,
+/// and one read 1.4 m off 40 m ahead (sigma 0.2 m) is too. Ground truth keeps the plain limit.
+#[test]
+fn far_round_a_bend_a_vehicle_is_in_the_lane_only_when_its_offset_says_so_with_confidence() {
+    use crate::msg::{Curve, RoadSpec};
+    use crate::road::Road;
+    let spec =
+        RoadSpec { curves: vec![Curve { start_m: 100.0, length_m: 500.0, radius_m: 500.0 }], ..RoadSpec::default() };
+    let road = Road::new(spec.clone());
+    let at = road.to_world(90.0, road.lane_center_d(1));
+    let heading = road.center(90.0).1;
+    let pose = Pose { x_m: at.x, y_m: at.y, yaw_rad: heading };
+    // A point `s` along the road, `off` left of the ego lane's centre, in the ego's frame.
+    let in_ego = |s: f64, off: f64| {
+        let p = road.to_world(s, road.lane_center_d(1) + off) - at;
+        let (sin, cos) = heading.sin_cos();
+        (p.x * cos + p.y * sin, -p.x * sin + p.y * cos)
+    };
+    let lead_of = |settings: AccSettings, s: f64, off: f64| {
+        let mut c = Controller::new(settings);
+        c.set_road(&spec);
+        let (x, y) = in_ego(s, off);
+        let now = EgoNow { pose: Some(pose), ..ego(0.0, 30.0) };
+        c.perceive(&frame(0.0, vec![Object { distance_m: x, lateral_m: y, ..obj(1, 0.0, 0.0, -30.0) }]), &now);
+        c.step(&now, &[]).status.lead.is_some()
+    };
+    let camera = AccSettings::default;
+    assert!(!lead_of(camera(), 280.0, 1.4), "read 1.4 m off 190 m into the bend: not the lead");
+    assert!(lead_of(camera(), 280.0, 0.3), "read near the centre there: the lead");
+    assert!(lead_of(camera(), 130.0, 1.4), "read 1.4 m off 40 m ahead: the lead");
+    assert!(lead_of(truth(), 280.0, 1.4), "ground truth: within the plain 1.6 m limit");
+}
+
 /// The in-lane limits follow the map's lane width: a car riding 1.8 m off the ego lane's
 /// centre is in a 5 m lane (and the lead) but over the line of a 3.5 m one.
 #[test]
