@@ -1,8 +1,8 @@
 //! The comfort command: Speed or Follow mode within the comfort limits. The lower of the
 //! cruise law and the time-gap law, never less braking than the planned threat needs once
 //! that matters (eased off for a threat far ahead that is not closing fast), moved toward from
-//! the last command at the jerk limit; braking whose target has gone is released at the
-//! release jerk.
+//! the last command at the jerk limit; braking whose target has gone, and an ended
+//! emergency's braking beyond the comfort limit, are released at the release jerk.
 
 use super::belief::LeadBelief;
 use super::settings::AccSettings;
@@ -68,9 +68,13 @@ impl Command {
         let beyond_m = x.s.tuning.select.beyond_lead_m;
         let gone =
             self.braking_for.is_some_and(|(id, gap)| x.lead.is_none_or(|l| l.id != id && l.gap_m > gap + beyond_m));
+        let release = x.s.tuning.command.release_jerk_mps3 * x.dt;
         let up = if gone {
-            let release = x.s.tuning.command.release_jerk_mps3 * x.dt;
             (self.accel_cmd + release).min(target.min(0.0)).max(self.accel_cmd + step)
+        } else if self.accel_cmd < -decel {
+            // Braking beyond the comfort limit is an emergency's, which has ended: released at
+            // the release jerk down to the limit, then eased at the comfort jerk.
+            (self.accel_cmd + release).min(-decel).max(self.accel_cmd + step)
         } else {
             self.accel_cmd + step
         };

@@ -250,6 +250,22 @@ fn closing_fast_warns_then_brakes_beyond_comfort_then_fully() {
     let release_ttc_s = c.settings().emergency.release_ttc_s;
     let ttc = if v > 15.0 { gap / (v - 15.0) } else { f64::INFINITY };
     assert!(gap > 2.0 && ttc >= release_ttc_s, "released at {t:.2} s, gap {gap:.1} m, {v:.1} m/s");
+    // The emergency's braking beyond the comfort limit goes at the release jerk, not at the
+    // comfort jerk (from 9 m/s2 that took 2.5 s and stopped a car behind a lead at 20 m/s).
+    let (mut t, mut v, mut gap) = (t, v, gap);
+    let limits = c.settings().limits.clone();
+    let mut deepest_after = f64::INFINITY;
+    while t < released.unwrap().0 + 0.7 {
+        t += DT;
+        let a = c.step(&ego(t, v), &[]).status.target_accel_mps2;
+        v = (v + a * DT).max(0.0);
+        gap += (15.0 - v) * DT;
+        if ((t / DT).round() as i64) % 5 == 0 {
+            c.perceive(&frame(t, vec![obj(1, gap, 0.0, 15.0 - v)]), &ego(t, v));
+        }
+        deepest_after = a;
+    }
+    assert!(deepest_after >= -limits.decel_at(v) - 1e-9, "0.7 s after the emergency: {deepest_after} m/s2");
 }
 
 #[test]
