@@ -19,6 +19,7 @@
 use super::lead_filter::LeadFilter;
 use super::settings::AccSettings;
 use super::threat::{threat, Threat};
+use super::tuning::ThreatTuning;
 
 /// The lead as believed now.
 #[derive(Debug, Clone, Copy)]
@@ -74,13 +75,13 @@ impl LeadBelief {
     }
 
     /// The threat judged on the mildest braking.
-    pub(super) fn threat(&self, v: f64) -> Threat {
-        threat(self.gap_m, v, self.speed_mps, self.mildest_accel())
+    pub(super) fn threat(&self, k: &ThreatTuning, v: f64) -> Threat {
+        threat(k, self.gap_m, v, self.speed_mps, self.mildest_accel())
     }
 
     /// The threat judged on the likely braking (the estimate itself).
-    pub(super) fn likely_threat(&self, v: f64) -> Threat {
-        threat(self.gap_m, v, self.speed_mps, self.accel_mps2)
+    pub(super) fn likely_threat(&self, k: &ThreatTuning, v: f64) -> Threat {
+        threat(k, self.gap_m, v, self.speed_mps, self.accel_mps2)
     }
 
     /// Whether the lead brakes beyond the comfort limit: its mildest deceleration past the
@@ -136,7 +137,7 @@ impl LeadBelief {
             |worse: Threat| if worse.needed_decel_mps2 <= decel { threat.or_worse(&worse) } else { threat };
         if !self.settled {
             let slowest = (self.speed_mps - b.unmeasured_sigmas * self.speed_sigma_mps).max(0.0);
-            let slower = |gap_m: f64| self::threat(gap_m, v, slowest, self.mildest_accel());
+            let slower = |gap_m: f64| self::threat(&s.tuning.threat, gap_m, v, slowest, self.mildest_accel());
             let far = self.gap_m > s.standstill_m + s.tuning.command.far_time_gaps * time_gap_s * v;
             let wait_s = (s.tuning.filter.settle_s - self.followed_s).max(0.0);
             let waited = slower(self.gap_m - (v - slowest).max(0.0) * wait_s);
@@ -147,7 +148,7 @@ impl LeadBelief {
         }
         if self.lit_for_s.is_some_and(|t| t < b.lit_anticipation_s) {
             let hardest = self.mildest_accel().min(-s.limits.decel_mps2);
-            let hard = self::threat(self.gap_m, v, self.speed_mps, hardest);
+            let hard = self::threat(&s.tuning.threat, self.gap_m, v, self.speed_mps, hardest);
             if hard.needed_decel_mps2 >= b.lit_need_share * decel {
                 return Some(within_comfort(hard));
             }

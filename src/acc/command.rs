@@ -6,7 +6,7 @@
 
 use super::belief::LeadBelief;
 use super::settings::AccSettings;
-use super::threat::{Threat, THREAT_MARGIN_M};
+use super::threat::Threat;
 use crate::msg::AccMode;
 
 /// A command above this (m/s2) brakes for nothing the release need track.
@@ -113,7 +113,7 @@ impl Command {
 /// in full.
 fn far_cap_mps2(s: &AccSettings, t: &Threat, v: f64, time_gap_s: f64, lead: &LeadBelief) -> f64 {
     let c = &s.tuning.command;
-    let gap = t.room_m + THREAT_MARGIN_M;
+    let gap = t.room_m + s.tuning.threat.margin_m;
     let room = (gap - s.standstill_m).max(0.1);
     let closing = (v - t.lead_speed_mps).max(0.0);
     let far = gap > s.standstill_m + c.far_time_gaps * time_gap_s * v;

@@ -132,8 +132,9 @@ impl Controller {
         let stale = !warnings.is_empty();
 
         let lead = self.belief(ego.t_s, v, stale);
-        let revealed = self.select.revealed(ego.t_s, v);
-        let threat = lead.map(|l| l.threat(v)).map(|t| revealed.map_or(t, |r| t.or_worse(&r)));
+        let k = &self.s.tuning.threat;
+        let revealed = self.select.revealed(k, ego.t_s, v);
+        let threat = lead.map(|l| l.threat(k, v)).map(|t| revealed.map_or(t, |r| t.or_worse(&r)));
         if threat.is_some_and(|t| warns(&self.s, &t, v, self.command.accel_cmd)) {
             warnings.push(AccWarning::ForwardCollision);
         }
@@ -198,10 +199,10 @@ impl Controller {
         // vehicle it hides or reveals, each seen in more than one frame.
         let confirm_s = self.s.tuning.decision.confirm_s;
         let confirmed = lead.filter(|l| l.confirmed(confirm_s)).map(|l| {
-            let t = l.threat(v);
-            self.select.revealed_for(t_s, v, confirm_s).map_or(t, |r| t.or_worse(&r))
+            let t = l.threat(&self.s.tuning.threat, v);
+            self.select.revealed_for(&self.s.tuning.threat, t_s, v, confirm_s).map_or(t, |r| t.or_worse(&r))
         });
-        let hard = hard.map(|l| l.likely_threat(v));
+        let hard = hard.map(|l| l.likely_threat(&self.s.tuning.threat, v));
         let situation = Situation { s: &self.s, threat, hard, confirmed, v, accel_cmd, t_s };
         self.decision.update(&situation);
         if let Some(t) = threat.filter(|_| self.decision.emergency) {

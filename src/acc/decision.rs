@@ -10,7 +10,7 @@
 //! it stops: then comfort braking was enough, and an emergency would have been for nothing).
 
 use super::settings::AccSettings;
-use super::threat::{threat, Threat, THREAT_MARGIN_M};
+use super::threat::{threat, Threat};
 
 /// Emergency or not, and the lead last found braking beyond the comfort limit.
 #[derive(Debug, Clone, Default)]
@@ -103,9 +103,8 @@ impl Decision {
         }
         let hard_lead = self.hard_lead.is_some();
         let floor = if hard_lead && ttc >= s.emergency.brake_ttc_s { 0.0 } else { s.limits.decel_mps2 };
-        let behind_standstill = short_of_standstill(s, t);
-        let standstill_need =
-            threat(behind_standstill.room_m + THREAT_MARGIN_M, v, t.lead_speed_mps, t.lead_accel_mps2);
+        let (behind_standstill, k) = (short_of_standstill(s, t), &s.tuning.threat);
+        let standstill_need = threat(k, behind_standstill.room_m + k.margin_m, v, t.lead_speed_mps, t.lead_accel_mps2);
         let need = (s.tuning.decision.emergency_factor * t.needed_decel_mps2).max(standstill_need.needed_decel_mps2);
         need.clamp(floor, vehicle_max)
     }

@@ -13,7 +13,7 @@ use super::lead_filter::{LeadFilter, Noise};
 use super::objects::{Object, PerceptionFrame};
 use super::settings::{AccSettings, PerceptionSource};
 use super::threat::{threat, Threat};
-use super::tuning::SelectTuning;
+use super::tuning::{SelectTuning, ThreatTuning};
 use crate::road::Road;
 
 /// The lane width the settings' in-lane limits are for.
@@ -84,18 +84,18 @@ impl LeadSelect {
 
     /// The threat of the vehicle the lead hides or reveals, moved on to `t_s` at its measured
     /// relative speed (it is not filtered: it counts as a vehicle holding its speed).
-    pub(super) fn revealed(&self, t_s: f64, v: f64) -> Option<Threat> {
-        self.revealed_for(t_s, v, 0.0)
+    pub(super) fn revealed(&self, k: &ThreatTuning, t_s: f64, v: f64) -> Option<Threat> {
+        self.revealed_for(k, t_s, v, 0.0)
     }
 
     /// As [`Self::revealed`], only once it has been the vehicle revealed for `confirm_s`
     /// (seen in more than one frame): what may start an emergency.
-    pub(super) fn revealed_for(&self, t_s: f64, v: f64, confirm_s: f64) -> Option<Threat> {
+    pub(super) fn revealed_for(&self, k: &ThreatTuning, t_s: f64, v: f64, confirm_s: f64) -> Option<Threat> {
         let confirmed = |r: &Revealed| r.stamp_s - r.since_s >= confirm_s - 1e-9;
         self.next_in_lane.filter(|r| self.lead.is_some() && confirmed(r)).map(|r| {
             let rel = r.relative_speed_mps;
             let gap = r.gap_m + rel * (t_s - r.stamp_s).max(0.0);
-            threat(gap, v, (v + rel).max(0.0), 0.0)
+            threat(k, gap, v, (v + rel).max(0.0), 0.0)
         })
     }
 

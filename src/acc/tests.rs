@@ -270,17 +270,18 @@ fn closing_fast_warns_then_brakes_beyond_comfort_then_fully() {
 
 #[test]
 fn the_threat_of_a_lead_braking_to_a_stop_is_the_stop_behind_it() {
+    let k = AccSettings::default().tuning.threat;
     // 25 m/s both, 45 m apart, the lead brakes at 6 m/s2: it stops after 52.1 m.
-    let t = threat(45.0, 25.0, 25.0, -6.0);
+    let t = threat(&k, 45.0, 25.0, 25.0, -6.0);
     let expected = 25.0f64.powi(2) / (2.0 * (43.0 + 25.0f64.powi(2) / 12.0));
     assert!((t.needed_decel_mps2 - expected).abs() < 1e-9, "{t:?}");
     assert_eq!(t.ttc_s, None);
     // Closing at 5 m/s on a steady lead 27 m ahead (2 m kept): 25 / 50 = 0.5 m/s2, TTC 5.4 s.
-    let t = threat(27.0, 25.0, 20.0, 0.0);
+    let t = threat(&k, 27.0, 25.0, 20.0, 0.0);
     assert!((t.needed_decel_mps2 - 0.5).abs() < 1e-9);
     assert!((t.ttc_s.unwrap() - 5.4).abs() < 1e-9);
     // Opening: no threat.
-    assert_eq!(threat(10.0, 20.0, 22.0, 0.0).needed_decel_mps2, 0.0);
+    assert_eq!(threat(&k, 10.0, 20.0, 22.0, 0.0).needed_decel_mps2, 0.0);
 }
 
 #[test]

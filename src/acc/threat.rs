@@ -1,18 +1,15 @@
 //! The threat a vehicle ahead poses: time to collision and the deceleration that still
 //! keeps a margin to it, for a lead holding its speed or braking to a stop.
 
-/// Margin kept when computing the deceleration that still avoids a collision.
-pub(super) const THREAT_MARGIN_M: f64 = 2.0;
-/// Lead deceleration below which the threat assessment assumes it brakes to a stop.
-const LEAD_BRAKING_MPS2: f64 = -0.5;
+use super::tuning::ThreatTuning;
 
 /// The threat a lead poses now.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Threat {
     pub ttc_s: Option<f64>,
-    /// Deceleration (positive) that keeps THREAT_MARGIN_M to the lead.
+    /// Deceleration (positive) that keeps `tuning.threat.margin_m` to the lead.
     pub needed_decel_mps2: f64,
-    /// What it was computed from: the gap less THREAT_MARGIN_M, the lead's speed and
+    /// What it was computed from: the gap less the margin, the lead's speed and
     /// acceleration.
     pub room_m: f64,
     pub lead_speed_mps: f64,
@@ -32,11 +29,12 @@ impl Threat {
 }
 
 /// Time to collision and the deceleration that still avoids one, from the gap, the speeds and
-/// the lead's acceleration (a braking lead is assumed to brake to a stop).
-pub fn threat(gap_m: f64, ego_speed_mps: f64, lead_speed_mps: f64, lead_accel_mps2: f64) -> Threat {
+/// the lead's acceleration (a lead braking harder than `k.braking_mps2` is assumed to brake to
+/// a stop), keeping `k.margin_m`.
+pub fn threat(k: &ThreatTuning, gap_m: f64, ego_speed_mps: f64, lead_speed_mps: f64, lead_accel_mps2: f64) -> Threat {
     let closing = ego_speed_mps - lead_speed_mps;
     let ttc_s = (closing > 0.1).then(|| gap_m.max(0.0) / closing);
-    let room = (gap_m - THREAT_MARGIN_M).max(0.1);
+    let room = (gap_m - k.margin_m).max(0.1);
     let lead_decel = (-lead_accel_mps2).max(0.0);
     // Both keep braking until the speeds match: the relative motion decides.
     let matching = if closing > 0.0 { lead_decel + closing * closing / (2.0 * room) } else { 0.0 };
@@ -44,11 +42,11 @@ pub fn threat(gap_m: f64, ego_speed_mps: f64, lead_speed_mps: f64, lead_accel_mp
     let of = |needed_decel_mps2: f64| Threat {
         ttc_s,
         needed_decel_mps2,
-        room_m: gap_m - THREAT_MARGIN_M,
+        room_m: gap_m - k.margin_m,
         lead_speed_mps: lead_speed,
         lead_accel_mps2,
     };
-    if lead_accel_mps2 >= LEAD_BRAKING_MPS2 {
+    if lead_accel_mps2 >= -k.braking_mps2 {
         return of(matching);
     }
     // A braking lead: does it stop before the speeds would match?

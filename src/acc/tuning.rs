@@ -10,6 +10,7 @@ use serde::Deserialize;
 pub struct Tuning {
     pub select: SelectTuning,
     pub filter: FilterTuning,
+    pub threat: ThreatTuning,
     pub belief: BeliefTuning,
     pub decision: DecisionTuning,
     pub command: CommandTuning,
@@ -47,6 +48,14 @@ pub struct FilterTuning {
     pub lamps_vouch_noise_mps: f64,
     pub speed_noise_gain: f64,
     pub steady_full_gap_m: f64,
+}
+
+/// The threat: the margin it keeps, and when a lead counts as braking to a stop.
+#[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ThreatTuning {
+    pub margin_m: f64,
+    pub braking_mps2: f64,
 }
 
 /// The lead belief: what the lead plausibly does, from its estimate, lamps and age.
@@ -100,6 +109,7 @@ impl Tuning {
     pub fn entries(&self) -> Vec<(&'static str, f64)> {
         let (s, f, b, d, c, l) =
             (&self.select, &self.filter, &self.belief, &self.decision, &self.command, &self.low_level);
+        let t = &self.threat;
         vec![
             ("tuning.select.lateral_rate_filter", s.lateral_rate_filter),
             ("tuning.select.max_lateral_rate_mps", s.max_lateral_rate_mps),
@@ -121,6 +131,8 @@ impl Tuning {
             ("tuning.filter.lamps_vouch_noise_mps", f.lamps_vouch_noise_mps),
             ("tuning.filter.speed_noise_gain", f.speed_noise_gain),
             ("tuning.filter.steady_full_gap_m", f.steady_full_gap_m),
+            ("tuning.threat.margin_m", t.margin_m),
+            ("tuning.threat.braking_mps2", t.braking_mps2),
             ("tuning.belief.unmeasured_sigmas", b.unmeasured_sigmas),
             ("tuning.belief.unsettled_wait_share", b.unsettled_wait_share),
             ("tuning.belief.lit_anticipation_s", b.lit_anticipation_s),
