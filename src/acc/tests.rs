@@ -424,24 +424,34 @@ fn a_lead_braking_beyond_comfort_gets_an_emergency_only_at_the_last_responsible_
     }
 }
 
+/// The ego on the centre of lane 1, `s_m` along a road with `curves`, heading along it: the
+/// road's spec, the ego's pose, and where a point `s` along the road, `off` left of that lane's
+/// centre, lies in the ego's frame (x ahead, y left).
+fn ego_on_road(
+    curves: Vec<crate::msg::Curve>,
+    s_m: f64,
+) -> (crate::msg::RoadSpec, Pose, impl Fn(f64, f64) -> (f64, f64)) {
+    let spec = crate::msg::RoadSpec { curves, ..crate::msg::RoadSpec::default() };
+    let road = crate::road::Road::new(spec.clone());
+    let at = road.to_world(s_m, road.lane_center_d(1));
+    let heading = road.center(s_m).1;
+    let in_ego = move |s: f64, off: f64| {
+        let p = road.to_world(s, road.lane_center_d(1) + off) - at;
+        let (sin, cos) = heading.sin_cos();
+        (p.x * cos + p.y * sin, -p.x * sin + p.y * cos)
+    };
+    (spec, Pose { x_m: at.x, y_m: at.y, yaw_rad: heading }, in_ego)
+}
+
 /// With the road's map a car standing in the next lane just into a bend (on the ego's
 /// straight-ahead line) is not the lead and a car in the ego's lane further round it is; on the
 /// yaw rate alone (no map, still on the straight) the first one would be.
 #[test]
 fn with_the_road_map_the_lead_is_in_the_ego_lane_round_a_bend() {
-    use crate::msg::{Curve, RoadSpec};
-    use crate::road::Road;
-    let spec =
-        RoadSpec { curves: vec![Curve { start_m: 400.0, length_m: 300.0, radius_m: 300.0 }], ..RoadSpec::default() };
-    let road = Road::new(spec.clone());
-    let at = road.to_world(350.0, road.lane_center_d(1));
-    let pose = Pose { x_m: at.x, y_m: at.y, yaw_rad: road.center(350.0).1 };
-    // Rear-bumper points of the two cars in the ego's frame (heading +x at s = 350 m).
-    let in_ego = |s: f64, lane: u32| {
-        let p = road.to_world(s, road.lane_center_d(lane)) - at;
-        (p.x, p.y)
-    };
-    let (next_lane, own_lane) = (in_ego(450.0, 0), in_ego(480.0, 1));
+    use crate::msg::Curve;
+    let (spec, pose, in_ego) = ego_on_road(vec![Curve { start_m: 400.0, length_m: 300.0, radius_m: 300.0 }], 350.0);
+    // Rear-bumper points of the two cars in the ego's frame: the next lane's, and its own.
+    let (next_lane, own_lane) = (in_ego(450.0, -spec.lane_width_m), in_ego(480.0, 0.0));
     assert!(next_lane.1.abs() < 1.6, "the next lane's car lies on the straight-ahead line: {next_lane:?}");
     let objects = vec![
         Object { id: 1, distance_m: next_lane.0, lateral_m: next_lane.1, ..obj(1, 0.0, 0.0, -25.0) },
@@ -466,20 +476,8 @@ fn with_the_road_map_the_lead_is_in_the_ego_lane_round_a_bend() {
 /// and one read 1.4 m off 40 m ahead (sigma 0.2 m) is too. Ground truth keeps the plain limit.
 #[test]
 fn far_round_a_bend_a_vehicle_is_in_the_lane_only_when_its_offset_says_so_with_confidence() {
-    use crate::msg::{Curve, RoadSpec};
-    use crate::road::Road;
-    let spec =
-        RoadSpec { curves: vec![Curve { start_m: 100.0, length_m: 500.0, radius_m: 500.0 }], ..RoadSpec::default() };
-    let road = Road::new(spec.clone());
-    let at = road.to_world(90.0, road.lane_center_d(1));
-    let heading = road.center(90.0).1;
-    let pose = Pose { x_m: at.x, y_m: at.y, yaw_rad: heading };
-    // A point `s` along the road, `off` left of the ego lane's centre, in the ego's frame.
-    let in_ego = |s: f64, off: f64| {
-        let p = road.to_world(s, road.lane_center_d(1) + off) - at;
-        let (sin, cos) = heading.sin_cos();
-        (p.x * cos + p.y * sin, -p.x * sin + p.y * cos)
-    };
+    use crate::msg::Curve;
+    let (spec, pose, in_ego) = ego_on_road(vec![Curve { start_m: 100.0, length_m: 500.0, radius_m: 500.0 }], 90.0);
     let lead_of = |settings: AccSettings, s: f64, off: f64| {
         let mut c = Controller::new(settings);
         c.set_road(&spec);
