@@ -212,3 +212,46 @@ mod tests {
         assert!(!is_rendezvous_noise("Unable to open listener tcp/10.0.0.1:7447: Address already in use"));
     }
 }
+
+/// Opens a bus as `node` on `connect`'s config, runs `f` with it and closes it: the frame of
+/// every tool that is one participant on the bus for its whole run.
+pub fn on_bus<T, F, Fut>(connect: &crate::ConnectArgs, node: &str, f: F) -> anyhow::Result<T>
+where
+    F: FnOnce(std::sync::Arc<crate::Bus>) -> Fut,
+    Fut: std::future::Future<Output = anyhow::Result<T>>,
+{
+    let rt = tokio::runtime::Runtime::new()?;
+    rt.block_on(async {
+        let bus = std::sync::Arc::new(crate::Bus::open(connect.zenoh_config()?, connect.topic_map()?, node).await?);
+        let out = f(bus.clone()).await?;
+        let bus = std::sync::Arc::try_unwrap(bus).map_err(|_| anyhow::anyhow!("{node}: the bus is still in use"))?;
+        bus.close().await?;
+        Ok(out)
+    })
+}
+
+/// A node name of this process's own (`top-4242`), so that several copies of a watching tool
+/// can run at once.
+pub fn own_name(tool: &str) -> String {
+    format!("{tool}-{}", std::process::id())
+}
+
+/// Exit 0 when the command says all went well, 1 when it says otherwise (something lost, a
+/// rule failed).
+pub fn exit_when(clean: bool) -> std::process::ExitCode {
+    if clean {
+        std::process::ExitCode::SUCCESS
+    } else {
+        std::process::ExitCode::FAILURE
+    }
+}
+
+/// A report on stdout: pretty JSON with `json`, else its markdown rendering.
+pub fn print_report<R: serde::Serialize>(json: bool, report: &R, markdown: fn(&R) -> String) -> anyhow::Result<()> {
+    if json {
+        println!("{}", serde_json::to_string_pretty(report)?);
+    } else {
+        println!("{}", markdown(report));
+    }
+    Ok(())
+}

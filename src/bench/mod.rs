@@ -6,12 +6,13 @@
 //! loopback interface. The receiver timestamps arrival against the publish time in the
 //! message: one-way latency on one host's clock.
 //!
-//! By concern: cases.rs (the point-to-point cases under typed ids), child.rs (the processes),
+//! By concern: command.rs (the command lines), cases.rs (the point-to-point cases under typed ids), child.rs (the processes),
 //! figures.rs (runs to rows), ratios.rs, report.rs (JSON and markdown); the suites with
 //! tables of their own in sim.rs, scale.rs, growth.rs and fleet.rs.
 
 mod cases;
 mod child;
+pub mod command;
 mod figures;
 pub mod fleet;
 pub mod fleet_watch;

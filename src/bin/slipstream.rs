@@ -1,10 +1,10 @@
-//! `slipstream`: the tools. Parses the command line and calls the library.
+//! `slipstream`: the tools. Parses the command line and hands each command to its tool's
+//! `command()` in the library (src/tools/, src/bench/command.rs).
 
 use std::process::ExitCode;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::{CommandFactory, Parser, Subcommand};
-use slipstream::bench::{self, BenchArgs, CaseSpec};
 use slipstream::config::ConnectArgs;
 
 /// slipstream: a driving simulator, perception and cruise control glued by Zenoh.
@@ -93,7 +93,7 @@ enum Command {
     /// Every case runs a sender and a receiver as child processes on loopback ports of their
     /// own, with the built-in config/zenoh.json5: connection flags do not apply. About 14
     /// minutes for all suites; --quick checks every path in about a minute.
-    Bench(BenchArgs),
+    Bench(slipstream::bench::BenchArgs),
     /// Feed every message decoder and config parser mutated valid inputs (seeded) and count
     /// what is accepted, rejected, or panics; exits with 1 on any panic
     Fuzz(slipstream::tools::fuzz::FuzzArgs),
@@ -114,7 +114,7 @@ enum Command {
     },
     /// Score a node against the simulator's ground truth
     #[command(subcommand)]
-    Eval(EvalCommand),
+    Eval(slipstream::tools::eval::EvalCommand),
     /// Print the completion script of a shell for `slipstream` (bash, zsh, fish, elvish,
     /// powershell). Example:
     ///
@@ -143,113 +143,7 @@ enum Command {
     BenchFleetWatch(slipstream::bench::fleet_watch::FleetWatchArgs),
     /// One side of a benchmark case (started by `slipstream bench`)
     #[command(hide = true)]
-    BenchPeer {
-        #[arg(value_parser = ["send", "recv"])]
-        role: String,
-        #[arg(long)]
-        spec: String,
-        /// The receiver's endpoint(s) for a sender; the router's for a receiver through one
-        #[arg(long)]
-        endpoint: Vec<String>,
-    },
-}
-
-#[derive(Subcommand)]
-enum EvalCommand {
-    /// Vehicle detection: runs scenarios in process (world, camera, detector and tracker; the
-    /// ego keeps its start speed and slows for the vehicle ahead), matches detections to the ground truth of the same frame, and reports
-    /// precision, recall and distance/lateral errors by range, and the lateral error 80-200 m
-    /// ahead by range and the bend it is seen through (--family bend-neighbours scores the
-    /// bends of `eval sweep`)
-    Detect {
-        /// Scenarios to run (names or files) [default: the standard set]
-        #[arg(long = "scenario", value_name = "NAME")]
-        scenarios: Vec<String>,
-        /// Simulated seconds per scenario at most
-        #[arg(long, default_value_t = 30.0)]
-        seconds: f64,
-        /// Print JSON instead of the table
-        #[arg(long)]
-        json: bool,
-        /// Simulator settings to measure with (the cameras: resolution, field of view, mount);
-        /// only the keys it changes are needed [default: config/sim.json5 when present, else
-        /// built-in]
-        #[arg(long, value_name = "FILE", env = "SLIPSTREAM_SIM_CONFIG")]
-        settings: Option<std::path::PathBuf>,
-        /// Put every frame through this encoding and back before the detector sees it, as a
-        /// link copy would (raw, lz4, jpeg, png), and report its size and encode/decode time
-        #[arg(long, value_name = "ENCODING")]
-        frames: Option<String>,
-        /// JPEG quality for --frames jpeg, 1..100
-        #[arg(long, default_value_t = 85, value_parser = clap::value_parser!(u8).range(1..=100))]
-        jpeg_quality: u8,
-        /// Also score --count scenarios of this `eval sweep` family (the sweep's own, with
-        /// --seed), e.g. bend-neighbours for the lateral error far ahead in bends
-        #[arg(long, value_enum)]
-        family: Option<slipstream::eval::sweep::families::Family>,
-        /// How many scenarios of --family
-        #[arg(long, default_value_t = 20)]
-        count: usize,
-        /// The sweep seed the --family scenarios come from
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-    },
-    /// Adaptive cruise control: runs slipstream-sim (lockstep, fast), slipstream-detect and
-    /// slipstream-acc as separate processes over Zenoh through each scenario and reports
-    /// collisions, minimum gap and TTC, time-gap and speed errors, and comfort (accel, decel,
-    /// jerk outside emergencies) and what a driver feels (unwarranted emergencies, phantom
-    /// braking, stopping for nothing, acceleration swings behind a steady lead) against the
-    /// aims, with traffic collisions counted, and where the time went; exits with 1 when a
-    /// scenario misses one. Runs one scenario per CPU core at once (-j). The nodes talk over
-    /// unix sockets in a namespace of their own (the topic config, -t, is passed on;
-    /// connection flags are not). Example:
-    ///
-    ///   slipstream eval acc --perception ground-truth --plots plots/
-    #[command(verbatim_doc_comment)]
-    Acc(slipstream::eval::acc::EvalAccArgs),
-    /// The ACC's safety envelope under network faults: for each scenario a fault-free run,
-    /// then perception delay, perception loss (independent, then bursty) and control-command
-    /// loss in rising steps, injected where samples enter the ACC and the simulator
-    /// (lockstep: the same seed gives the same run). Prints, per scenario and axis, the largest
-    /// fault with no collision, no emergency braking the fault-free run does not need and
-    /// comfort kept, and what failed first (docs/faults.md). Example:
-    ///
-    ///   slipstream eval faults --scenario cut-in --plot envelope.png
-    #[command(verbatim_doc_comment)]
-    Faults(slipstream::eval::faults::EvalFaultsArgs),
-    /// Driving judged at scale: generates --count scenarios (default 1,000) from parameterised
-    /// families (Euro NCAP car-to-car rear, cut-ins, cut-outs, braking leads, the edge of
-    /// range, bends with vehicles in the next lanes, lane ends, dense traffic), each declaring
-    /// what its physics warrants, runs each like `eval acc` and reports collisions,
-    /// unwarranted emergencies and phantom braking per 1,000 km by family, comfort violations
-    /// and the time-gap error, with the worst runs named (their files replay with `eval acc
-    /// --scenario FILE`). Writes the scenarios, sweep.json and rates.png under --out; exits
-    /// with 1 when a family misses the bar (no collision, no unwarranted emergency, at most
-    /// one phantom-braking event per 1,000 km). Example:
-    ///
-    ///   slipstream eval sweep --count 40 --seed 7 --out /tmp/sweep
-    #[command(verbatim_doc_comment)]
-    Sweep(slipstream::eval::sweep::EvalSweepArgs),
-}
-
-/// Opens a bus as `node`, runs `f` with it, closes it.
-fn on_bus<F, Fut>(connect: &ConnectArgs, node: &str, f: F) -> Result<()>
-where
-    F: FnOnce(slipstream::Bus) -> Fut,
-    Fut: std::future::Future<Output = Result<slipstream::Bus>>,
-{
-    let rt = tokio::runtime::Runtime::new()?;
-    rt.block_on(async {
-        let bus = slipstream::Bus::open(connect.zenoh_config()?, connect.topic_map()?, node).await?;
-        let bus = f(bus).await?;
-        bus.close().await?;
-        Ok(())
-    })
-}
-
-/// Exit 0 when the command says all went well, 1 when it says something was lost.
-fn code(clean: Result<bool>) -> Result<ExitCode> {
-    Ok(if clean? { ExitCode::SUCCESS } else { ExitCode::FAILURE })
+    BenchPeer(slipstream::bench::command::PeerArgs),
 }
 
 fn main() -> ExitCode {
@@ -265,257 +159,31 @@ fn main() -> ExitCode {
 }
 
 fn run(cli: Cli) -> Result<ExitCode> {
+    use slipstream::bench;
+    use slipstream::tools::*;
     let connect = &cli.connect;
-    let done = |r: Result<()>| r.map(|()| ExitCode::SUCCESS);
-    match cli.command {
-        Command::Up(args) => match &args.from {
-            Some(path) => Ok(ExitCode::from(slipstream::tools::up::run_from(path, &args, connect)?)),
-            None => Ok(ExitCode::from(slipstream::tools::up::run(&args, connect)?.exit_code())),
-        },
-        Command::Top(args) => done(on_bus(connect, &format!("top-{}", std::process::id()), |bus| async move {
-            slipstream::tools::top::run(&bus, &args).await?;
-            Ok(bus)
-        })),
-        Command::Echo(args) => done(on_bus(connect, &format!("echo-{}", std::process::id()), |bus| async move {
-            let printed = slipstream::tools::echo::run(&bus, &args).await?;
-            if args.count.is_some_and(|n| printed < n) {
-                anyhow::bail!("{printed} of {} messages seen on {}", args.count.unwrap_or(0), args.topic);
-            }
-            Ok(bus)
-        })),
-        Command::Record(args) if args.profile == slipstream::tools::record::Profile::Ros2 => {
-            code(slipstream::tools::record::command_ros2(&args, connect))
-        }
-        Command::Convert(args) => {
-            code(connect.topic_map().map_err(Into::into).and_then(|t| slipstream::tools::convert::command(&args, &t)))
-        }
-        Command::Record(args) => record(&args, connect),
-        Command::Play(args) => done(on_bus(connect, "play", |bus| async move {
-            // The player paces with blocking sleeps and puts: on a thread of its own.
-            let bus = std::sync::Arc::new(bus);
-            let b = bus.clone();
-            tokio::task::spawn_blocking(move || slipstream::tools::play::run(&b, &args)).await??;
-            std::sync::Arc::try_unwrap(bus).map_err(|_| anyhow::anyhow!("the player still holds the session"))
-        })),
-        Command::View(args) => done(on_bus(connect, &format!("view-{}", std::process::id()), |bus| async move {
-            slipstream::tools::view::run(&bus, &args).await?;
-            Ok(bus)
-        })),
-        Command::Ros2(args) if args.list => {
-            done(connect.topic_map().map_err(Into::into).and_then(|t| slipstream::tools::ros2::list(&t, &args)))
-        }
-        Command::Ros2(args) => done(on_bus(connect, &format!("ros2-{}", std::process::id()), |bus| async move {
-            slipstream::tools::ros2::run(&bus, &args).await?;
-            Ok(bus)
-        })),
-        Command::Conform(slipstream::tools::conform::ConformCommand::Sim(args)) => conform_sim(connect, &args),
-        Command::Fuzz(args) => done(slipstream::tools::fuzz::command(&args)),
-        Command::Soak(args) => {
-            use slipstream::tools::soak;
-            let report = soak::run(&args, connect)?;
-            if args.json {
-                println!("{}", serde_json::to_string_pretty(&report)?);
-            } else {
-                println!("{}", soak::summary(&report));
-            }
-            Ok(if report.pass { ExitCode::SUCCESS } else { ExitCode::from(1) })
-        }
-        Command::Router => done(slipstream::tools::router::run(connect)),
-        Command::Demo(args) => done(slipstream::tools::demo::run(connect, &args)),
-        Command::Bench(args) => done(bench_command(&args)),
-        Command::Info { json } => {
-            let info = slipstream::tools::info::gather(connect)?;
-            if json {
-                println!("{}", serde_json::to_string_pretty(&info)?);
-            } else {
-                print!("{}", slipstream::tools::info::render(&info));
-            }
-            Ok(ExitCode::SUCCESS)
-        }
-        Command::Eval(e) => eval_command(e, connect),
-        Command::Completions { shell } => {
-            clap_complete::generate(shell, &mut Cli::command(), "slipstream", &mut std::io::stdout());
-            Ok(ExitCode::SUCCESS)
-        }
-        Command::Man { dir } => done(write_man_pages(&dir)),
-        Command::WireExamples => wire_examples(),
-        Command::WireCheck => wire_check(),
-        Command::BenchFleetWatch(args) => {
-            let rt = tokio::runtime::Runtime::new()?;
-            let seen = rt.block_on(slipstream::bench::fleet_watch::watch(connect, args))?;
-            println!("{}", serde_json::to_string(&seen)?);
-            Ok(ExitCode::SUCCESS)
-        }
-        Command::BenchPeer { role, spec, endpoint } => {
-            let spec: CaseSpec = serde_json::from_str(&spec).context("bench-peer: parse --spec")?;
-            let rt = tokio::runtime::Runtime::new()?;
-            done(rt.block_on(async move {
-                match role.as_str() {
-                    "send" => bench::run_sender(spec, endpoint).await,
-                    _ => bench::run_receiver(spec, endpoint.into_iter().next()).await,
-                }
-            }))
-        }
+    match &cli.command {
+        Command::Up(args) => up::command(args, connect),
+        Command::Top(args) => top::command(args, connect),
+        Command::Echo(args) => echo::command(args, connect),
+        Command::Record(args) => record::command(args, connect),
+        Command::Play(args) => play::command(args, connect),
+        Command::View(args) => view::command(args, connect),
+        Command::Ros2(args) => ros2::command(args, connect),
+        Command::Conform(command) => conform::command(command, connect),
+        Command::Convert(args) => convert::command(args, connect),
+        Command::Router => router::command(connect),
+        Command::Demo(args) => demo::command(args, connect),
+        Command::Bench(args) => bench::command::command(args),
+        Command::Fuzz(args) => fuzz::command(args),
+        Command::Soak(args) => soak::command(args, connect),
+        Command::Info { json } => info::command(*json, connect),
+        Command::Eval(command) => eval::command(command, connect),
+        Command::Completions { shell } => manual::completions(Cli::command(), *shell),
+        Command::Man { dir } => manual::man_pages(Cli::command(), dir),
+        Command::WireExamples => wire::examples(),
+        Command::WireCheck => wire::check(),
+        Command::BenchFleetWatch(args) => bench::command::fleet_watch(connect, args),
+        Command::BenchPeer(args) => bench::command::peer(args),
     }
-}
-
-/// `eval detect`, `eval acc`, `eval faults`: the report, and failure when an aim was missed
-/// (acc).
-fn eval_command(command: EvalCommand, connect: &ConnectArgs) -> Result<ExitCode> {
-    match command {
-        EvalCommand::Detect { scenarios, seconds, json, settings, frames, jpeg_quality, family, count, seed } => {
-            use slipstream::eval::{detect, link_codec::LinkCodec};
-            let scenarios = detect::scenarios(&scenarios, family, count, seed)?;
-            let settings = slipstream::sim::SimSettings::load_or_default(settings.as_deref())?;
-            let codec = match frames.as_deref() {
-                None => None,
-                Some(name) => {
-                    let Some(e) = slipstream::config::CameraEncoding::ALL.into_iter().find(|e| e.name() == name) else {
-                        anyhow::bail!("--frames {name}: not a frame encoding (use raw, lz4, jpeg or png)");
-                    };
-                    Some(LinkCodec::new(e, jpeg_quality))
-                }
-            };
-            let report = detect::evaluate(scenarios, seconds, &settings, codec);
-            print_report(json, &report, detect::markdown)?;
-            Ok(ExitCode::SUCCESS)
-        }
-        EvalCommand::Acc(args) => {
-            use slipstream::eval::acc;
-            let report = acc::run(&args, connect)?;
-            print_report(args.json, &report, acc::markdown)?;
-            let failed = report.results.iter().filter(|r| !r.metrics.pass || r.lockstep_timeouts > 0).count();
-            if failed > 0 {
-                anyhow::bail!("{failed} of {} scenarios missed an aim", report.results.len());
-            }
-            Ok(ExitCode::SUCCESS)
-        }
-        EvalCommand::Sweep(args) => {
-            use slipstream::eval::sweep;
-            let report = sweep::run(&args, connect)?;
-            let json = serde_json::to_string_pretty(&report)?;
-            let file = args.out.join("sweep.json");
-            std::fs::write(&file, &json).with_context(|| format!("write {}", file.display()))?;
-            print_report(args.json, &report, sweep::markdown)?;
-            eprintln!(
-                "report: {}; plot: {}",
-                file.display(),
-                report.plot.as_ref().map_or("none".into(), |p| p.display().to_string())
-            );
-            if !report.pass {
-                anyhow::bail!("the sweep missed the bar (table above)");
-            }
-            Ok(ExitCode::SUCCESS)
-        }
-        EvalCommand::Faults(args) => {
-            use slipstream::eval::faults;
-            let report = faults::run(&args, connect)?;
-            print_report(args.json, &report, faults::markdown)?;
-            Ok(ExitCode::SUCCESS)
-        }
-    }
-}
-
-/// `wire-examples`: every message kind's example encoding, as JSON (for the wire doc's test).
-fn wire_examples() -> Result<ExitCode> {
-    let all: Vec<_> = slipstream::msg::examples()
-        .into_iter()
-        .map(|(kind, bytes)| serde_json::json!({ "kind": kind.name(), "hex": slipstream::msg::hex_lines(&bytes).replace('\n', " ") }))
-        .collect();
-    println!("{}", serde_json::to_string_pretty(&all)?);
-    Ok(ExitCode::SUCCESS)
-}
-
-/// `wire-check`: decodes each hex line of stdin, printing its kind or why it is refused.
-fn wire_check() -> Result<ExitCode> {
-    use std::io::BufRead;
-    for line in std::io::stdin().lock().lines() {
-        let line = line?;
-        let bytes: Result<Vec<u8>, _> =
-            (0..line.len()).step_by(2).map(|i| u8::from_str_radix(line.get(i..i + 2).unwrap_or("zz"), 16)).collect();
-        let verdict = match bytes.map(|b| slipstream::msg::decode_json(&b)) {
-            Ok(Ok((kind, _, _))) => serde_json::json!({ "kind": kind.name() }),
-            Ok(Err(e)) => serde_json::json!({ "error": e.to_string() }),
-            Err(_) => serde_json::json!({ "error": format!("not hex: {line}") }),
-        };
-        println!("{verdict}");
-    }
-    Ok(ExitCode::SUCCESS)
-}
-
-/// `record` (slipstream's profile): fails when anything was lost on the way to the file.
-fn record(args: &slipstream::tools::record::RecordArgs, connect: &ConnectArgs) -> Result<ExitCode> {
-    let rt = tokio::runtime::Runtime::new()?;
-    let summary = rt.block_on(async {
-        let bus = slipstream::Bus::open(connect.zenoh_config()?, connect.topic_map()?, "record").await?;
-        let summary = slipstream::tools::record::run(&bus, args).await;
-        let closed = tokio::time::timeout(slipstream::launch::CLOSE_TIMEOUT, bus.close()).await;
-        if !matches!(closed, Ok(Ok(()))) {
-            tracing::warn!("the recorder's session did not close cleanly");
-        }
-        summary
-    })?;
-    Ok(if summary.lost_anything() { ExitCode::FAILURE } else { ExitCode::SUCCESS })
-}
-
-/// `conform sim`: as the lockstep node it answers for, or as a watcher of its own name.
-fn conform_sim(connect: &ConnectArgs, args: &slipstream::tools::conform::ConformSimArgs) -> Result<ExitCode> {
-    use slipstream::tools::conform;
-    let node = if args.lockstep { args.name.clone() } else { format!("conform-{}", std::process::id()) };
-    let mut pass = false;
-    on_bus(connect, &node, |bus| async {
-        let report = conform::run_sim(&bus, args).await?;
-        if args.json {
-            println!("{}", serde_json::to_string_pretty(&report)?);
-        } else {
-            print!("{}", conform::render(&report));
-        }
-        pass = report.pass;
-        Ok(bus)
-    })?;
-    Ok(if pass { ExitCode::SUCCESS } else { ExitCode::FAILURE })
-}
-
-/// slipstream.1 and a page per visible command (slipstream-up.1, ...) into `dir`.
-fn write_man_pages(dir: &std::path::Path) -> Result<()> {
-    std::fs::create_dir_all(dir).with_context(|| format!("create {}", dir.display()))?;
-    let top = Cli::command();
-    let pages = std::iter::once(top.clone()).chain(
-        top.get_subcommands()
-            .filter(|c| !c.is_hide_set())
-            .map(|c| c.clone().name(format!("slipstream-{}", c.get_name())))
-            .collect::<Vec<_>>(),
-    );
-    for page in pages {
-        let path = dir.join(format!("{}.1", page.get_name()));
-        let mut text = Vec::new();
-        clap_mangen::Man::new(page).render(&mut text)?;
-        std::fs::write(&path, text).with_context(|| format!("write {}", path.display()))?;
-    }
-    Ok(())
-}
-
-/// A report as JSON or as its markdown rendering.
-fn print_report<R: serde::Serialize>(json: bool, report: &R, markdown: fn(&R) -> String) -> Result<()> {
-    if json {
-        println!("{}", serde_json::to_string_pretty(report)?);
-    } else {
-        println!("{}", markdown(report));
-    }
-    Ok(())
-}
-
-fn bench_command(args: &BenchArgs) -> Result<()> {
-    let report = bench::run(args)?;
-    let md = bench::markdown(&report);
-    if args.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
-    } else {
-        println!("{md}");
-    }
-    if let Some(path) = &args.markdown {
-        std::fs::write(path, format!("Command: `{}`\n{md}", report.command))
-            .with_context(|| format!("write {}", path.display()))?;
-    }
-    Ok(())
 }

@@ -104,9 +104,10 @@ fn topic_of(topics: &TopicMap, channel: &mcap::Channel) -> Option<(Topic, String
     Some((topic, ns))
 }
 
-/// Converts and prints the summary; false when a payload did not convert.
-pub fn command(args: &ConvertArgs, topics: &TopicMap) -> Result<bool> {
-    let s = run(args, topics).with_context(|| format!("convert {}", args.input.display()))?;
+/// `slipstream convert`: converts and prints the summary; exit 1 when a payload did not
+/// convert.
+pub fn command(args: &ConvertArgs, connect: &crate::ConnectArgs) -> Result<std::process::ExitCode> {
+    let s = run(args, &connect.topic_map()?).with_context(|| format!("convert {}", args.input.display()))?;
     println!(
         "{}: {} messages read, {} ROS 2 messages written to {}; {} on keys no route takes, {} malformed{}",
         args.input.display(),
@@ -117,5 +118,5 @@ pub fn command(args: &ConvertArgs, topics: &TopicMap) -> Result<bool> {
         s.malformed,
         if s.input_cut { " (the input was cut; read up to its last whole chunk)" } else { "" }
     );
-    Ok(s.malformed == 0)
+    Ok(crate::cli::exit_when(s.malformed == 0))
 }

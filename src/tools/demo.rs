@@ -231,3 +231,8 @@ pub fn run(connect: &ConnectArgs, args: &DemoArgs) -> Result<()> {
         Ok(())
     })
 }
+
+/// `slipstream demo`: fails when the subscriber missed what the publisher sent.
+pub fn command(args: &DemoArgs, connect: &ConnectArgs) -> Result<std::process::ExitCode> {
+    run(connect, args).map(|()| std::process::ExitCode::SUCCESS)
+}

@@ -144,3 +144,13 @@ fn line(sample: &zenoh::sample::Sample, args: &EchoArgs, bad: &TopicStats) -> Re
     }
     Ok(Some(v.to_string()))
 }
+
+/// `slipstream echo`: fails when --count messages did not come.
+pub fn command(args: &EchoArgs, connect: &crate::ConnectArgs) -> Result<std::process::ExitCode> {
+    let printed =
+        crate::cli::on_bus(connect, &crate::cli::own_name("echo"), |bus| async move { run(&bus, args).await })?;
+    match args.count {
+        Some(n) if printed < n => anyhow::bail!("{printed} of {n} messages seen on {}", args.topic),
+        _ => Ok(std::process::ExitCode::SUCCESS),
+    }
+}

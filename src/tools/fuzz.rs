@@ -256,7 +256,7 @@ pub fn markdown(reports: &[TargetReport]) -> String {
 }
 
 /// `slipstream fuzz`: the table (or JSON); fails when anything panicked.
-pub fn command(args: &FuzzArgs) -> Result<()> {
+pub fn command(args: &FuzzArgs) -> Result<std::process::ExitCode> {
     // Panics are findings, shown in the table: not printed once per input meanwhile.
     let hook = std::panic::take_hook();
     std::panic::set_hook(Box::new(|_| {}));
@@ -269,5 +269,5 @@ pub fn command(args: &FuzzArgs) -> Result<()> {
     }
     let panics: u64 = reports.iter().map(|r| r.panics).sum();
     anyhow::ensure!(panics == 0, "{panics} inputs made a decoder or parser panic (above)");
-    Ok(())
+    Ok(std::process::ExitCode::SUCCESS)
 }

@@ -98,3 +98,14 @@ pub fn render(info: &Info) -> String {
     }
     s
 }
+
+/// `slipstream info`: the table, or JSON with `json`.
+pub fn command(json: bool, connect: &ConnectArgs) -> anyhow::Result<std::process::ExitCode> {
+    let info = gather(connect)?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&info)?);
+    } else {
+        print!("{}", render(&info));
+    }
+    Ok(std::process::ExitCode::SUCCESS)
+}

@@ -6,8 +6,10 @@ pub mod conform;
 pub mod convert;
 pub mod demo;
 pub mod echo;
+pub mod eval;
 pub mod fuzz;
 pub mod info;
+pub mod manual;
 pub mod play;
 pub mod record;
 pub mod ros2;
@@ -16,6 +18,7 @@ pub mod soak;
 pub mod top;
 pub mod up;
 pub mod view;
+pub mod wire;
 
 /// Waits for a stop request (Ctrl-C, SIGTERM, SIGHUP: [`crate::cli::stop_requested`]) or `duration_s`, printing `status()` on stderr every `every`: one line
 /// redrawn in place on a terminal, a line each otherwise (`record`, `view`).

@@ -72,3 +72,13 @@ pub fn run(bus: &Bus, args: &PlayArgs) -> Result<PlayReport> {
         }
     }
 }
+
+/// `slipstream play`: the player paces with blocking sleeps and puts, so it runs on a thread of
+/// its own beside the session's runtime.
+pub fn command(args: &PlayArgs, connect: &crate::ConnectArgs) -> Result<std::process::ExitCode> {
+    crate::cli::on_bus(connect, "play", |bus| async move {
+        let args = args.clone();
+        tokio::task::spawn_blocking(move || run(&bus, &args)).await?
+    })?;
+    Ok(std::process::ExitCode::SUCCESS)
+}

@@ -80,16 +80,24 @@ impl Ros2Summary {
     }
 }
 
-/// `record --profile ros2` as a command: its own session, closed at the end; whether nothing
-/// was dropped or failed.
-pub fn command_ros2(args: &RecordArgs, connect: &crate::config::ConnectArgs) -> Result<bool> {
+/// `slipstream record` in either profile: its own session, closed at the end (a session that
+/// does not close in time is only warned about: the file is whole by then); exit 1 when
+/// anything was lost on the way to the file.
+pub fn command(args: &RecordArgs, connect: &crate::config::ConnectArgs) -> Result<std::process::ExitCode> {
     let rt = tokio::runtime::Runtime::new()?;
-    rt.block_on(async {
+    let clean = rt.block_on(async {
         let bus = Bus::open(connect.zenoh_config()?, connect.topic_map()?, "record").await?;
-        let summary = run_ros2(&bus, args).await;
-        let _ = tokio::time::timeout(crate::launch::CLOSE_TIMEOUT, bus.close()).await;
-        Ok(!summary?.lost_anything())
-    })
+        let clean = match args.profile {
+            Profile::Ros2 => run_ros2(&bus, args).await.map(|s| !s.lost_anything()),
+            Profile::Slipstream => run(&bus, args).await.map(|s| !s.lost_anything()),
+        };
+        let closed = tokio::time::timeout(crate::launch::CLOSE_TIMEOUT, bus.close()).await;
+        if !matches!(closed, Ok(Ok(()))) {
+            tracing::warn!("the recorder's session did not close cleanly");
+        }
+        clean
+    })?;
+    Ok(crate::cli::exit_when(clean))
 }
 
 /// `--profile ros2`: the `ros2` mapping's routes into a ros2-profile MCAP file until Ctrl-C or

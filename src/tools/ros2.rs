@@ -193,3 +193,13 @@ pub async fn run(bus: &Bus, args: &Ros2Args) -> Result<FaceStats> {
     }
     Ok(stats)
 }
+
+/// `slipstream ros2`: the mapping with --list, else the bridge until Ctrl-C (or --duration).
+pub fn command(args: &Ros2Args, connect: &crate::ConnectArgs) -> Result<std::process::ExitCode> {
+    if args.list {
+        list(&connect.topic_map()?, args)?;
+    } else {
+        crate::cli::on_bus(connect, &crate::cli::own_name("ros2"), |bus| async move { run(&bus, args).await })?;
+    }
+    Ok(std::process::ExitCode::SUCCESS)
+}

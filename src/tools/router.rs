@@ -22,3 +22,8 @@ pub fn run(connect: &ConnectArgs) -> Result<()> {
         Ok(())
     })
 }
+
+/// `slipstream router`: until Ctrl-C.
+pub fn command(connect: &ConnectArgs) -> Result<std::process::ExitCode> {
+    run(connect).map(|()| std::process::ExitCode::SUCCESS)
+}

@@ -454,3 +454,11 @@ pub fn summary(r: &SoakReport) -> String {
     ));
     s
 }
+
+/// `slipstream soak`: the summary (or JSON); exit 1 when something grew or a step went
+/// unanswered.
+pub fn command(args: &SoakArgs, connect: &crate::config::ConnectArgs) -> Result<std::process::ExitCode> {
+    let report = run(args, connect)?;
+    crate::cli::print_report(args.json, &report, summary)?;
+    Ok(crate::cli::exit_when(report.pass))
+}

@@ -275,3 +275,9 @@ pub async fn run(bus: &Bus, args: &TopArgs) -> Result<()> {
     }
     Ok(())
 }
+
+/// `slipstream top`: watches until Ctrl-C (or its --duration).
+pub fn command(args: &TopArgs, connect: &crate::ConnectArgs) -> Result<std::process::ExitCode> {
+    crate::cli::on_bus(connect, &crate::cli::own_name("top"), |bus| async move { run(&bus, args).await })?;
+    Ok(std::process::ExitCode::SUCCESS)
+}

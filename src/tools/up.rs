@@ -724,3 +724,11 @@ pub fn summary(r: &UpReport) -> String {
     }
     s
 }
+
+/// `slipstream up`: the loop (or `--from` a recording); exit 1 on a collision or a dead node.
+pub fn command(args: &UpArgs, connect: &ConnectArgs) -> Result<std::process::ExitCode> {
+    Ok(std::process::ExitCode::from(match &args.from {
+        Some(path) => run_from(path, args, connect)?,
+        None => run(args, connect)?.exit_code(),
+    }))
+}

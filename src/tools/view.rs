@@ -83,3 +83,9 @@ pub async fn run(bus: &Bus, args: &ViewArgs) -> Result<ViewStats> {
     eprintln!("{}", status_line(&stats));
     Ok(stats)
 }
+
+/// `slipstream view`: serves until Ctrl-C (or its --duration).
+pub fn command(args: &ViewArgs, connect: &crate::ConnectArgs) -> Result<std::process::ExitCode> {
+    crate::cli::on_bus(connect, &crate::cli::own_name("view"), |bus| async move { run(&bus, args).await })?;
+    Ok(std::process::ExitCode::SUCCESS)
+}

@@ -1,6 +1,7 @@
 //! The code's shape, read from its sources: no function in src/ runs over 100 lines (tests
-//! excepted), and no two files of one module import each other, directly or round a longer
-//! circle. A change that breaks either fails here, naming the function or the circle.
+//! excepted), the binaries only parse and hand over to the library, and no two files of one
+//! module import each other, directly or round a longer circle. A change that breaks one of
+//! these fails here, naming the function, the binary or the circle.
 
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::{Path, PathBuf};
@@ -157,6 +158,30 @@ fn no_function_in_src_runs_over_100_lines() {
         }
     }
     assert!(long.is_empty(), "functions over {MAX_FN_LINES} lines (split them by concern):\n{}", long.join("\n"));
+}
+
+/// The most lines a binary's `run` may take: parse, hand over to the library, print.
+const MAX_BIN_RUN_LINES: usize = 45;
+
+#[test]
+fn binaries_are_thin() {
+    let mut fat = Vec::new();
+    for (file, text) in sources().into_iter().filter(|(f, _)| f.starts_with("bin")) {
+        for (name, line, lines) in functions(&text) {
+            match name.as_str() {
+                "main" => {}
+                "run" if lines <= MAX_BIN_RUN_LINES => {}
+                "run" => fat.push(format!("src/{}:{line} run is {lines} lines", file.display())),
+                _ => fat.push(format!("src/{}:{line} defines {name}", file.display())),
+            }
+        }
+    }
+    assert!(
+        fat.is_empty(),
+        "a binary is main -> run -> the library (run at most {MAX_BIN_RUN_LINES} lines); move the logic into its \
+         tool's command():\n{}",
+        fat.join("\n")
+    );
 }
 
 /// The sibling files a file names: `super::x` and `crate::<its module path>::x`, where x is a

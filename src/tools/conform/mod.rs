@@ -117,3 +117,13 @@ pub fn render(report: &ConformReport) -> String {
     );
     out
 }
+
+/// `slipstream conform sim`: as the lockstep node it answers for, or as a watcher of its own
+/// name; the verdicts (or JSON), and exit 1 when a rule failed.
+pub fn command(command: &ConformCommand, connect: &crate::ConnectArgs) -> anyhow::Result<std::process::ExitCode> {
+    let ConformCommand::Sim(args) = command;
+    let node = if args.lockstep { args.name.clone() } else { crate::cli::own_name("conform") };
+    let report = crate::cli::on_bus(connect, &node, |bus| async move { Ok(run_sim(&bus, args).await?) })?;
+    crate::cli::print_report(args.json, &report, render)?;
+    Ok(crate::cli::exit_when(report.pass))
+}

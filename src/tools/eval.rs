@@ -1,0 +1,155 @@
+//! `slipstream eval`: scoring a node against the simulator's ground truth. The subcommands'
+//! command lines and what each prints and exits with; the scoring itself is the eval layer's
+//! ([`crate::eval`]).
+
+use std::process::ExitCode;
+
+use anyhow::{Context, Result};
+
+use crate::cli::print_report;
+use crate::config::ConnectArgs;
+
+#[derive(clap::Subcommand)]
+pub enum EvalCommand {
+    /// Vehicle detection: runs scenarios in process (world, camera, detector and tracker; the
+    /// ego keeps its start speed and slows for the vehicle ahead), matches detections to the ground truth of the same frame, and reports
+    /// precision, recall and distance/lateral errors by range, and the lateral error 80-200 m
+    /// ahead by range and the bend it is seen through (--family bend-neighbours scores the
+    /// bends of `eval sweep`)
+    Detect(DetectArgs),
+    /// Adaptive cruise control: runs slipstream-sim (lockstep, fast), slipstream-detect and
+    /// slipstream-acc as separate processes over Zenoh through each scenario and reports
+    /// collisions, minimum gap and TTC, time-gap and speed errors, and comfort (accel, decel,
+    /// jerk outside emergencies) and what a driver feels (unwarranted emergencies, phantom
+    /// braking, stopping for nothing, acceleration swings behind a steady lead) against the
+    /// aims, with traffic collisions counted, and where the time went; exits with 1 when a
+    /// scenario misses one. Runs one scenario per CPU core at once (-j). The nodes talk over
+    /// unix sockets in a namespace of their own (the topic config, -t, is passed on;
+    /// connection flags are not). Example:
+    ///
+    ///   slipstream eval acc --perception ground-truth --plots plots/
+    #[command(verbatim_doc_comment)]
+    Acc(crate::eval::acc::EvalAccArgs),
+    /// The ACC's safety envelope under network faults: for each scenario a fault-free run,
+    /// then perception delay, perception loss (independent, then bursty) and control-command
+    /// loss in rising steps, injected where samples enter the ACC and the simulator
+    /// (lockstep: the same seed gives the same run). Prints, per scenario and axis, the largest
+    /// fault with no collision, no emergency braking the fault-free run does not need and
+    /// comfort kept, and what failed first (docs/faults.md). Example:
+    ///
+    ///   slipstream eval faults --scenario cut-in --plot envelope.png
+    #[command(verbatim_doc_comment)]
+    Faults(crate::eval::faults::EvalFaultsArgs),
+    /// Driving judged at scale: generates --count scenarios (default 1,000) from parameterised
+    /// families (Euro NCAP car-to-car rear, cut-ins, cut-outs, braking leads, the edge of
+    /// range, bends with vehicles in the next lanes, lane ends, dense traffic), each declaring
+    /// what its physics warrants, runs each like `eval acc` and reports collisions,
+    /// unwarranted emergencies and phantom braking per 1,000 km by family, comfort violations
+    /// and the time-gap error, with the worst runs named (their files replay with `eval acc
+    /// --scenario FILE`). Writes the scenarios, sweep.json and rates.png under --out; exits
+    /// with 1 when a family misses the bar (no collision, no unwarranted emergency, at most
+    /// one phantom-braking event per 1,000 km). Example:
+    ///
+    ///   slipstream eval sweep --count 40 --seed 7 --out /tmp/sweep
+    #[command(verbatim_doc_comment)]
+    Sweep(crate::eval::sweep::EvalSweepArgs),
+}
+
+/// `eval detect`'s command line.
+#[derive(clap::Args)]
+pub struct DetectArgs {
+    /// Scenarios to run (names or files) [default: the standard set]
+    #[arg(long = "scenario", value_name = "NAME")]
+    pub scenarios: Vec<String>,
+    /// Simulated seconds per scenario at most
+    #[arg(long, default_value_t = 30.0)]
+    pub seconds: f64,
+    /// Print JSON instead of the table
+    #[arg(long)]
+    pub json: bool,
+    /// Simulator settings to measure with (the cameras: resolution, field of view, mount);
+    /// only the keys it changes are needed [default: config/sim.json5 when present, else
+    /// built-in]
+    #[arg(long, value_name = "FILE", env = "SLIPSTREAM_SIM_CONFIG")]
+    pub settings: Option<std::path::PathBuf>,
+    /// Put every frame through this encoding and back before the detector sees it, as a
+    /// link copy would (raw, lz4, jpeg, png), and report its size and encode/decode time
+    #[arg(long, value_name = "ENCODING")]
+    pub frames: Option<String>,
+    /// JPEG quality for --frames jpeg, 1..100
+    #[arg(long, default_value_t = 85, value_parser = clap::value_parser!(u8).range(1..=100))]
+    pub jpeg_quality: u8,
+    /// Also score --count scenarios of this `eval sweep` family (the sweep's own, with
+    /// --seed), e.g. bend-neighbours for the lateral error far ahead in bends
+    #[arg(long, value_enum)]
+    pub family: Option<crate::eval::sweep::families::Family>,
+    /// How many scenarios of --family
+    #[arg(long, default_value_t = 20)]
+    pub count: usize,
+    /// The sweep seed the --family scenarios come from
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+}
+
+/// `slipstream eval ...`: the report (or JSON); exit 1 (an error saying so) when `acc` or
+/// `sweep` missed an aim.
+pub fn command(command: &EvalCommand, connect: &ConnectArgs) -> Result<ExitCode> {
+    match command {
+        EvalCommand::Detect(args) => detect(args),
+        EvalCommand::Acc(args) => {
+            use crate::eval::acc;
+            let report = acc::run(args, connect)?;
+            print_report(args.json, &report, acc::markdown)?;
+            let failed = report.results.iter().filter(|r| !r.metrics.pass || r.lockstep_timeouts > 0).count();
+            if failed > 0 {
+                anyhow::bail!("{failed} of {} scenarios missed an aim", report.results.len());
+            }
+            Ok(ExitCode::SUCCESS)
+        }
+        EvalCommand::Sweep(args) => sweep(args, connect),
+        EvalCommand::Faults(args) => {
+            use crate::eval::faults;
+            let report = faults::run(args, connect)?;
+            print_report(args.json, &report, faults::markdown)?;
+            Ok(ExitCode::SUCCESS)
+        }
+    }
+}
+
+/// `eval detect`: the frames' link encoding by name, then the report.
+fn detect(args: &DetectArgs) -> Result<ExitCode> {
+    use crate::eval::{detect, link_codec::LinkCodec};
+    let scenarios = detect::scenarios(&args.scenarios, args.family, args.count, args.seed)?;
+    let settings = crate::sim::SimSettings::load_or_default(args.settings.as_deref())?;
+    let codec = match args.frames.as_deref() {
+        None => None,
+        Some(name) => {
+            let Some(e) = crate::config::CameraEncoding::ALL.into_iter().find(|e| e.name() == name) else {
+                anyhow::bail!("--frames {name}: not a frame encoding (use raw, lz4, jpeg or png)");
+            };
+            Some(LinkCodec::new(e, args.jpeg_quality))
+        }
+    };
+    let report = detect::evaluate(scenarios, args.seconds, &settings, codec);
+    print_report(args.json, &report, detect::markdown)?;
+    Ok(ExitCode::SUCCESS)
+}
+
+/// `eval sweep`: sweep.json under --out, the table, and an error when a family missed the bar.
+fn sweep(args: &crate::eval::sweep::EvalSweepArgs, connect: &ConnectArgs) -> Result<ExitCode> {
+    use crate::eval::sweep;
+    let report = sweep::run(args, connect)?;
+    let file = args.out.join("sweep.json");
+    std::fs::write(&file, serde_json::to_string_pretty(&report)?)
+        .with_context(|| format!("write {}", file.display()))?;
+    print_report(args.json, &report, sweep::markdown)?;
+    eprintln!(
+        "report: {}; plot: {}",
+        file.display(),
+        report.plot.as_ref().map_or("none".into(), |p| p.display().to_string())
+    );
+    if !report.pass {
+        anyhow::bail!("the sweep missed the bar (table above)");
+    }
+    Ok(ExitCode::SUCCESS)
+}
