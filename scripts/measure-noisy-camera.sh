@@ -33,7 +33,7 @@ scenario noise-12-flicker 12 0.25
 
 echo "== eval detect, 12 s: scenario | frames | precision | recall within 60 m"
 for f in noise-3 noise-6 noise-9 noise-12 noise-12-flicker; do
-  "$bin" eval detect --scenario "$out/$f.json5" --seconds 12 2>&1 | grep "^| $f |" | cut -d'|' -f2-5
+  "$bin" eval detect --scenario "$out/$f.json5" --duration 12 2>&1 | grep "^| $f |" | cut -d'|' -f2-5
 done
 echo
 echo "== eval acc, camera: noise-12-flicker"

@@ -75,7 +75,7 @@ pub struct AccArgs {
     #[arg(long, value_enum, value_name = "CLASS")]
     pub vehicle: Option<VehicleClass>,
     /// Answer each step only once the perception of that step's camera frame is in: a
-    /// deterministic loop with `slipstream-sim --clock lockstep`
+    /// deterministic loop with `slipstream-sim --mode lockstep`
     #[arg(long)]
     pub lockstep: bool,
     /// Start disengaged (acc/command { enable: true } engages)

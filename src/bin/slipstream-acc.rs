@@ -20,7 +20,7 @@ use slipstream::config::{ConnectArgs, FaultArgs};
 ///
 ///   slipstream-acc --perception ground-truth --set-speed 30 --time-gap 2.0
 ///
-///   slipstream-acc --lockstep     (with slipstream-sim --clock lockstep --wait-for acc)
+///   slipstream-acc --lockstep     (with slipstream-sim --mode lockstep --wait-for acc)
 #[derive(Parser)]
 #[command(name = "slipstream-acc", version, verbatim_doc_comment)]
 struct Cli {

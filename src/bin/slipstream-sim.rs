@@ -15,9 +15,9 @@ use slipstream::sim::args::SimArgs;
 ///
 ///   slipstream-sim --scenario cut-in
 ///
-///   slipstream-sim --scenario my.json5 --clock fast --seed 7
+///   slipstream-sim --scenario my.json5 --mode fast --seed 7
 ///
-///   slipstream-sim --clock lockstep --wait-for acc    (steps wait for the acc node)
+///   slipstream-sim --mode lockstep --wait-for acc    (steps wait for the acc node)
 ///
 ///   slipstream-sim --scenario busy-traffic --preview frame.png --at 5
 #[derive(Parser)]

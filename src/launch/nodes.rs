@@ -31,7 +31,7 @@ use crate::perception::node::DetectStats;
 use crate::sim::SimReport;
 use crate::Bus;
 
-/// How the simulator's clock runs (slipstream-sim --clock).
+/// How the simulator's clock runs (slipstream-sim --mode).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
 pub enum ClockMode {
@@ -104,7 +104,7 @@ impl LoopSpec {
         ] {
             if p.topics.contains_key(&topic) {
                 bail!(
-                    "{}: key `topics.{topic}`: faults on {topic} cannot run in lockstep (each step waits for what follows from it) (fix: put them on {instead}, or use --clock realtime or fast)",
+                    "{}: key `topics.{topic}`: faults on {topic} cannot run in lockstep (each step waits for what follows from it) (fix: put them on {instead}, or use --mode realtime or fast)",
                     p.name
                 );
             }
@@ -391,7 +391,7 @@ impl LoopRun {
         let mut sim_args = vec![
             "--scenario".to_string(),
             spec.scenario.clone(),
-            "--clock".into(),
+            "--mode".into(),
             spec.clock.name().into(),
             "--duration".into(),
             spec.duration_s.to_string(),

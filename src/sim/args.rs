@@ -8,8 +8,9 @@ use crate::config::ConfigError;
 
 #[derive(Debug, Clone, clap::Args)]
 pub struct SimArgs {
-    /// Scenario: a built-in name (see --list-scenarios) or a path to a .json5 file
-    #[arg(short = 's', long, default_value = "steady-follow")]
+    /// Scenario: a built-in name (see --list-scenarios) or a path to a .json5 file (the same
+    /// default as `slipstream up`)
+    #[arg(short = 's', long, default_value = "cut-in")]
     pub scenario: String,
     /// List the built-in scenarios and exit
     #[arg(long)]
@@ -21,10 +22,11 @@ pub struct SimArgs {
     /// changes are needed [default: config/sim.json5 when present, else built-in]
     #[arg(long, value_name = "FILE", env = "SLIPSTREAM_SIM_CONFIG")]
     pub settings: Option<PathBuf>,
-    /// Clock mode (settings key `mode`): realtime (paced to the wall clock), fast (as fast as
-    /// it can), lockstep (each step waits for the controllers' answers; deterministic)
-    #[arg(long, value_parser = ["realtime", "fast", "lockstep"])]
-    pub clock: Option<String>,
+    /// How the clock runs (settings key `mode`, as `up --mode`): realtime (paced to the wall
+    /// clock), fast (as fast as it can), lockstep (each step waits for the controllers'
+    /// answers; deterministic)
+    #[arg(long, alias = "clock", value_parser = ["realtime", "fast", "lockstep"])]
+    pub mode: Option<String>,
     /// Nodes lockstep waits for (comma-separated), e.g. acc
     #[arg(long, value_delimiter = ',')]
     pub wait_for: Option<Vec<String>>,
@@ -59,7 +61,7 @@ impl SimArgs {
     /// The settings file (or defaults) with the flags applied and checked.
     pub fn settings(&self) -> Result<SimSettings, ConfigError> {
         let mut s = SimSettings::load_or_default(self.settings.as_deref())?;
-        if let Some(mode) = &self.clock {
+        if let Some(mode) = &self.mode {
             s.mode = match mode.as_str() {
                 "fast" => Mode::Fast,
                 "lockstep" => Mode::Lockstep,

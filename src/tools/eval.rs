@@ -46,11 +46,11 @@ pub enum EvalCommand {
     /// what its physics warrants, runs each like `eval acc` and reports collisions,
     /// unwarranted emergencies and phantom braking per 1,000 km by family, comfort violations
     /// and the time-gap error, with the worst runs named (their files replay with `eval acc
-    /// --scenario FILE`). Writes the scenarios, sweep.json and rates.png under --out; exits
+    /// --scenario FILE`). Writes the scenarios, sweep.json and rates.png under --report; exits
     /// with 1 when a family misses the bar (no collision, no unwarranted emergency, at most
     /// one phantom-braking event per 1,000 km). Example:
     ///
-    ///   slipstream eval sweep --count 40 --seed 7 --out /tmp/sweep
+    ///   slipstream eval sweep --count 40 --seed 7 --report /tmp/sweep
     #[command(verbatim_doc_comment)]
     Sweep(crate::eval::sweep::EvalSweepArgs),
 }
@@ -61,8 +61,8 @@ pub struct DetectArgs {
     /// Scenarios to run (names or files) [default: the standard set]
     #[arg(long = "scenario", value_name = "NAME")]
     pub scenarios: Vec<String>,
-    /// Simulated seconds per scenario at most
-    #[arg(long, default_value_t = 30.0)]
+    /// Simulated seconds per scenario at most (as `eval acc --duration`)
+    #[arg(long = "duration", alias = "seconds", default_value_t = 30.0)]
     pub seconds: f64,
     /// Print JSON instead of the table
     #[arg(long)]
@@ -135,7 +135,7 @@ fn detect(args: &DetectArgs) -> Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
-/// `eval sweep`: sweep.json under --out, the table, and an error when a family missed the bar.
+/// `eval sweep`: sweep.json under --report, the table, and an error when a family missed the bar.
 fn sweep(args: &crate::eval::sweep::EvalSweepArgs, connect: &ConnectArgs) -> Result<ExitCode> {
     use crate::eval::sweep;
     let report = sweep::run(args, connect)?;

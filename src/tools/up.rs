@@ -50,7 +50,8 @@ pub struct UpArgs {
     /// Scenario: a built-in name (slipstream-sim --list-scenarios) or a .json5 file
     #[arg(long, default_value = "cut-in")]
     pub scenario: String,
-    /// How the simulator's clock runs (slipstream-sim --clock)
+    /// How the simulator's clock runs (slipstream-sim --mode): realtime (paced to the wall
+    /// clock), fast (as fast as it goes), lockstep (deterministic: each step waits for the ACC)
     #[arg(long, alias = "clock", value_enum, default_value = "realtime")]
     pub mode: ClockMode,
     /// Where report.json, the plots and the nodes' logs go

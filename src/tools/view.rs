@@ -19,14 +19,14 @@ const STATUS_EVERY: Duration = Duration::from_secs(2);
     and import the layout config/foxglove-layout.json (docs/viewing.md).\n\n\
     Examples:\n  slipstream up --view                 (the loop and its view in one command)\n  \
     slipstream view                      (a loop that is already running)\n  \
-    slipstream view --port 9000 --scenario highway.json5")]
+    slipstream view --view-port 9000 --scenario highway.json5")]
 pub struct ViewArgs {
     /// Address to listen on. The default serves this machine only: from another PC, tunnel
     /// with `ssh -L 8765:localhost:8765 SIM-PC`
-    #[arg(long, default_value = DEFAULT_HOST)]
+    #[arg(long = "view-host", alias = "host", default_value = DEFAULT_HOST)]
     pub host: String,
-    /// Port to listen on (0: any free port, printed)
-    #[arg(long, default_value_t = DEFAULT_PORT)]
+    /// Port to listen on (0: any free port, printed); the same flag as `up --view-port`
+    #[arg(long = "view-port", alias = "port", default_value_t = DEFAULT_PORT)]
     pub port: u16,
     /// Updates per second sent to viewers at most; the loop's own rates are untouched
     #[arg(long, default_value_t = DEFAULT_RATE_HZ, value_parser = rate)]

@@ -254,7 +254,7 @@ impl LiveView {
             .await
             .with_context(|| {
                 format!(
-                    "cannot serve the live view on {}:{} (another `slipstream view` or `up --view`? pick another with --view-port / --port)",
+                    "cannot serve the live view on {}:{} (another `slipstream view` or `up --view`? pick another with --view-port)",
                     opts.host, opts.port
                 )
             })?;

@@ -86,7 +86,7 @@ fn a_bad_config_fails_with_file_key_and_fix() {
 fn eval_detect_measures_the_camera_settings_it_is_given() {
     let far_recall = |settings: Option<&std::path::Path>| {
         let mut cmd = bin();
-        cmd.args(["eval", "detect", "--scenario", "car-standing-at-150-m", "--seconds", "3", "--json"]);
+        cmd.args(["eval", "detect", "--scenario", "car-standing-at-150-m", "--duration", "3", "--json"]);
         if let Some(f) = settings {
             cmd.arg("--settings").arg(f);
         }
@@ -101,7 +101,7 @@ fn eval_detect_measures_the_camera_settings_it_is_given() {
 
     let bad = temp_file("narrow-bad.json5", "{ narrow_camera: { horizontal_fov_deg: 5 } }");
     let mut cmd = bin();
-    cmd.args(["eval", "detect", "--seconds", "1", "--settings"]).arg(&bad);
+    cmd.args(["eval", "detect", "--duration", "1", "--settings"]).arg(&bad);
     let out = run(cmd, Duration::from_secs(60));
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
@@ -251,7 +251,7 @@ fn bench_quick_every_path_delivers() {
 #[test]
 fn eval_detect_measures_the_lateral_and_across_road_errors_far_ahead_in_the_sweeps_bends() {
     let mut cmd = bin();
-    cmd.args(["eval", "detect", "--family", "bend-neighbours", "--count", "2", "--seconds", "12", "--json"]);
+    cmd.args(["eval", "detect", "--family", "bend-neighbours", "--count", "2", "--duration", "12", "--json"]);
     let out = run(cmd, Duration::from_secs(300));
     assert!(out.status.success(), "stderr: {}", String::from_utf8_lossy(&out.stderr));
     let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
@@ -275,7 +275,7 @@ fn eval_detect_measures_the_lateral_and_across_road_errors_far_ahead_in_the_swee
 #[test]
 fn eval_detect_scores_a_scenario_as_json() {
     let mut cmd = bin();
-    cmd.args(["eval", "detect", "--scenario", "cut-in", "--seconds", "6", "--json"]);
+    cmd.args(["eval", "detect", "--scenario", "cut-in", "--duration", "6", "--json"]);
     let out = run(cmd, Duration::from_secs(120));
     assert!(out.status.success(), "stderr: {}", String::from_utf8_lossy(&out.stderr));
     let report: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
@@ -321,4 +321,52 @@ fn completions_and_man_pages_cover_every_command() {
     }
     assert!(!dir.join("slipstream-bench-peer.1").exists(), "hidden commands have no page");
     let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// The long flags a tool's `--help` lists (`--name`), in order.
+fn flags_of(program: &str, args: &[&str]) -> Vec<String> {
+    let mut cmd = Command::new(program);
+    cmd.args(args).arg("--help");
+    let out = run(cmd, Duration::from_secs(20));
+    assert!(out.status.success(), "{program} {args:?} --help");
+    String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter_map(|l| l.trim_start().split(", ").last())
+        .filter_map(|l| l.strip_prefix("--"))
+        .map(|l| l.split([' ', '=', '<', '[']).next().unwrap_or("").to_string())
+        .collect()
+}
+
+#[test]
+fn one_setting_has_one_flag_across_the_tools() {
+    let s = env!("CARGO_BIN_EXE_slipstream");
+    let sim = env!("CARGO_BIN_EXE_slipstream-sim");
+    // (tool, the flag it spells a shared setting with, spellings that setting must not take)
+    let cases: [(&str, &[&str], &str, &[&str]); 7] = [
+        (s, &["up"], "mode", &["clock"]),
+        (sim, &[], "mode", &["clock"]),
+        (s, &["up"], "view-port", &["port"]),
+        (s, &["view"], "view-port", &["port"]),
+        (s, &["eval", "sweep"], "report", &["out", "output-dir"]),
+        (s, &["eval", "detect"], "duration", &["seconds"]),
+        (s, &["eval", "acc"], "duration", &["seconds"]),
+    ];
+    for (program, args, flag, not) in cases {
+        let flags = flags_of(program, args);
+        assert!(flags.iter().any(|f| f == flag), "{args:?}: no --{flag} in {flags:?}");
+        for n in not {
+            assert!(!flags.iter().any(|f| f == n), "{args:?}: --{n} is spelled --{flag} elsewhere");
+        }
+    }
+    // The simulator and `up` start the same scenario when none is named.
+    let default_of = |program: &str, args: &[&str]| {
+        let mut cmd = Command::new(program);
+        cmd.args(args).arg("--help");
+        let help = String::from_utf8_lossy(&run(cmd, Duration::from_secs(20)).stdout).to_string();
+        let at = help.find("--scenario <").expect("a --scenario option");
+        let rest = &help[at..];
+        let d = rest.find("[default: ").expect("a default scenario") + "[default: ".len();
+        rest[d..].split(']').next().unwrap().to_string()
+    };
+    assert_eq!(default_of(sim, &[]), default_of(s, &["up"]));
 }

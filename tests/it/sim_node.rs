@@ -508,7 +508,7 @@ async fn lockstep_explains_answers_from_a_controller_that_does_not_name_itself()
     std::fs::write(&settings_file, "{ lockstep: { step_timeout_ms: 300, on_timeout: 'stop' } }").unwrap();
     let mut cmd = sim_bin();
     cmd.args([
-        "--clock",
+        "--mode",
         "lockstep",
         "--wait-for",
         "ctl",

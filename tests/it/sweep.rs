@@ -35,7 +35,7 @@ fn f(v: &Value) -> f64 {
 /// `eval sweep` into `out`; its report.
 fn sweep(out: &Path, args: &[&str]) -> (Value, Output) {
     let mut c = slipstream();
-    c.args(["eval", "sweep", "--json", "--out"]).arg(out).args(args);
+    c.args(["eval", "sweep", "--json", "--report"]).arg(out).args(args);
     let done = run(c, Duration::from_secs(900));
     let report: Value = serde_json::from_slice(&done.stdout)
         .unwrap_or_else(|e| panic!("{e}: {}", String::from_utf8_lossy(&done.stderr)));
@@ -107,7 +107,7 @@ fn bad_sweep_arguments_are_refused_before_anything_runs() {
         [(vec!["--count", "0"], "--count"), (vec!["--families", "no-such"], "no-such"), (vec!["--jobs", "0"], "--jobs")]
     {
         let mut c = slipstream();
-        c.args(["eval", "sweep", "--out"]).arg(&out).args(&args);
+        c.args(["eval", "sweep", "--report"]).arg(&out).args(&args);
         let done = run(c, Duration::from_secs(60));
         let err = String::from_utf8_lossy(&done.stderr);
         assert!(!done.status.success() && err.contains(says), "{args:?}: {err}");

@@ -80,7 +80,7 @@ def assert_keeps_the_contract(code, verdicts):
 def test_slipstream_sim_keeps_the_contract_in_every_clock_mode(slipstream_bin, sim_bin, free_port, mode):
     endpoint, ns = f"tcp/127.0.0.1:{free_port}", f"conform-{mode}"
     # A long scenario on a straight road: nothing ends it while conform watches.
-    argv = [sim_bin, "--scenario", "steady-follow", "--clock", mode, "--duration", "3000", "-l", endpoint, "-e",
+    argv = [sim_bin, "--scenario", "steady-follow", "--mode", mode, "--duration", "3000", "-l", endpoint, "-e",
             endpoint, "-n", ns]
     with Running(argv):
         code, verdicts = conform(slipstream_bin, endpoint, ns, *(["--lockstep"] if mode == "lockstep" else []))

@@ -32,8 +32,8 @@ def test_every_json_output_has_each_key_once(slipstream_bin, sim_bin, free_port,
     strict(run(slipstream_bin, "wire-examples"))
     strict(run(slipstream_bin, "ros2", "--list", "--json"))
     strict(run(slipstream_bin, "fuzz", "--count", "200", "--json"))
-    strict(run(slipstream_bin, "eval", "detect", "--scenario", "cut-in", "--seconds", "2", "--json"))
-    with Running([sim_bin, "--scenario", "steady-follow", "--clock", "realtime", "--duration", "600", "-l", endpoint,
+    strict(run(slipstream_bin, "eval", "detect", "--scenario", "cut-in", "--duration", "2", "--json"))
+    with Running([sim_bin, "--scenario", "steady-follow", "--mode", "realtime", "--duration", "600", "-l", endpoint,
                   "-e", endpoint, "-n", ns]):
         time.sleep(1)
         rows = [strict(line) for line in run(slipstream_bin, *flags, "top", "--json", "--duration", "3").splitlines()]
@@ -41,7 +41,7 @@ def test_every_json_output_has_each_key_once(slipstream_bin, sim_bin, free_port,
     keys = {r["key"]: r for r in rows[-1]["keys"]}
     # A row names its key and the topic it is mapped to, each once.
     assert keys[f"{ns}/vehicle/speed"]["topic"] == "vehicle/speed", keys[f"{ns}/vehicle/speed"]
-    sim_report = run(sim_bin, "--scenario", "steady-follow", "--clock", "fast", "--duration", "2", "--json",
+    sim_report = run(sim_bin, "--scenario", "steady-follow", "--mode", "fast", "--duration", "2", "--json",
                      "-l", "tcp/127.0.0.1:0", "-e", "tcp/127.0.0.1:1")
     strict(sim_report)
     report_dir = tmp_path / "report"

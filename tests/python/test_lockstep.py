@@ -16,7 +16,7 @@ from slipstream_client import decode, encode
 def test_a_python_controller_drives_the_simulator_in_lockstep(sim_bin, free_port):
     endpoint = f"tcp/127.0.0.1:{free_port}"
     sim = subprocess.Popen(
-        [sim_bin, "--scenario", "steady-follow", "--clock", "lockstep", "--wait-for", "pyctl",
+        [sim_bin, "--scenario", "steady-follow", "--mode", "lockstep", "--wait-for", "pyctl",
          "--duration", "2", "--camera-size", "160x120", "--json", "-l", endpoint, "-e", endpoint,
          # Physics at the state's rate: every step publishes a state and waits for its answer.
          "--physics-hz", "100"],

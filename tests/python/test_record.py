@@ -114,7 +114,7 @@ def test_a_cut_recording_reads_up_to_its_last_chunk(slipstream_bin, sim_bin, fre
     that streams it without the summary at the end (docs/recording.md)."""
     endpoint = f"tcp/127.0.0.1:{free_port}"
     path = tmp_path / "full.mcap"
-    sim = subprocess.Popen([sim_bin, "--scenario", "open-road", "--clock", "realtime", "--duration", "60",
+    sim = subprocess.Popen([sim_bin, "--scenario", "open-road", "--mode", "realtime", "--duration", "60",
                             "-l", endpoint], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     try:
         run = subprocess.run([slipstream_bin, "-e", endpoint, "record", "-o", str(path), "--duration", "4",

@@ -215,7 +215,7 @@ class Controller:
 def test_a_ros_controller_drives_the_ego_and_bad_commands_are_refused(slipstream_bin, sim_bin, free_port):
     ts = typestore(slipstream_bin)
     endpoint = f"tcp/127.0.0.1:{free_port}"
-    sim = subprocess.Popen([sim_bin, "--scenario", "open-road", "--clock", "realtime", "--duration", "60",
+    sim = subprocess.Popen([sim_bin, "--scenario", "open-road", "--mode", "realtime", "--duration", "60",
                             "-l", endpoint], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, cwd=ROOT)
     bridge = subprocess.Popen([slipstream_bin, "-e", endpoint, "ros2", "--control", "--json", "--duration", "25"],
                               stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=ROOT)

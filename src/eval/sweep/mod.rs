@@ -45,7 +45,7 @@ pub struct EvalSweepArgs {
     pub perception: PerceptionSource,
     /// Where the scenarios (scenarios/<name>.json5), the report (sweep.json), the plot
     /// (rates.png) and the logs of the runs that missed an aim (logs/) go
-    #[arg(long, value_name = "DIR", default_value = "sweep")]
+    #[arg(long = "report", alias = "out", value_name = "DIR", default_value = "sweep")]
     pub out: PathBuf,
     /// The worst runs named in the report
     #[arg(long, default_value_t = 10, value_name = "N")]
@@ -81,7 +81,7 @@ pub struct SweepReport {
 fn write_scenarios(args: &EvalSweepArgs) -> Result<Vec<(SweepRun, Scenario)>> {
     let families: Vec<Family> = if args.families.is_empty() { Family::ALL.to_vec() } else { args.families.clone() };
     let dir = args.out.join("scenarios");
-    std::fs::create_dir_all(&dir).with_context(|| format!("create {} (--out)", dir.display()))?;
+    std::fs::create_dir_all(&dir).with_context(|| format!("create {} (--report)", dir.display()))?;
     let mut out = Vec::with_capacity(args.count);
     for index in 0..args.count {
         // Dealt in turn, each family's j-th the full sweep's: --families picks scenarios out

@@ -29,8 +29,8 @@ pub enum ConformCommand {
     /// with the numbers, and exits with 1 on any FAIL. Run it with the simulator alone (no
     /// ACC driving it). Examples:
     ///
-    ///   slipstream-sim --clock realtime &   slipstream conform sim
-    ///   slipstream-sim --clock lockstep &   slipstream conform sim --lockstep
+    ///   slipstream-sim --mode realtime &   slipstream conform sim
+    ///   slipstream-sim --mode lockstep &   slipstream conform sim --lockstep
     ///   slipstream -n car1 -e tcp/ROUTER:7447 conform sim --json
     #[command(verbatim_doc_comment)]
     Sim(ConformSimArgs),
