@@ -46,7 +46,7 @@ if ! .venv/bin/python -c 'import zenoh, numpy, pytest, mcap, mcap_ros2, websocke
 fi
 # The Python client as its users install it (editable: the tests run against this checkout's
 # code, imported as an installed package, not from a path the tests add).
-.venv/bin/pip install --quiet --disable-pip-version-check -e 'clients/python[numpy,lz4,carla,coppeliasim]'
+.venv/bin/pip install --quiet --disable-pip-version-check -e 'clients/python[numpy,lz4,mcap,carla,coppeliasim]'
 .venv/bin/python -c 'import zenoh; print("eclipse-zenoh", zenoh.__version__ if hasattr(zenoh, "__version__") else "installed")'
 
 step "rust build and tests (cargo test --release)"

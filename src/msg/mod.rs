@@ -19,6 +19,7 @@ mod any;
 mod camera;
 mod codec;
 mod image_encoding;
+pub mod layout;
 mod objects;
 mod pixels;
 mod road;

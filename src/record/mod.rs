@@ -2,9 +2,11 @@
 //!
 //! A recording keeps every payload byte for byte, on one MCAP channel per key, message type
 //! and publisher: the channel's topic is the Zenoh key, its schema is named after the message
-//! type (`slipstream.Speed`, ...), its message encoding names the wire version
-//! (`slipstream/v5`; docs/wire-format.md is the schema), its metadata names the publishing node. Log and publish time are the header's publish stamp,
-//! the MCAP sequence its seq; the header's simulation time stays inside the payload.
+//! type (`slipstream.Speed`, ...) and holds the type's layout (schema encoding
+//! `slipstream-layout`, [`crate::msg::layout`]), its message encoding names the wire version
+//! (`slipstream/v5`), its metadata names the publishing node. Log time is when the recorder
+//! received the message, publish time the header's publish stamp, the MCAP sequence its seq;
+//! the header's simulation time stays inside the payload.
 //!
 //! The recorder never blocks a publisher: Zenoh's callback copies the payload into a bounded
 //! queue ([`QUEUE_BYTES`]) and a writer thread of its own writes the file. Nothing is lost

@@ -405,15 +405,19 @@ fn add_channel(
     key: &ChannelKey,
     namespace: &str,
 ) -> mcap::McapResult<u16> {
-    let schema = match schemas.get(&key.1) {
-        Some(id) => *id,
-        None => {
-            // No registered schema encoding describes postcard: the name says the type and
-            // docs/wire-format.md its bytes.
-            let id = writer.add_schema(&schema_name(key.1), "", &[])?;
+    let schema = match (schemas.get(&key.1), key.1) {
+        (Some(id), _) => *id,
+        (None, Some(kind)) => {
+            // The type's layout as data (src/msg/layout.rs): with docs/wire-format.md's rules a
+            // reader decodes the channel without this crate.
+            let data = serde_json::to_vec(&crate::msg::layout::schema_data(kind)).unwrap_or_default();
+            let id = writer.add_schema(&schema_name(key.1), crate::msg::layout::SCHEMA_ENCODING, &data)?;
             schemas.insert(key.1, id);
             id
         }
+        // Bytes that are no slipstream message have no layout: a channel without a schema
+        // (schema id 0, as MCAP allows).
+        (None, None) => 0,
     };
     let mut meta = BTreeMap::new();
     if let Some(kind) = key.1 {

@@ -109,6 +109,44 @@ def test_up_record_is_read_whole_by_an_independent_reader(lockstep_run):
     assert int(info["wire_version"]) == WIRE_VERSION and info["namespace"] == ""
 
 
+def test_the_mcap_package_decodes_every_channel_from_the_schema_it_carries(lockstep_run):
+    """`iter_decoded_messages` with the client's DecoderFactory: each channel decoded from its
+    own schema record's layout (docs/recording.md), equal to the client's own decoder, for
+    every message of the recording."""
+    from slipstream_client.mcap_decoder import SCHEMA_ENCODING, DecoderFactory
+    report, _ = lockstep_run
+    kinds = defaultdict(int)
+    with open(report / "run.mcap", "rb") as f:
+        reader = mcap_reader.make_reader(f, decoder_factories=[DecoderFactory()])
+        for schema, channel, message, decoded in reader.iter_decoded_messages(log_time_order=False):
+            assert schema.encoding == SCHEMA_ENCODING and schema.name == "slipstream." + json.loads(schema.data)["name"]
+            assert decoded == decode(message.data), channel.topic
+            kinds[decoded[0]] += 1
+    assert {"Speed", "VehicleState", "ControlCommand", "CameraFrame", "CameraInfo", "GroundTruthObjects",
+            "Detections", "SimClock", "SimEvent", "AccStatus"} <= set(kinds), dict(kinds)
+
+
+def test_a_layout_decodes_its_own_wire_version_and_refuses_what_does_not_fit(lockstep_run):
+    """The layout, not the client's version, says how to read: a channel whose schema carries
+    another wire version decodes payloads of that version; bytes that do not fit are refused."""
+    from slipstream_client.mcap_decoder import Layout
+    from slipstream_client.wire import WireError
+    report, _ = lockstep_run
+    with open(report / "run.mcap", "rb") as f:
+        reader = mcap_reader.make_reader(f)
+        schema, _, message = next(m for m in reader.iter_messages() if m[0].name == "slipstream.VehicleState")
+    doc = json.loads(schema.data)
+    doc["wire_version"] = WIRE_VERSION + 1
+    other = Layout(json.dumps(doc).encode())
+    payload = bytes([WIRE_VERSION + 1]) + message.data[1:]
+    assert other.decode(payload)[1:] == decode(message.data)[1:]
+    for bad in (message.data, payload + b"\x00", payload[:-3], payload[:1]):
+        with pytest.raises(WireError):
+            other.decode(bad)
+    with pytest.raises(WireError):
+        Layout(b"{}")
+
+
 def test_a_cut_recording_reads_up_to_its_last_chunk(slipstream_bin, sim_bin, free_port, tmp_path):
     """A file cut short (a crash, a full disk) still yields its complete chunks to a reader
     that streams it without the summary at the end (docs/recording.md)."""

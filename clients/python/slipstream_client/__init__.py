@@ -3,7 +3,8 @@
 wire: decode/encode every message; keys: the keys in force after namespace and remapping;
 connect: a Zenoh session with the nodes' flags; image: camera frames as numpy arrays;
 simulator: the simulator side of docs/simulator-contract.md; camera: the pinhole of a
-CameraInfo; cli: what command-line programs (examples, adapters) share. Library code raises
+CameraInfo; mcap_decoder: recordings decoded by the `mcap` package from their own schemas;
+cli: what command-line programs (examples, adapters) share. Library code raises
 (WireError, ConfigError, connect.ConnectError) and logs to the "slipstream_client" logger; it
 neither prints nor exits.
 """

@@ -128,10 +128,15 @@ _BITS = {"u32": 32, "u64": 64}
 
 
 class _Reader:
-    def __init__(self, data, copy=True):
+    """Reads postcard values of the type language above; `structs` and `variants` name the
+    types it knows (this version's by default, a recording's own in mcap_decoder)."""
+
+    def __init__(self, data, copy=True, structs=None, variants=None):
         self.data = memoryview(data)
         self.at = 0
         self.copy = copy
+        self.structs = STRUCTS if structs is None else structs
+        self.variants = VARIANTS if variants is None else variants
 
     def take(self, n):
         if self.at + n > len(self.data):
@@ -197,10 +202,10 @@ class _Reader:
                 raise WireError(f"enum index {i} names no variant")
             return ty[1][i]
         if tag == "struct":
-            return {name: self.read(fty) for name, fty in STRUCTS[ty[1]]}
+            return {name: self.read(fty) for name, fty in self.structs[ty[1]]}
         if tag == "variants":
             i = self.varint("u32")
-            variants = VARIANTS[ty[1]]
+            variants = self.variants[ty[1]]
             if i >= len(variants):
                 raise WireError(f"enum index {i} names no variant")
             name, fields = variants[i]
