@@ -13,6 +13,8 @@
 #   - the Rust tests in the release profile, the profile of the quick start's
 #     `cargo build --release`: the package has no dev-dependencies and resolves the same
 #     features for both, so after that build no dependency (Zenoh included) compiles again;
+#   - `cargo install --path .` and `pip install ./clients/python[numpy]` into a scratch
+#     directory, checked from outside the checkout (scripts/check-install.sh);
 #   - the Python tests against the release binaries.
 # Safe to run again: it installs only what is missing.
 set -euo pipefail
@@ -57,6 +59,9 @@ echo "build: ${SECONDS} s"
 SECONDS=0
 cargo test --release
 echo "rust tests (compile included): ${SECONDS} s"
+
+step "installs as the README gives them (scripts/check-install.sh)"
+bash scripts/check-install.sh
 
 step "python tests (against target/release/slipstream)"
 rm -f target/test-reports/netns.json
