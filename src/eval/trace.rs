@@ -190,27 +190,39 @@ pub fn build_trace(rec: &Recorded, ego_front: f64, standstill_m: f64) -> Trace {
 
 impl Trace {
     /// Writes the trace as CSV: one row per vehicle/state, what the plot shows, for a
-    /// spreadsheet or pandas.
+    /// spreadsheet or pandas. Values rounded to what the loop resolves (ms, mm, mm/s); an
+    /// unknown gap is an empty cell.
     pub fn write_csv(&self, path: &Path) -> anyhow::Result<()> {
-        let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.4}"));
-        let mut out = String::from(
-        "t_s,speed_mps,accel_mps2,acc_mode,target_accel_mps2,set_speed_mps,time_gap_s,acc_gap_m,truth_gap_m,truth_lead_speed_mps\n",
-    );
-        for x in &self.samples {
-            out.push_str(&format!(
-                "{:.3},{:.4},{:.4},{:?},{:.4},{:.3},{:.3},{},{},{}\n",
-                x.t_s,
-                x.speed_mps,
-                x.accel_mps2,
-                x.mode,
-                x.target_accel_mps2,
-                x.set_speed_mps,
-                x.time_gap_s,
-                opt(x.acc_gap_m),
-                opt(x.truth.map(|t| t.gap_m)),
-                opt(x.lead_speed_mps()),
-            ));
+        /// One row of trace.csv; the field names are the header.
+        #[derive(Serialize)]
+        struct Row {
+            t_s: f64,
+            speed_mps: f64,
+            accel_mps2: f64,
+            acc_mode: AccMode,
+            target_accel_mps2: f64,
+            set_speed_mps: f64,
+            time_gap_s: f64,
+            acc_gap_m: Option<f64>,
+            truth_gap_m: Option<f64>,
+            truth_lead_speed_mps: Option<f64>,
         }
-        std::fs::write(path, out).with_context(|| format!("write {}", path.display()))
+        let r = |v: f64, digits: i32| (v * 10f64.powi(digits)).round() / 10f64.powi(digits);
+        let mut out = csv::Writer::from_path(path).with_context(|| format!("write {}", path.display()))?;
+        for x in &self.samples {
+            out.serialize(Row {
+                t_s: r(x.t_s, 3),
+                speed_mps: r(x.speed_mps, 4),
+                accel_mps2: r(x.accel_mps2, 4),
+                acc_mode: x.mode,
+                target_accel_mps2: r(x.target_accel_mps2, 4),
+                set_speed_mps: r(x.set_speed_mps, 3),
+                time_gap_s: r(x.time_gap_s, 3),
+                acc_gap_m: x.acc_gap_m.map(|v| r(v, 4)),
+                truth_gap_m: x.truth.map(|t| r(t.gap_m, 4)),
+                truth_lead_speed_mps: x.lead_speed_mps().map(|v| r(v, 4)),
+            })?;
+        }
+        out.flush().with_context(|| format!("write {}", path.display()))
     }
 }

@@ -68,14 +68,12 @@ pub struct Usage {
     pub fds: u64,
 }
 
-/// Reads /proc/<pid>: resident memory, threads, open file descriptors.
+/// Reads /proc/<pid> (through `procfs`): resident memory, threads, open file descriptors.
 pub fn usage(pid: u32) -> Option<Usage> {
-    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
-    let field = |name: &str| -> Option<u64> {
-        status.lines().find(|l| l.starts_with(name))?.split_whitespace().nth(1)?.parse().ok()
-    };
-    let fds = std::fs::read_dir(format!("/proc/{pid}/fd")).ok()?.count() as u64;
-    Some(Usage { rss_kib: field("VmRSS:")?, threads: field("Threads:")?, fds })
+    let process = procfs::process::Process::new(i32::try_from(pid).ok()?).ok()?;
+    let status = process.status().ok()?;
+    let fds = process.fd_count().ok()? as u64;
+    Some(Usage { rss_kib: status.vmrss?, threads: status.threads, fds })
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -350,18 +348,16 @@ fn line(processes: &[(String, u32)], s: Option<&Sample>) -> String {
 /// soak.json, soak.csv and soak.png in `dir`.
 fn write_outputs(r: &SoakReport, dir: &Path) -> Result<()> {
     std::fs::write(dir.join("soak.json"), serde_json::to_string_pretty(r)?)?;
-    let mut csv = String::from("t_min,sim_time_s,process,rss_kib,threads,fds\n");
+    let mut csv = csv::Writer::from_path(dir.join("soak.csv"))?;
+    csv.write_record(["t_min", "sim_time_s", "process", "rss_kib", "threads", "fds"])?;
     for s in &r.samples {
         for (p, u) in r.processes.iter().zip(&s.usage) {
             if let Some(u) = u {
-                csv.push_str(&format!(
-                    "{:.3},{:.1},{p},{},{},{}\n",
-                    s.t_min, s.sim_time_s, u.rss_kib, u.threads, u.fds
-                ));
+                csv.serialize((s.t_min, s.sim_time_s, p, u.rss_kib, u.threads, u.fds))?;
             }
         }
     }
-    std::fs::write(dir.join("soak.csv"), csv)?;
+    csv.flush()?;
     plot(r, &dir.join("soak.png"))
 }
 

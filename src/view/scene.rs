@@ -346,13 +346,15 @@ pub fn ego_frame(stamp_ns: u64, ego: &VehicleState) -> FrameTransforms {
 
 /// One sample of the ACC's series for the Plot and Raw Message panels (JSON): what it sees,
 /// wants and does, on simulated time.
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, schemars::JsonSchema)]
 pub struct AccSeries {
     pub t_s: f64,
     pub speed_mps: f64,
     pub accel_mps2: f64,
     pub set_speed_mps: Option<f64>,
     pub time_gap_s: Option<f64>,
+    /// The ACC's mode by name (Off, Speed, Follow, Stale, Emergency).
+    #[schemars(with = "Option<String>")]
     pub mode: Option<AccMode>,
     pub gap_m: Option<f64>,
     pub desired_gap_m: Option<f64>,
@@ -387,21 +389,12 @@ pub fn acc_series(
     }
 }
 
-/// The JSON schema of [`AccSeries`], for the channel's advertisement.
+/// The JSON schema of [`AccSeries`], for the channel's advertisement: derived from the type
+/// (draft 7, definitions inline: Foxglove resolves no references).
 pub fn acc_series_schema() -> Schema {
-    let num = serde_json::json!({ "type": "number" });
-    let opt = serde_json::json!({ "type": ["number", "null"] });
-    let schema = serde_json::json!({
-        "type": "object",
-        "properties": {
-            "t_s": num, "speed_mps": num, "accel_mps2": num,
-            "set_speed_mps": opt, "time_gap_s": opt, "gap_m": opt, "desired_gap_m": opt,
-            "ttc_s": opt, "truth_gap_m": opt,
-            "mode": { "type": ["string", "null"] },
-            "warnings": { "type": "array", "items": { "type": "string" } },
-        },
-    });
-    Schema::new(ACC_SERIES_SCHEMA, "jsonschema", schema.to_string().into_bytes())
+    let settings = schemars::generate::SchemaSettings::draft07().with(|s| s.inline_subschemas = true);
+    let schema = settings.into_generator().into_root_schema_for::<AccSeries>();
+    Schema::new(ACC_SERIES_SCHEMA, "jsonschema", serde_json::to_vec(&schema).unwrap_or_default())
 }
 
 /// The name of [`acc_series_schema`].
