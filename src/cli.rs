@@ -66,6 +66,12 @@ pub fn error_report(e: &anyhow::Error) -> String {
     out
 }
 
+/// Whether to colour what goes to `stream`: only on a terminal, and never when NO_COLOR is set
+/// to anything but the empty string (no-color.org).
+pub fn colour(stream: &impl std::io::IsTerminal) -> bool {
+    stream.is_terminal() && std::env::var_os("NO_COLOR").is_none_or(|v| v.is_empty())
+}
+
 /// Logs to stderr, filtered by RUST_LOG (default: info for slipstream, warnings for Zenoh and
 /// the Foxglove server),
 /// without the messages Zenoh prints for the loopback rendezvous working as designed
@@ -76,7 +82,7 @@ pub fn init_tracing() {
     let layer = tracing_subscriber::fmt::layer()
         .with_writer(std::io::stderr)
         // Colours on a terminal only: `slipstream up` writes the nodes' logs to files.
-        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .with_ansi(colour(&std::io::stderr()))
         .with_filter(RendezvousNoise)
         .with_filter(AclRefusals::default())
         .with_filter(env);

@@ -138,7 +138,20 @@ fn detect(args: &DetectArgs) -> Result<ExitCode> {
 /// `eval sweep`: sweep.json under --report, the table, and an error when a family missed the bar.
 fn sweep(args: &crate::eval::sweep::EvalSweepArgs, connect: &ConnectArgs) -> Result<ExitCode> {
     use crate::eval::sweep;
-    let report = sweep::run(args, connect)?;
+    // On a terminal a bar with the time left and a line per failed run; in a log a line per run.
+    let shown = super::status::Status::counted(0, false);
+    let started = std::time::Instant::now();
+    let report = sweep::run(args, connect, |r| {
+        shown.set_total(r.total as u64);
+        shown.step();
+        if r.failed.is_some() || !shown.is_live() {
+            let elapsed = started.elapsed().as_secs_f64();
+            let left = elapsed / r.done as f64 * (r.total - r.done) as f64;
+            let verdict = r.failed.as_deref().unwrap_or("pass");
+            shown.note(&format!("[{}/{}, {elapsed:.0} s, ~{left:.0} s left] {}: {verdict}", r.done, r.total, r.name));
+        }
+    })?;
+    shown.finish();
     let file = args.out.join("sweep.json");
     std::fs::write(&file, serde_json::to_string_pretty(&report)?)
         .with_context(|| format!("write {}", file.display()))?;

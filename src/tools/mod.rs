@@ -15,21 +15,22 @@ pub mod record;
 pub mod ros2;
 pub mod router;
 pub mod soak;
+pub mod status;
 pub mod top;
 pub mod up;
 pub mod view;
 pub mod wire;
 
-/// Waits for a stop request (Ctrl-C, SIGTERM, SIGHUP: [`crate::cli::stop_requested`]) or `duration_s`, printing `status()` on stderr every `every`: one line
-/// redrawn in place on a terminal, a line each otherwise (`record`, `view`).
+/// Waits for a stop request (Ctrl-C, SIGTERM, SIGHUP: [`crate::cli::stop_requested`]) or
+/// `duration_s`, showing `status()` on stderr every `every` ([`status::Status`]: redrawn in
+/// place on a terminal, a line each otherwise) (`record`, `view`, `ros2`).
 pub(crate) async fn until_stopped(
     duration_s: Option<f64>,
     every: std::time::Duration,
     mut status: impl FnMut() -> String,
 ) {
-    use std::io::{IsTerminal, Write};
     use std::time::{Duration, Instant};
-    let tty = std::io::stderr().is_terminal();
+    let shown = status::Status::lines(false);
     let deadline = duration_s.map(|d| Instant::now() + Duration::from_secs_f64(d));
     let ctrl_c = crate::cli::stop_requested();
     tokio::pin!(ctrl_c);
@@ -39,17 +40,10 @@ pub(crate) async fn until_stopped(
         tokio::select! {
             _ = &mut ctrl_c => break,
             _ = tokio::time::sleep(left) => if deadline.is_some() { break },
-            _ = tick.tick() => {
-                let line = status();
-                let mut err = std::io::stderr().lock();
-                let _ = if tty { write!(err, "\r\x1b[2K{line}") } else { writeln!(err, "{line}") };
-                let _ = err.flush();
-            }
+            _ = tick.tick() => shown.show(&status()),
         }
     }
-    if tty {
-        eprintln!();
-    }
+    shown.finish();
 }
 
 /// UTC date and time for directory names: 20261122-041530.

@@ -1,7 +1,6 @@
 //! `slipstream play FILE.mcap`: a recording back onto the bus, into this namespace (-n), at the
 //! recorded pace, faster (--rate), or as fast as the subscribers take it (--max).
 
-use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
 
 use anyhow::Result;
@@ -45,18 +44,18 @@ pub fn run(bus: &Bus, args: &PlayArgs) -> Result<PlayReport> {
         .collect::<Result<Vec<_>>>()?;
     let options =
         PlayOptions { pace: if args.max { Pace::Max } else { Pace::Rate(args.rate) }, start_s: args.start, keys };
-    let tty = std::io::stderr().is_terminal();
-    let progress = |r: &PlayReport| {
-        let line = format!("{:7.1} s recorded, {} messages, {:.1} MB", r.recorded_s, r.messages, r.bytes as f64 / 1e6);
-        let mut err = std::io::stderr().lock();
-        let _ = if tty { write!(err, "\r\x1b[2K{line}") } else { writeln!(err, "{line}") };
-        let _ = err.flush();
-    };
     loop {
+        let shown = super::status::Status::lines(false);
+        let progress = |r: &PlayReport| {
+            shown.show(&format!(
+                "{:7.1} s recorded, {} messages, {:.1} MB",
+                r.recorded_s,
+                r.messages,
+                r.bytes as f64 / 1e6
+            ))
+        };
         let report = play(bus, &args.file, &options, progress)?;
-        if tty {
-            eprintln!();
-        }
+        shown.finish();
         eprintln!(
             "played {}: {} messages ({:.1} MB), {:.1} s recorded in {:.1} s{}{}",
             args.file.display(),

@@ -1,7 +1,6 @@
 //! `slipstream record`: every key of the namespace (or the keys and topics given) into an MCAP
 //! file until Ctrl-C or --duration, with progress; the summary at the end says what was lost.
 
-use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
@@ -171,6 +170,6 @@ pub async fn run(bus: &Bus, args: &RecordArgs) -> Result<RecordingSummary> {
     })
     .await;
     let summary = tokio::task::spawn_blocking(move || recording.finish()).await??;
-    println!("{}", summary.render(std::io::stdout().is_terminal()));
+    println!("{}", summary.render(crate::cli::colour(&std::io::stdout())));
     Ok(summary)
 }

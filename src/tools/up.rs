@@ -10,7 +10,6 @@
 //! tcp/127.0.0.1:7447), so `slipstream top` or `echo` in another terminal find the loop with no
 //! address typed; in client mode (through a router) the nodes get the flags as given.
 
-use std::io::{IsTerminal, Write};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -217,22 +216,16 @@ pub fn run_from(path: &Path, args: &UpArgs, connect: &ConnectArgs) -> Result<u8>
         None => PathBuf::from("reports").join(format!("resim-{stem}-{}", super::utc_stamp())),
     };
     // The directory comes with the nodes' logs, once the recording has been read.
-    let plain = args.plain || !std::io::stderr().is_terminal();
     eprintln!(
         "slipstream up --from {}: today's detector and ACC answer the recording; report in {}",
         path.display(),
         dir.display()
     );
-    let mut progress = |t_s: f64| {
-        let mut err = std::io::stderr().lock();
-        let _ = if plain { writeln!(err, "replayed {t_s:.1} s") } else { write!(err, "\r\x1b[2Kreplayed {t_s:.1} s") };
-        let _ = err.flush();
-    };
+    let shown = super::status::Status::lines(args.plain);
+    let mut progress = |t_s: f64| shown.show(&format!("replayed {t_s:.1} s"));
     let rt = tokio::runtime::Runtime::new()?;
     let report = rt.block_on(crate::eval::resim::run(path, connect, &dir, &mut progress))?;
-    if !plain {
-        eprintln!();
-    }
+    shown.finish();
     let file = dir.join("report.json");
     std::fs::write(&file, serde_json::to_string_pretty(&report)?)
         .with_context(|| format!("write {}", file.display()))?;
@@ -361,15 +354,14 @@ async fn watch_until_over(
     external: Option<&crate::launch::ExternalSim>,
 ) -> Result<Option<&'static str>> {
     let name = lp.spec().scenario.clone();
-    let plain = args.plain || !std::io::stderr().is_terminal();
-    let refresh = if plain { REFRESH_PLAIN } else { REFRESH_TTY };
+    let shown = super::status::Status::lines(args.plain);
+    let refresh = if shown.is_live() { REFRESH_TTY } else { REFRESH_PLAIN };
     let nodes_seen = lp.bus().watch_nodes().await?;
     let ctrl_c = crate::cli::stop_requested();
     tokio::pin!(ctrl_c);
     // The end is noticed within NODE_POLL; the view is drawn at its own refresh rate.
     let mut poll = tokio::time::interval(NODE_POLL);
     let mut drawn_at: Option<Instant> = None;
-    let mut drawn_lines = 0usize;
     loop {
         tokio::select! {
             signal = &mut ctrl_c => return Ok(Some(signal)),
@@ -381,20 +373,10 @@ async fn watch_until_over(
         }
         drawn_at = Some(Instant::now());
         let lines = watch.lines(&name, args.mode, duration_s, &nodes_seen.names());
-        let mut err = std::io::stderr().lock();
-        if plain {
-            let _ = writeln!(err, "{}", lines.join("  |  "));
-        } else {
-            if drawn_lines > 0 {
-                let _ = write!(err, "\x1b[{drawn_lines}A");
-            }
-            for l in &lines {
-                let _ = writeln!(err, "\x1b[2K{l}");
-            }
-            drawn_lines = lines.len();
-        }
-        let _ = err.flush();
+        // A block of lines in place on a terminal; one line per refresh in a log.
+        shown.show(&lines.join(if shown.is_live() { "\n" } else { "  |  " }));
         if over {
+            shown.finish();
             return Ok(None);
         }
     }
@@ -721,7 +703,7 @@ pub fn summary(r: &UpReport) -> String {
     }
     if let Some(rec) = &r.recording {
         s.push('\n');
-        s.push_str(&rec.render(std::io::stdout().is_terminal()));
+        s.push_str(&rec.render(crate::cli::colour(&std::io::stdout())));
     }
     s
 }

@@ -110,8 +110,12 @@ fn write_scenarios(args: &EvalSweepArgs) -> Result<Vec<(SweepRun, Scenario)>> {
     Ok(out)
 }
 
-/// Runs the sweep; progress goes to stderr, a line per run.
-pub fn run(args: &EvalSweepArgs, connect: &crate::config::ConnectArgs) -> Result<SweepReport> {
+/// Runs the sweep, telling `on_run` of each run as it finishes.
+pub fn run(
+    args: &EvalSweepArgs,
+    connect: &crate::config::ConnectArgs,
+    mut on_run: impl FnMut(RunDone),
+) -> Result<SweepReport> {
     connect.topic_map()?;
     anyhow::ensure!(args.count > 0, "--count must be at least 1");
     anyhow::ensure!(args.timeout > 0.0, "--timeout must be > 0");
@@ -135,7 +139,7 @@ pub fn run(args: &EvalSweepArgs, connect: &crate::config::ConnectArgs) -> Result
     let started = Instant::now();
     let total = runs.len();
     let results = run_all(scenarios, &acc_args, None, connect.topics.clone(), &logs, jobs, |done, name, result| {
-        progress(done, total, started, name, result, &logs, args.perception)
+        on_run(RunDone { done, total, name, failed: judged(name, result, &logs, args.perception) })
     })?;
     for (run, result) in runs.iter_mut().zip(results) {
         match result {
@@ -147,31 +151,34 @@ pub fn run(args: &EvalSweepArgs, connect: &crate::config::ConnectArgs) -> Result
     Ok(report(args, runs, jobs, wall_s))
 }
 
-/// A line per finished run, with the time left at the pace so far; a clean run's logs are
-/// removed (a thousand runs' logs would fill the disk; the failures' are kept).
-fn progress(
-    done: usize,
-    total: usize,
-    started: Instant,
+/// A run has finished: how many of how many, and why it failed if it did.
+pub struct RunDone<'a> {
+    pub done: usize,
+    pub total: usize,
+    pub name: &'a str,
+    /// None when the run passed; else the aims it missed or the error that stopped it.
+    pub failed: Option<String>,
+}
+
+/// Why a run failed (None: it passed). A clean run's logs are removed: a thousand runs' logs
+/// would fill the disk; the failures' are kept.
+fn judged(
     name: &str,
     result: &Result<crate::eval::acc::ScenarioResult>,
     logs: &Path,
     perception: PerceptionSource,
-) {
-    let elapsed = started.elapsed().as_secs_f64();
-    let left = elapsed / done as f64 * (total - done) as f64;
-    let verdict = match result {
+) -> Option<String> {
+    match result {
         Ok(r) if r.metrics.pass && r.lockstep_timeouts == 0 => {
             let _ = std::fs::remove_dir_all(logs.join(format!("{name}-{}", perception.name())));
-            "pass".to_string()
+            None
         }
         Ok(r) => {
             let failed: Vec<&str> = r.metrics.checks.iter().filter(|c| !c.pass).map(|c| c.name.as_str()).collect();
-            format!("FAIL: {}", failed.join(", "))
+            Some(format!("FAIL: {}", failed.join(", ")))
         }
-        Err(e) => format!("ERROR: {e:#}"),
-    };
-    eprintln!("[{done}/{total}, {elapsed:.0} s, ~{left:.0} s left] {name}: {verdict}");
+        Err(e) => Some(format!("ERROR: {e:#}")),
+    }
 }
 
 /// The rates, the worst runs and the plot.
