@@ -31,7 +31,7 @@ use anyhow::{Context, Result};
 pub use cases::{CaseId, FrameSize, Path, Phase, Table, ZENOH_OWN_RUNTIME};
 pub(crate) use child::{process_cpu_s, process_peak_rss_mib};
 use child::{python_available, remove_seed_script, run_case, run_groups, RouterProcess, PYTHON};
-use figures::percentile;
+use figures::Latencies;
 pub use figures::{median, Row};
 pub use peer::{run_receiver, run_sender};
 pub use ratios::Ratio;
