@@ -2,6 +2,7 @@
 (Python's json keeps the last of two, losing the first without a word; so do most readers)."""
 
 import json
+import socket
 import subprocess
 import time
 
@@ -33,6 +34,12 @@ def test_every_json_output_has_each_key_once(slipstream_bin, sim_bin, free_port,
     strict(run(slipstream_bin, "ros2", "--list", "--json"))
     strict(run(slipstream_bin, "fuzz", "--count", "200", "--json"))
     strict(run(slipstream_bin, "eval", "detect", "--scenario", "cut-in", "--duration", "2", "--json"))
+    strict(run(slipstream_bin, "eval", "acc", "--scenario", "steady-follow", "--perception", "ground-truth",
+               "--duration", "3", "--json", timeout=300))
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        demo = f"tcp/127.0.0.1:{sock.getsockname()[1]}"
+    strict(run(slipstream_bin, "-l", demo, "-e", demo, "-n", "json-demo", "demo", "--duration", "2", "--json"))
     with Running([sim_bin, "--scenario", "steady-follow", "--mode", "realtime", "--duration", "600", "-l", endpoint,
                   "-e", endpoint, "-n", ns]):
         time.sleep(1)
