@@ -17,7 +17,7 @@ import os
 import pathlib
 import re
 
-from typing import Dict, ItemsView, Optional
+from typing import Any, Dict, ItemsView, Optional
 
 import json5
 
@@ -85,6 +85,8 @@ class Topics:
                 raise ConfigError(origin, "", "the file is not an object", "write { namespace: ..., topics: {...} }")
         if namespace is None:
             namespace = os.environ.get("SLIPSTREAM_NAMESPACE", raw.get("namespace", ""))
+            if not isinstance(namespace, str):
+                raise ConfigError(origin, "namespace", f"{namespace!r} is not a string", "write e.g. namespace: 'car7'")
         remap = {}
         read = (raw.get("camera") or {}).get("read")
         for topic, entry in (raw.get("topics") or {}).items():
@@ -137,7 +139,7 @@ class Topics:
         return self._keys.items()
 
 
-def parse_json5(text: str, origin: str = "<json5>"):
+def parse_json5(text: str, origin: str = "<json5>") -> Any:
     """A JSON5 document (the config files' language) read with the `json5` package; an error
     names the file and the line."""
     try:

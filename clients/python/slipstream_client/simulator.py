@@ -20,7 +20,7 @@ ControlTimeout event and a brake)."""
 
 import threading
 import time
-from typing import Any, Dict, List, Optional, Sequence
+from typing import Any, Dict, List, Optional, Sequence, Tuple
 
 import zenoh
 import zenoh.ext
@@ -67,21 +67,28 @@ class SimulatorSide:
         self.session, self.topics, self.mode, self.hz = session, topics, mode, int(physics_hz)
         self.wait_for, self.step_timeout, self.name = list(wait_for), step_timeout, name
         self.attachment = name.encode()
-        self.seq, self.bad = {}, BadPayloads()
+        self.seq: Dict[str, int] = {}
+        self.bad = BadPayloads()
         self.arrived = threading.Condition()
-        self.latest, self.answers, self.followed, self.heard, self.now_ns = None, {}, None, 0.0, 0
-        self.applied, self.timing = dict(NEUTRAL), None
+        # The followed controller's newest command: (command, header, arrival ns, sim ns then).
+        self.latest: Optional[Tuple[Dict[str, Any], Dict[str, int], int, int]] = None
+        self.answers: Dict[Tuple[str, int], Tuple[Dict[str, Any], Dict[str, int]]] = {}
+        self.followed: Optional[str] = None
+        self.heard, self.now_ns = 0.0, 0
+        self.applied: Dict[str, Any] = dict(NEUTRAL)
+        self.timing: Optional[Dict[str, int]] = None
         self.pubs = {t: session.declare_publisher(topics.key(t), priority=p, express=e, congestion_control=c)
                      for t, (p, e, c) in _QOS.items()}
         self.pubs.update({t: self.latched(t) for t in _LATCHED})
         self.control_sub = session.declare_subscriber(topics.key("vehicle/control"), self.on_control)
         self.token = session.liveliness().declare_token(topics.node_key(name))
 
-    def latched(self, topic):
+    def latched(self, topic: str) -> Any:
         """A publisher whose last sample a late subscriber still gets (zenoh-ext's cache)."""
         return zenoh.ext.declare_advanced_publisher(
             self.session, self.topics.key(topic), cache=zenoh.ext.CacheConfig(max_samples=1),
-            sample_miss_detection=zenoh.ext.MissDetectionConfig(), publisher_detection=True)
+            sample_miss_detection=zenoh.ext.MissDetectionConfig(),  # type: ignore[call-arg]  # defaults in 1.10
+            publisher_detection=True)
 
     def stamp(self, k: int) -> int:
         """Step k's simulated time, ns: floor(k * 1e9 / physics_hz)."""
@@ -125,7 +132,7 @@ class SimulatorSide:
     def end(self, k: int, reason: str, success: bool = True) -> None:
         self.event(k, "ScenarioEnd", reason=reason, success=success)
 
-    def on_control(self, sample):
+    def on_control(self, sample: Any) -> None:
         try:
             _, header, cmd = decode(sample.payload.to_bytes(), expected="ControlCommand")
         except WireError as e:
@@ -150,7 +157,7 @@ class SimulatorSide:
         self.applied = cmd if cmd is not None else dict(NEUTRAL)
         return cmd
 
-    def command_for(self, k):
+    def command_for(self, k: int) -> Tuple[Optional[Dict[str, Any]], Optional[Dict[str, int]]]:
         """(command or None, control_timing)."""
         if self.mode == "lockstep":
             return self.await_answer(k)
@@ -163,7 +170,7 @@ class SimulatorSide:
             return {**NEUTRAL, "brake": TIMEOUT_BRAKE}, None
         return cmd, {"command_stamp_pub_ns": header["stamp_pub_ns"], "applied_ns": arrived_ns}
 
-    def await_answer(self, k):
+    def await_answer(self, k: int) -> Tuple[Optional[Dict[str, Any]], Optional[Dict[str, int]]]:
         """Lockstep: every awaited node's answer to step k, at most `step_timeout` seconds."""
         deadline = time.monotonic() + self.step_timeout
         with self.arrived:
@@ -178,7 +185,7 @@ class SimulatorSide:
             self.answers = {key: v for key, v in self.answers.items() if key[1] > k}
         return cmd, {"command_stamp_pub_ns": header["stamp_pub_ns"], "applied_ns": time.time_ns()}
 
-    def wait_for_controllers(self, timeout=30.0):
+    def wait_for_controllers(self, timeout: float = 30.0) -> None:
         """Lockstep start: the awaited nodes' liveliness tokens, then a vehicle/state subscriber."""
         deadline = time.monotonic() + timeout
         wanted = {self.topics.node_key(n) for n in self.wait_for}
@@ -186,7 +193,7 @@ class SimulatorSide:
             replies = self.session.liveliness().get(self.topics.node_key("*"), timeout=1)
             alive = {str(r.ok.key_expr) for r in replies if r.ok is not None}
             if wanted <= alive:
-                while time.monotonic() < deadline and not self.pubs["vehicle/state"].matching_status.matching:
+                while time.monotonic() < deadline and not self.pubs["vehicle/state"].matching_status.matching:  # type: ignore[attr-defined]
                     time.sleep(0.02)
                 return
             time.sleep(0.1)
