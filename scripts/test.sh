@@ -40,9 +40,9 @@ fi
 echo "ok"
 
 step "python venv (.venv) with eclipse-zenoh 1.10"
-if ! .venv/bin/python -c 'import zenoh, numpy, pytest, mcap, mcap_ros2, websockets, rosbags, zenoh_ros2_sdk, carla, coppeliasim_zmqremoteapi_client' >/dev/null 2>&1; then
+if ! .venv/bin/python -c 'import zenoh, numpy, pytest, mypy, mcap, mcap_ros2, websockets, rosbags, zenoh_ros2_sdk, carla, coppeliasim_zmqremoteapi_client' >/dev/null 2>&1; then
   python3 -m venv .venv
-  .venv/bin/pip install --quiet --disable-pip-version-check 'eclipse-zenoh==1.10.*' numpy pytest mcap \
+  .venv/bin/pip install --quiet --disable-pip-version-check 'eclipse-zenoh==1.10.*' numpy pytest mypy mcap \
     mcap-ros2-support websockets 'rosbags==0.11.*' 'zenoh-ros2-sdk==0.1.*' 'carla==0.9.16' \
     'coppeliasim-zmqremoteapi-client==2.0.*'
 fi
@@ -59,6 +59,9 @@ echo "build: ${SECONDS} s"
 SECONDS=0
 cargo test --release
 echo "rust tests (compile included): ${SECONDS} s"
+
+step "python client: type hints checked (mypy)"
+.venv/bin/mypy --ignore-missing-imports clients/python/slipstream_client
 
 step "installs as the README gives them (scripts/check-install.sh)"
 bash scripts/check-install.sh

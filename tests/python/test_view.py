@@ -199,8 +199,8 @@ def test_a_taken_port_is_a_clear_error(slipstream_bin, free_port):
         taken.listen()
         port = taken.getsockname()[1]
         run = subprocess.run(
-            [slipstream_bin, "-l", f"tcp/127.0.0.1:{free_port}", "view", "--port", str(port), "--duration", "1"],
+            [slipstream_bin, "-l", f"tcp/127.0.0.1:{free_port}", "view", "--view-port", str(port), "--duration", "1"],
             capture_output=True, text=True, timeout=60, cwd=ROOT)
     assert run.returncode == 1, (run.returncode, run.stderr)
     assert f"cannot serve the live view on 127.0.0.1:{port}" in run.stderr, run.stderr
-    assert "--port" in run.stderr
+    assert "--view-port" in run.stderr
