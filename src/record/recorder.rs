@@ -137,10 +137,9 @@ impl RecordingSummary {
         } else {
             "nothing lost: every sequence number of every publisher is in the file".to_string()
         };
-        match (color, self.lost_anything()) {
-            (true, true) => s.push_str(&format!("  \x1b[31m{verdict}\x1b[0m")),
-            _ => s.push_str(&format!("  {verdict}")),
-        }
+        let verdict = console::style(verdict);
+        let verdict = if color && self.lost_anything() { verdict.red().force_styling(true) } else { verdict };
+        s.push_str(&format!("  {verdict}"));
         s
     }
 }
@@ -487,4 +486,32 @@ fn write_item(
         publish_time: header.map_or(item.received_ns, |h| h.stamp_pub_ns),
     };
     writer.write_to_known_channel(&record, &item.payload)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn summary(lost_upstream: u64) -> RecordingSummary {
+        RecordingSummary {
+            path: PathBuf::from("run.mcap"),
+            duration_s: 1.0,
+            file_bytes: 10,
+            messages: 5,
+            lost_upstream,
+            dropped_by_recorder: 0,
+            channels: Vec::new(),
+            viewable_copies: 0,
+            viewable_skipped: 0,
+        }
+    }
+
+    #[test]
+    fn the_verdict_is_red_only_when_something_was_lost_and_colour_is_wanted() {
+        let red = "\u{1b}[31m";
+        assert!(summary(2).render(true).contains(red));
+        assert!(!summary(2).render(false).contains('\u{1b}'));
+        assert!(!summary(0).render(true).contains('\u{1b}'));
+        assert!(summary(2).render(false).contains("LOST: 2 messages"));
+    }
 }

@@ -265,8 +265,9 @@ pub async fn run(bus: &Bus, args: &TopArgs) -> Result<()> {
         if json {
             writeln!(out, "{}", serde_json::to_string(&view)?)?;
         } else {
-            // Home the cursor and clear the screen, then draw.
-            write!(out, "\x1b[H\x1b[2J{}(Ctrl-C to quit)\n", render(&view))?;
+            // A screen of its own on the terminal: cleared, then drawn.
+            console::Term::stdout().clear_screen()?;
+            write!(out, "{}(Ctrl-C to quit)\n", render(&view))?;
         }
         out.flush()?;
         if deadline.is_some_and(|d| Instant::now() >= d) {
