@@ -202,6 +202,17 @@ fn stop_and_go_holds_at_standstill_and_moves_off_after_the_lead() {
     assert!(started > 3.0, "waits for the lead to move first");
 }
 
+/// One step behind track 1, a lead at 15 m/s: the command applied to the ego's speed and the
+/// gap, a frame every fifth step. The acceleration commanded.
+fn step_behind_a_15_mps_lead(c: &mut Controller, t: f64, v: &mut f64, gap: &mut f64) -> f64 {
+    let a = c.step(&ego(t, *v), &[]).status.target_accel_mps2;
+    *v = (*v + a * DT).max(0.0);
+    *gap += (15.0 - *v) * DT;
+    if ((t / DT).round() as i64) % 5 == 0 {
+        c.perceive(&frame(t, vec![obj(1, *gap, 0.0, 15.0 - *v)]), &ego(t, *v));
+    }
+    a
+}
 #[test]
 fn closing_fast_warns_then_brakes_beyond_comfort_then_fully() {
     // Two looks (an emergency starts only for what is measured in more than one frame) at a
@@ -234,12 +245,7 @@ fn closing_fast_warns_then_brakes_beyond_comfort_then_fully() {
     let mut released = None;
     while t < 5.0 {
         t += DT;
-        let a = c.step(&ego(t, v), &[]).status.target_accel_mps2;
-        v = (v + a * DT).max(0.0);
-        gap += (15.0 - v) * DT;
-        if ((t / DT).round() as i64) % 5 == 0 {
-            c.perceive(&frame(t, vec![obj(1, gap, 0.0, 15.0 - v)]), &ego(t, v));
-        }
+        step_behind_a_15_mps_lead(&mut c, t, &mut v, &mut gap);
         if c.step(&ego(t, v), &[]).status.mode != AccMode::Emergency {
             released = Some((t, gap, v));
             break;
@@ -257,13 +263,7 @@ fn closing_fast_warns_then_brakes_beyond_comfort_then_fully() {
     let mut deepest_after = f64::INFINITY;
     while t < released.unwrap().0 + 0.7 {
         t += DT;
-        let a = c.step(&ego(t, v), &[]).status.target_accel_mps2;
-        v = (v + a * DT).max(0.0);
-        gap += (15.0 - v) * DT;
-        if ((t / DT).round() as i64) % 5 == 0 {
-            c.perceive(&frame(t, vec![obj(1, gap, 0.0, 15.0 - v)]), &ego(t, v));
-        }
-        deepest_after = a;
+        deepest_after = step_behind_a_15_mps_lead(&mut c, t, &mut v, &mut gap);
     }
     assert!(deepest_after >= -limits.decel_at(v) - 1e-9, "0.7 s after the emergency: {deepest_after} m/s2");
 }
