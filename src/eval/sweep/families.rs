@@ -7,7 +7,7 @@
 use serde::Serialize;
 use serde_json::{json, Value};
 
-use super::warrant::{needed_decel, seen_from_m, warranted_for, Target, AVOIDABLE_MPS2};
+use super::warrant::{needed_decel, seen_from_m, warranted_for, warranted_for_braking_lead, Target, AVOIDABLE_MPS2};
 use crate::msg::ObjectClass;
 use crate::sim::rng::SimRng;
 use crate::sim::scenario::Warranted;
@@ -376,7 +376,8 @@ fn braking_lead(d: &mut Draw) -> (Warranted, Value) {
         "ego": ego,
         "traffic": [lead],
     });
-    (warranted_for(need_at(decel), v), scenario)
+    let lead = Target { gap_m: gap, speed_mps: v, decel_mps2: decel, floor_mps: floor };
+    (warranted_for_braking_lead(v, lead), scenario)
 }
 
 fn edge_of_range(d: &mut Draw) -> (Warranted, Value) {

@@ -92,6 +92,58 @@ fn keeps_clear(ego_mps: f64, t: Target, decel: f64) -> bool {
     gap >= STOP_MARGIN_M
 }
 
+/// The most braking a braking lead warrants, judged on what can be known while it brakes.
+/// Where it stops braking is not known until it has: until then a lead braking at `decel` is
+/// one braking on to a stop. So an emergency is warranted when a driver who brakes within the
+/// comfort limit (after [`REACTION_S`]) until the lead's braking ends, and only then at
+/// [`AVOIDABLE_MPS2`], would not keep clear of that lead had it braked on to a stop: the
+/// decision to brake harder had to come while the lead was still braking. Otherwise (and for
+/// braking that ends within the reaction, known to have ended before anyone answers it), what
+/// its whole braking needs ([`needed_decel`]) decides.
+pub fn warranted_for_braking_lead(ego_mps: f64, lead: Target) -> Warranted {
+    let hindsight = warranted_for(needed_decel(ego_mps, lead), ego_mps);
+    if lead.decel_mps2 <= 0.0 || lead.speed_mps <= lead.floor_mps {
+        return hindsight;
+    }
+    let braking_s = (lead.speed_mps - lead.floor_mps) / lead.decel_mps2;
+    let to_stop = Target { floor_mps: 0.0, ..lead };
+    if braking_s <= REACTION_S || waiting_keeps_clear(ego_mps, to_stop, braking_s) {
+        hindsight
+    } else {
+        most(hindsight, Warranted::Emergency)
+    }
+}
+
+/// Whether the ego, braking at the comfort limit of its speed from [`REACTION_S`] until
+/// `wait_s` and at [`AVOIDABLE_MPS2`] after, keeps the margin behind `t`.
+fn waiting_keeps_clear(ego_mps: f64, t: Target, wait_s: f64) -> bool {
+    const DT: f64 = 0.01;
+    let (mut gap, mut v, mut u, mut time) = (t.gap_m, ego_mps, t.speed_mps, 0.0);
+    for _ in 0..60_000 {
+        let target_slowing = u > t.floor_mps && t.decel_mps2 > 0.0;
+        if v <= u && !target_slowing {
+            break;
+        }
+        if gap < STOP_MARGIN_M {
+            return false;
+        }
+        let decel = if time < REACTION_S {
+            0.0
+        } else if time < wait_s {
+            comfort_decel_at(v, aims::MAX_DECEL_MPS2, aims::MAX_DECEL_LOW_SPEED_MPS2)
+        } else {
+            AVOIDABLE_MPS2
+        };
+        v = (v - decel * DT).max(0.0);
+        if target_slowing {
+            u = (u - t.decel_mps2 * DT).max(t.floor_mps);
+        }
+        gap += (u - v) * DT;
+        time += DT;
+    }
+    gap >= STOP_MARGIN_M
+}
+
 /// The most braking a need declares: within [`COMFORT_SHARE`] of the comfort limit at the
 /// ego's speed, comfort; beyond, an emergency may be needed.
 pub fn warranted_for(need_mps2: f64, ego_mps: f64) -> Warranted {
@@ -157,6 +209,25 @@ mod tests {
         let to_half = needed_decel(25.0, Target { gap_m: 30.0, speed_mps: 25.0, decel_mps2: 4.0, floor_mps: 12.5 });
         let to_stop = needed_decel(25.0, Target { gap_m: 30.0, speed_mps: 25.0, decel_mps2: 4.0, floor_mps: 0.0 });
         assert!(to_half < to_stop, "{to_half} {to_stop}");
+    }
+
+    #[test]
+    fn a_lead_braking_hard_warrants_an_emergency_when_its_end_comes_too_late_to_wait_for() {
+        // 8 m/s2 at a 1.1 s gap from 31.5 m/s, stopping its braking at 19.2 m/s 1.5 s later:
+        // in hindsight comfort braking keeps clear, but had it braked on to a stop, a driver
+        // waiting for the end of its braking would have hit it.
+        let short = Target { gap_m: 39.7, speed_mps: 31.5, decel_mps2: 8.0, floor_mps: 19.2 };
+        assert_eq!(warranted_for(needed_decel(31.5, short), 31.5), Warranted::Comfort);
+        assert_eq!(warranted_for_braking_lead(31.5, short), Warranted::Emergency);
+        // The same lead far ahead leaves time to wait for the end of its braking.
+        let far = Target { gap_m: 80.0, ..short };
+        assert_eq!(warranted_for_braking_lead(31.5, far), Warranted::Comfort);
+        // A brief dab of hard braking ends before anyone could answer it.
+        let dab = Target { floor_mps: 29.5, ..short };
+        assert_eq!(warranted_for_braking_lead(31.5, dab), Warranted::Comfort);
+        // Braking within comfort warrants no emergency, whatever its length.
+        let gentle = Target { gap_m: 39.7, speed_mps: 31.5, decel_mps2: 2.0, floor_mps: 0.0 };
+        assert_eq!(warranted_for_braking_lead(31.5, gentle), Warranted::Comfort);
     }
 
     #[test]
