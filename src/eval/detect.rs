@@ -555,6 +555,58 @@ mod rendered {
         assert!(worst(58.0, 75.0) < 0.04, "58-75 m: {errors:?}");
     }
 
+    /// A motorcycle ~130 m ahead through the narrow camera: its body (8 columns) ends 4 rows
+    /// above its rear tyre (4 columns, with its shadow), where it meets the road. Joined as a
+    /// far car's wheels, the body's two sides read the range from the body's lower edge, 30%
+    /// long, which in a bend puts a motorcycle of the next lane into the ego's. The pixels are
+    /// those of such a frame (bend-neighbours-0667 of `eval sweep --seed 1`).
+    #[test]
+    fn a_far_motorcycle_is_ranged_at_its_tyre_not_at_its_body() {
+        const PATCH: [&str; 21] = [
+            "176 177 176 176 177 46 46 46 46 33 177 177 177 177 176 177",
+            "177 177 176 177 177 46 46 45 46 33 177 177 177 177 177 177",
+            "177 177 178 178 177 46 46 46 46 32 178 178 178 178 177 178",
+            "81 81 81 81 81 46 46 46 46 33 81 81 81 81 82 81",
+            "81 81 81 81 38 38 38 38 38 38 38 81 81 81 81 81",
+            "81 82 81 81 38 38 38 38 38 38 38 81 81 81 81 81",
+            "81 81 81 81 38 38 38 38 38 38 38 81 82 81 81 81",
+            "81 81 81 82 38 38 38 38 38 38 38 81 81 81 81 81",
+            "82 81 81 82 38 38 38 38 37 38 38 82 81 82 82 82",
+            "81 81 81 81 46 46 46 46 46 46 32 32 81 81 81 81",
+            "81 81 81 81 46 103 103 103 46 46 33 33 81 81 81 81",
+            "81 81 82 81 46 46 47 46 46 46 33 33 82 81 82 81",
+            "81 81 81 81 46 46 15 15 45 46 32 32 81 81 81 81",
+            "81 81 81 81 46 46 16 16 46 46 32 33 81 81 81 81",
+            "81 81 81 81 46 46 16 16 46 46 33 32 81 81 81 81",
+            "81 81 81 81 46 47 16 16 46 46 33 33 81 81 81 81",
+            "81 81 81 81 46 45 16 15 46 46 33 32 81 81 81 81",
+            "81 81 81 82 81 81 16 15 11 11 81 81 81 81 81 81",
+            "81 81 81 81 81 81 16 16 11 11 81 81 81 81 81 81",
+            "80 81 81 81 88 104 16 16 11 11 82 81 81 81 81 81",
+            "76 70 67 67 68 68 16 16 10 10 68 67 67 68 73 79",
+        ];
+        let text = "{ name: 't', duration_s: 10, seed: 3, variation: { gap_m: 0, speed_mps: 0 }, ego: { lane: 1, speed_mps: 0 }, traffic: [] }";
+        let world = World::new(Scenario::parse(text, "test").unwrap(), 3, 100);
+        let mut cameras = crate::sim::cameras::Cameras::new(&SimSettings::default(), &world);
+        cameras.draw(&world);
+        let info = cameras.narrow_info().unwrap().clone();
+        let mut narrow = cameras.narrow_rgb().unwrap().to_vec();
+        let (w, first_row, first_col) = (info.width as usize, 126, 764);
+        for (dv, row) in PATCH.iter().enumerate() {
+            for (du, grey) in row.split(' ').enumerate() {
+                let at = ((first_row + dv) * w + first_col + du) * 3;
+                narrow[at..at + 3].fill(grey.parse().unwrap());
+            }
+        }
+        // Where the tyre meets the road: the lower edge of the patch's last row.
+        let camera = crate::perception::geometry::CameraModel::new(&info);
+        let tyre = camera.ground_point((first_col + 8) as f64, (first_row + PATCH.len()) as f64).unwrap().x;
+        let mut rig = crate::perception::CameraRig::new(cameras.front.info(), Some(&info), DetectorParams::default());
+        for d in rig.detect(&cameras.front.rgb, Some(&narrow)) {
+            assert!((d.distance_m - tyre).abs() < 0.1 * tyre, "{:.1} m, the tyre at {tyre:.1} m: {d:?}", d.distance_m);
+        }
+    }
+
     /// Through the narrow camera a vehicle's range follows it to a few centimetres at 40-48 m
     /// (a row is ~0.8 m there), a motorcycle's too. Its rear tyre stands at its rear and ends
     /// in the band's lowest row with a hard edge; counted in, it held the range while the

@@ -139,7 +139,16 @@ impl Detector {
                 let v1 = a.v1.max(b.v1);
                 let contact = self.camera.ground_point((a.u0 + b.u1 + 1) as f64 / 2.0, v1 as f64 + 1.0)?;
                 let px_per_m = self.camera.info.fx_px / (contact.x - origin_x).max(0.5);
-                if (b.u1 + 1 - a.u0) as f64 / px_per_m > self.params.max_width_m {
+                let width_m = (b.u1 + 1 - a.u0) as f64 / px_per_m;
+                if width_m > self.params.max_width_m {
+                    return None;
+                }
+                // Wheels end on the contact row. Two parts no farther apart than a
+                // motorcycle is wide, with a dark part filling the columns between them (one
+                // dark region, split where its lowest row jumps) that reaches lower, are a far
+                // motorcycle's body over its rear tyre, which is where it meets the road.
+                let lower_between = |c: &Component| c.u0 == a.u1 + 1 && c.u1 + 1 == b.u0 && c.v1 > v1 + 1;
+                if width_m <= MOTORCYCLE_MAX_WIDTH_M && components.iter().any(lower_between) {
                     return None;
                 }
                 let between = |v: u32| {
