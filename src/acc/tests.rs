@@ -795,9 +795,8 @@ fn a_new_lead_near_at_the_egos_speed_draws_no_braking_while_its_speed_is_unmeasu
 
 /// A van 165 m ahead holding 25 m/s, the ego at 30 m/s: the follow law does not brake yet, and
 /// a camera's noisy far ranges leave the lead's estimated acceleration wandering within its
-/// uncertainty. Taken as it was, a wander to -1.1 m/s2 drew comfort braking for a lead that
-/// did not brake (a scenario of our own: 0.4 s of phantom braking at up to 1.2 m/s2). Eight
-/// noise sequences; before, six of them braked at 1.0-1.6 m/s2.
+/// uncertainty. Taken as it is, a wander to -1.1 m/s2 would draw comfort braking for a lead that
+/// does not brake (phantom braking at up to 1.2 m/s2). Eight noise sequences, none braking.
 #[test]
 fn a_far_leads_acceleration_within_its_noise_draws_no_braking() {
     for seed in 1..=8u64 {
@@ -883,9 +882,9 @@ fn a_far_lead_braking_for_a_moment_draws_easing_off_and_one_braking_to_a_stop_a_
 
 /// A van 53.6 m ahead (the time gap) at the ego's 27 m/s and a truck standing 170 m ahead in the same lane,
 /// beyond it: the van cannot drive through the truck, so the truck counts for the threat
-/// while the van is still the lead, and braking starts at once (before, only once the van
-/// had moved out, with 1.5-1.9 s of emergency in a scenario of our own). The same truck
-/// driving at the van's speed draws no braking.
+/// while the van is still the lead, and braking starts at once (waiting until the van has
+/// moved out leaves only an emergency). The same truck driving at the van's speed draws no
+/// braking.
 #[test]
 fn a_vehicle_standing_beyond_the_lead_is_braked_for_while_the_lead_is_still_the_lead() {
     for truck_speed in [0.0, 27.0] {
@@ -953,13 +952,13 @@ fn an_emergency_for_a_hard_braking_lead_does_not_flicker_with_a_noisy_estimate()
     }
 }
 
-/// A car standing 175 m ahead of the ego at 25 m/s, as the detector reported it (a scenario
-/// of our own): a new track without speed at first (0 relative, sigma 30 m/s), then relative
+/// A car standing 175 m ahead of the ego at 25 m/s, as the detector reports it: a new track
+/// without speed at first (0 relative, sigma 30 m/s), then relative
 /// speeds that come down to 2 m/s short of the truth within 0.6 s and reach it a second
 /// later, as the ranges add up. That convergence is the measurement's, not the car braking:
-/// before, the filter's acceleration took it up (-4.2 m/s2 once the lead counted as settled,
-/// its speed still 5 m/s) and the ACC answered a hard-braking lead with an emergency 7.8 s
-/// from it.
+/// taken up by the filter's acceleration (-4.2 m/s2 once the lead counts as settled, its
+/// speed still 5 m/s), it would draw an emergency for a hard-braking lead 7.8 s away.
+
 #[test]
 fn a_far_new_leads_converging_speed_is_not_read_as_hard_braking() {
     let mut c = Controller::new(AccSettings { set_speed_mps: 25.0, ..AccSettings::default() });
@@ -1002,10 +1001,9 @@ fn a_far_new_leads_converging_speed_is_not_read_as_hard_braking() {
 }
 
 /// Two cars standing in the lanes either side, 200 m ahead in a bend, merged in the camera's
-/// image into one in the ego's lane for half a second (a scenario of our own): a new lead,
-/// read as standing. Were it real, waiting the second until it is settled would leave a stop
-/// at 2.3 m/s2: nothing to brake for yet. Before, the guard planned for it at once and braked
-/// at up to 1.4 m/s2 for nothing.
+/// image into one in the ego's lane for half a second: a new lead, read as standing. Were it
+/// real, waiting the second until it is settled would leave a stop at 2.3 m/s2: nothing to
+/// brake for yet (planned for at once, it would draw up to 1.4 m/s2 of braking for nothing).
 #[test]
 fn a_far_new_lead_is_braked_for_before_it_settles_only_where_waiting_would_cost_comfort() {
     let mut c = Controller::new(AccSettings { set_speed_mps: 27.0, ..AccSettings::default() });
@@ -1027,9 +1025,9 @@ fn a_far_new_lead_is_braked_for_before_it_settles_only_where_waiting_would_cost_
 
 /// A car 170 m ahead at 20 m/s, the ego at 27 m/s: its speed read to +-4 m/s swings its
 /// estimated acceleration by several m/s2, and its driver, holding the speed after braking,
-/// flashes its brake lights for a frame now and then (a scenario of our own). Before, each
-/// flash started a manoeuvre (its speed followed at the range's noise) and the estimate at a
-/// flash, taken as true with the lamps lit, drew an emergency with a TTC of 17 s.
+/// flashes its brake lights for a frame now and then. Were each flash to start a manoeuvre
+/// (its speed followed at the range's noise) and the estimate at a flash be taken as true with
+/// the lamps lit, it would draw an emergency with a TTC of 17 s.
 #[test]
 fn brake_light_flashes_of_a_far_lead_do_not_make_its_noisy_estimate_a_hard_brake() {
     let mut c = Controller::new(AccSettings { set_speed_mps: 27.0, ..AccSettings::default() });
@@ -1078,9 +1076,9 @@ fn lead_brakes_to_stop(
 }
 
 /// A car 143 m ahead at 26 m/s, the ego at 20 m/s, its speed read to +-2 m/s: its lamps come
-/// on and stay on as it brakes at 4 m/s2 to a stop behind a car standing further on (a scenario
-/// of our own). Stopping behind it needs 0.9 m/s2. Before, the lamps vouched for the swinging
-/// estimate (-6.6 m/s2 half a second after the pedal): a 5 s emergency at 1.2-1.6 m/s2.
+/// on and stay on as it brakes at 4 m/s2 to a stop behind a car standing further on. Stopping
+/// behind it needs 0.9 m/s2. Lamps vouching for the swinging estimate (-6.6 m/s2 half a second
+/// after the pedal) would draw a 5 s emergency at 1.2-1.6 m/s2.
 #[test]
 fn held_lamps_of_a_lead_whose_speed_reads_coarsely_do_not_vouch_for_its_estimate() {
     let noise = |t: f64| 2.0 * (std::f64::consts::TAU * t / 0.9).sin() + 1.5 * spread((t * 20.0).round() as u64);
@@ -1091,8 +1089,7 @@ fn held_lamps_of_a_lead_whose_speed_reads_coarsely_do_not_vouch_for_its_estimate
 
 /// A lead 110 m ahead at 24 m/s brakes at 5 m/s2 to a stop, the ego at 20 m/s: stopping
 /// behind it needs 1.2 m/s2, which comfort braking gives. An emergency braked at 1.5 times the
-/// need (ground truth in a scenario of our own: 1.5 m/s2 where 0.8-1.0 was needed, 0.9 s of
-/// phantom braking).
+/// need would brake at 1.5 m/s2 where 0.8-1.0 is needed (phantom braking).
 #[test]
 fn a_far_lead_braking_hard_whose_stop_needs_little_is_answered_within_comfort() {
     let run = lead_brakes_to_stop(truth(), (110.0, 20.0, 24.0), (2.0, 5.0), |_| 0.0, 12.0);
@@ -1105,9 +1102,10 @@ fn a_far_lead_braking_hard_whose_stop_needs_little_is_answered_within_comfort() 
 }
 
 /// A car standing 170 m ahead of the ego at 25 m/s, braked for, then hidden from perception for
-/// 1.8 s (just past a bend's exit, behind cars standing in the lanes either side: a scenario of
-/// our own). Before, it was let go after 0.3 s, the ACC resumed its cruise, and seeing the car
-/// again at 100 m it needed a 5 s emergency.
+/// 1.8 s (just past a bend's exit, behind cars standing in the lanes either side). Let go after
+/// 0.3 s, the ACC would resume its cruise and, seeing the car again at 100 m, need a 5 s
+/// emergency.
+
 #[test]
 fn a_standing_lead_hidden_for_a_moment_is_still_braked_for() {
     let mut c = Controller::new(AccSettings { set_speed_mps: 25.0, ..truth() });

@@ -18,7 +18,7 @@ use crate::sim::Scenario;
 
 /// A loop holds real time when its simulator runs at least this fast.
 pub const MIN_RTF: f64 = 0.97;
-/// ... and its frame -> applied latency p50 is at most this (issue 17's aim).
+/// ... and its frame -> applied latency p50 is at most this (the loop's aim).
 pub const MAX_LOOP_P50_MS: f64 = 5.0;
 /// The scenario every loop drives.
 const SCENARIO: &str = "cut-in";

@@ -3,8 +3,8 @@
 //! detected point falls on the road's map, against the vehicle's own), by range band and by
 //! the tightest bend between the ego and the vehicle, as bias and standard deviation. The
 //! ACC's in-lane probability needs the uncertainty of a vehicle's place across its lane at a
-//! range and in a bend; this table is where that figure is measured (`eval detect`, issue 39
-//! part 5). In a bend the place across the road takes the range's error too: the line of
+//! range and in a bend; this table is where that figure is measured (`eval detect`).
+//! In a bend the place across the road takes the range's error too: the line of
 //! sight crosses the lanes there.
 
 use nalgebra::Vector2;

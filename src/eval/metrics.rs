@@ -9,7 +9,7 @@ use crate::acc::settings::{comfort_decel_at, COMFORT_HIGH_SPEED_MPS, COMFORT_LOW
 use crate::msg::AccMode;
 use crate::sim::scenario::Warranted;
 
-/// The aims of issue 5 (docs/control.md).
+/// The ACC's aims (docs/control.md).
 pub mod aims {
     pub const TIME_GAP_RMS_S: f64 = 0.05;
     /// Settled behind a lead that holds its speed, the ego's acceleration stays this close to
@@ -25,13 +25,13 @@ pub mod aims {
     /// that has gone is to be released at once, and a released brake is felt far less than an
     /// applied one. The ACC's own release jerk (tuning.command.release_jerk_mps3) is 10.
     pub const MAX_RELEASE_JERK_MPS3: f64 = 12.0;
-    /// A lead braking beyond the comfort limit is answered within this long (issue 16). Reported
+    /// A lead braking beyond the comfort limit is answered within this long. Reported
     /// in every run, not judged: where comfort braking keeps clear of such a lead, the ACC
     /// answers with the comfort ramp, which takes longer (docs/control.md, results).
     pub const HARD_BRAKING_RESPONSE_S: f64 = 0.5;
     /// Tolerance on the measured acceleration and deceleration: the vehicle's response to a
     /// limited target overshoots a little (tyre and suspension dynamics of the physics
-    /// engine). Jerk has none (issue 16): the controller limits it to 2.2 m/s3.
+    /// engine). Jerk has none: the controller limits it to 2.2 m/s3.
     pub const COMFORT_TOLERANCE: f64 = 0.1;
 }
 
@@ -43,7 +43,7 @@ const FOLLOWING_BAND_MPS: f64 = 1.0;
 /// Samples this close (before, after) to an emergency belong to it.
 const EMERGENCY_MARGIN_S: (f64, f64) = (0.1, 1.5);
 /// Braking harder than this with nothing in the lane within twice the time gap (nor closing
-/// fast on something farther) is phantom braking (issue 16), unless a vehicle was there
+/// fast on something farther) is phantom braking, unless a vehicle was there
 /// within PHANTOM_GRACE_S before.
 const PHANTOM_DECEL_MPS2: f64 = 1.0;
 const PHANTOM_GRACE_S: f64 = 1.0;
@@ -70,7 +70,7 @@ const SETTLED_AHEAD_S: f64 = 1.0;
 const LEAD_ACCEL_WINDOW_S: f64 = 0.5;
 /// A lead braking harder than this (the comfort limit) is braking hard: the ACC must ask for
 /// the deceleration stopping behind it needs (NEED_SHARE of it, counted from the truth) within
-/// HARD_BRAKING_RESPONSE_S (issue 16). The lead's acceleration is taken over
+/// HARD_BRAKING_RESPONSE_S. The lead's acceleration is taken over
 /// HARD_BRAKING_WINDOW_S; stopping behind it keeps HARD_BRAKING_MARGIN_M; an episode ends when
 /// it brakes less than PHANTOM_DECEL_MPS2, and counts only if it needed more than that.
 const HARD_BRAKING_WINDOW_S: f64 = 0.1;
@@ -161,12 +161,12 @@ struct Tally {
     /// speed mode at the same set speed: (lead id or set speed, sample index).
     lead_since: Option<(u32, usize)>,
     speed_since: Option<(f64, usize)>,
-    /// What a driver feels (issue 16).
+    /// What a driver feels.
     feel: Feel,
     hard: HardBraking,
 }
 
-/// A lead braking beyond the comfort limit (issue 16), and how soon the ACC answered.
+/// A lead braking beyond the comfort limit, and how soon the ACC answered.
 #[derive(Default)]
 struct HardBraking {
     episode: Option<Episode>,
@@ -536,7 +536,7 @@ impl Tally {
             aim: format!("<= {}", aims::MAX_RELEASE_JERK_MPS3),
             pass: self.max_release_jerk <= aims::MAX_RELEASE_JERK_MPS3,
         });
-        // What a driver feels (issue 16): each must be zero.
+        // What a driver feels: each must be zero.
         let f = &self.feel;
         let none = |name: &str, value: f64| Check {
             name: name.into(),

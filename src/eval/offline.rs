@@ -145,11 +145,11 @@ mod tests {
     }
 
     /// A car standing 150 m ahead of the ego at 30 m/s, shown by a truck moving out or there
-    /// from the first frame (issue 16): stopped for within the comfort limits, no emergency,
-    /// with the camera and with ground truth. Before the comfort limit grew at low speed, both
-    /// ended in a 6 s emergency; before the ACC planned for a new lead's unmeasured speed (and
-    /// the detector ignored the road seen under a far car's body), so did the camera from the
-    /// first frame.
+    /// from the first frame: stopped for within the comfort limits, no emergency, with the
+    /// camera and with ground truth. It needs the comfort limit's growth at low speed, the ACC
+    /// planning for a new lead's unmeasured speed, and the detector reading the road seen under
+    /// a far car's body; without any of them it ends in a 6 s emergency.
+
     #[test]
     fn a_car_first_seen_150_m_ahead_at_30_mps_is_stopped_for_without_an_emergency() {
         for name in ["truck-reveals-stopped-car", "car-standing-at-150-m"] {

@@ -89,7 +89,7 @@ impl Rates {
         r
     }
 
-    /// The bar of issue 39: no collision, no unwarranted emergency, phantom braking at most
+    /// The bar: no collision, no unwarranted emergency, phantom braking at most
     /// one event per 1,000 km, and every run finished.
     pub fn meets_the_bar(&self) -> bool {
         self.errors == 0
