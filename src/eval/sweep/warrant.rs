@@ -66,23 +66,26 @@ pub fn needed_decel(ego_mps: f64, target: Target) -> f64 {
     hi
 }
 
-/// Whether braking at `decel` after the reaction keeps the margin: the ego and the target
-/// rolled forward at 10 ms until the ego is no faster than the target and the target no
-/// longer slows.
+/// Whether braking at `decel` after the reaction keeps the margin.
 fn keeps_clear(ego_mps: f64, t: Target, decel: f64) -> bool {
+    rollout(ego_mps, t, |time, _| if time >= REACTION_S { decel } else { 0.0 })
+}
+
+/// Whether the ego at `ego_mps`, braking at `decel(time, speed)`, keeps the margin behind `t`:
+/// the two rolled forward at 10 ms until the ego is no faster than the target and the target
+/// no longer slows.
+fn rollout(ego_mps: f64, t: Target, decel: impl Fn(f64, f64) -> f64) -> bool {
     const DT: f64 = 0.01;
     let (mut gap, mut v, mut u, mut time) = (t.gap_m, ego_mps, t.speed_mps, 0.0);
     for _ in 0..60_000 {
         let target_slowing = u > t.floor_mps && t.decel_mps2 > 0.0;
         if v <= u && !target_slowing {
-            return gap >= STOP_MARGIN_M;
+            break;
         }
         if gap < STOP_MARGIN_M {
             return false;
         }
-        if time >= REACTION_S {
-            v = (v - decel * DT).max(0.0);
-        }
+        v = (v - decel(time, v) * DT).max(0.0);
         if target_slowing {
             u = (u - t.decel_mps2 * DT).max(t.floor_mps);
         }
@@ -117,31 +120,15 @@ pub fn warranted_for_braking_lead(ego_mps: f64, lead: Target) -> Warranted {
 /// Whether the ego, braking at the comfort limit of its speed from [`REACTION_S`] until
 /// `wait_s` and at [`AVOIDABLE_MPS2`] after, keeps the margin behind `t`.
 fn waiting_keeps_clear(ego_mps: f64, t: Target, wait_s: f64) -> bool {
-    const DT: f64 = 0.01;
-    let (mut gap, mut v, mut u, mut time) = (t.gap_m, ego_mps, t.speed_mps, 0.0);
-    for _ in 0..60_000 {
-        let target_slowing = u > t.floor_mps && t.decel_mps2 > 0.0;
-        if v <= u && !target_slowing {
-            break;
-        }
-        if gap < STOP_MARGIN_M {
-            return false;
-        }
-        let decel = if time < REACTION_S {
+    rollout(ego_mps, t, |time, v| {
+        if time < REACTION_S {
             0.0
         } else if time < wait_s {
             comfort_decel_at(v, aims::MAX_DECEL_MPS2, aims::MAX_DECEL_LOW_SPEED_MPS2)
         } else {
             AVOIDABLE_MPS2
-        };
-        v = (v - decel * DT).max(0.0);
-        if target_slowing {
-            u = (u - t.decel_mps2 * DT).max(t.floor_mps);
         }
-        gap += (u - v) * DT;
-        time += DT;
-    }
-    gap >= STOP_MARGIN_M
+    })
 }
 
 /// The most braking a need declares: within [`COMFORT_SHARE`] of the comfort limit at the
