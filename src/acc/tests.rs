@@ -958,7 +958,6 @@ fn an_emergency_for_a_hard_braking_lead_does_not_flicker_with_a_noisy_estimate()
 /// later, as the ranges add up. That convergence is the measurement's, not the car braking:
 /// taken up by the filter's acceleration (-4.2 m/s2 once the lead counts as settled, its
 /// speed still 5 m/s), it would draw an emergency for a hard-braking lead 7.8 s away.
-
 #[test]
 fn a_far_new_leads_converging_speed_is_not_read_as_hard_braking() {
     let mut c = Controller::new(AccSettings { set_speed_mps: 25.0, ..AccSettings::default() });
@@ -1105,7 +1104,6 @@ fn a_far_lead_braking_hard_whose_stop_needs_little_is_answered_within_comfort() 
 /// 1.8 s (just past a bend's exit, behind cars standing in the lanes either side). Let go after
 /// 0.3 s, the ACC would resume its cruise and, seeing the car again at 100 m, need a 5 s
 /// emergency.
-
 #[test]
 fn a_standing_lead_hidden_for_a_moment_is_still_braked_for() {
     let mut c = Controller::new(AccSettings { set_speed_mps: 25.0, ..truth() });
