@@ -5,6 +5,7 @@
 //! QoS the topic map gives, declares the node's liveliness token, and keeps statistics for
 //! every subscription.
 
+mod cadence;
 pub mod faults;
 mod follow;
 mod frame_copies;
@@ -195,7 +196,9 @@ impl Bus {
             p.at(topic, &self.node)
                 .map(|f| (faults::Model::new(f.clone(), p.seed, topic.name(), &self.node), self.clock.clone()))
         });
-        subscriber::Inlet { qos: self.topics.qos(topic), faults }
+        let frames = topic.kind() == crate::msg::MessageKind::CameraFrame;
+        let poll_periodic = frames && self.topics.camera.poll_before_frame;
+        subscriber::Inlet { qos: self.topics.qos(topic), faults, poll_periodic }
     }
 
     /// The main session (priorities; frames, events, liveliness, raw keys).

@@ -13,14 +13,16 @@
 //! - [`CallbackSubscriber`] calls a function on the receive thread: no inbox, no handoff.
 
 use std::collections::VecDeque;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use parking_lot::Mutex;
 use serde::de::DeserializeOwned;
 use zenoh::key_expr::OwnedKeyExpr;
 use zenoh::sample::Sample;
 
+use super::cadence::Cadence;
 use super::faults::{Gate, Model, NodeClock};
 use super::{zerr, BusError, TopicStats};
 use crate::msg::{self, CameraFrameRef, DecodeError, Header, Message, Stamped};
@@ -37,21 +39,27 @@ pub struct Received<M> {
 
 /// Bounded hand-over from Zenoh's thread to a reader: drops (and counts) the oldest. A task
 /// waits on `notify`; a thread of its own waits on `arrived` (a futex wake, without a trip
-/// through the async runtime's scheduler).
+/// through the async runtime's scheduler), and on a periodic stream polls `pushes` in a short
+/// window around the next message instead of being woken for it ([`Cadence`]).
 struct Inbox<T> {
     items: Mutex<VecDeque<T>>,
     capacity: usize,
     notify: tokio::sync::Notify,
     arrived: parking_lot::Condvar,
+    /// The stream's cadence, when its reader polls around each message.
+    cadence: Option<Mutex<Cadence>>,
+    pushes: AtomicU64,
 }
 
 impl<T> Inbox<T> {
-    fn new(delivery: Delivery) -> Self {
+    fn new(delivery: Delivery, poll_periodic: bool) -> Self {
         Inbox {
             items: Mutex::new(VecDeque::with_capacity(delivery.capacity())),
             capacity: delivery.capacity(),
             notify: tokio::sync::Notify::new(),
             arrived: parking_lot::Condvar::new(),
+            cadence: poll_periodic.then(|| Mutex::new(Cadence::default())),
+            pushes: AtomicU64::new(0),
         }
     }
 
@@ -63,6 +71,10 @@ impl<T> Inbox<T> {
         }
         items.push_back(item);
         drop(items);
+        if let Some(cadence) = &self.cadence {
+            cadence.lock().arrived(Instant::now());
+            self.pushes.fetch_add(1, Ordering::Release);
+        }
         self.notify.notify_one();
         self.arrived.notify_one();
     }
@@ -80,15 +92,38 @@ impl<T> Inbox<T> {
         }
     }
 
+    /// The next item within `timeout`, on a thread of its own: parked until a message comes
+    /// or, on a periodic stream, until its window opens, then polling until the window closes.
     fn pop_blocking(&self, timeout: Duration) -> Option<T> {
-        let deadline = std::time::Instant::now() + timeout;
-        let mut items = self.items.lock();
+        let deadline = Instant::now() + timeout;
         loop {
+            let mut items = self.items.lock();
             if let Some(item) = items.pop_front() {
                 return Some(item);
             }
-            if self.arrived.wait_until(&mut items, deadline).timed_out() {
-                return items.pop_front();
+            let now = Instant::now();
+            if now >= deadline {
+                return None;
+            }
+            // (A statement of its own: the guard must not live through the wait below.)
+            let window = self.cadence.as_ref().and_then(|c| c.lock().window()).filter(|&(_, closes)| closes > now);
+            match window {
+                Some((opens, _)) if now < opens => {
+                    self.arrived.wait_until(&mut items, opens.min(deadline));
+                }
+                Some((_, closes)) => {
+                    let seen = self.pushes.load(Ordering::Acquire);
+                    drop(items);
+                    let until = closes.min(deadline);
+                    while self.pushes.load(Ordering::Acquire) == seen && Instant::now() < until {
+                        std::hint::spin_loop();
+                    }
+                }
+                None => {
+                    if self.arrived.wait_until(&mut items, deadline).timed_out() {
+                        return items.pop_front();
+                    }
+                }
             }
         }
     }
@@ -181,6 +216,9 @@ impl Arrivals {
 pub(crate) struct Inlet {
     pub qos: TopicQos,
     pub faults: Option<(Model, Arc<NodeClock>)>,
+    /// A reader thread polls in a window around each message of a periodic stream
+    /// (`camera.poll_before_frame`).
+    pub poll_periodic: bool,
 }
 
 /// Declares a subscriber that validates every sample with `accept`, records the good ones in
@@ -338,7 +376,7 @@ impl<T: Clone + Send + 'static> Subscription<T> {
     {
         let stats = Arc::new(TopicStats::new(name));
         let delivery = inlet.qos.delivery;
-        let inbox = Arc::new(Inbox::new(delivery));
+        let inbox = Arc::new(Inbox::new(delivery, inlet.poll_periodic));
         let arrivals = Arc::new(Arrivals::new(inlet.faults.is_some()));
         let (into, counted) = (inbox.clone(), stats.clone());
         let deliver = move |item| into.push(item, &counted);
@@ -480,6 +518,33 @@ mod tests {
     use super::*;
     use crate::bus::faults::{Gate, Model, NodeClock};
     use crate::config::{Loss, TopicFaults};
+
+    /// A reader thread polling around each message of a periodic stream still gets every
+    /// message in order, once, and still times out when the stream stops: polling changes
+    /// when it is awake, never what it reads.
+    #[test]
+    fn a_polling_reader_gets_a_periodic_stream_whole_and_times_out_after_it() {
+        for poll in [true, false] {
+            let inbox = Arc::new(Inbox::new(Delivery::Queue(4), poll));
+            let stats = TopicStats::new("test");
+            let writer = {
+                let inbox = inbox.clone();
+                std::thread::spawn(move || {
+                    for i in 0..20u32 {
+                        std::thread::sleep(Duration::from_millis(12));
+                        inbox.push(i, &stats);
+                    }
+                })
+            };
+            let got: Vec<u32> = (0..20).map_while(|_| inbox.pop_blocking(Duration::from_secs(5))).collect();
+            writer.join().unwrap();
+            assert_eq!(got, (0..20).collect::<Vec<_>>(), "poll={poll}");
+            let waited = std::time::Instant::now();
+            assert_eq!(inbox.pop_blocking(Duration::from_millis(30)), None, "poll={poll}");
+            assert!(waited.elapsed() >= Duration::from_millis(30), "poll={poll}: returned before its timeout");
+            assert_eq!(inbox.cadence.is_some(), poll);
+        }
+    }
 
     #[test]
     fn arrivals_say_what_arrived_from_whom() {

@@ -88,6 +88,10 @@ pub struct CameraSettings {
     pub link_copies: EncodingSet,
     /// Which copy this node's frame subscribers read; None: the frames as published.
     pub read: Option<CameraEncoding>,
+    /// A frame reader on a thread of its own (the detector) is awake and polling in a short
+    /// window around each frame of a periodic camera instead of being woken for it
+    /// (src/bus/cadence.rs): ~60 us less per frame for ~2 % of a core per camera at 20 Hz.
+    pub poll_before_frame: bool,
 }
 
 impl Default for CameraSettings {
@@ -99,6 +103,7 @@ impl Default for CameraSettings {
             shared_memory: true,
             link_copies: EncodingSet::of(&[CameraEncoding::Lz4, CameraEncoding::Jpeg]),
             read: None,
+            poll_before_frame: true,
         }
     }
 }
@@ -148,6 +153,7 @@ struct RawCamera {
     jpeg_quality: Option<u8>,
     shm_pool_mib: Option<usize>,
     shared_memory: Option<bool>,
+    poll_before_frame: Option<bool>,
 }
 
 #[derive(Deserialize, Default)]
@@ -261,6 +267,7 @@ impl TopicMap {
             })?),
         };
         map.camera.shared_memory = cam.shared_memory.unwrap_or(map.camera.shared_memory);
+        map.camera.poll_before_frame = cam.poll_before_frame.unwrap_or(map.camera.poll_before_frame);
 
         for (name, over) in raw.topics {
             map.apply_override(&name, over, origin)?;
