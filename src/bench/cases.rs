@@ -102,6 +102,7 @@ pub enum Path {
     BusShmUnix,
     BusShmUnixCallback,
     BusShmUnixThread,
+    BusShmUnixThreadWoken,
     BusTcp,
     BusShmOwnRuntime,
     BusTcpOwnRuntime,
@@ -145,6 +146,7 @@ impl Path {
             Path::BusShmUnix => "bus, shared memory, unix socket",
             Path::BusShmUnixCallback => "bus, shared memory, unix socket, callback reader",
             Path::BusShmUnixThread => "bus, shared memory, unix socket, reader thread",
+            Path::BusShmUnixThreadWoken => "bus, shared memory, unix socket, reader thread woken (no polling)",
             Path::BusTcp => "bus, TCP (shm off)",
             Path::BusShmOwnRuntime => "bus, shared memory, zenoh's runtime",
             Path::BusTcpOwnRuntime => "bus, TCP (shm off), zenoh's runtime",
@@ -334,6 +336,11 @@ fn frame_cases(out: &mut Vec<Case>, size: FrameSize, phase: Phase, quick: bool, 
         push(
             Path::BusShmUnixThread,
             CaseSpec { unix_socket: true, reader: FrameReader::Thread, ..frame(Transport::Bus, true) },
+        );
+        // The same thread without polling: what the wake-up costs, in the same run.
+        push(
+            Path::BusShmUnixThreadWoken,
+            CaseSpec { unix_socket: true, reader: FrameReader::ThreadWoken, ..frame(Transport::Bus, true) },
         );
     }
     push(Path::BusTcp, frame(Transport::Bus, false));

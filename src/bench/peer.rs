@@ -136,7 +136,8 @@ pub fn peer_topics(spec: &CaseSpec) -> Result<TopicMap> {
     } else {
         format!(r#"topics: {{ "vehicle/speed": {flat}, "camera/front": {flat} }},"#)
     };
-    let text = format!("{{ {topics} camera: {{ shared_memory: {} }} }}", spec.shm);
+    let poll = spec.reader != FrameReader::ThreadWoken;
+    let text = format!("{{ {topics} camera: {{ shared_memory: {}, poll_before_frame: {poll} }} }}", spec.shm);
     let map = TopicMap::from_json5(&text, "bench case")?;
     Ok(match &spec.namespace {
         Some(ns) => map.with_namespace(ns)?,
@@ -383,7 +384,7 @@ async fn read_frames(
     }));
     let stop = stop.clone();
     const POLL: Duration = Duration::from_millis(100);
-    if reader == FrameReader::Thread {
+    if matches!(reader, FrameReader::Thread | FrameReader::ThreadWoken) {
         r.threads.push(std::thread::spawn(move || {
             while !stop.load(Ordering::Relaxed) {
                 if let Some(s) = sub.recv_blocking(POLL) {

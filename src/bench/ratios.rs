@@ -140,6 +140,7 @@ fn frame_ratios(out: &mut Vec<RatioDef>, size: FrameSize) {
     push(latency(Path::BusTcp), latency(Path::SeedPythonTcpPickle), Figure::P50, "< 1");
     push(latency(Path::BusShmUnixCallback), latency(Path::BusShmUnix), Figure::P50, "-");
     push(latency(Path::BusShmUnixThread), latency(Path::BusShmUnix), Figure::P50, "-");
+    push(latency(Path::BusShmUnixThread), latency(Path::BusShmUnixThreadWoken), Figure::P50, "< 1");
 }
 
 /// The ratios whose tables ran; a needed row that is absent is named in `missing`.

@@ -68,8 +68,11 @@ pub enum FrameReader {
     /// A latest-only `FrameSubscriber` awaited by a task of the async runtime.
     #[default]
     Task,
-    /// The same subscriber read by a thread of its own (`recv_blocking`), as the detector does.
+    /// The same subscriber read by a thread of its own (`recv_blocking`), as the detector does:
+    /// awake and polling around each frame of the periodic stream (`camera.poll_before_frame`).
     Thread,
+    /// The same thread, always woken by the receive thread (`camera.poll_before_frame: false`).
+    ThreadWoken,
     /// Zenoh's receive callback itself: no hand-off.
     Callback,
 }
