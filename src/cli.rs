@@ -56,9 +56,10 @@ pub fn exit_code(result: anyhow::Result<std::process::ExitCode>) -> std::process
 /// missed aim print sixty lines of frames; RUST_LIB_BACKTRACE=1 adds the trace where it was
 /// captured (anyhow's switch for errors, as against panics).
 pub fn error_report(e: &anyhow::Error) -> String {
-    let mut out = format!("Error: {e}\n");
+    let clean = |text: String| crate::bus::without_source_locations(&text);
+    let mut out = format!("Error: {}\n", clean(e.to_string()));
     for cause in e.chain().skip(1) {
-        out.push_str(&format!("  caused by: {cause}\n"));
+        out.push_str(&format!("  caused by: {}\n", clean(cause.to_string())));
     }
     if std::env::var_os("RUST_LIB_BACKTRACE").is_some_and(|v| v != "0") {
         out.push_str(&format!("\n{}\n", e.backtrace()));
@@ -72,13 +73,27 @@ pub fn colour(stream: &impl std::io::IsTerminal) -> bool {
     stream.is_terminal() && std::env::var_os("NO_COLOR").is_none_or(|v| v.is_empty())
 }
 
-/// Logs to stderr, filtered by RUST_LOG (default: info for slipstream, warnings for Zenoh and
-/// the Foxglove server),
-/// without the messages Zenoh prints for the loopback rendezvous working as designed
-/// (see config/zenoh.json5).
-pub fn init_tracing() {
+/// What a process logs when RUST_LOG is not set.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LogLevel {
+    /// A node or a daemon (the simulator, the detector, the ACC, a router): its lifecycle at
+    /// INFO, into the log file `up` gives it or the terminal it runs in.
+    Node,
+    /// A tool a person runs at a terminal (`up`, `top`, `echo`, `record`, ...): warnings and
+    /// errors only, so that its own output (a live view, JSON lines, a verdict) is all there is.
+    Tool,
+}
+
+/// Logs to stderr, filtered by RUST_LOG (default by `level`; warnings for Zenoh and the
+/// Foxglove server), without the messages Zenoh prints for the loopback rendezvous working as
+/// designed (see config/zenoh.json5).
+pub fn init_tracing(level: LogLevel) {
+    let base = match level {
+        LogLevel::Node => "info",
+        LogLevel::Tool => "warn",
+    };
     let env = EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| EnvFilter::new(format!("info,zenoh=warn,zenoh_ext=warn,foxglove=warn,{ACL_TARGET}=trace")));
+        .unwrap_or_else(|_| EnvFilter::new(format!("{base},zenoh=warn,zenoh_ext=warn,foxglove=warn,{ACL_TARGET}=trace")));
     let layer = tracing_subscriber::fmt::layer()
         .with_writer(std::io::stderr)
         // Colours on a terminal only: `slipstream up` writes the nodes' logs to files.
@@ -219,8 +234,10 @@ mod tests {
     }
 }
 
-/// Opens a bus as `node` on `connect`'s config, runs `f` with it and closes it: the frame of
-/// every tool that is one participant on the bus for its whole run.
+/// Opens a bus as `node` on `connect`'s config, runs `f` with it and leaves it: the frame of
+/// every tool that is one participant on the bus for its whole run. Leaving cannot fail the
+/// tool ([`crate::Bus::leave`]); a tool prints its verdict inside `f`, so nothing on the way
+/// out can delay or lose it.
 pub fn on_bus<T, F, Fut>(connect: &crate::ConnectArgs, node: &str, f: F) -> anyhow::Result<T>
 where
     F: FnOnce(std::sync::Arc<crate::Bus>) -> Fut,
@@ -229,10 +246,12 @@ where
     let rt = tokio::runtime::Runtime::new()?;
     rt.block_on(async {
         let bus = std::sync::Arc::new(crate::Bus::open(connect.zenoh_config()?, connect.topic_map()?, node).await?);
-        let out = f(bus.clone()).await?;
-        let bus = std::sync::Arc::try_unwrap(bus).map_err(|_| anyhow::anyhow!("{node}: the bus is still in use"))?;
-        bus.close().await?;
-        Ok(out)
+        let out = f(bus.clone()).await;
+        match std::sync::Arc::try_unwrap(bus) {
+            Ok(bus) => bus.leave().await,
+            Err(_) => tracing::warn!(node, "the bus is still in use at the end; left to the process's exit"),
+        }
+        out
     })
 }
 
@@ -252,12 +271,12 @@ pub fn exit_when(clean: bool) -> std::process::ExitCode {
     }
 }
 
-/// A report on stdout: pretty JSON with `json`, else its markdown rendering.
+/// A report on stdout, flushed: pretty JSON with `json`, else its markdown rendering.
 pub fn print_report<R: serde::Serialize>(json: bool, report: &R, markdown: fn(&R) -> String) -> anyhow::Result<()> {
-    if json {
-        println!("{}", serde_json::to_string_pretty(report)?);
-    } else {
-        println!("{}", markdown(report));
-    }
+    use std::io::Write;
+    let text = if json { serde_json::to_string_pretty(report)? } else { markdown(report) };
+    let mut out = std::io::stdout().lock();
+    writeln!(out, "{text}")?;
+    out.flush()?;
     Ok(())
 }

@@ -43,7 +43,7 @@ fn main() -> std::process::ExitCode {
 fn run() -> Result<()> {
     slipstream::cli::apply_zenoh_runtime_default();
     let cli = Cli::parse();
-    slipstream::cli::init_tracing();
+    slipstream::cli::init_tracing(slipstream::cli::LogLevel::Node);
     let settings = cli.acc.settings()?;
     let rt = tokio::runtime::Runtime::new()?;
     rt.block_on(async {
@@ -78,7 +78,7 @@ fn run() -> Result<()> {
         if cli.json {
             println!("{}", serde_json::to_string_pretty(&stats)?);
         }
-        bus.close().await.context("acc: leave the bus")?;
+        bus.leave().await;
         anyhow::Ok(())
     })
 }

@@ -38,7 +38,7 @@ fn main() -> std::process::ExitCode {
 fn run() -> Result<()> {
     slipstream::cli::apply_zenoh_runtime_default();
     let cli = Cli::parse();
-    slipstream::cli::init_tracing();
+    slipstream::cli::init_tracing(slipstream::cli::LogLevel::Node);
     if cli.sim.list_scenarios {
         print!("{}", SimArgs::scenario_list());
         return Ok(());
@@ -57,20 +57,20 @@ fn run() -> Result<()> {
         return Ok(());
     }
     let rt = tokio::runtime::Runtime::new()?;
-    let report = rt.block_on(async {
+    rt.block_on(async {
         let bus =
             slipstream::Bus::open_node(&cli.connect, &cli.faults, &cli.sim.name).await.context("sim: join the bus")?;
         let shutdown = async {
             slipstream::cli::stop_requested().await;
         };
         let report = slipstream::sim::run(&bus, world, &settings, shutdown).await.context("sim: run")?;
-        bus.close().await.context("sim: leave the bus")?;
-        anyhow::Ok(report)
-    })?;
-    if cli.sim.json {
-        println!("{}", serde_json::to_string_pretty(&report)?);
-    } else {
-        println!("{}", report.summary());
-    }
-    Ok(())
+        // The summary first: nothing on the way out can lose it.
+        if cli.sim.json {
+            println!("{}", serde_json::to_string_pretty(&report)?);
+        } else {
+            println!("{}", report.summary());
+        }
+        bus.leave().await;
+        anyhow::Ok(())
+    })
 }

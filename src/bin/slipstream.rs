@@ -151,10 +151,11 @@ fn main() -> ExitCode {
     // A router forwards what it receives: its receive path must not share the tx pool, or a
     // message of several batches (a raw camera frame) waits for the threads busy receiving it
     // and is never forwarded. Zenoh's own thread layout there; the handover layout elsewhere.
-    if !matches!(cli.command, Command::Router) {
+    let daemon = matches!(cli.command, Command::Router);
+    if !daemon {
         slipstream::cli::apply_zenoh_runtime_default();
     }
-    slipstream::cli::init_tracing();
+    slipstream::cli::init_tracing(if daemon { slipstream::cli::LogLevel::Node } else { slipstream::cli::LogLevel::Tool });
     slipstream::cli::exit_code(run(cli))
 }
 

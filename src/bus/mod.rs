@@ -6,6 +6,7 @@
 //! every subscription.
 
 mod cadence;
+mod error;
 pub mod faults;
 mod follow;
 mod frame_copies;
@@ -16,6 +17,8 @@ mod subscriber;
 
 use std::sync::Arc;
 
+pub use error::{without_source_locations, zenoh_message, BusError};
+pub(crate) use error::zerr;
 pub use faults::NodeClock;
 pub use follow::{Following, FOLLOW_SWITCH_AFTER};
 pub use frame_publisher::{FramePublisher, FrameSent};
@@ -25,28 +28,13 @@ pub use subscriber::{
     Arrivals, CallbackSubscriber, Declared, FrameSample, FrameSubscriber, Received, Subscriber, Subscription,
 };
 
-use crate::config::{ConfigError, FaultProfile, TopicMap};
+use crate::config::{FaultProfile, TopicMap};
 use crate::msg::{CameraFrame, Message};
 use crate::topics::TopicDef;
 
-/// What can go wrong on the bus. Decode errors are not here: they are counted per
-/// subscription and logged, never returned to the node as a failure of the bus.
-#[derive(Debug, thiserror::Error)]
-pub enum BusError {
-    #[error("zenoh: {context}: {source}")]
-    Zenoh { context: String, source: zenoh::Error },
-    #[error(transparent)]
-    Config(#[from] ConfigError),
-    #[error("invalid frame: {0}")]
-    InvalidFrame(String),
-    #[error("the subscription to {0} is closed")]
-    Closed(String),
-}
-
-pub(crate) fn zerr(context: impl Into<String>) -> impl FnOnce(zenoh::Error) -> BusError {
-    let context = context.into();
-    move |source| BusError::Zenoh { context, source }
-}
+/// The longest a session may take to close. A session closes in milliseconds; what could
+/// hold it longer (a peer that stopped answering) must not hold up a node's exit.
+pub const CLOSE_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(2);
 
 /// A node's connection to the system: session, topic map, node name and liveliness token.
 pub struct Bus {
@@ -391,12 +379,25 @@ impl Bus {
         Ok(NodeWatch { alive, _subscriber: subscriber })
     }
 
-    /// Leaves the bus: undeclares everything and closes the sessions.
+    /// Leaves the bus: undeclares everything and closes the sessions, each within
+    /// [`CLOSE_TIMEOUT`]. Both are closed even when the first fails; the first error is returned.
     pub async fn close(self) -> Result<(), BusError> {
-        if let Some(ll) = &self.low_latency {
-            ll.close().await.map_err(zerr("close the low-latency session"))?;
+        let low_latency = match &self.low_latency {
+            Some(ll) => ll.close().timeout(CLOSE_TIMEOUT).await.map_err(zerr("close the low-latency session")),
+            None => Ok(()),
+        };
+        let main = self.session.close().timeout(CLOSE_TIMEOUT).await.map_err(zerr("close session"));
+        low_latency.and(main)
+    }
+
+    /// Leaves the bus at the end of a node's or a tool's work: as [`Bus::close`], but a failure
+    /// is logged, not returned. By then the work is done and its result (a verdict, a summary,
+    /// a file) stands; the process's exit closes whatever Zenoh still held.
+    pub async fn leave(self) {
+        let node = self.node.clone();
+        if let Err(e) = self.close().await {
+            tracing::warn!(node, "leaving the bus: {e}");
         }
-        self.session.close().await.map_err(zerr("close session"))
     }
 }
 

@@ -20,7 +20,6 @@
 //! | [`NODE_POLL`] | 20 ms | how often the launcher looks at the bus and the processes while waiting |
 //! | [`SETTLE`] | 200 ms | after the simulator ends, for its last messages to land (the others stop meanwhile) |
 //! | [`STOP_GRACE`] | 5 s | SIGINT, then this long to exit, then SIGKILL |
-//! | [`CLOSE_TIMEOUT`] | 5 s | closing the observer's session never holds up the report |
 
 use std::time::Duration;
 
@@ -40,7 +39,5 @@ pub const NODE_POLL: Duration = Duration::from_millis(20);
 pub const SETTLE: Duration = Duration::from_millis(200);
 /// SIGINT, then this long, then SIGKILL.
 pub const STOP_GRACE: Duration = Duration::from_secs(5);
-/// The longest the observer's session may take to close.
-pub const CLOSE_TIMEOUT: Duration = Duration::from_secs(5);
 /// RUST_LOG for the nodes when the user set none: lifecycle at INFO, Zenoh's chatter off.
 pub const DEFAULT_RUST_LOG: &str = "info,zenoh=warn,zenoh_ext=warn";

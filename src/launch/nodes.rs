@@ -23,7 +23,7 @@ use anyhow::{bail, Context, Result};
 use serde::Serialize;
 
 use super::child::{free_ports, sibling_binary, Child};
-use super::{CLOSE_TIMEOUT, DEFAULT_RUST_LOG, NODE_POLL, NODE_START_TIMEOUT, SETTLE, STOP_GRACE};
+use super::{DEFAULT_RUST_LOG, NODE_POLL, NODE_START_TIMEOUT, SETTLE, STOP_GRACE};
 use crate::acc::node::AccStats;
 use crate::acc::{PerceptionSource, VehicleClass};
 use crate::config::{ConnectArgs, FaultProfile, DEFAULT_ZENOH_CONFIG};
@@ -570,14 +570,10 @@ impl LoopRun {
         v
     }
 
-    /// Leaves the bus, waiting at most [`CLOSE_TIMEOUT`]: other sessions still attached (a
-    /// `top`, a Python client) must not hold up the caller's report.
+    /// Leaves the bus ([`Bus::leave`]: bounded, never failing): other sessions still attached
+    /// (a `top`, a Python client) must not hold up the caller's report.
     pub async fn close(self) {
-        match tokio::time::timeout(CLOSE_TIMEOUT, self.bus.close()).await {
-            Ok(Ok(())) => {}
-            Ok(Err(e)) => tracing::warn!("closing the observer's session: {e}"),
-            Err(_) => tracing::warn!("closing the observer's session took over {CLOSE_TIMEOUT:?}; left open"),
-        }
+        self.bus.leave().await;
     }
 }
 

@@ -227,7 +227,7 @@ pub fn run(connect: &ConnectArgs, args: &DemoArgs) -> Result<()> {
             }
             verdict(&summary)?;
         }
-        bus.close().await?;
+        bus.leave().await;
         Ok(())
     })
 }

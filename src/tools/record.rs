@@ -79,7 +79,7 @@ impl Ros2Summary {
     }
 }
 
-/// `slipstream record` in either profile: its own session, closed at the end (a session that
+/// `slipstream record` in either profile: its own session, left at the end (a session that
 /// does not close in time is only warned about: the file is whole by then); exit 1 when
 /// anything was lost on the way to the file.
 pub fn command(args: &RecordArgs, connect: &crate::config::ConnectArgs) -> Result<std::process::ExitCode> {
@@ -90,10 +90,7 @@ pub fn command(args: &RecordArgs, connect: &crate::config::ConnectArgs) -> Resul
             Profile::Ros2 => run_ros2(&bus, args).await.map(|s| !s.lost_anything()),
             Profile::Slipstream => run(&bus, args).await.map(|s| !s.lost_anything()),
         };
-        let closed = tokio::time::timeout(crate::launch::CLOSE_TIMEOUT, bus.close()).await;
-        if !matches!(closed, Ok(Ok(()))) {
-            tracing::warn!("the recorder's session did not close cleanly");
-        }
+        bus.leave().await;
         clean
     })?;
     Ok(crate::cli::exit_when(clean))

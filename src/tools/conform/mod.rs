@@ -123,7 +123,11 @@ pub fn render(report: &ConformReport) -> String {
 pub fn command(command: &ConformCommand, connect: &crate::ConnectArgs) -> anyhow::Result<std::process::ExitCode> {
     let ConformCommand::Sim(args) = command;
     let node = if args.lockstep { args.name.clone() } else { crate::cli::own_name("conform") };
-    let report = crate::cli::on_bus(connect, &node, |bus| async move { Ok(run_sim(&bus, args).await?) })?;
-    crate::cli::print_report(args.json, &report, render)?;
-    Ok(crate::cli::exit_when(report.pass))
+    // The verdict is printed while still on the bus: leaving it can neither delay nor lose it.
+    let pass = crate::cli::on_bus(connect, &node, |bus| async move {
+        let report = run_sim(&bus, args).await?;
+        crate::cli::print_report(args.json, &report, render)?;
+        Ok(report.pass)
+    })?;
+    Ok(crate::cli::exit_when(pass))
 }
