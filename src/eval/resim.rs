@@ -484,7 +484,7 @@ pub async fn run(path: &Path, connect: &ConnectArgs, dir: &Path, progress: &mut 
         faults: None,
         link: Default::default(),
     };
-    let mut lp = LoopRun::open(spec.clone(), Network::User(connect), &dir.join("logs"), "resim").await?;
+    let mut lp = LoopRun::open(spec.clone(), Network::User { connect, sim_elsewhere: false }, &dir.join("logs"), "resim").await?;
     let (inbox, subs) = Inbox::start(lp.bus()).await?;
     lp.start_controllers().await?;
     let replayed = tokio::task::block_in_place(|| replay(lp.bus(), path, &recorded.outputs, &inbox, progress));

@@ -90,6 +90,17 @@ impl LoopSpec {
         crate::msg::ObjectClass::from(scenario.ego.class).into()
     }
 
+    /// The nodes a run of this loop brings onto the bus: its observer, the ACC, the detector
+    /// with camera perception, and the simulator (which `up --sim external` does not start,
+    /// and a re-simulation replaces with its observer).
+    fn nodes<'a>(&self, observer: &'a str) -> Vec<&'a str> {
+        let mut v = vec![observer, ACC_NODE, SIM_NODE];
+        if self.perception == PerceptionSource::Camera {
+            v.push(DETECT_NODE);
+        }
+        v
+    }
+
     /// Faults a node of this loop cannot take: in lockstep, every step waits for the ACC's
     /// answer to its speed message and for the detections of its frame, so speed and camera
     /// frames must arrive; their faults belong on what follows them.
@@ -116,8 +127,10 @@ impl LoopSpec {
 /// How the loop's processes find each other.
 #[derive(Debug, Clone)]
 pub enum Network<'a> {
-    /// The user's connection and topic flags (see the module doc).
-    User(&'a ConnectArgs),
+    /// The user's connection and topic flags (see the module doc), in a namespace no other
+    /// loop holds ([`super::namespace`]). `sim_elsewhere`: the simulator is someone else's
+    /// (`up --sim external`), expected in the namespace.
+    User { connect: &'a ConnectArgs, sim_elsewhere: bool },
     /// Loopback ports and a namespace of the run's own; the topic config file, if any.
     Isolated { topics: Option<PathBuf>, namespace: String },
 }
@@ -174,6 +187,10 @@ impl Progress {
 const ACC: &str = "slipstream-acc";
 const DETECT: &str = "slipstream-detect";
 const SIM: &str = "slipstream-sim";
+/// The nodes' names on the bus (their liveliness tokens).
+const ACC_NODE: &str = "acc";
+const DETECT_NODE: &str = "detect";
+const SIM_NODE: &str = "sim";
 /// The file slipstream-sim --json writes its report to, in the logs directory.
 const SIM_REPORT: &str = "slipstream-sim.json";
 /// The file slipstream-acc --json writes its statistics to, in the logs directory.
@@ -258,6 +275,8 @@ pub struct LoopRun {
     endpoints: Endpoints,
     nodes: Vec<Child>,
     died: Vec<String>,
+    /// See [`LoopRun::moved`].
+    moved: Option<(String, Vec<String>)>,
 }
 
 impl LoopRun {
@@ -266,8 +285,10 @@ impl LoopRun {
     pub async fn open(spec: LoopSpec, network: Network<'_>, logs: &Path, observer: &str) -> Result<LoopRun> {
         std::fs::create_dir_all(logs).with_context(|| format!("create the log directory {}", logs.display()))?;
         let endpoints = Endpoints::new(spec.link)?;
-        let (config, topic_map, base_flags, user_connect, peer) = match network {
-            Network::User(connect) => {
+        let isolated = matches!(network, Network::Isolated { .. });
+        let sim_elsewhere = matches!(network, Network::User { sim_elsewhere: true, .. });
+        let (config, topic_map, mut base_flags, user_connect, peer) = match network {
+            Network::User { connect, .. } => {
                 let mut config = connect.zenoh_config()?;
                 let mode = config.get_json("mode").ok().and_then(|m| serde_json::from_str::<String>(&m).ok());
                 anyhow::ensure!(
@@ -306,7 +327,22 @@ impl LoopRun {
                 (config, map, flags, Vec::new(), true)
             }
         };
-        let bus = Bus::open(config, topic_map, observer).await.context("join the bus")?;
+        let session = zenoh::open(config)
+            .await
+            .map_err(|e| anyhow::anyhow!("join the bus: {}", crate::bus::zenoh_message(&e)))?;
+        let claimed = match isolated {
+            true => super::namespace::Claimed { map: topic_map, moved_to: None, beside: Vec::new() },
+            false => {
+                let ours: Vec<&str> =
+                    spec.nodes(observer).into_iter().filter(|n| !(sim_elsewhere && *n == SIM_NODE)).collect();
+                super::namespace::claim(&session, topic_map, &ours, sim_elsewhere).await?
+            }
+        };
+        if let Some(ns) = &claimed.moved_to {
+            base_flags.extend(["-n".into(), ns.clone()]);
+        }
+        let moved = claimed.moved_to.clone().map(|ns| (ns, claimed.beside.clone()));
+        let bus = Bus::from_session(session, claimed.map, observer).await.context("join the bus")?;
         Ok(LoopRun {
             bus,
             spec,
@@ -317,7 +353,14 @@ impl LoopRun {
             endpoints,
             nodes: Vec::new(),
             died: Vec::new(),
+            moved,
         })
+    }
+
+    /// Set when the default namespace held another loop and this one moved: the namespace it
+    /// moved to and the other loop's nodes ([`super::namespace`]).
+    pub fn moved(&self) -> Option<&(String, Vec<String>)> {
+        self.moved.as_ref()
     }
 
     /// The observer's session: subscribe here to what the run is judged by.
@@ -398,14 +441,14 @@ impl LoopRun {
             "--json".into(),
         ];
         if spec.clock == ClockMode::Lockstep {
-            sim_args.extend(["--wait-for".into(), "acc".into()]);
+            sim_args.extend(["--wait-for".into(), ACC_NODE.into()]);
         }
         self.spawn(SIM, sim_args, &sim, &controllers)
     }
 
     /// The simulator's first frame must find the detector and the ACC listening.
     async fn await_controllers(&mut self) -> Result<()> {
-        let wanted: Vec<&str> = if self.camera() { vec!["acc", "detect"] } else { vec!["acc"] };
+        let wanted: Vec<&str> = if self.camera() { vec![ACC_NODE, DETECT_NODE] } else { vec![ACC_NODE] };
         let seen = self.bus.watch_nodes().await?;
         let deadline = Instant::now() + NODE_START_TIMEOUT;
         loop {
@@ -562,10 +605,10 @@ impl LoopRun {
     pub fn inputs(&self) -> Vec<NodeInput> {
         let mut v: Vec<NodeInput> = self
             .acc_report()
-            .map(|a| a.inputs.into_iter().map(|stats| NodeInput { node: "acc".into(), stats }).collect())
+            .map(|a| a.inputs.into_iter().map(|stats| NodeInput { node: ACC_NODE.into(), stats }).collect())
             .unwrap_or_default();
         if let Ok(sim) = self.sim_report() {
-            v.push(NodeInput { node: "sim".into(), stats: sim.control_input });
+            v.push(NodeInput { node: SIM_NODE.into(), stats: sim.control_input });
         }
         v
     }

@@ -146,6 +146,9 @@ pub struct UpReport {
     pub scenario: String,
     pub mode: ClockMode,
     pub perception: PerceptionSource,
+    /// The namespace the loop's keys live under ("" for none): the one given, or `loop-N`
+    /// when the default one held another loop.
+    pub namespace: String,
     pub ended: String,
     pub interrupted: bool,
     pub collisions: u64,
@@ -507,11 +510,11 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
     let t0_ns = crate::msg::wall_clock_ns();
     let spec = loop_spec(args, &scenario)?;
     let faults = spec.faults.as_ref().map(|p| p.summary());
-    let mut lp = LoopRun::open(spec, Network::User(connect), &dir.join("logs"), "up").await.context("up")?;
+    let network = Network::User { connect, sim_elsewhere: args.sim == SimSource::External };
+    let mut lp = LoopRun::open(spec, network, &dir.join("logs"), "up").await.context("up")?;
     let watch = Watch::start(lp.bus(), args.perception == PerceptionSource::Camera).await?;
     let extras = Extras::start(lp.bus(), args, &scenario, dir).await?;
-    let (clock, perception) = (args.mode.name(), args.perception.name());
-    eprintln!("slipstream up: {} ({clock} clock, {perception} perception), report in {}", scenario.name, dir.display());
+    eprintln!("{}", header(&scenario.name, args, &lp, dir));
     let external = start_nodes(&mut lp, args).await?;
     let shown = if external.is_some() { args.duration } else { Some(scenario.duration_s) };
     let stopped_by = watch_until_over(&mut lp, &watch, args, shown, external.as_ref()).await?;
@@ -550,6 +553,7 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
         scenario: scenario.name.clone(),
         mode: args.mode,
         perception: args.perception,
+        namespace: lp.bus().topics().namespace().to_string(),
         ended: trace.end.clone(),
         interrupted: stopped_by.is_some(),
         collisions: trace.collisions,
@@ -579,6 +583,22 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
         .with_context(|| format!("write {}", path.display()))?;
     lp.close().await;
     Ok(report)
+}
+
+/// The run's first line: scenario, clock, perception, the namespace (and why, when the default
+/// one held another loop), the report directory.
+fn header(scenario: &str, args: &UpArgs, lp: &LoopRun, dir: &Path) -> String {
+    let (clock, perception) = (args.mode.name(), args.perception.name());
+    let ns = lp.bus().topics().namespace();
+    let place = match lp.moved() {
+        Some((to, beside)) => format!(
+            " in namespace {to} (the default namespace holds another loop: {}; `slipstream top -n {to}` watches this one)",
+            beside.join(", ")
+        ),
+        None if !ns.is_empty() => format!(" in namespace {ns}"),
+        None => String::new(),
+    };
+    format!("slipstream up: {scenario} ({clock} clock, {perception} perception){place}, report in {}", dir.display())
 }
 
 /// trace.csv, the run's plot and the latency plot; returns the plots written.

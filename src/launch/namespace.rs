@@ -1,0 +1,111 @@
+//! Which namespace a loop started with the user's flags runs in, so that two loops on one host
+//! never mix.
+//!
+//! Every peer on a machine meets every other through the rendezvous port, so a second `up` in
+//! the same namespace would join the first one's keys: its simulator would apply the other
+//! loop's controls and both reports would merge each other's topics. Before anything starts,
+//! the launcher lists the nodes alive on the bus (their liveliness tokens, in every namespace)
+//! and compares them with the nodes this run brings. A name both have is a clash:
+//! - in a namespace the user chose (`-n`, or the topic config's `namespace`), the run refuses,
+//!   naming the nodes already there;
+//! - in the default namespace, the run moves to the first free `loop-N` (N = 2, 3, ...) and
+//!   says so, so that `slipstream top -n loop-N` finds it.
+//!
+//! A run whose simulator is someone else's (`up --sim external`) expects a `sim` there and
+//! cannot move away from it: a clash on its other nodes refuses.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::time::Duration;
+
+use anyhow::{bail, Result};
+
+use crate::topics::NODES_PREFIX;
+use crate::TopicMap;
+
+/// How long the launcher asks the bus for the nodes alive. The replies come from sessions
+/// already connected (opening a session waits for its peers' declarations): milliseconds.
+const ASK_TIMEOUT: Duration = Duration::from_secs(1);
+/// The namespaces a second, third, ... loop moves to: `loop-2` to `loop-<MAX_LOOPS>`.
+const MAX_LOOPS: u32 = 64;
+
+/// The namespace the run got, and whether it moved there from the default one.
+pub struct Claimed {
+    pub map: TopicMap,
+    /// Set when the default namespace held another loop: the namespace moved to.
+    pub moved_to: Option<String>,
+    /// The other loop's nodes in the default namespace, when the run moved.
+    pub beside: Vec<String>,
+}
+
+/// Claims `map`'s namespace for a run that brings the nodes `ours`, or moves (see the module
+/// doc). `sim_elsewhere`: the simulator is not ours and is expected in the namespace.
+pub async fn claim(session: &zenoh::Session, map: TopicMap, ours: &[&str], sim_elsewhere: bool) -> Result<Claimed> {
+    let alive = nodes_by_namespace(session).await?;
+    let clash = |ns: &str| -> Vec<String> {
+        alive.get(ns).map_or(Vec::new(), |names| names.iter().filter(|n| ours.contains(&n.as_str())).cloned().collect())
+    };
+    let here = clash(map.namespace());
+    if here.is_empty() {
+        return Ok(Claimed { map, moved_to: None, beside: Vec::new() });
+    }
+    let shown = |ns: &str| if ns.is_empty() { "the default namespace".to_string() } else { format!("namespace `{ns}`") };
+    if !map.namespace().is_empty() || sim_elsewhere {
+        bail!(
+            "a loop is already running in {} (alive there: {}): this one would mix with it (fix: stop it, or give this run a namespace of its own with -n NAME; `slipstream top -n NAME` then watches it)",
+            shown(map.namespace()),
+            here.join(", ")
+        );
+    }
+    let free = (2..=MAX_LOOPS).map(|n| format!("loop-{n}")).find(|ns| !alive.contains_key(ns.as_str()));
+    let Some(ns) = free else {
+        bail!("loop-2 to loop-{MAX_LOOPS} all hold loops (fix: give this run a namespace of its own with -n NAME)")
+    };
+    Ok(Claimed { map: map.with_namespace(&ns)?, moved_to: Some(ns), beside: here })
+}
+
+/// Every node alive on the bus, by namespace ("" for the default one).
+async fn nodes_by_namespace(session: &zenoh::Session) -> Result<BTreeMap<String, BTreeSet<String>>> {
+    let selector = format!("**/{NODES_PREFIX}/*");
+    let replies = session
+        .liveliness()
+        .get(&selector)
+        .timeout(ASK_TIMEOUT)
+        .await
+        .map_err(|e| anyhow::anyhow!("ask the bus for the nodes alive: {}", crate::bus::zenoh_message(&e)))?;
+    let mut alive: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+    while let Ok(reply) = replies.recv_async().await {
+        if let Ok(sample) = reply.result() {
+            if let Some((ns, name)) = split_node_key(sample.key_expr().as_str()) {
+                alive.entry(ns.to_string()).or_default().insert(name.to_string());
+            }
+        }
+    }
+    Ok(alive)
+}
+
+/// `lab/rig2/nodes/sim` -> ("lab/rig2", "sim"); `nodes/sim` -> ("", "sim").
+fn split_node_key(key: &str) -> Option<(&str, &str)> {
+    let marker = format!("{NODES_PREFIX}/");
+    let (ns, name) = match key.strip_prefix(&marker) {
+        Some(name) => ("", name),
+        None => {
+            let at = key.rfind(&format!("/{marker}"))?;
+            (&key[..at], &key[at + marker.len() + 1..])
+        }
+    };
+    (!name.is_empty() && !name.contains('/')).then_some((ns, name))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::split_node_key;
+
+    #[test]
+    fn a_token_key_splits_into_namespace_and_node() {
+        assert_eq!(split_node_key("nodes/sim"), Some(("", "sim")));
+        assert_eq!(split_node_key("lab/rig2/nodes/acc"), Some(("lab/rig2", "acc")));
+        assert_eq!(split_node_key("loop-2/nodes/up"), Some(("loop-2", "up")));
+        assert_eq!(split_node_key("nodes/acc/inputs"), None);
+        assert_eq!(split_node_key("vehicle/speed"), None);
+    }
+}
