@@ -69,6 +69,25 @@ impl Topic {
         Topic::ALL.into_iter().find(|t| t.name() == name)
     }
 
+    /// The topic `name` most likely meant when it is none: a typo (at most two letters off,
+    /// `vehicle/sped`) or a topic's last part alone (`speed`). For the suggestion in an error.
+    pub fn nearest(name: &str) -> Option<Topic> {
+        if Topic::from_name(name).is_some() {
+            return None;
+        }
+        let by_suffix = Topic::ALL.into_iter().filter(|t| t.name().rsplit('/').next() == Some(name));
+        let by_suffix: Vec<Topic> = by_suffix.collect();
+        if let [one] = by_suffix[..] {
+            return Some(one);
+        }
+        Topic::ALL
+            .into_iter()
+            .map(|t| (strsim::levenshtein(name, t.name()), t))
+            .filter(|(d, _)| *d <= MAX_TYPO)
+            .min_by_key(|(d, _)| *d)
+            .map(|(_, t)| t)
+    }
+
     /// The message type this topic carries.
     pub fn kind(self) -> MessageKind {
         match self {
@@ -171,6 +190,9 @@ pub const SIM_ROAD: TopicDef<msg::RoadSpec> = TopicDef::new(Topic::SimRoad);
 /// `<namespace>/nodes/<node name>`.
 pub const NODES_PREFIX: &str = "nodes";
 
+/// The most letters a name may be off a topic's to be taken for a typo of it ([`Topic::nearest`]).
+const MAX_TYPO: usize = 2;
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -191,5 +213,14 @@ mod tests {
         assert_eq!(VEHICLE_SPEED.topic.kind(), <msg::Speed as Message>::KIND);
         assert_eq!(CAMERA_FRONT.topic.kind(), <msg::CameraFrame as Message>::KIND);
         assert_eq!(ACC_COMMAND.topic.kind(), <msg::AccCommand as Message>::KIND);
+    }
+
+    #[test]
+    fn a_typo_or_a_last_part_suggests_the_topic_and_a_stranger_nothing() {
+        assert_eq!(Topic::nearest("vehicle/sped"), Some(Topic::VehicleSpeed));
+        assert_eq!(Topic::nearest("perception/object"), Some(Topic::PerceptionObjects));
+        assert_eq!(Topic::nearest("clock"), Some(Topic::SimClock));
+        assert_eq!(Topic::nearest("vehicle/speed"), None);
+        assert_eq!(Topic::nearest("rt/chatter"), None);
     }
 }

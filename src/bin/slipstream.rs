@@ -155,7 +155,11 @@ fn main() -> ExitCode {
     if !daemon {
         slipstream::cli::apply_zenoh_runtime_default();
     }
-    slipstream::cli::init_tracing(if daemon { slipstream::cli::LogLevel::Node } else { slipstream::cli::LogLevel::Tool });
+    slipstream::cli::init_tracing(if daemon {
+        slipstream::cli::LogLevel::Node
+    } else {
+        slipstream::cli::LogLevel::Tool
+    });
     slipstream::cli::exit_code(run(cli))
 }
 

@@ -36,20 +36,7 @@ pub struct EchoArgs {
 
 /// Runs until --count, --duration or Ctrl-C. Returns how many messages it printed.
 pub async fn run(bus: &Bus, args: &EchoArgs) -> Result<u64> {
-    let topics = bus.topics();
-    let (key, latched) = match Topic::from_name(&args.topic) {
-        Some(t) => (topics.key(t), topics.qos(t).latched),
-        None => {
-            let k = zenoh::key_expr::OwnedKeyExpr::autocanonize(args.topic.clone()).map_err(|e| {
-                anyhow::anyhow!(
-                    "`{}` is neither a topic nor a key expression ({e}); topics: {}",
-                    args.topic,
-                    Topic::ALL.map(|t| t.name()).join(", ")
-                )
-            })?;
-            (k, false)
-        }
-    };
+    let (key, latched) = resolve(bus.topics(), &args.topic)?;
     if let Some(dir) = &args.save {
         std::fs::create_dir_all(dir).with_context(|| format!("create {}", dir.display()))?;
     }
@@ -64,7 +51,7 @@ pub async fn run(bus: &Bus, args: &EchoArgs) -> Result<u64> {
             }
         })
         .await?;
-    tracing::info!(%key, "echo: waiting for messages");
+    tracing::debug!(%key, "echo: waiting for messages");
     let bad = TopicStats::new(key.to_string());
     let deadline = args.duration.map(|d| Instant::now() + Duration::from_secs_f64(d));
     let mut printed = 0u64;
@@ -92,11 +79,40 @@ pub async fn run(bus: &Bus, args: &EchoArgs) -> Result<u64> {
         out.flush()?;
         printed += 1;
     }
+    if printed == 0 {
+        let waited = args.duration.map_or(String::new(), |d| format!(" in {d} s"));
+        eprintln!("echo: no message on {key}{waited} (`slipstream top` lists the keys that carry messages)");
+    }
     let missed = dropped.load(std::sync::atomic::Ordering::Relaxed);
     if missed > 0 {
         tracing::warn!(missed, "messages arrived faster than they could be printed and were skipped");
     }
     Ok(printed)
+}
+
+/// The key to subscribe to for `given` and whether it is latched: a topic's key after
+/// namespace and remapping, or any key expression. A name a letter or two off a topic's (or a
+/// topic's last part alone) is refused with the topic it likely meant: waiting on a key
+/// nothing publishes would look like a silent loop.
+fn resolve(topics: &crate::TopicMap, given: &str) -> Result<(zenoh::key_expr::OwnedKeyExpr, bool)> {
+    if let Some(t) = Topic::from_name(given) {
+        return Ok((topics.key(t), topics.qos(t).latched));
+    }
+    if let Some(t) = Topic::nearest(given) {
+        anyhow::bail!(
+            "`{given}` is not a topic: did you mean {}? (topics: {}; a key expression nothing publishes yet can be given with a wildcard, e.g. `{given}/**`)",
+            t.name(),
+            Topic::ALL.map(|t| t.name()).join(", ")
+        );
+    }
+    let key = zenoh::key_expr::OwnedKeyExpr::autocanonize(given.to_string()).map_err(|e| {
+        anyhow::anyhow!(
+            "`{given}` is neither a topic nor a key expression ({}); topics: {}",
+            crate::bus::zenoh_message(&e),
+            Topic::ALL.map(|t| t.name()).join(", ")
+        )
+    })?;
+    Ok((key, false))
 }
 
 /// The JSON line for one sample; None (counted and logged) when it does not decode.
@@ -147,6 +163,8 @@ fn line(sample: &zenoh::sample::Sample, args: &EchoArgs, bad: &TopicStats) -> Re
 
 /// `slipstream echo`: fails when --count messages did not come.
 pub fn command(args: &EchoArgs, connect: &crate::ConnectArgs) -> Result<std::process::ExitCode> {
+    // A typo is refused before joining the bus.
+    resolve(&connect.topic_map()?, &args.topic)?;
     let printed =
         crate::cli::on_bus(connect, &crate::cli::own_name("echo"), |bus| async move { run(&bus, args).await })?;
     match args.count {
