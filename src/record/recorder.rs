@@ -197,6 +197,13 @@ impl Recording {
             let (tx, shared) = (tx.clone(), shared.clone());
             subs.push(bus.subscribe_samples(sel.clone(), false, move |s| enqueue(&tx, &shared, &s)).await?);
         }
+        // A latched topic (camera info, the road) was published when its node started, maybe
+        // long before the recorder: ask its publishers for their cached message too. Its live
+        // messages then come on both subscriptions; the writer keeps one of each.
+        for key in latched_keys(bus.topics(), selectors) {
+            let (tx, shared) = (tx.clone(), shared.clone());
+            subs.push(bus.subscribe_samples(key, true, move |s| enqueue(&tx, &shared, &s)).await?);
+        }
         Ok(Recording { shared, tx, subs, writer: Some(thread) })
     }
 
@@ -214,6 +221,16 @@ impl Recording {
         let thread = self.writer.take().context("recording already finished")?;
         thread.join().map_err(|_| anyhow!("the recorder's writer thread panicked"))?
     }
+}
+
+/// The keys of the latched topics that `selectors` cover.
+fn latched_keys(topics: &crate::TopicMap, selectors: &[OwnedKeyExpr]) -> Vec<OwnedKeyExpr> {
+    crate::topics::Topic::ALL
+        .into_iter()
+        .filter(|t| topics.qos(*t).latched)
+        .map(|t| topics.key(t))
+        .filter(|key| selectors.iter().any(|s| s.includes(key)))
+        .collect()
 }
 
 /// Zenoh's callback: copy the payload (one copy: the sample's buffer, possibly shared memory
@@ -468,6 +485,12 @@ fn write_item(
     }
     let channel = channels.get_mut(&key).expect("just added");
     let header = kind.and_then(|k| msg::decode_header(&item.payload, k).ok()).map(|(h, _)| h);
+    if header.is_some_and(|h| channel.last_seq == Some(h.seq)) {
+        // The same sequence number again from the same publisher on the same key: one message
+        // heard twice (a latched topic's live message also comes through its cache's
+        // subscription), written once.
+        return Ok(());
+    }
     if let Some(h) = &header {
         let last = channel.last_seq.unwrap_or(h.seq);
         if h.seq > last + 1 {
