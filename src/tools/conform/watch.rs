@@ -54,12 +54,19 @@ impl Tap {
     }
 }
 
-/// Lockstep: answers each step once, as the node the simulator waits for.
+/// Lockstep: answers each step once, as the node the simulator waits for, at the pace of the
+/// simulated clock. A lockstep simulator runs as fast as its slowest answer: answered at once,
+/// a 40 s scenario would end within seconds of wall time, before the watch is over. Paced,
+/// the watch sees the same stretch of simulated time in every clock mode.
 struct Answerer {
-    publisher: Publisher<ControlCommand>,
+    /// Steps to answer, to the pacing task (at most one is outstanding: the simulator waits).
+    due: tokio::sync::mpsc::Sender<(u64, u64)>,
     physics_hz: Option<f64>,
     last: Option<u64>,
 }
+
+/// Steps queued for the pacing task at most (a lockstep simulator waits for each answer).
+const ANSWERS_QUEUED: usize = 64;
 
 impl Answerer {
     /// The answer to step `k`: a light throttle on even steps, coasting on odd ones (the ego
@@ -69,18 +76,34 @@ impl Answerer {
         ControlCommand { throttle, brake: 0.0, steer: 0.0, answers_step: Some(k), perception_stamp_pub_ns: None }
     }
 
-    fn answer(&mut self, k: u64, stamp_sim_ns: u64, tap: &Tap) {
+    /// Starts the pacing task: it publishes the answer to a step stamped `t` no sooner than
+    /// `t - t_first` after the first answer.
+    fn start(publisher: Publisher<ControlCommand>, tap: Tap) -> Answerer {
+        let (due, mut steps) = tokio::sync::mpsc::channel::<(u64, u64)>(ANSWERS_QUEUED);
+        tokio::spawn(async move {
+            let mut origin: Option<(tokio::time::Instant, u64)> = None;
+            while let Some((k, stamp_sim_ns)) = steps.recv().await {
+                let (t0, s0) = *origin.get_or_insert((tokio::time::Instant::now(), stamp_sim_ns));
+                tokio::time::sleep_until(t0 + Duration::from_nanos(stamp_sim_ns.saturating_sub(s0))).await;
+                let cmd = Answerer::command(k);
+                if let Err(e) = publisher.put(stamp_sim_ns, &cmd) {
+                    tracing::warn!("conform: answer to step {k}: {e}");
+                    continue;
+                }
+                if let Some(l) = tap.observed.lock().lockstep.as_mut() {
+                    l.answered.insert(k, cmd);
+                }
+            }
+        });
+        Answerer { due, physics_hz: None, last: None }
+    }
+
+    fn answer(&mut self, k: u64, stamp_sim_ns: u64) {
         if self.last.is_some_and(|last| last >= k) {
             return;
         }
-        let cmd = Answerer::command(k);
-        if let Err(e) = self.publisher.put(stamp_sim_ns, &cmd) {
-            tracing::warn!("conform: answer to step {k}: {e}");
-            return;
-        }
-        self.last = Some(k);
-        if let Some(l) = tap.observed.lock().lockstep.as_mut() {
-            l.answered.insert(k, cmd);
+        if self.due.try_send((k, stamp_sim_ns)).is_ok() {
+            self.last = Some(k);
         }
     }
 
@@ -109,11 +132,7 @@ pub async fn watch(bus: &Bus, args: &ConformSimArgs) -> Result<Observed, BusErro
     };
     let tap = Tap { observed: Arc::new(Mutex::new(observed)), start: Instant::now() };
     let answerer = match args.lockstep {
-        true => Some(Arc::new(Mutex::new(Answerer {
-            publisher: bus.publisher(topics::VEHICLE_CONTROL).await?,
-            physics_hz: None,
-            last: None,
-        }))),
+        true => Some(Arc::new(Mutex::new(Answerer::start(bus.publisher(topics::VEHICLE_CONTROL).await?, tap.clone())))),
         false => None,
     };
     let subs = subscribe(bus, &tap, answerer.clone()).await?;
@@ -196,7 +215,7 @@ async fn subscribe(bus: &Bus, tap: &Tap, answerer: Option<Arc<Mutex<Answerer>>>)
             if let (Some(t), Some(a)) = (stamp, &ans) {
                 let mut a = a.lock();
                 if let Some(k) = a.step_of(t) {
-                    a.answer(k, t, &tp);
+                    a.answer(k, t);
                 }
             }
         }),
@@ -223,7 +242,7 @@ fn take_state(tap: &Tap, sample: &Sample, answerer: Option<&Mutex<Answerer>>) {
         seen.header.stamp_sim_ns
     };
     if let Some(a) = answerer {
-        a.lock().answer(state.step, stamp, tap);
+        a.lock().answer(state.step, stamp);
     }
 }
 
