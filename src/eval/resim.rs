@@ -16,6 +16,7 @@
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -33,6 +34,8 @@ use crate::topics::Topic;
 
 /// How long a step waits for the outputs the recording has for it.
 pub const OUTPUT_WAIT: Duration = Duration::from_secs(5);
+/// How often a wait for outputs looks whether the replay is to stop.
+const STOP_POLL: Duration = Duration::from_millis(100);
 /// Steps in a row whose outputs did not come before the replay gives up (the nodes stopped).
 const GIVE_UP_AFTER: u32 = 3;
 
@@ -107,12 +110,19 @@ struct Recorded {
     set_speed_mps: Option<f64>,
     outputs: Outputs,
     inputs: u64,
+    /// The keys (relative to the recording's namespace) that hold at least one message.
+    keys: std::collections::BTreeSet<String>,
 }
 
 impl Recorded {
     fn scan(path: &Path) -> Result<Recorded> {
         let mut rec = Recorded::default();
         each_message(path, |m| {
+            let ns = m.channel.metadata.get("namespace").map_or("", String::as_str);
+            let key = m.channel.topic.strip_prefix(ns).unwrap_or(&m.channel.topic).trim_start_matches('/');
+            if !rec.keys.contains(key) {
+                rec.keys.insert(key.to_string());
+            }
             let bytes = m.data.into_owned();
             let Ok(kind) = msg::peek_kind(&bytes) else { return Ok(()) };
             match kind {
@@ -143,6 +153,42 @@ impl Recorded {
         })?;
         anyhow::ensure!(rec.inputs > 0, "{} holds no simulator messages to replay", path.display());
         Ok(rec)
+    }
+
+    /// The latched inputs today's nodes cannot do without and the file lacks: a camera's
+    /// calibration wherever its frames are replayed into the detector (it uses no frame
+    /// without one). Keys are the default topic map's.
+    fn missing(&self) -> Vec<&'static str> {
+        if self.perception() != PerceptionSource::Camera {
+            return Vec::new();
+        }
+        let keys = crate::TopicMap::default();
+        [(Topic::CameraFront, Topic::CameraFrontInfo), (Topic::CameraNarrow, Topic::CameraNarrowInfo)]
+            .into_iter()
+            .filter(|(frames, info)| {
+                self.keys.contains(keys.key(*frames).as_str()) && !self.keys.contains(keys.key(*info).as_str())
+            })
+            .map(|(_, info)| info.name())
+            .collect()
+    }
+
+    /// Refuses a file that cannot be re-simulated as it was run, saying what it lacks; warns
+    /// about the road, without which the ACC runs with no lanes (an external simulator may
+    /// publish none).
+    fn check(&self, path: &Path) -> Result<()> {
+        let missing = self.missing();
+        if !missing.is_empty() {
+            bail!(
+                "{} cannot be re-simulated: it has no {}, and the detector uses no frame without its camera's calibration (fix: record the run again with its latched topics: `up --record`, or `slipstream record` with no keys or with these ones named)",
+                path.display(),
+                missing.join(" and ")
+            );
+        }
+        let road = crate::TopicMap::default().key(Topic::SimRoad);
+        if !self.keys.contains(road.as_str()) {
+            tracing::warn!("{} has no sim/road: the ACC replays without the road's lanes", path.display());
+        }
+        Ok(())
     }
 
     fn clock(&self) -> ClockMode {
@@ -188,8 +234,9 @@ impl Inbox {
     }
 
     /// Waits until every frame in `frames` has its detections and `command` (a step's
-    /// stamp) its command; false after `timeout`.
-    fn wait(&self, frames: &[u64], command: Option<u64>, timeout: Duration) -> bool {
+    /// stamp) its command; false after `timeout` or once `stop` is set (looked at every
+    /// [`STOP_POLL`]).
+    fn wait(&self, frames: &[u64], command: Option<u64>, timeout: Duration, stop: &AtomicBool) -> bool {
         let deadline = Instant::now() + timeout;
         let mut o = self.outputs.lock();
         loop {
@@ -198,9 +245,11 @@ impl Inbox {
             if done {
                 return true;
             }
-            if self.arrived.wait_until(&mut o, deadline).timed_out() {
+            let now = Instant::now();
+            if now >= deadline || stop.load(Ordering::Relaxed) {
                 return false;
             }
+            self.arrived.wait_until(&mut o, deadline.min(now + STOP_POLL));
         }
     }
 }
@@ -223,7 +272,14 @@ pub struct ReplayStats {
     /// were played late.
     pub late_inputs: u64,
     pub wall_s: f64,
+    /// Stopped before the end of the recording (a signal).
+    pub interrupted: bool,
 }
+
+/// The replay was asked to stop.
+#[derive(Debug, thiserror::Error)]
+#[error("the replay was stopped")]
+struct Interrupted;
 
 /// Inputs read ahead and played in simulated-time order: the recorder receives each key on
 /// its own path, so a step's state may sit in the file after the next step's speed.
@@ -244,6 +300,8 @@ struct Replayer<'a> {
     inbox: &'a Inbox,
     outputs: BTreeMap<u16, Option<Output>>,
     step: Step,
+    /// Set when the replay is to end early.
+    stop: &'a AtomicBool,
     in_a_row: u32,
     stats: ReplayStats,
     last_progress: Instant,
@@ -289,9 +347,12 @@ impl Replayer<'_> {
             self.step.frames.iter().copied().filter(|f| recorded.detections.contains_key(f)).collect();
         let command = recorded.commands.contains_key(&stamp).then_some(stamp);
         self.stats.steps += 1;
-        if self.inbox.wait(&frames, command, OUTPUT_WAIT) {
+        if self.inbox.wait(&frames, command, OUTPUT_WAIT, self.stop) {
             self.in_a_row = 0;
             return Ok(());
+        }
+        if self.stop.load(Ordering::Relaxed) {
+            return Err(Interrupted.into());
         }
         self.stats.steps_timed_out += 1;
         self.in_a_row += 1;
@@ -314,6 +375,7 @@ fn replay(
     recorded: &Outputs,
     inbox: &Inbox,
     progress: &mut dyn FnMut(f64),
+    stop: &AtomicBool,
 ) -> Result<ReplayStats> {
     let started = Instant::now();
     let mut r = Replayer {
@@ -322,6 +384,7 @@ fn replay(
         inbox,
         outputs: BTreeMap::new(),
         step: Step::default(),
+        stop,
         in_a_row: 0,
         stats: ReplayStats::default(),
         last_progress: Instant::now(),
@@ -329,7 +392,10 @@ fn replay(
     // Keyed by (simulated time, place in the file): time order, the file's order within a step.
     let mut window: BTreeMap<(u64, u64), Pending> = BTreeMap::new();
     let mut index = 0u64;
-    each_message(path, |m| {
+    let read = each_message(path, |m| {
+        if stop.load(Ordering::Relaxed) {
+            return Err(Interrupted.into());
+        }
         let (channel, bytes) = (m.channel, m.data.into_owned());
         let Ok(kind) = msg::peek_kind(&bytes) else { return Ok(()) };
         if role(kind) == Role::Output {
@@ -344,11 +410,17 @@ fn replay(
             }
         }
         Ok(())
-    })?;
-    while let Some(((stamp, _), p)) = window.pop_first() {
-        r.play(stamp, p, progress)?;
+    });
+    let rest = read.and_then(|_| {
+        while let Some(((stamp, _), p)) = window.pop_first() {
+            r.play(stamp, p, progress)?;
+        }
+        r.finish_step()
+    });
+    match rest {
+        Err(e) if e.is::<Interrupted>() => r.stats.interrupted = true,
+        other => other?,
     }
-    r.finish_step()?;
     r.stats.wall_s = started.elapsed().as_secs_f64();
     Ok(r.stats)
 }
@@ -454,6 +526,8 @@ pub struct ResimReport {
     pub commands: Comparison,
     pub nodes: Vec<NodeEnd>,
     pub report_dir: PathBuf,
+    /// What stopped the replay before the recording's end (a signal's name), if anything.
+    pub stopped_by: Option<String>,
 }
 
 impl ResimReport {
@@ -466,8 +540,17 @@ impl ResimReport {
 
 /// Replays `path` into today's detector and ACC (started with `connect`'s flags, logs in
 /// `dir`) and compares their outputs with the recorded ones.
-pub async fn run(path: &Path, connect: &ConnectArgs, dir: &Path, progress: &mut dyn FnMut(f64)) -> Result<ResimReport> {
+/// `stop`, once set (a signal), ends the replay early: the nodes are stopped and the report
+/// covers what was replayed (`replay.interrupted`).
+pub async fn run(
+    path: &Path,
+    connect: &ConnectArgs,
+    dir: &Path,
+    progress: &mut dyn FnMut(f64),
+    stop: &AtomicBool,
+) -> Result<ResimReport> {
     let recorded = tokio::task::block_in_place(|| Recorded::scan(path))?;
+    recorded.check(path)?;
     // The scenario's own time gap and vehicle, as `up` gave them; otherwise today's ACC
     // settings decide (a changed settings file is what a re-simulation compares).
     let scenario = recorded.scenario.as_deref().and_then(|name| crate::sim::Scenario::find(name).ok());
@@ -484,10 +567,12 @@ pub async fn run(path: &Path, connect: &ConnectArgs, dir: &Path, progress: &mut 
         faults: None,
         link: Default::default(),
     };
-    let mut lp = LoopRun::open(spec.clone(), Network::User { connect, sim_elsewhere: false }, &dir.join("logs"), "resim").await?;
+    let mut lp =
+        LoopRun::open(spec.clone(), Network::User { connect, sim_elsewhere: false }, &dir.join("logs"), "resim")
+            .await?;
     let (inbox, subs) = Inbox::start(lp.bus()).await?;
     lp.start_controllers().await?;
-    let replayed = tokio::task::block_in_place(|| replay(lp.bus(), path, &recorded.outputs, &inbox, progress));
+    let replayed = tokio::task::block_in_place(|| replay(lp.bus(), path, &recorded.outputs, &inbox, progress, stop));
     tokio::time::sleep(crate::launch::SETTLE).await;
     for node in lp.check().died {
         tracing::warn!(
@@ -517,6 +602,7 @@ pub async fn run(path: &Path, connect: &ConnectArgs, dir: &Path, progress: &mut 
         ),
         nodes,
         report_dir: dir.to_path_buf(),
+        stopped_by: None,
     })
 }
 
@@ -559,10 +645,15 @@ pub fn summary(r: &ResimReport) -> String {
             r.replay.steps_timed_out, OUTPUT_WAIT
         ));
     }
-    let verdict = match (r.detections.same() && r.commands.same(), r.complete()) {
-        (true, true) => "today's nodes answer exactly as recorded",
-        (false, true) => "today's nodes answer differently (above)",
-        (_, false) => "the replay is incomplete (a node died or did not answer)",
+    let stopped;
+    let verdict = match (r.detections.same() && r.commands.same(), r.complete(), &r.stopped_by) {
+        (_, _, Some(signal)) if r.replay.interrupted => {
+            stopped = format!("stopped by {signal} before the recording's end: compared up to there");
+            stopped.as_str()
+        }
+        (true, true, _) => "today's nodes answer exactly as recorded",
+        (false, true, _) => "today's nodes answer differently (above)",
+        (_, false, _) => "the replay is incomplete (a node died or did not answer)",
     };
     s.push_str(&format!("  {verdict}\n  report: {}", r.report_dir.join("report.json").display()));
     s

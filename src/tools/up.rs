@@ -206,7 +206,8 @@ impl Outcome {
 
 /// `up --from FILE`: re-simulation ([`crate::eval::resim`]); prints the summary, writes the
 /// report. Exit code 0 when every recorded output was answered (the same or not: differences
-/// are in the report), 1 when a node died or stopped answering.
+/// are in the report), 1 when a node died or stopped answering, 130 when a signal (Ctrl-C,
+/// SIGTERM, SIGHUP) stopped it: the nodes are stopped and the report covers what was replayed.
 pub fn run_from(path: &Path, args: &UpArgs, connect: &ConnectArgs) -> Result<u8> {
     anyhow::ensure!(
         path.is_file(),
@@ -227,13 +228,30 @@ pub fn run_from(path: &Path, args: &UpArgs, connect: &ConnectArgs) -> Result<u8>
     let shown = super::status::Status::lines(args.plain);
     let mut progress = |t_s: f64| shown.show(&format!("replayed {t_s:.1} s"));
     let rt = tokio::runtime::Runtime::new()?;
-    let report = rt.block_on(crate::eval::resim::run(path, connect, &dir, &mut progress))?;
+    // A signal ends the replay early; the nodes are stopped and the report still written.
+    let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
+    let signal = Arc::new(Mutex::new(None::<&'static str>));
+    let mut report = rt.block_on(async {
+        let (stop2, signal2) = (stop.clone(), signal.clone());
+        let watcher = tokio::spawn(async move {
+            *signal2.lock() = Some(crate::cli::stop_requested().await);
+            stop2.store(true, std::sync::atomic::Ordering::Relaxed);
+        });
+        let report = crate::eval::resim::run(path, connect, &dir, &mut progress, &stop).await;
+        watcher.abort();
+        report
+    })?;
     shown.finish();
+    report.stopped_by = signal.lock().map(str::to_string);
     let file = dir.join("report.json");
     std::fs::write(&file, serde_json::to_string_pretty(&report)?)
         .with_context(|| format!("write {}", file.display()))?;
     println!("{}", crate::eval::resim::summary(&report));
-    Ok(if report.complete() { 0 } else { 1 })
+    Ok(match (&report.stopped_by, report.complete()) {
+        (Some(_), _) => 130,
+        (None, true) => 0,
+        (None, false) => 1,
+    })
 }
 
 /// Runs the loop to the end of the scenario (or Ctrl-C), prints the summary, writes the report.
