@@ -272,9 +272,27 @@ pub fn run(args: &UpArgs, connect: &ConnectArgs) -> Result<Outcome> {
         None => PathBuf::from("reports").join(format!("{}-{}", scenario.name, super::utc_stamp())),
     };
     let rt = tokio::runtime::Runtime::new()?;
-    let report = rt.block_on(run_loop(args, connect, scenario, &dir))?;
+    let fresh = !dir.exists();
+    let report = rt.block_on(run_loop(args, connect, scenario, &dir)).inspect_err(|_| {
+        // A run that failed before anything was written (a taken view port, a namespace in
+        // use) leaves no empty report directory behind; one with logs keeps them.
+        if fresh {
+            remove_if_empty(&dir);
+        }
+    })?;
     println!("{}", summary(&report));
     Ok(Outcome { report })
+}
+
+/// Removes `dir` if it holds nothing but empty directories; best effort.
+fn remove_if_empty(dir: &Path) {
+    fn empty(d: &Path) -> bool {
+        std::fs::read_dir(d)
+            .is_ok_and(|entries| entries.flatten().all(|e| e.file_type().is_ok_and(|t| t.is_dir()) && empty(&e.path())))
+    }
+    if empty(dir) {
+        let _ = std::fs::remove_dir_all(dir);
+    }
 }
 
 /// With --sim external the scenario is the simulator's: this one only names the run, sets
