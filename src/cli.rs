@@ -92,8 +92,9 @@ pub fn init_tracing(level: LogLevel) {
         LogLevel::Node => "info",
         LogLevel::Tool => "warn",
     };
-    let env = EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| EnvFilter::new(format!("{base},zenoh=warn,zenoh_ext=warn,foxglove=warn,{ACL_TARGET}=trace")));
+    let env = EnvFilter::try_from_default_env().unwrap_or_else(|_| {
+        EnvFilter::new(format!("{base},zenoh=warn,zenoh_ext=warn,foxglove=warn,{ACL_TARGET}=trace"))
+    });
     let layer = tracing_subscriber::fmt::layer()
         .with_writer(std::io::stderr)
         // Colours on a terminal only: `slipstream up` writes the nodes' logs to files.

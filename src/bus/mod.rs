@@ -17,8 +17,8 @@ mod subscriber;
 
 use std::sync::Arc;
 
-pub use error::{without_source_locations, zenoh_message, BusError};
 pub(crate) use error::zerr;
+pub use error::{without_source_locations, zenoh_message, BusError};
 pub use faults::NodeClock;
 pub use follow::{Following, FOLLOW_SWITCH_AFTER};
 pub use frame_publisher::{FramePublisher, FrameSent};

@@ -48,7 +48,8 @@ pub async fn claim(session: &zenoh::Session, map: TopicMap, ours: &[&str], sim_e
     if here.is_empty() {
         return Ok(Claimed { map, moved_to: None, beside: Vec::new() });
     }
-    let shown = |ns: &str| if ns.is_empty() { "the default namespace".to_string() } else { format!("namespace `{ns}`") };
+    let shown =
+        |ns: &str| if ns.is_empty() { "the default namespace".to_string() } else { format!("namespace `{ns}`") };
     if !map.namespace().is_empty() || sim_elsewhere {
         bail!(
             "a loop is already running in {} (alive there: {}): this one would mix with it (fix: stop it, or give this run a namespace of its own with -n NAME; `slipstream top -n NAME` then watches it)",
