@@ -155,7 +155,12 @@ pub struct UpReport {
     /// Collisions among traffic vehicles.
     pub traffic_collisions: u64,
     pub sim_time_s: f64,
+    /// `up`'s whole run, starting and stopping the nodes included.
     pub wall_time_s: f64,
+    /// The simulator's own run: its report's wall time (or, with an external simulator, from
+    /// its first message to the end).
+    pub sim_wall_time_s: f64,
+    /// Simulated seconds per second of the simulator's own run (`sim_wall_time_s`).
     pub real_time_factor: f64,
     pub nodes: Vec<NodeEnd>,
     pub latency: LatencyReport,
@@ -552,8 +557,10 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
     let extras = Extras::start(lp.bus(), args, &scenario, dir).await?;
     eprintln!("{}", header(&scenario.name, args, &lp, dir));
     let external = start_nodes(&mut lp, args).await?;
+    let sim_started = Instant::now();
     let shown = if external.is_some() { args.duration } else { Some(scenario.duration_s) };
     let stopped_by = watch_until_over(&mut lp, &watch, args, shown, external.as_ref()).await?;
+    let sim_ran_s = sim_started.elapsed().as_secs_f64();
     for node in lp.check().died {
         eprintln!(
             "{node} ended before the run was over; see {}",
@@ -583,6 +590,7 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
     let trace = judged.trace;
     let plots = judged_outputs(&trace, &latency, &scenario.name, args, t0_ns, dir)?;
     let sim_time_s = trace.samples.last().map_or(0.0, |s| s.t_s);
+    let sim_wall_time_s = sim.as_ref().map_or(sim_ran_s, |s| s.wall_time_s);
     let lag_s = VehicleParams::of_class(scenario.ego.class.into()).actuator_lag_s;
     let report = UpReport {
         command: std::env::args().collect::<Vec<_>>().join(" "),
@@ -596,7 +604,8 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
         traffic_collisions: trace.traffic_collisions,
         sim_time_s,
         wall_time_s: wall,
-        real_time_factor: sim_time_s / wall.max(1e-9),
+        sim_wall_time_s,
+        real_time_factor: sim_time_s / sim_wall_time_s.max(1e-9),
         nodes,
         latency: latency_report(&latency, args, rec.statuses.last().map(|s| s.msg.time_gap_s), lag_s),
         metrics: judged.metrics,
@@ -686,14 +695,15 @@ pub fn summary(r: &UpReport) -> String {
     let f = fmt_opt;
     let mut s =
         format!(
-        "\n{} ({} clock, {} perception): {}\n  {:.1} s simulated in {:.1} s (real-time factor {:.2}); collisions {} (traffic among itself: {})\n",
+        "\n{} ({} clock, {} perception): {}\n  {:.1} s simulated in {:.1} s (real-time factor {:.2}; {:.1} s with the nodes' start and stop); collisions {} (traffic among itself: {})\n",
         r.scenario,
         r.mode.name(),
         r.perception.name(),
         r.ended,
         r.sim_time_s,
-        r.wall_time_s,
+        r.sim_wall_time_s,
         r.real_time_factor,
+        r.wall_time_s,
         r.collisions,
         r.traffic_collisions
     );
