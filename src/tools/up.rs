@@ -598,7 +598,8 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
         mode: args.mode,
         perception: args.perception,
         namespace: lp.bus().topics().namespace().to_string(),
-        ended: trace.end.clone(),
+        // A signal names the end: the simulator, stopped by up, reports only "stopped".
+        ended: stopped_by.map_or_else(|| trace.end.clone(), |signal| format!("stopped ({signal})")),
         interrupted: stopped_by.is_some(),
         collisions: trace.collisions,
         traffic_collisions: trace.traffic_collisions,
