@@ -45,7 +45,7 @@ pub struct EvalSweepArgs {
     pub perception: PerceptionSource,
     /// Where the scenarios (scenarios/<name>.json5), the report (sweep.json), the plot
     /// (rates.png) and the logs of the runs that missed an aim (logs/) go
-    #[arg(long = "report", alias = "out", value_name = "DIR", default_value = "sweep")]
+    #[arg(long = "report", alias = "out", value_name = "DIR", default_value = "reports/sweep")]
     pub out: PathBuf,
     /// The worst runs named in the report
     #[arg(long, default_value_t = 10, value_name = "N")]
