@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use super::settings::{AccSettings, PerceptionSource, Vehicle, DEFAULT_ACC_CONFIG_PATH};
-use crate::config::ConfigError;
+use crate::config::{ConfigError, ConnectArgs, FaultArgs};
 use crate::msg::ObjectClass;
 use crate::vehicle::VehicleParams;
 
@@ -111,4 +111,34 @@ impl AccArgs {
         s.check().map_err(|(key, problem, fix)| ConfigError::new("command line", key, problem, fix))?;
         Ok(s)
     }
+}
+
+/// slipstream-acc: adaptive cruise control, closing the loop through the simulator.
+///
+/// Reads vehicle/speed, vehicle/state, the vehicles ahead (perception/objects, or the
+/// simulator's ground truth with --perception ground-truth) and acc/command; publishes
+/// vehicle/control for every speed message (naming the step it answers, for lockstep) and
+/// acc/status (mode, set speed, target acceleration, lead, gap, desired gap, TTC, warnings).
+/// Keeps a time gap to the lead in its lane, holds the set speed with nobody ahead, stops and
+/// goes, warns and brakes hard when a collision threatens, and brakes smoothly when its inputs
+/// go stale. Control law and results: docs/control.md. Examples:
+///
+///   slipstream-acc                                  (camera perception, config/acc.json5)
+///
+///   slipstream-acc --perception ground-truth --set-speed 30 --time-gap 2.0
+///
+///   slipstream-acc --lockstep     (with slipstream-sim --mode lockstep --wait-for acc)
+#[derive(clap::Parser, Debug)]
+#[command(name = "slipstream-acc", version, verbatim_doc_comment)]
+pub struct AccCli {
+    #[command(flatten)]
+    pub connect: ConnectArgs,
+    #[command(flatten)]
+    pub faults: FaultArgs,
+    #[command(flatten)]
+    pub acc: AccArgs,
+    /// At exit, print the run's statistics as JSON on stdout (commands, modes, and per input
+    /// what arrived, was lost on the way, or was dropped or delayed by --faults)
+    #[arg(long)]
+    pub json: bool,
 }

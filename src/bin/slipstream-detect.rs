@@ -3,30 +3,8 @@
 
 use anyhow::{Context, Result};
 use clap::Parser;
-use slipstream::config::{ConnectArgs, FaultArgs};
+use slipstream::perception::args::DetectCli;
 use slipstream::perception::DetectorParams;
-
-/// slipstream-detect: finds vehicles in camera/front frames and publishes perception/objects.
-///
-/// Reads camera/front (latest-only: never a stale frame; skipped frames are counted) and
-/// camera/front/info; publishes one Detections message per frame with the frame's simulation
-/// time, sequence number and publish time, so consumers can match it to speed and ground
-/// truth. Method and scores: docs/perception.md.
-#[derive(Parser)]
-#[command(name = "slipstream-detect", version)]
-struct Cli {
-    #[command(flatten)]
-    connect: ConnectArgs,
-    #[command(flatten)]
-    faults: FaultArgs,
-    /// This node's name on the bus
-    #[arg(long, default_value = "detect")]
-    name: String,
-    /// At exit, print the run's statistics as JSON on stdout (frames, detections, time spent
-    /// detecting)
-    #[arg(long)]
-    json: bool,
-}
 
 fn main() -> std::process::ExitCode {
     slipstream::cli::exit_code(run().map(|()| std::process::ExitCode::SUCCESS))
@@ -34,7 +12,7 @@ fn main() -> std::process::ExitCode {
 
 fn run() -> Result<()> {
     slipstream::cli::apply_zenoh_runtime_default();
-    let cli = Cli::parse();
+    let cli = DetectCli::parse();
     slipstream::cli::init_tracing(slipstream::cli::LogLevel::Node);
     let rt = tokio::runtime::Runtime::new()?;
     rt.block_on(async {

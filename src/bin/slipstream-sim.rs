@@ -3,33 +3,7 @@
 
 use anyhow::{Context, Result};
 use clap::Parser;
-use slipstream::config::{ConnectArgs, FaultArgs};
-use slipstream::sim::args::SimArgs;
-
-/// slipstream-sim: a deterministic driving simulator on the bus.
-///
-/// Publishes vehicle/speed, vehicle/state, camera/front (+ camera/front/info), objects
-/// (ground truth), sim/clock and sim/events; the ego obeys vehicle/control. Runs one
-/// scenario (scenarios/*.json5, or a file of your own: docs/simulator.md) and exits when it
-/// ends. Examples:
-///
-///   slipstream-sim --scenario cut-in
-///
-///   slipstream-sim --scenario my.json5 --mode fast --seed 7
-///
-///   slipstream-sim --mode lockstep --wait-for acc    (steps wait for the acc node)
-///
-///   slipstream-sim --scenario busy-traffic --preview frame.png --at 5
-#[derive(Parser)]
-#[command(name = "slipstream-sim", version, verbatim_doc_comment)]
-struct Cli {
-    #[command(flatten)]
-    connect: ConnectArgs,
-    #[command(flatten)]
-    faults: FaultArgs,
-    #[command(flatten)]
-    sim: SimArgs,
-}
+use slipstream::sim::args::{SimArgs, SimCli};
 
 fn main() -> std::process::ExitCode {
     slipstream::cli::exit_code(run().map(|()| std::process::ExitCode::SUCCESS))
@@ -37,7 +11,7 @@ fn main() -> std::process::ExitCode {
 
 fn run() -> Result<()> {
     slipstream::cli::apply_zenoh_runtime_default();
-    let cli = Cli::parse();
+    let cli = SimCli::parse();
     slipstream::cli::init_tracing(slipstream::cli::LogLevel::Node);
     if cli.sim.list_scenarios {
         print!("{}", SimArgs::scenario_list());

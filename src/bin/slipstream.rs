@@ -23,9 +23,12 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Run the whole loop on this machine: slipstream-sim, slipstream-detect and slipstream-acc
-    /// as separate processes, with a live view (scenario time, ego speed, gap, ACC mode,
-    /// real-time factor, loop latency per hop), then a summary, report.json and plots.
+    /// Run the whole loop on this machine (simulator, detector, cruise control) and report on it
+    ///
+    /// slipstream-sim, slipstream-detect and slipstream-acc as separate processes, with a live
+    /// view (scenario time, ego speed, gap, ACC mode, real-time factor, loop latency per hop),
+    /// then a summary, report.json and plots. A second loop started beside a running one
+    /// moves to a namespace of its own (loop-2, ...), named in its first line.
     ///
     /// Exits with 1 on a collision or when a node dies. Ctrl-C stops every node and still
     /// writes the report. The nodes' logs go to the report directory. Examples:
@@ -78,8 +81,10 @@ enum Command {
     /// Convert a recording: `--to ros2` writes the ROS 2 messages of the `ros2` mapping into a
     /// ros2-profile MCAP file that `ros2 bag play`, Foxglove and ROS tools read (docs/ros2.md)
     Convert(slipstream::tools::convert::ConvertArgs),
-    /// Run a Zenoh router (for nodes on several PCs, in client mode) with config/router.json5
-    /// (or -c FILE): for users who have no zenohd. Runs until Ctrl-C.
+    /// Run a Zenoh router for nodes on several PCs (for users who have no zenohd)
+    ///
+    /// With config/router.json5 (or -c FILE); the nodes run in client mode. Runs until Ctrl-C.
+    /// Examples:
     ///
     ///   slipstream router                                  (listens on tcp/0.0.0.0:7447)
     ///   slipstream-sim -m client -e tcp/ROUTER-PC:7447     (on another PC)
@@ -97,10 +102,12 @@ enum Command {
     /// Feed every message decoder and config parser mutated valid inputs (seeded) and count
     /// what is accepted, rejected, or panics; exits with 1 on any panic
     Fuzz(slipstream::tools::fuzz::FuzzArgs),
-    /// The loop for a long while (lockstep, camera, by default 30 minutes) on loopback ports
-    /// and a namespace of its own, with every process's resident memory, threads and open
-    /// files sampled: after the warm-up nothing may grow (aim: RSS drift < 5 %) and every
-    /// control step must be answered. Writes soak.json, soak.csv and soak.png. Example:
+    /// Run the loop for a long while and check that no process grows (memory, threads, files)
+    ///
+    /// The loop (lockstep, camera, by default 30 minutes) on loopback ports and a namespace of
+    /// its own, with every process's resident memory, threads and open files sampled: after
+    /// the warm-up nothing may grow (aim: RSS drift < 5 %) and every control step must be
+    /// answered. Writes soak.json, soak.csv and soak.png. Example:
     ///
     ///   slipstream soak --minutes 30 --report reports/soak
     #[command(verbatim_doc_comment)]
@@ -115,8 +122,9 @@ enum Command {
     /// Score a node against the simulator's ground truth
     #[command(subcommand)]
     Eval(slipstream::tools::eval::EvalCommand),
-    /// Print the completion script of a shell for `slipstream` (bash, zsh, fish, elvish,
-    /// powershell). Example:
+    /// Print a shell's completion script for `slipstream` (bash, zsh, fish, elvish, powershell)
+    ///
+    /// Example:
     ///
     ///   slipstream completions bash > ~/.local/share/bash-completion/completions/slipstream
     #[command(verbatim_doc_comment)]
@@ -124,8 +132,9 @@ enum Command {
         #[arg(value_enum)]
         shell: clap_complete::Shell,
     },
-    /// Write the man pages of `slipstream` and of each of its commands into DIR
-    /// (slipstream.1, slipstream-up.1, ...; `man -l DIR/slipstream-up.1`)
+    /// Write the man pages of `slipstream`, of each of its commands and of the node binaries
+    /// into DIR (slipstream.1, slipstream-up.1, slipstream-eval-acc.1, slipstream-sim.1, ...;
+    /// `man -l DIR/slipstream-up.1`)
     Man {
         #[arg(value_name = "DIR")]
         dir: std::path::PathBuf,
@@ -185,10 +194,16 @@ fn run(cli: Cli) -> Result<ExitCode> {
         Command::Info { json } => info::command(*json, connect),
         Command::Eval(command) => eval::command(command, connect),
         Command::Completions { shell } => manual::completions(Cli::command(), *shell),
-        Command::Man { dir } => manual::man_pages(Cli::command(), dir),
+        Command::Man { dir } => manual::man_pages(Cli::command(), node_commands(), dir),
         Command::WireExamples => wire::examples(),
         Command::WireCheck => wire::check(),
         Command::BenchFleetWatch(args) => bench::command::fleet_watch(connect, args),
         Command::BenchPeer(args) => bench::command::peer(args),
     }
+}
+
+/// The node binaries' command lines, for `slipstream man`.
+fn node_commands() -> Vec<clap::Command> {
+    use slipstream::{acc::args::AccCli, perception::args::DetectCli, sim::args::SimCli};
+    vec![SimCli::command(), DetectCli::command(), AccCli::command()]
 }

@@ -5,13 +5,15 @@
 //! - [`detector`]: one frame -> vehicles, classical computer vision (pixels + camera info only).
 //! - [`tracker`]: detections joined into tracks; distance and relative speed by a Kalman filter.
 //! - [`rig`]: the front and the narrow camera together: each vehicle once, tracked.
-//! - [`node`]: slipstream-detect on the bus (camera/front, camera/narrow -> perception/objects).
+//! - [`node`]: slipstream-detect on the bus (camera/front, camera/narrow -> perception/objects);
+//!   [`args`]: its command line.
 //!
 //! It reads pixels and the camera's calibration only, never the simulator: scoring against the
 //! simulator's ground truth is the eval layer's (`slipstream eval detect`: src/eval/detect.rs).
 //!
 //! docs/perception.md describes the method, its limits and its measured scores.
 
+pub mod args;
 pub mod detector;
 pub mod geometry;
 pub mod node;

@@ -4,7 +4,7 @@ use std::path::PathBuf;
 
 use super::scenario::{Scenario, BUILT_IN};
 use super::settings::{Mode, SimSettings};
-use crate::config::ConfigError;
+use crate::config::{ConfigError, ConnectArgs, FaultArgs};
 
 #[derive(Debug, Clone, clap::Args)]
 pub struct SimArgs {
@@ -116,6 +116,31 @@ impl SimArgs {
             })
             .collect()
     }
+}
+
+/// slipstream-sim: a deterministic driving simulator on the bus.
+///
+/// Publishes vehicle/speed, vehicle/state, camera/front (+ camera/front/info), objects
+/// (ground truth), sim/clock and sim/events; the ego obeys vehicle/control. Runs one
+/// scenario (scenarios/*.json5, or a file of your own: docs/simulator.md) and exits when it
+/// ends. Examples:
+///
+///   slipstream-sim --scenario cut-in
+///
+///   slipstream-sim --scenario my.json5 --mode fast --seed 7
+///
+///   slipstream-sim --mode lockstep --wait-for acc    (steps wait for the acc node)
+///
+///   slipstream-sim --scenario busy-traffic --preview frame.png --at 5
+#[derive(clap::Parser, Debug)]
+#[command(name = "slipstream-sim", version, verbatim_doc_comment)]
+pub struct SimCli {
+    #[command(flatten)]
+    pub connect: ConnectArgs,
+    #[command(flatten)]
+    pub faults: FaultArgs,
+    #[command(flatten)]
+    pub sim: SimArgs,
 }
 
 #[cfg(test)]

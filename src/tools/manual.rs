@@ -18,16 +18,15 @@ pub fn completions(mut cli: clap::Command, shell: clap_complete::Shell) -> Resul
     }
 }
 
-/// The page of `top` (slipstream.1) and one per visible command (slipstream-up.1, ...) into
-/// `dir`.
-pub fn man_pages(top: clap::Command, dir: &std::path::Path) -> Result<ExitCode> {
+/// The page of `top` (slipstream.1), one per visible command at every depth (slipstream-up.1,
+/// slipstream-eval-acc.1, ...) and one per command of `others` (the node binaries:
+/// slipstream-sim.1, ...) into `dir`; returns the pages written.
+pub fn man_pages(top: clap::Command, others: Vec<clap::Command>, dir: &std::path::Path) -> Result<ExitCode> {
     std::fs::create_dir_all(dir).with_context(|| format!("create {}", dir.display()))?;
-    let pages = std::iter::once(top.clone()).chain(
-        top.get_subcommands()
-            .filter(|c| !c.is_hide_set())
-            .map(|c| c.clone().name(format!("{}-{}", top.get_name(), c.get_name())))
-            .collect::<Vec<_>>(),
-    );
+    let mut pages = Vec::new();
+    for command in std::iter::once(top).chain(others) {
+        collect_pages(command, &mut pages);
+    }
     for page in pages {
         let path = dir.join(format!("{}.1", page.get_name()));
         let mut text = Vec::new();
@@ -35,4 +34,18 @@ pub fn man_pages(top: clap::Command, dir: &std::path::Path) -> Result<ExitCode> 
         std::fs::write(&path, text).with_context(|| format!("write {}", path.display()))?;
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// `command`'s page and, named `<command>-<sub>`, its visible subcommands' pages, at every depth.
+fn collect_pages(command: clap::Command, pages: &mut Vec<clap::Command>) {
+    let name = command.get_name().to_string();
+    let subs: Vec<clap::Command> = command
+        .get_subcommands()
+        .filter(|c| !c.is_hide_set() && c.get_name() != "help")
+        .map(|c| c.clone().name(format!("{name}-{}", c.get_name())))
+        .collect();
+    pages.push(command);
+    for sub in subs {
+        collect_pages(sub, pages);
+    }
 }
