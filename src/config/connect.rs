@@ -21,6 +21,20 @@ pub enum ModeArg {
     Router,
 }
 
+/// `-m`: Zenoh's mode. A clock mode given there (`up -m lockstep`, for `--mode lockstep`) is
+/// named as such.
+fn zenoh_mode(value: &str) -> Result<ModeArg, String> {
+    match value {
+        "peer" => Ok(ModeArg::Peer),
+        "client" => Ok(ModeArg::Client),
+        "router" => Ok(ModeArg::Router),
+        "realtime" | "fast" | "lockstep" => Err(format!(
+            "`{value}` is a clock mode, and -m is Zenoh's mode (peer, client or router): the clock is `--mode {value}`"
+        )),
+        _ => Err(format!("`{value}` is no Zenoh mode: peer, client or router")),
+    }
+}
+
 /// Connection and topic flags, flattened into every binary's command line.
 #[derive(Debug, Clone, Default, clap::Args)]
 pub struct ConnectArgs {
@@ -29,8 +43,16 @@ pub struct ConnectArgs {
     #[arg(short = 'c', long = "config", value_name = "FILE", env = "SLIPSTREAM_ZENOH_CONFIG", global = true)]
     pub zenoh_config: Option<PathBuf>,
 
-    /// Zenoh mode, overriding the config file
-    #[arg(id = "zenoh_mode", short = 'm', long = "zenoh-mode", value_name = "MODE", value_enum, global = true)]
+    /// Zenoh mode, overriding the config file: peer, client or router (the simulator's clock
+    /// is `--mode`, without -m)
+    #[arg(
+        id = "zenoh_mode",
+        short = 'm',
+        long = "zenoh-mode",
+        value_name = "MODE",
+        value_parser = zenoh_mode,
+        global = true
+    )]
     pub mode: Option<ModeArg>,
 
     /// Endpoint to connect to, e.g. tcp/192.168.1.10:7447 (repeatable; replaces the config's list)

@@ -19,7 +19,7 @@ const STATUS_EVERY: Duration = Duration::from_secs(2);
     and import the layout config/foxglove-layout.json (docs/viewing.md).\n\n\
     Examples:\n  slipstream up --view                 (the loop and its view in one command)\n  \
     slipstream view                      (a loop that is already running)\n  \
-    slipstream view --view-port 9000 --scenario highway.json5")]
+    slipstream view --view-port 9000 --scenario scenarios/curve-follow.json5   (the road of a scenario file)")]
 pub struct ViewArgs {
     /// Address to listen on. The default serves this machine only: from another PC, tunnel
     /// with `ssh -L 8765:localhost:8765 SIM-PC`
