@@ -98,7 +98,7 @@ pub(super) fn figures(spec: &CaseSpec, s: &SendReport, r: &RecvReport) -> RunFig
         p50: lat.us(0.5),
         p99: lat.us(0.99),
         max: lat.max_us(),
-        fps: throughput.then(|| (r.received - 1) as f64 / r.span_s),
+        fps: throughput.then(|| r.received as f64 / r.span_s),
         mbps: throughput.then(|| r.bytes as f64 / r.span_s / 1e6),
         shm: r.shared_memory as f64,
         bg_fps: spec.background.map(|_| r.background_received as f64 / s.elapsed_s.max(1e-3)),

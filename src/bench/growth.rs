@@ -190,7 +190,7 @@ struct Throughput {
 
 fn throughput_figures(sent: &SendReport, recvs: &[RecvReport]) -> Throughput {
     let fps: Vec<Option<f64>> =
-        recvs.iter().map(|r| (r.received >= 2 && r.span_s > 0.0).then(|| (r.received - 1) as f64 / r.span_s)).collect();
+        recvs.iter().map(|r| (r.received >= 2 && r.span_s > 0.0).then(|| r.received as f64 / r.span_s)).collect();
     let mb: f64 = recvs.iter().filter(|r| r.span_s > 0.0).map(|r| r.bytes as f64 / r.span_s / 1e6).sum();
     Throughput {
         published: (sent.span_s > 0.0).then(|| sent.sent as f64 / sent.span_s),
@@ -403,10 +403,10 @@ mod tests {
     #[test]
     fn fanout_takes_the_slowest_subscriber_and_every_loss() {
         let sent = SendReport { sent: 10, span_s: 1.0, ..SendReport::default() };
-        let t = throughput_figures(&sent, &[recv(11, &[], 1.0), recv(21, &[], 1.0), recv(31, &[], 1.0)]);
+        let t = throughput_figures(&sent, &[recv(10, &[], 1.0), recv(20, &[], 1.0), recv(30, &[], 2.0)]);
         assert_eq!(t.min, Some(10.0));
-        assert_eq!(t.median, Some(20.0));
-        assert_eq!(t.got_share, Some(1.1));
+        assert_eq!(t.median, Some(15.0));
+        assert_eq!(t.got_share, Some(1.0));
         let l = latency_figures(&sent, &[recv(10, &[100, 200, 300], 1.0), recv(8, &[400, 500, 600], 1.0)]);
         assert_eq!(l.lost, 2.0);
         assert!(close(l.p50, 350.0) && close(l.p99, 600.0), "{:?} {:?}", l.p50, l.p99);

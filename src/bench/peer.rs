@@ -46,7 +46,9 @@ struct Collector {
     received: AtomicU64,
     bytes: AtomicU64,
     highest: Mutex<Option<u64>>,
-    first_last: Mutex<Option<(Instant, Instant)>>,
+    /// The earliest publish stamp and the latest arrival of the measured messages (wall clock,
+    /// ns): the span a receiver's throughput is taken over.
+    first_pub_last_arrival: Mutex<Option<(u64, u64)>>,
     background: AtomicU64,
     shm: AtomicU64,
     skipped: AtomicU64,
@@ -56,14 +58,13 @@ struct Collector {
 impl Collector {
     fn record(&self, seq: u64, stamp_pub_ns: u64, len: usize) {
         let now_ns = wall_clock_ns();
-        let now = Instant::now();
         self.latencies.lock().push(now_ns as i64 - stamp_pub_ns as i64);
         self.received.fetch_add(1, Ordering::Relaxed);
         self.bytes.fetch_add(len as u64, Ordering::Relaxed);
         let mut h = self.highest.lock();
         *h = Some(h.map_or(seq, |x| x.max(seq)));
-        let mut fl = self.first_last.lock();
-        *fl = Some(fl.map_or((now, now), |(f, _)| (f, now)));
+        let mut span = self.first_pub_last_arrival.lock();
+        *span = Some(span.map_or((stamp_pub_ns, now_ns), |(f, l)| (f.min(stamp_pub_ns), l.max(now_ns))));
     }
 
     fn report(&self) -> RecvReport {
@@ -72,7 +73,7 @@ impl Collector {
             highest_seq: *self.highest.lock(),
             bytes: self.bytes.load(Ordering::Relaxed),
             latencies_ns: self.latencies.lock().clone(),
-            span_s: self.first_last.lock().map_or(0.0, |(f, l)| l.duration_since(f).as_secs_f64()),
+            span_s: self.first_pub_last_arrival.lock().map_or(0.0, |(f, l)| l.saturating_sub(f) as f64 / 1e9),
             background_received: self.background.load(Ordering::Relaxed),
             shared_memory: self.shm.load(Ordering::Relaxed),
             skipped: self.skipped.load(Ordering::Relaxed),
@@ -473,6 +474,26 @@ async fn first_locator(session: &zenoh::Session) -> Result<String> {
     locators.first().map(|l| l.to_string()).context("the receiver's session has no listening locator")
 }
 
+/// The first and the last publish stamp of what a sender sent (wall clock, ns): the span its
+/// rate is taken over, the same clock and the same start as a receiver's
+/// (`RecvReport::span_s`), so that no receiver's rate exceeds it.
+#[derive(Default)]
+struct Stamps(Mutex<Option<(u64, u64)>>);
+
+impl Stamps {
+    /// Notes a message's publish stamp (None: not sent); returns whether it was sent.
+    fn note(&self, stamp_pub_ns: Option<u64>) -> bool {
+        let Some(t) = stamp_pub_ns else { return false };
+        let mut s = self.0.lock();
+        *s = Some(s.map_or((t, t), |(first, _)| (first, t)));
+        true
+    }
+
+    fn span_s(&self) -> f64 {
+        self.0.lock().map_or(0.0, |(first, last)| last.saturating_sub(first) as f64 / 1e9)
+    }
+}
+
 /// Paces a loop: the i-th iteration starts at start + i/rate (no drift), or at once.
 struct Pacer {
     start: Instant,
@@ -648,12 +669,16 @@ async fn send_bus(spec: &CaseSpec, endpoints: &[String], max: Duration) -> Resul
             let (pacer, deadline) = (Pacer::new(spec.rate_hz), Instant::now() + max);
             // Paced on a blocking thread: a sleeping pacer must not hold a runtime worker.
             let count = spec.count;
-            let first = Instant::now();
+            let stamps = Arc::new(Stamps::default());
+            let seen = stamps.clone();
             report.sent = tokio::task::spawn_blocking(move || {
-                pacer.run(count, deadline, |i| Ok(publisher.put(i * 10_000_000, &Speed { speed_mps: 20.0 }).is_ok()))
+                pacer.run(count, deadline, |i| {
+                    let header = publisher.put(i * 10_000_000, &Speed { speed_mps: 20.0 });
+                    Ok(seen.note(header.ok().flatten().map(|h| h.stamp_pub_ns)))
+                })
             })
             .await??;
-            report.span_s = first.elapsed().as_secs_f64();
+            report.span_s = stamps.span_s();
         }
         Payload::Frame { width, height } => {
             let publisher = bus.frame_publisher(crate::topics::CAMERA_FRONT).await?;
@@ -662,15 +687,15 @@ async fn send_bus(spec: &CaseSpec, endpoints: &[String], max: Duration) -> Resul
             }
             let (pacer, deadline) = (Pacer::new(spec.rate_hz), Instant::now() + max);
             let len = (width * height * 3) as usize;
-            let first = Instant::now();
+            let stamps = Stamps::default();
             report.sent = pacer.run(spec.count, deadline, |i| {
                 // The renderer would write every pixel here; the bench writes one byte so
                 // that only transport costs are compared.
                 let sent = publisher
                     .put_with(i * 50_000_000, width, height, ImageEncoding::Rgb8, len, |px| px[len - 1] = i as u8)?;
-                Ok(sent.is_some())
+                Ok(stamps.note(sent.map(|s| s.header.stamp_pub_ns)))
             })?;
-            report.span_s = first.elapsed().as_secs_f64();
+            report.span_s = stamps.span_s();
         }
     }
     done.store(true, Ordering::Relaxed);

@@ -37,16 +37,18 @@ class Collected:
         self.first = self.last = None
 
     def record(self, seq, stamp_ns, size):
-        now_ns, now = time.time_ns(), time.monotonic()
+        now_ns = time.time_ns()
         self.lat.append(now_ns - stamp_ns)
         self.received += 1
         self.bytes += size
         self.highest = seq if self.highest is None else max(self.highest, seq)
-        self.first = self.first or now
-        self.last = now
+        # The span: from the first message's publication to the last one's arrival (the
+        # Rust receiver's definition, src/bench/spec.rs RecvReport.span_s).
+        self.first = stamp_ns if self.first is None else min(self.first, stamp_ns)
+        self.last = now_ns
 
     def report(self):
-        span = (self.last - self.first) if self.first is not None else 0.0
+        span = (self.last - self.first) / 1e9 if self.first is not None else 0.0
         return {"received": self.received, "highest_seq": self.highest, "bytes": self.bytes,
                 "latencies_ns": self.lat, "span_s": span, "background_received": 0, "shared_memory": 0}
 

@@ -145,7 +145,9 @@ pub struct RecvReport {
     pub bytes: u64,
     /// One-way latency of every measured message, ns.
     pub latencies_ns: Vec<i64>,
-    /// Wall-clock span between the first and the last measured message, s.
+    /// From the first measured message's publication (its stamp) to the last one's arrival,
+    /// wall clock, s: the time the received messages took to be published and delivered, so
+    /// a rate over it never exceeds the publisher's.
     pub span_s: f64,
     pub background_received: u64,
     /// Frames delivered in shared memory.
@@ -166,7 +168,8 @@ pub struct SendReport {
     pub sent: u64,
     /// From start (session open included) to the last message, s.
     pub elapsed_s: f64,
-    /// From the first measured message to the last, s (the bus sender only; else 0).
+    /// From the first measured message's publish stamp to the last one's, s (the bus sender
+    /// only; else 0).
     #[serde(default)]
     pub span_s: f64,
     pub background_sent: u64,
