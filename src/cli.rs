@@ -96,13 +96,37 @@ pub fn init_tracing(level: LogLevel) {
         EnvFilter::new(format!("{base},zenoh=warn,zenoh_ext=warn,foxglove=warn,{ACL_TARGET}=trace"))
     });
     let layer = tracing_subscriber::fmt::layer()
-        .with_writer(std::io::stderr)
+        // Above a live status (a progress bar), never inside it.
+        .with_writer(|| LogLine(Vec::new()))
         // Colours on a terminal only: `slipstream up` writes the nodes' logs to files.
         .with_ansi(colour(&std::io::stderr()))
         .with_filter(RendezvousNoise)
         .with_filter(AclRefusals::default())
         .with_filter(env);
     let _ = tracing_subscriber::registry().with(layer).try_init();
+}
+
+/// One log event's text, written to stderr whole when the event is done
+/// ([`crate::tools::status::write_above`]).
+struct LogLine(Vec<u8>);
+
+impl std::io::Write for LogLine {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.0.extend_from_slice(buf);
+        Ok(buf.len())
+    }
+
+    fn flush(&mut self) -> std::io::Result<()> {
+        Ok(())
+    }
+}
+
+impl Drop for LogLine {
+    fn drop(&mut self) {
+        if !self.0.is_empty() {
+            let _ = crate::tools::status::write_above(&self.0);
+        }
+    }
 }
 
 /// Drops the Zenoh events that the rendezvous of config/zenoh.json5 causes on purpose: the

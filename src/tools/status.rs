@@ -1,7 +1,8 @@
 //! What a long-running tool shows on stderr while it works. On a terminal: one block redrawn in
 //! place (`indicatif`), and for counted work a bar with the time left. Anywhere else (a pipe, a
 //! log file, CI, `--plain`): a line per update, so a log reads top to bottom with no control
-//! characters in it.
+//! characters in it. A log line written while a status is live goes above it
+//! ([`write_above`]), never into the middle of it.
 
 use std::io::IsTerminal;
 use std::time::Duration;
@@ -11,6 +12,27 @@ use indicatif::{ProgressBar, ProgressDrawTarget, ProgressStyle};
 /// How often the bar redraws at most on its own (the elapsed time and rate move).
 const TICK: Duration = Duration::from_millis(500);
 
+/// The status being redrawn in place, if any: log lines are written above it.
+static LIVE: std::sync::Mutex<Option<ProgressBar>> = std::sync::Mutex::new(None);
+
+/// Writes `bytes` (whole log lines) to stderr: above the live status when one is drawn (it is
+/// cleared, the lines written, and it is drawn again), else straight through.
+pub fn write_above(bytes: &[u8]) -> std::io::Result<()> {
+    use std::io::Write;
+    let live = LIVE.lock().ok().and_then(|l| l.clone());
+    match live {
+        Some(bar) => bar.suspend(|| std::io::stderr().lock().write_all(bytes)),
+        None => std::io::stderr().lock().write_all(bytes),
+    }
+}
+
+/// Makes `bar` the live status (or none).
+fn set_live(bar: Option<&ProgressBar>) {
+    if let Ok(mut l) = LIVE.lock() {
+        *l = bar.cloned();
+    }
+}
+
 /// A tool's live status line(s) or bar.
 pub struct Status {
     bar: Option<ProgressBar>,
@@ -19,13 +41,20 @@ pub struct Status {
 impl Status {
     /// A block of text redrawn in place on a terminal (unless `plain`), else printed as lines.
     pub fn lines(plain: bool) -> Status {
-        Status { bar: live(plain).then(|| bar(None, "{msg}")) }
+        Status::new(live(plain).then(|| bar(None, "{msg}")))
     }
 
     /// `len` steps with a bar, the count, the time spent and the time left at the pace so far.
     pub fn counted(len: u64, plain: bool) -> Status {
         let template = "{bar:32} {pos}/{len} [{elapsed_precise}, ~{eta} left] {msg}";
-        Status { bar: live(plain).then(|| bar(Some(len), template)) }
+        Status::new(live(plain).then(|| bar(Some(len), template)))
+    }
+
+    fn new(bar: Option<ProgressBar>) -> Status {
+        if bar.is_some() {
+            set_live(bar.as_ref());
+        }
+        Status { bar }
     }
 
     /// Whether the status is redrawn in place (a terminal) rather than printed as lines.
@@ -67,6 +96,7 @@ impl Status {
     pub fn finish(&self) {
         if let Some(b) = &self.bar {
             b.finish();
+            set_live(None);
         }
     }
 }
