@@ -458,7 +458,9 @@ impl LoopRun {
             }
             for n in &mut self.nodes {
                 if let Some(status) = n.exited() {
-                    bail!("{} exited at start ({status}); see {}", n.name, log_of(&self.logs, &n.name).display());
+                    let log = log_of(&self.logs, &n.name);
+                    let why = last_error(&log).map_or(String::new(), |e| format!(": {e}"));
+                    bail!("{} exited at start ({status}){why}\n(its log: {})", n.name, log.display());
                 }
             }
             anyhow::ensure!(
@@ -623,6 +625,27 @@ impl LoopRun {
 /// A node's stderr log in `logs`.
 pub fn log_of(logs: &Path, node: &str) -> PathBuf {
     logs.join(format!("{node}.log"))
+}
+
+/// How far back from its end a node's log is read for its error.
+const ERROR_TAIL_BYTES: u64 = 16 * 1024;
+
+/// The error a node printed last (after "Error: ", with its "caused by" lines, as every binary
+/// prints them: `cli::error_report`), from the end of its log; None when there is none.
+pub fn last_error(log: &Path) -> Option<String> {
+    use std::io::{Read, Seek, SeekFrom};
+    let mut file = std::fs::File::open(log).ok()?;
+    let len = file.metadata().ok()?.len();
+    file.seek(SeekFrom::Start(len.saturating_sub(ERROR_TAIL_BYTES))).ok()?;
+    let mut bytes = Vec::new();
+    file.take(ERROR_TAIL_BYTES).read_to_end(&mut bytes).ok()?;
+    let tail = String::from_utf8_lossy(&bytes);
+    let lines: Vec<&str> = tail.lines().collect();
+    let at = lines.iter().rposition(|l| l.starts_with("Error: "))?;
+    let first = lines[at].trim_start_matches("Error: ");
+    let error: Vec<&str> =
+        std::iter::once(first).chain(lines[at + 1..].iter().copied().take_while(|l| l.starts_with("  "))).collect();
+    Some(error.join("\n"))
 }
 
 fn create(path: &Path) -> Result<std::fs::File> {

@@ -562,10 +562,9 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
     let stopped_by = watch_until_over(&mut lp, &watch, args, shown, external.as_ref()).await?;
     let sim_ran_s = sim_started.elapsed().as_secs_f64();
     for node in lp.check().died {
-        eprintln!(
-            "{node} ended before the run was over; see {}",
-            crate::launch::nodes::log_of(lp.logs(), &node).display()
-        );
+        let log = crate::launch::nodes::log_of(lp.logs(), &node);
+        let why = crate::launch::nodes::last_error(&log).map_or(String::new(), |e| format!(": {e}"));
+        eprintln!("{node} ended before the run was over{why}\n(its log: {})", log.display());
     }
     if let Some(signal) = stopped_by {
         eprintln!("{signal}: stopping the nodes");
