@@ -129,7 +129,7 @@ impl ConnectArgs {
                 ConfigError::new(
                     flag,
                     key,
-                    format!("`{value}` rejected: {e}"),
+                    format!("`{value}` rejected: {}", super::zenoh_error::message(&e)),
                     format!("check the value given to {flag} (config from {origin})"),
                 )
             })
@@ -202,7 +202,9 @@ fn load_zenoh_file(path: &Path) -> Result<zenoh::Config, ConfigError> {
         ));
     }
     zenoh::Config::from_file(path).map_err(|e| {
-        ConfigError::new(origin, "", e.to_string(), "compare with the keys documented in config/zenoh.json5")
+        // The text only to point at the key; Zenoh reads the file itself (JSON5 or YAML).
+        let text = std::fs::read_to_string(path).unwrap_or_default();
+        super::zenoh_error::file_error(&origin, &text, &e)
     })
 }
 

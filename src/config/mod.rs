@@ -6,6 +6,7 @@ mod error;
 pub mod faults;
 mod low_latency;
 mod topic_map;
+mod zenoh_error;
 
 pub use connect::{ConnectArgs, ModeArg, DEFAULT_ZENOH_CONFIG, DEFAULT_ZENOH_CONFIG_PATH};
 pub use error::{from_value, merge_json, parse_json5, parse_json5_value, parse_layered, read_config, ConfigError};
