@@ -204,3 +204,31 @@ def test_a_taken_port_is_a_clear_error(slipstream_bin, free_port):
     assert run.returncode == 1, (run.returncode, run.stderr)
     assert f"cannot serve the live view on 127.0.0.1:{port}" in run.stderr, run.stderr
     assert "--view-port" in run.stderr
+
+
+def test_a_client_offering_only_the_old_subprotocol_is_refused_as_documented(slipstream_bin, free_port):
+    """docs/viewing.md: the SDK's server speaks foxglove.sdk.v1 (and v1.1); a client that offers
+    only foxglove.websocket.v1 gets HTTP 400, one that also offers foxglove.sdk.v1 gets in."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    view = subprocess.Popen(
+        [slipstream_bin, "-l", f"tcp/127.0.0.1:{free_port}", "view", "--view-port", str(port), "--duration", "30"],
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=ROOT)
+    try:
+        deadline = time.monotonic() + 20
+        while True:
+            try:
+                with ws_sync.connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.websocket.v1", SUBPROTOCOL],
+                                     open_timeout=5) as ws:
+                    assert ws.subprotocol == SUBPROTOCOL
+                break
+            except (ConnectionRefusedError, OSError):
+                assert time.monotonic() < deadline, "the view never listened"
+                time.sleep(0.2)
+        with pytest.raises(Exception) as refused:
+            ws_sync.connect(f"ws://127.0.0.1:{port}", subprotocols=["foxglove.websocket.v1"], open_timeout=5)
+        assert "400" in str(refused.value), refused.value
+    finally:
+        view.send_signal(signal.SIGINT)
+        view.wait(timeout=30)
