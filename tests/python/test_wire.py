@@ -162,3 +162,45 @@ def test_python_and_rust_agree_at_every_edge_the_doc_states(slipstream_bin, exam
             python = False
         assert ("kind" in rust) == accepted, f"{name}: Rust says {rust}, the doc says accepted={accepted}"
         assert python == accepted, f"{name}: Python says accepted={python}, the doc says {accepted}"
+
+
+def test_a_late_plain_subscriber_gets_a_latched_topic_by_a_query_as_documented(sim_bin, free_port):
+    """docs/wire-format.md "Keys": camera/front/info is published once, when the simulator
+    starts; a plain subscriber that starts later never gets it, and a plain query on
+    `camera/front/info/@adv/**` (any language, no zenoh-ext) returns it from the cache."""
+    import threading
+    import time
+
+    import zenoh
+    from conftest import peer_config
+
+    endpoint = f"tcp/127.0.0.1:{free_port}"
+    sim = subprocess.Popen([sim_bin, "-l", endpoint, "--mode", "realtime", "--duration", "60"],
+                           stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    try:
+        with zenoh.open(peer_config(endpoint)) as session:
+            live, lock = [], threading.Lock()
+            # The simulator is running (its speed arrives) before anything asks for the info.
+            seen = threading.Event()
+            speed = session.declare_subscriber("vehicle/speed", lambda s: seen.set())
+            assert seen.wait(30), "the simulator never published"
+
+            def on_info(sample):
+                with lock:
+                    live.append(sample)
+
+            sub = session.declare_subscriber("camera/front/info", on_info)
+            time.sleep(1.0)
+            with lock:
+                assert live == [], "a plain subscriber got a message published before it started"
+            replies = session.get("camera/front/info/@adv/**", timeout=5, accept_replies=zenoh.ReplyKeyExpr.ANY)
+            cached = [r.ok for r in replies if r.ok is not None]
+            assert len(cached) == 1, cached
+            assert str(cached[0].key_expr) == "camera/front/info"
+            kind, _, info = decode(cached[0].payload.to_bytes())
+            assert kind == "CameraInfo" and (info["width"], info["height"]) == (640, 480)
+            sub.undeclare()
+            speed.undeclare()
+    finally:
+        sim.kill()
+        sim.wait(timeout=10)
