@@ -24,6 +24,18 @@ pub fn apply_zenoh_runtime_default() {
     }
 }
 
+/// A router's runtime: Zenoh's own layout. A router forwards what it receives, and with
+/// [`ZENOH_RUNTIME_DEFAULT`]'s handover layout it never forwarded a message of several batches
+/// (a raw camera frame); so when a router inherits that layout from a slipstream process that
+/// started it (`bench fleet`, a script run beside `up`), the layout is taken back. Any other
+/// ZENOH_RUNTIME the user set stays. Call early in `main`, before any thread or Zenoh starts.
+pub fn apply_router_runtime() {
+    if std::env::var("ZENOH_RUNTIME").is_ok_and(|v| v == ZENOH_RUNTIME_DEFAULT) {
+        // Single-threaded at this point of main: no other thread reads the environment.
+        std::env::remove_var("ZENOH_RUNTIME");
+    }
+}
+
 /// Resolves when the process is asked to stop: Ctrl-C (SIGINT), SIGTERM (a supervisor, `kill`,
 /// systemd, docker stop) or SIGHUP (its terminal closed). Every long-running command stops on
 /// any of them the same way, nodes stopped and reports written. Returns the signal's name.

@@ -161,7 +161,9 @@ fn main() -> ExitCode {
     // message of several batches (a raw camera frame) waits for the threads busy receiving it
     // and is never forwarded. Zenoh's own thread layout there; the handover layout elsewhere.
     let daemon = matches!(cli.command, Command::Router);
-    if !daemon {
+    if daemon {
+        slipstream::cli::apply_router_runtime();
+    } else {
         slipstream::cli::apply_zenoh_runtime_default();
     }
     slipstream::cli::init_tracing(if daemon {
