@@ -42,6 +42,21 @@ pub enum Durability {
     TransientLocal,
 }
 
+/// As ROS 2 tools name the settings (`ros2 topic info -v`): "best effort, volatile, keep last 5".
+impl std::fmt::Display for RosQos {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let reliability = match self.reliability {
+            Reliability::Reliable => "reliable",
+            Reliability::BestEffort => "best effort",
+        };
+        let durability = match self.durability {
+            Durability::Volatile => "volatile",
+            Durability::TransientLocal => "transient local",
+        };
+        write!(f, "{reliability}, {durability}, keep last {}", self.depth)
+    }
+}
+
 /// rmw_zenoh's default profile: a token leaves out what equals it.
 const DEFAULT_DEPTH: u32 = 42;
 

@@ -158,7 +158,7 @@ pub fn list(topics: &TopicMap, args: &Ros2Args) -> Result<()> {
     println!("ROS 2 node {} in namespace {} on domain {} ({:?} keys)", c.node, c.namespace, c.domain_id, c.distro);
     for r in rows {
         let on = if r.enabled { "on " } else { "off" };
-        println!("{on} {:19} {:8} {:34} {:42} {:?}", r.route, r.direction, r.topic, r.type_name, r.qos);
+        println!("{on} {:19} {:8} {:34} {:42} {}", r.route, r.direction, r.topic, r.type_name, r.qos);
     }
     Ok(())
 }
