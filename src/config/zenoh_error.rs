@@ -31,10 +31,9 @@ pub fn file_error(origin: &str, text: &str, error: &dyn std::fmt::Display) -> Co
 pub fn message(error: &dyn std::fmt::Display) -> String {
     let raw = crate::bus::without_source_locations(&error.to_string());
     match serde_message(&raw) {
-        Some((m, _)) => m
-            .split("\\n")
-            .find_map(|l| l.trim().strip_prefix("= "))
-            .map_or_else(|| m.clone(), str::to_string),
+        Some((m, _)) => {
+            m.split("\\n").find_map(|l| l.trim().strip_prefix("= ")).map_or_else(|| m.clone(), str::to_string)
+        }
         None => raw,
     }
 }
