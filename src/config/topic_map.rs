@@ -448,6 +448,24 @@ impl TopicMap {
         selectors
     }
 
+    /// The keys of this map's own loop, for `up`'s report and recording: [`Self::every_key`]
+    /// in a namespace; in the default one, every topic's key and the nodes' keys. A `**` there
+    /// would also take every other loop on the machine (`loop-2/...`, their frames included)
+    /// into this loop's report.
+    pub fn loop_keys(&self) -> Vec<OwnedKeyExpr> {
+        if !self.namespace.is_empty() || self.camera.read.is_some() {
+            return self.every_key();
+        }
+        let mut selectors = vec![self.nodes_selector()];
+        for t in crate::topics::Topic::ALL {
+            let key = self.key(t);
+            if !selectors.contains(&key) {
+                selectors.push(key);
+            }
+        }
+        selectors
+    }
+
     pub fn all_selector(&self) -> OwnedKeyExpr {
         if self.namespace.is_empty() {
             key_expr("**").expect("valid")

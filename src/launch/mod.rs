@@ -25,6 +25,7 @@ use std::time::Duration;
 
 pub mod child;
 pub mod external;
+pub mod hold;
 pub mod namespace;
 pub mod nodes;
 

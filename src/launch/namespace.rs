@@ -27,41 +27,75 @@ use crate::TopicMap;
 const ASK_TIMEOUT: Duration = Duration::from_secs(1);
 /// The namespaces a second, third, ... loop moves to: `loop-2` to `loop-<MAX_LOOPS>`.
 const MAX_LOOPS: u32 = 64;
+/// How often, how many times at most, and for how many polls unchanged the launcher watches
+/// its count of peers settle before asking for the nodes alive (about 0.2 s on one machine).
+const SETTLE_POLL: Duration = Duration::from_millis(100);
+const SETTLE_POLLS: u32 = 15;
+const SETTLED_AFTER: u32 = 2;
 
 /// The namespace the run got, and whether it moved there from the default one.
 pub struct Claimed {
     pub map: TopicMap,
     /// Set when the default namespace held another loop: the namespace moved to.
     pub moved_to: Option<String>,
-    /// The other loop's nodes in the default namespace, when the run moved.
-    pub beside: Vec<String>,
+    /// Why the default namespace was taken, when the run moved ("its nodes acc, sim are
+    /// alive", "`up` (pid 42: slipstream up) holds it").
+    pub beside: String,
+    /// The run's hold on its namespace on this machine (none for an isolated loop).
+    pub hold: Option<super::hold::Hold>,
 }
 
 /// Claims `map`'s namespace for a run that brings the nodes `ours`, or moves (see the module
 /// doc). `sim_elsewhere`: the simulator is not ours and is expected in the namespace.
 pub async fn claim(session: &zenoh::Session, map: TopicMap, ours: &[&str], sim_elsewhere: bool) -> Result<Claimed> {
+    settle(session).await;
     let alive = nodes_by_namespace(session).await?;
-    let clash = |ns: &str| -> Vec<String> {
-        alive.get(ns).map_or(Vec::new(), |names| names.iter().filter(|n| ours.contains(&n.as_str())).cloned().collect())
+    let taken_by = |ns: &str| -> Result<std::result::Result<super::hold::Hold, String>> {
+        let here: Vec<&str> =
+            alive.get(ns).map_or(Vec::new(), |n| n.iter().map(String::as_str).filter(|n| ours.contains(n)).collect());
+        if !here.is_empty() {
+            return Ok(Err(format!("its nodes {} are alive", here.join(", "))));
+        }
+        Ok(super::hold::take(ns)?.map_err(|holder| format!("`up` ({holder}) holds it")))
     };
-    let here = clash(map.namespace());
-    if here.is_empty() {
-        return Ok(Claimed { map, moved_to: None, beside: Vec::new() });
-    }
-    let shown =
-        |ns: &str| if ns.is_empty() { "the default namespace".to_string() } else { format!("namespace `{ns}`") };
+    let why = match taken_by(map.namespace())? {
+        Ok(hold) => return Ok(Claimed { map, moved_to: None, beside: String::new(), hold: Some(hold) }),
+        Err(why) => why,
+    };
     if !map.namespace().is_empty() || sim_elsewhere {
+        let shown = if map.namespace().is_empty() {
+            "the default namespace".to_string()
+        } else {
+            format!("namespace `{}`", map.namespace())
+        };
         bail!(
-            "a loop is already running in {} (alive there: {}): this one would mix with it (fix: stop it, or give this run a namespace of its own with -n NAME; `slipstream top -n NAME` then watches it)",
-            shown(map.namespace()),
-            here.join(", ")
+            "a loop is already running in {shown} ({why}): this one would mix with it (fix: stop it, or give this run a namespace of its own with -n NAME; `slipstream top -n NAME` then watches it)"
         );
     }
-    let free = (2..=MAX_LOOPS).map(|n| format!("loop-{n}")).find(|ns| !alive.contains_key(ns.as_str()));
-    let Some(ns) = free else {
-        bail!("loop-2 to loop-{MAX_LOOPS} all hold loops (fix: give this run a namespace of its own with -n NAME)")
-    };
-    Ok(Claimed { map: map.with_namespace(&ns)?, moved_to: Some(ns), beside: here })
+    for ns in (2..=MAX_LOOPS).map(|n| format!("loop-{n}")) {
+        if let Ok(hold) = taken_by(&ns)? {
+            return Ok(Claimed { map: map.with_namespace(&ns)?, moved_to: Some(ns), beside: why, hold: Some(hold) });
+        }
+    }
+    bail!("loop-2 to loop-{MAX_LOOPS} all hold loops (fix: give this run a namespace of its own with -n NAME)")
+}
+
+/// Lets gossip link this session to the peers it learned of when it opened, so that the
+/// question for the nodes alive reaches each of them (a peer answers for its own tokens only):
+/// waits until the count of peers has not changed for [`SETTLED_AFTER`] polls, at most
+/// [`SETTLE_POLLS`].
+async fn settle(session: &zenoh::Session) {
+    let mut last = usize::MAX;
+    let mut unchanged = 0;
+    for _ in 0..SETTLE_POLLS {
+        let peers = session.info().peers_zid().await.count();
+        unchanged = if peers == last { unchanged + 1 } else { 0 };
+        if unchanged >= SETTLED_AFTER {
+            return;
+        }
+        last = peers;
+        tokio::time::sleep(SETTLE_POLL).await;
+    }
 }
 
 /// Every node alive on the bus, by namespace ("" for the default one).

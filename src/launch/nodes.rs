@@ -276,7 +276,9 @@ pub struct LoopRun {
     nodes: Vec<Child>,
     died: Vec<String>,
     /// See [`LoopRun::moved`].
-    moved: Option<(String, Vec<String>)>,
+    moved: Option<(String, String)>,
+    /// The run's hold on its namespace on this machine, for as long as the run lasts.
+    _hold: Option<super::hold::Hold>,
 }
 
 impl LoopRun {
@@ -331,7 +333,7 @@ impl LoopRun {
             .await
             .map_err(|e| anyhow::anyhow!("join the bus: {}", crate::bus::zenoh_message(&e)))?;
         let claimed = match isolated {
-            true => super::namespace::Claimed { map: topic_map, moved_to: None, beside: Vec::new() },
+            true => super::namespace::Claimed { map: topic_map, moved_to: None, beside: String::new(), hold: None },
             false => {
                 let ours: Vec<&str> =
                     spec.nodes(observer).into_iter().filter(|n| !(sim_elsewhere && *n == SIM_NODE)).collect();
@@ -342,6 +344,7 @@ impl LoopRun {
             base_flags.extend(["-n".into(), ns.clone()]);
         }
         let moved = claimed.moved_to.clone().map(|ns| (ns, claimed.beside.clone()));
+        let hold = claimed.hold;
         let bus = Bus::from_session(session, claimed.map, observer).await.context("join the bus")?;
         Ok(LoopRun {
             bus,
@@ -354,12 +357,13 @@ impl LoopRun {
             nodes: Vec::new(),
             died: Vec::new(),
             moved,
+            _hold: hold,
         })
     }
 
     /// Set when the default namespace held another loop and this one moved: the namespace it
-    /// moved to and the other loop's nodes ([`super::namespace`]).
-    pub fn moved(&self) -> Option<&(String, Vec<String>)> {
+    /// moved to and why the default one was taken ([`super::namespace`]).
+    pub fn moved(&self) -> Option<&(String, String)> {
         self.moved.as_ref()
     }
 

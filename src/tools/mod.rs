@@ -51,6 +51,45 @@ pub(crate) fn utc_stamp() -> String {
     jiff::Timestamp::now().strftime("%Y%m%d-%H%M%S").to_string()
 }
 
+/// A default output path of its own: `<stem>-<UTC stamp><ext>`, or with `-2`, `-3`, ... when
+/// another run took that name in the same second (two `up` started together write two
+/// reports, never one over the other). `create` makes the path (a directory, an empty file)
+/// and fails when it exists, so the claim cannot race.
+pub(crate) fn fresh_path(
+    parent: &std::path::Path,
+    stem: &str,
+    ext: &str,
+    create: impl Fn(&std::path::Path) -> std::io::Result<()>,
+) -> anyhow::Result<std::path::PathBuf> {
+    use anyhow::Context;
+    if !parent.as_os_str().is_empty() {
+        std::fs::create_dir_all(parent).with_context(|| format!("create {}", parent.display()))?;
+    }
+    let base = format!("{stem}-{}", utc_stamp());
+    for n in 1..=1000 {
+        let name = if n == 1 { format!("{base}{ext}") } else { format!("{base}-{n}{ext}") };
+        let path = parent.join(name);
+        match create(&path) {
+            Ok(()) => return Ok(path),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
+            Err(e) => return Err(e).with_context(|| format!("create {}", path.display())),
+        }
+    }
+    anyhow::bail!("{}: a thousand runs named {base} already (fix: name the output yourself)", parent.display())
+}
+
+/// [`fresh_path`] for a report directory under `reports/`.
+pub(crate) fn fresh_report_dir(stem: &str) -> anyhow::Result<std::path::PathBuf> {
+    fresh_path(std::path::Path::new("reports"), stem, "", |p| std::fs::create_dir(p))
+}
+
+/// [`fresh_path`] for a recording in the working directory.
+pub(crate) fn fresh_recording() -> anyhow::Result<std::path::PathBuf> {
+    fresh_path(std::path::Path::new(""), "recording", ".mcap", |p| {
+        std::fs::OpenOptions::new().write(true).create_new(true).open(p).map(drop)
+    })
+}
+
 #[cfg(test)]
 mod tests {
     #[test]
@@ -61,5 +100,19 @@ mod tests {
         let month: u32 = s[4..6].parse().unwrap();
         let day: u32 = s[6..8].parse().unwrap();
         assert!((1..=12).contains(&month) && (1..=31).contains(&day), "{s}");
+    }
+
+    #[test]
+    fn two_runs_in_the_same_second_get_two_paths() {
+        let parent = std::env::temp_dir().join(format!("fresh-path-{}", std::process::id()));
+        let mkdir = |p: &std::path::Path| std::fs::create_dir(p);
+        let first = super::fresh_path(&parent, "cut-in", "", mkdir).unwrap();
+        let second = super::fresh_path(&parent, "cut-in", "", mkdir).unwrap();
+        assert_ne!(first, second);
+        assert!(first.is_dir() && second.is_dir());
+        // The second name is the first's with -2, unless the clock turned a second between.
+        let (a, b) = (first.display().to_string(), second.display().to_string());
+        assert!(b == format!("{a}-2") || b > a, "{a} then {b}");
+        std::fs::remove_dir_all(&parent).unwrap();
     }
 }

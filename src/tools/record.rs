@@ -99,7 +99,10 @@ pub fn command(args: &RecordArgs, connect: &crate::config::ConnectArgs) -> Resul
 /// `--profile ros2`: the `ros2` mapping's routes into a ros2-profile MCAP file until Ctrl-C or
 /// --duration.
 pub async fn run_ros2(bus: &Bus, args: &RecordArgs) -> Result<Ros2Summary> {
-    let path = args.output.clone().unwrap_or_else(|| PathBuf::from(format!("recording-{}.mcap", super::utc_stamp())));
+    let path = match &args.output {
+        Some(p) => p.clone(),
+        None => super::fresh_recording()?,
+    };
     let config = crate::ros2::Ros2Config::from_topic_map(bus.topics())?;
     let bag = std::sync::Arc::new(crate::ros2::Bag::create(&path, &config)?);
     let bridge = crate::ros2::Bridge::start(bus, bag.clone()).await?;
@@ -146,7 +149,10 @@ pub fn selectors(bus: &Bus, keys: &[String]) -> Result<Vec<zenoh::key_expr::Owne
 
 /// Records until Ctrl-C or --duration; prints progress to stderr and the summary to stdout.
 pub async fn run(bus: &Bus, args: &RecordArgs) -> Result<RecordingSummary> {
-    let path = args.output.clone().unwrap_or_else(|| PathBuf::from(format!("recording-{}.mcap", super::utc_stamp())));
+    let path = match &args.output {
+        Some(p) => p.clone(),
+        None => super::fresh_recording()?,
+    };
     let selectors = selectors(bus, &args.keys)?;
     let viewable = match (args.viewable, &args.scenario) {
         (false, _) => None,

@@ -200,7 +200,7 @@ fn verdict(process: &str, i: usize, samples: &[Sample], warmup_min: f64) -> Proc
 pub fn run(args: &SoakArgs, connect: &crate::config::ConnectArgs) -> Result<SoakReport> {
     let dir = match &args.report {
         Some(d) => d.clone(),
-        None => PathBuf::from("reports").join(format!("soak-{}", super::utc_stamp())),
+        None => super::fresh_report_dir("soak")?,
     };
     std::fs::create_dir_all(&dir).with_context(|| format!("create {}", dir.display()))?;
     let scenario_path = dir.join("soak-scenario.json5");

@@ -90,11 +90,12 @@ pub struct Watcher {
 }
 
 impl Watcher {
-    pub async fn start(bus: &Bus) -> Result<Watcher> {
+    /// Watches `selectors` (`TopicMap::every_key` for `top`, `TopicMap::loop_keys` for `up`).
+    pub async fn start(bus: &Bus, selectors: &[zenoh::key_expr::OwnedKeyExpr]) -> Result<Watcher> {
         let seen = Arc::new(Mutex::new(Seen::default()));
         let topics = bus.topics();
         let mut subs = Vec::new();
-        for sel in topics.every_key() {
+        for sel in selectors.iter().cloned() {
             let seen = seen.clone();
             let map = topics.clone();
             subs.push(bus.subscribe_samples(sel, false, move |sample| record(&seen, &map, &sample)).await?);
@@ -248,7 +249,7 @@ fn bandwidth(bps: f64) -> String {
 
 /// Runs until Ctrl-C or `--duration`.
 pub async fn run(bus: &Bus, args: &TopArgs) -> Result<()> {
-    let watcher = Watcher::start(bus).await?;
+    let watcher = Watcher::start(bus, &bus.topics().every_key()).await?;
     let json = args.json || !std::io::stdout().is_terminal();
     let deadline = args.duration.map(|d| Instant::now() + Duration::from_secs_f64(d));
     let mut tick = tokio::time::interval(Duration::from_secs_f64(args.interval));

@@ -220,9 +220,9 @@ pub fn run_from(path: &Path, args: &UpArgs, connect: &ConnectArgs) -> Result<u8>
         path.display()
     );
     let stem = path.file_stem().map_or("recording".into(), |s| s.to_string_lossy().into_owned());
-    let dir = match &args.report {
-        Some(d) => d.clone(),
-        None => PathBuf::from("reports").join(format!("resim-{stem}-{}", super::utc_stamp())),
+    let (dir, fresh) = match &args.report {
+        Some(d) => (d.clone(), !d.exists()),
+        None => (super::fresh_report_dir(&format!("resim-{stem}"))?, true),
     };
     // The directory comes with the nodes' logs, once the recording has been read.
     eprintln!(
@@ -236,16 +236,22 @@ pub fn run_from(path: &Path, args: &UpArgs, connect: &ConnectArgs) -> Result<u8>
     // A signal ends the replay early; the nodes are stopped and the report still written.
     let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
     let signal = Arc::new(Mutex::new(None::<&'static str>));
-    let mut report = rt.block_on(async {
-        let (stop2, signal2) = (stop.clone(), signal.clone());
-        let watcher = tokio::spawn(async move {
-            *signal2.lock() = Some(crate::cli::stop_requested().await);
-            stop2.store(true, std::sync::atomic::Ordering::Relaxed);
-        });
-        let report = crate::eval::resim::run(path, connect, &dir, &mut progress, &stop).await;
-        watcher.abort();
-        report
-    })?;
+    let mut report = rt
+        .block_on(async {
+            let (stop2, signal2) = (stop.clone(), signal.clone());
+            let watcher = tokio::spawn(async move {
+                *signal2.lock() = Some(crate::cli::stop_requested().await);
+                stop2.store(true, std::sync::atomic::Ordering::Relaxed);
+            });
+            let report = crate::eval::resim::run(path, connect, &dir, &mut progress, &stop).await;
+            watcher.abort();
+            report
+        })
+        .inspect_err(|_| {
+            if fresh {
+                remove_if_empty(&dir);
+            }
+        })?;
     shown.finish();
     report.stopped_by = signal.lock().map(str::to_string);
     let file = dir.join("report.json");
@@ -272,12 +278,11 @@ pub fn run(args: &UpArgs, connect: &ConnectArgs) -> Result<Outcome> {
         args.actuator_lag.is_none_or(|l| l.is_finite() && l >= 0.0),
         "--actuator-lag must be a number of seconds >= 0"
     );
-    let dir = match &args.report {
-        Some(d) => d.clone(),
-        None => PathBuf::from("reports").join(format!("{}-{}", scenario.name, super::utc_stamp())),
+    let (dir, fresh) = match &args.report {
+        Some(d) => (d.clone(), !d.exists()),
+        None => (super::fresh_report_dir(&scenario.name)?, true),
     };
     let rt = tokio::runtime::Runtime::new()?;
-    let fresh = !dir.exists();
     let report = rt.block_on(run_loop(args, connect, scenario, &dir)).inspect_err(|_| {
         // A run that failed before anything was written (a taken view port, a namespace in
         // use) leaves no empty report directory behind; one with logs keeps them.
@@ -339,7 +344,7 @@ impl Watch {
             .await?;
         Ok(Watch {
             recorder: Recorder::start(bus).await?,
-            keys: Watcher::start(bus).await?,
+            keys: Watcher::start(bus, &bus.topics().loop_keys()).await?,
             latency: watch.latency.clone(),
             _latency: watch,
             clock,
@@ -465,7 +470,7 @@ impl Extras {
         let recording = match args.record {
             true => {
                 let viewable = args.viewable.then(|| crate::view::copies::Copies::new(Some(scenario)));
-                Some(Recording::start_with(bus, &bus.topics().every_key(), &dir.join(RECORDING), viewable).await?)
+                Some(Recording::start_with(bus, &bus.topics().loop_keys(), &dir.join(RECORDING), viewable).await?)
             }
             false => None,
         };
@@ -636,9 +641,8 @@ fn header(scenario: &str, args: &UpArgs, lp: &LoopRun, dir: &Path) -> String {
     let (clock, perception) = (args.mode.name(), args.perception.name());
     let ns = lp.bus().topics().namespace();
     let place = match lp.moved() {
-        Some((to, beside)) => format!(
-            " in namespace {to} (the default namespace holds another loop: {}; `slipstream top -n {to}` watches this one)",
-            beside.join(", ")
+        Some((to, why)) => format!(
+            " in namespace {to} (the default namespace holds another loop: {why}; `slipstream top -n {to}` watches this one)"
         ),
         None if !ns.is_empty() => format!(" in namespace {ns}"),
         None => String::new(),

@@ -162,3 +162,17 @@ fn a_node_reading_a_link_copy_watches_every_topic_at_its_read_key_not_the_whole_
         assert!(!ke.intersects(&zenoh::key_expr::KeyExpr::try_from("car1/camera/front").unwrap()), "{k}");
     }
 }
+
+#[test]
+fn a_loop_in_the_default_namespace_watches_its_own_keys_not_the_other_loops() {
+    let keys = |m: &TopicMap| m.loop_keys().iter().map(|k| k.to_string()).collect::<Vec<_>>();
+    let default = keys(&crate::common::map("{}"));
+    assert!(default.contains(&"vehicle/speed".to_string()) && default.contains(&"nodes/**".to_string()), "{default:?}");
+    for k in &default {
+        let ke = zenoh::key_expr::KeyExpr::try_from(k.as_str()).unwrap();
+        let other = zenoh::key_expr::KeyExpr::try_from("loop-2/vehicle/speed").unwrap();
+        assert!(!ke.intersects(&other), "{k} would take the loop in loop-2");
+    }
+    // In a namespace of its own, the whole namespace is the loop's.
+    assert_eq!(keys(&crate::common::map("{ namespace: \"car1\" }")), vec!["car1/**"]);
+}
