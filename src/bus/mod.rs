@@ -22,7 +22,7 @@ pub use error::{without_source_locations, zenoh_message, BusError};
 pub use faults::NodeClock;
 pub use follow::{Following, FOLLOW_SWITCH_AFTER};
 pub use frame_publisher::{FramePublisher, FrameSent};
-pub use publisher::Publisher;
+pub use publisher::{is_foreign, Publisher};
 pub use stats::{StatsSnapshot, TopicStats};
 pub use subscriber::{
     Arrivals, CallbackSubscriber, Declared, FrameSample, FrameSubscriber, Received, Subscriber, Subscription,

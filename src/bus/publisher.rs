@@ -213,3 +213,12 @@ impl<M: Message> Publisher<M> {
 pub fn encoding_of(kind: msg::MessageKind) -> Encoding {
     Encoding::APPLICATION_OCTET_STREAM.with_schema(kind.encoding_schema())
 }
+
+/// Whether a sample is not the loop's: on a key no topic maps to, and without the encoding
+/// every slipstream message carries ([`encoding_of`]). ROS 2 messages that `slipstream ros2`
+/// bridges into the default namespace (`0/clock/...`) or a user's own keys are such samples:
+/// tools show them apart instead of counting them as malformed payloads, which are ours.
+pub fn is_foreign(sample: &zenoh::sample::Sample, topics: &crate::TopicMap) -> bool {
+    let ours = sample.encoding().schema().is_some_and(|s| s.as_slice().starts_with(b"slipstream/"));
+    !ours && topics.topic_of(sample.key_expr()).is_none()
+}

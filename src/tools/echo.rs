@@ -71,7 +71,7 @@ pub async fn run(bus: &Bus, args: &EchoArgs) -> Result<u64> {
                 Err(_) => continue,
             },
         };
-        let line = match line(&sample, args, &bad)? {
+        let line = match line(&sample, bus.topics(), args, &bad)? {
             Some(l) => l,
             None => continue,
         };
@@ -115,14 +115,25 @@ fn resolve(topics: &crate::TopicMap, given: &str) -> Result<(zenoh::key_expr::Ow
     Ok((key, false))
 }
 
-/// The JSON line for one sample; None (counted and logged) when it does not decode.
-fn line(sample: &zenoh::sample::Sample, args: &EchoArgs, bad: &TopicStats) -> Result<Option<String>> {
+/// The JSON line for one sample; None (counted and logged) when it does not decode. A sample
+/// that is not the loop's ([`crate::bus::is_foreign`], e.g. a bridged ROS 2 message under
+/// `echo '**'`) is shown by its key, encoding and size, not counted as malformed.
+fn line(
+    sample: &zenoh::sample::Sample,
+    topics: &crate::TopicMap,
+    args: &EchoArgs,
+    bad: &TopicStats,
+) -> Result<Option<String>> {
     let key = sample.key_expr().as_str();
     let from = sample.attachment().and_then(|a| a.try_to_string().ok()).map(|s| s.into_owned());
     let payload = sample.payload().to_bytes();
     let received_ns = msg::wall_clock_ns();
     if args.raw {
         let v = json!({ "key": key, "from": from, "bytes": payload.len(), "hex": msg::hex_lines(&payload).replace('\n', " ") });
+        return Ok(Some(v.to_string()));
+    }
+    if crate::bus::is_foreign(sample, topics) {
+        let v = json!({ "key": key, "from": from, "encoding": sample.encoding().to_string(), "bytes": payload.len() });
         return Ok(Some(v.to_string()));
     }
     let (kind, header, body) = match msg::decode_json(&payload) {

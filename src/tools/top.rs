@@ -150,6 +150,9 @@ fn record(seen: &Mutex<Seen>, topics: &crate::TopicMap, sample: &zenoh::sample::
         }
         return;
     }
+    if crate::bus::is_foreign(sample, topics) {
+        return;
+    }
     let from = sample.attachment().and_then(|a| a.try_to_string().ok()).map(|s| s.into_owned());
     let payload = sample.payload().to_bytes();
     // On a topic's key, a message of another type is as wrong as bytes that do not decode.

@@ -212,20 +212,25 @@ fn sim(port: u16, scenario: &str) -> slipstream::launch::child::Child {
     slipstream::launch::child::Child::spawn("slipstream-sim", &mut cmd).unwrap()
 }
 
+/// A key of rmw_zenoh's layout (domain 0, /clock), as a ROS 2 bridge publishes it.
+const FOREIGN_KEY: &str = "0/clock/rosgraph_msgs::msg::dds_::Time_/RIHS01_0123";
+
 #[test]
-fn top_json_reports_the_configured_rates_and_counts_bad_payloads() {
+fn top_json_reports_the_configured_rates_counts_bad_payloads_and_leaves_out_foreign_keys() {
     let _serial = common::serial();
     let (p_sim, p_top) = (free_port(), free_port());
     let _sim = sim(p_sim, "open-road");
     let mut cmd = bin("slipstream");
     cmd.args(["top", "--json", "--duration", "5", "-l", &ep(p_top), "-e", &ep(p_sim)]);
     let top = cmd.stdout(Stdio::piped()).stderr(Stdio::null()).spawn().unwrap();
-    // A malformed payload on vehicle/speed from a session of the test's own.
+    // A malformed payload on vehicle/speed from a session of the test's own, and a ROS 2
+    // message (CDR, on an rmw_zenoh key) as `slipstream ros2` bridges into the namespace.
     let rt = tokio::runtime::Runtime::new().unwrap();
     rt.block_on(async {
         let s = common::connected_session(&ep(p_top)).await;
         for _ in 0..30 {
             s.put("vehicle/speed", vec![9u8, 9, 9]).attachment("garbage").await.unwrap();
+            s.put(FOREIGN_KEY, vec![0u8, 1, 0, 0, 7, 0, 0, 0]).await.unwrap();
             tokio::time::sleep(Duration::from_millis(100)).await;
         }
         s.close().await.unwrap();
@@ -260,6 +265,7 @@ fn top_json_reports_the_configured_rates_and_counts_bad_payloads() {
     assert!(speed["latency_p50_us"].as_f64().is_some());
     assert!(row("camera/front", "sim")["bandwidth_bps"].as_f64().unwrap() > 1e6, "frames are big");
     assert!(row("vehicle/speed", "garbage")["decode_errors"].as_u64().unwrap() >= 1);
+    assert!(keys.iter().all(|k| k["key"] != FOREIGN_KEY), "not the loop's, not a malformed payload: {keys:?}");
     assert!(last["nodes"].as_array().unwrap().iter().any(|n| n == "sim"), "{}", last["nodes"]);
     let rtf = last["sim"]["real_time_factor"].as_f64().unwrap();
     assert!(rtf > 0.0, "the clock's real-time factor is shown: {rtf}");
