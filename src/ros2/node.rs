@@ -119,6 +119,10 @@ enum Inner {
 
 /// One ROS 2 publisher: CDR payloads with rmw_zenoh's attachment.
 pub struct RosPublisher {
+    /// Whether a subscriber matches (None: always send). Declared before `inner` so that it
+    /// drops first: a publisher's undeclaration also removes its matching listeners, and a
+    /// listener dropped after that logs an error from Zenoh.
+    watched: Option<Watched>,
     inner: Inner,
     /// The resolved ROS name (`/camera/front/image_raw`).
     pub topic: String,
@@ -126,8 +130,6 @@ pub struct RosPublisher {
     pub key: String,
     /// The ROS type (`sensor_msgs/msg/Image`).
     pub type_name: String,
-    /// Whether a subscriber matches (None: always send).
-    watched: Option<Watched>,
     gid: [u8; 16],
     seq: AtomicI64,
     _token: LivelinessToken,
