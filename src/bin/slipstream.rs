@@ -126,6 +126,7 @@ enum Command {
     ///
     /// Example:
     ///
+    ///   mkdir -p ~/.local/share/bash-completion/completions
     ///   slipstream completions bash > ~/.local/share/bash-completion/completions/slipstream
     #[command(verbatim_doc_comment)]
     Completions {
