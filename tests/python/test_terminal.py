@@ -24,7 +24,8 @@ def echo_for_a_second(slipstream_bin, free_port, env, tty):
 
 @pytest.mark.skipif(SCRIPT is None, reason="no `script` (util-linux) for a pseudo-terminal")
 def test_colour_only_on_a_terminal_and_never_with_no_color(slipstream_bin, free_port):
-    env = {k: v for k, v in os.environ.items() if k not in ("NO_COLOR", "RUST_LOG")}
+    # Tools log warnings only by default; RUST_LOG=info shows their "joined the bus" line.
+    env = {**{k: v for k, v in os.environ.items() if k != "NO_COLOR"}, "RUST_LOG": "info"}
     on_tty = echo_for_a_second(slipstream_bin, free_port, env, tty=True)
     assert "joined the bus" in on_tty and ESC in on_tty, on_tty[-1000:]
     no_color = echo_for_a_second(slipstream_bin, free_port, {**env, "NO_COLOR": "1"}, tty=True)
