@@ -197,16 +197,10 @@ fn run(cli: Cli) -> Result<ExitCode> {
         Command::Info { json } => info::command(*json, connect),
         Command::Eval(command) => eval::command(command, connect),
         Command::Completions { shell } => manual::completions(Cli::command(), *shell),
-        Command::Man { dir } => manual::man_pages(Cli::command(), node_commands(), dir),
+        Command::Man { dir } => manual::man_pages(Cli::command(), dir),
         Command::WireExamples => wire::examples(),
         Command::WireCheck => wire::check(),
         Command::BenchFleetWatch(args) => bench::command::fleet_watch(connect, args),
         Command::BenchPeer(args) => bench::command::peer(args),
     }
-}
-
-/// The node binaries' command lines, for `slipstream man`.
-fn node_commands() -> Vec<clap::Command> {
-    use slipstream::{acc::args::AccCli, perception::args::DetectCli, sim::args::SimCli};
-    vec![SimCli::command(), DetectCli::command(), AccCli::command()]
 }

@@ -19,12 +19,11 @@ pub fn completions(mut cli: clap::Command, shell: clap_complete::Shell) -> Resul
 }
 
 /// The page of `top` (slipstream.1), one per visible command at every depth (slipstream-up.1,
-/// slipstream-eval-acc.1, ...) and one per command of `others` (the node binaries:
-/// slipstream-sim.1, ...) into `dir`; returns the pages written.
-pub fn man_pages(top: clap::Command, others: Vec<clap::Command>, dir: &std::path::Path) -> Result<ExitCode> {
+/// slipstream-eval-acc.1, ...) and one per node binary (slipstream-sim.1, ...) into `dir`.
+pub fn man_pages(top: clap::Command, dir: &std::path::Path) -> Result<ExitCode> {
     std::fs::create_dir_all(dir).with_context(|| format!("create {}", dir.display()))?;
     let mut pages = Vec::new();
-    for command in std::iter::once(top).chain(others) {
+    for command in std::iter::once(top).chain(node_commands()) {
         collect_pages(command, &mut pages);
     }
     for page in pages {
@@ -34,6 +33,13 @@ pub fn man_pages(top: clap::Command, others: Vec<clap::Command>, dir: &std::path
         std::fs::write(&path, text).with_context(|| format!("write {}", path.display()))?;
     }
     Ok(ExitCode::SUCCESS)
+}
+
+/// The node binaries' command lines.
+fn node_commands() -> Vec<clap::Command> {
+    use crate::{acc::args::AccCli, perception::args::DetectCli, sim::args::SimCli};
+    use clap::CommandFactory;
+    vec![SimCli::command(), DetectCli::command(), AccCli::command()]
 }
 
 /// `command`'s page and, named `<command>-<sub>`, its visible subcommands' pages, at every depth.

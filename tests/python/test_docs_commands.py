@@ -184,7 +184,7 @@ def watched(command, proc, code):
             assert all("hex" in line for line in lines)
     elif command == "slipstream top":
         assert code == 0 and json_lines(out), "top, not on a terminal, prints a JSON object per refresh"
-    elif command.startswith("slipstream record"):
+    elif "slipstream record" in command:
         recorded(proc, proc_output_file(command))
     else:
         assert code == 0, f"`{command}` exited {code}:\n{proc.stderr()[-2000:]}"
