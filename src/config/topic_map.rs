@@ -428,14 +428,7 @@ impl TopicMap {
     /// frames across the link that the copy is there to spare.
     pub fn every_key(&self) -> Vec<OwnedKeyExpr> {
         if self.camera.read.is_some() {
-            let mut selectors = vec![self.nodes_selector()];
-            for t in crate::topics::Topic::ALL {
-                let key = self.read_key(t);
-                if !selectors.contains(&key) {
-                    selectors.push(key);
-                }
-            }
-            return selectors;
+            return self.nodes_and_each_topic(|t| self.read_key(t));
         }
         let all = self.all_selector();
         let mut selectors = vec![all.clone()];
@@ -456,9 +449,14 @@ impl TopicMap {
         if !self.namespace.is_empty() || self.camera.read.is_some() {
             return self.every_key();
         }
+        self.nodes_and_each_topic(|t| self.key(t))
+    }
+
+    /// The nodes' keys and each topic's key as `key_of` gives it, once each.
+    fn nodes_and_each_topic(&self, key_of: impl Fn(crate::topics::Topic) -> OwnedKeyExpr) -> Vec<OwnedKeyExpr> {
         let mut selectors = vec![self.nodes_selector()];
         for t in crate::topics::Topic::ALL {
-            let key = self.key(t);
+            let key = key_of(t);
             if !selectors.contains(&key) {
                 selectors.push(key);
             }
