@@ -57,7 +57,7 @@ SECONDS=0
 cargo build --release
 echo "build: ${SECONDS} s"
 SECONDS=0
-cargo test --release
+cargo test --release --workspace
 echo "rust tests (compile included): ${SECONDS} s"
 
 step "python client: type hints checked (mypy)"

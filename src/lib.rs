@@ -2,10 +2,13 @@
 //! glued by Eclipse Zenoh with typed, timestamped, remappable topics.
 //!
 //! # Layout
-//! Four layers; a module imports only from its own layer or the ones above it in this list
-//! (tests/it/layering.rs reads the sources and fails on any other import).
+//! Four layers; a module imports only from its own layer or the ones above it in this list.
+//! The contract is a crate of its own (crates/contract, `slipstream_contract`): the compiler
+//! keeps it from importing anything above. For the layers still in this crate,
+//! tests/it/layering.rs reads the sources and fails on any other import.
 //!
-//! **Contract**: what every process agrees on.
+//! **Contract** (crates/contract, re-exported here under the same paths): what every process
+//! agrees on.
 //! - [`msg`]: one type per topic and its one wire encoding (postcard behind a version/kind
 //!   preamble and a header with seq, simulation time and publish time); the clock rule
 //!   [`msg::due`].
@@ -36,12 +39,8 @@
 //! - [`bench`]: `slipstream bench`, the bus against raw Zenoh, UDP and TCP in one run.
 //! - [`cli`]: what every binary does first (Zenoh's runtime layout, logging).
 
-pub mod msg;
-pub mod qos;
-pub mod topics;
-
-pub mod bus;
-pub mod config;
+// The contract is a crate of its own (crates/contract), re-exported under its old paths.
+pub use slipstream_contract::{bus, config, msg, qos, topics};
 
 pub mod acc;
 pub mod perception;

@@ -1,5 +1,5 @@
-//! The code's shape, read from its sources: no function in src/ runs over 100 lines (tests
-//! excepted), the binaries only parse and hand over to the library, and no two files of one
+//! The code's shape, read from its sources (src/ and every crate's under crates/): no function
+//! runs over 100 lines (tests excepted), the binaries only parse and hand over to the library, and no two files of one
 //! module import each other, directly or round a longer circle. A change that breaks one of
 //! these fails here, naming the function, the binary or the circle.
 
@@ -9,15 +9,39 @@ use std::path::{Path, PathBuf};
 /// The longest a function in src/ may be, its signature and closing brace included.
 const MAX_FN_LINES: usize = 100;
 
-fn sources() -> Vec<(PathBuf, String)> {
-    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
-    let mut files = Vec::new();
-    crate::common::rust_files(&src, &mut files);
-    files.sort();
-    files
-        .into_iter()
-        .map(|f| (f.strip_prefix(&src).unwrap().to_path_buf(), std::fs::read_to_string(&f).unwrap()))
-        .collect()
+/// One source file: the source directory of its crate (`src`, `crates/contract/src`), its path
+/// inside it (what `crate::` paths follow), and its text.
+struct Source {
+    root: String,
+    file: PathBuf,
+    text: String,
+}
+
+impl Source {
+    /// The path a person opens: `crates/contract/src/bus/mod.rs`.
+    fn shown(&self) -> String {
+        format!("{}/{}", self.root, self.file.display())
+    }
+}
+
+fn sources() -> Vec<Source> {
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let mut roots = vec!["src".to_string()];
+    let mut crates: Vec<_> = std::fs::read_dir(repo.join("crates")).map_or(Vec::new(), |d| d.flatten().collect());
+    crates.sort_by_key(|e| e.file_name());
+    roots.extend(crates.iter().map(|c| format!("crates/{}/src", c.file_name().to_string_lossy())));
+    let mut out = Vec::new();
+    for root in roots {
+        let src = repo.join(&root);
+        let mut files = Vec::new();
+        crate::common::rust_files(&src, &mut files);
+        files.sort();
+        for f in files {
+            let text = std::fs::read_to_string(&f).unwrap();
+            out.push(Source { root: root.clone(), file: f.strip_prefix(&src).unwrap().to_path_buf(), text });
+        }
+    }
+    out
 }
 
 /// The source with comments, string and character literals blanked (newlines kept), so that
@@ -150,10 +174,10 @@ fn the_function_finder_counts_code_not_text() {
 #[test]
 fn no_function_in_src_runs_over_100_lines() {
     let mut long = Vec::new();
-    for (file, text) in sources() {
-        for (name, line, lines) in functions(&text) {
+    for source in sources() {
+        for (name, line, lines) in functions(&source.text) {
             if lines > MAX_FN_LINES {
-                long.push(format!("src/{}:{line} {name} ({lines} lines)", file.display()));
+                long.push(format!("{}:{line} {name} ({lines} lines)", source.shown()));
             }
         }
     }
@@ -166,13 +190,13 @@ const MAX_BIN_RUN_LINES: usize = 45;
 #[test]
 fn binaries_are_thin() {
     let mut fat = Vec::new();
-    for (file, text) in sources().into_iter().filter(|(f, _)| f.starts_with("bin")) {
-        for (name, line, lines) in functions(&text) {
+    for source in sources().into_iter().filter(|s| s.file.starts_with("bin")) {
+        for (name, line, lines) in functions(&source.text) {
             match name.as_str() {
                 "main" => {}
                 "run" if lines <= MAX_BIN_RUN_LINES => {}
-                "run" => fat.push(format!("src/{}:{line} run is {lines} lines", file.display())),
-                _ => fat.push(format!("src/{}:{line} defines {name}", file.display())),
+                "run" => fat.push(format!("{}:{line} run is {lines} lines", source.shown())),
+                _ => fat.push(format!("{}:{line} defines {name}", source.shown())),
             }
         }
     }
@@ -225,13 +249,14 @@ fn sibling_refs(file: &Path, text: &str, siblings: &BTreeSet<String>) -> BTreeSe
 #[test]
 fn no_two_files_of_a_module_import_each_other() {
     let files = sources();
-    let mut by_dir: BTreeMap<PathBuf, Vec<(String, &str, &Path)>> = BTreeMap::new();
-    for (file, text) in &files {
-        let stem = file.file_stem().unwrap().to_string_lossy().into_owned();
-        by_dir.entry(file.parent().unwrap().to_path_buf()).or_default().push((stem, text, file));
+    let mut by_dir: BTreeMap<(String, PathBuf), Vec<(String, &str, &Path)>> = BTreeMap::new();
+    for s in &files {
+        let stem = s.file.file_stem().unwrap().to_string_lossy().into_owned();
+        let dir = (s.root.clone(), s.file.parent().unwrap().to_path_buf());
+        by_dir.entry(dir).or_default().push((stem, s.text.as_str(), s.file.as_path()));
     }
     let mut circles = Vec::new();
-    for (dir, members) in by_dir {
+    for ((root, dir), members) in by_dir {
         let names: BTreeSet<String> = members.iter().map(|(n, _, _)| n.clone()).filter(|n| n != "mod").collect();
         let graph: BTreeMap<String, BTreeSet<String>> = members
             .iter()
@@ -246,7 +271,7 @@ fn no_two_files_of_a_module_import_each_other() {
             }
         }
         for path in found.into_values() {
-            circles.push(format!("src/{}: {}", dir.display(), path.join(" -> ")));
+            circles.push(format!("{root}/{}: {}", dir.display(), path.join(" -> ")));
         }
     }
     assert!(

@@ -9,10 +9,10 @@ use super::{ConfigError, TopicMap};
 pub const DEFAULT_ZENOH_CONFIG_PATH: &str = "config/zenoh.json5";
 
 /// config/zenoh.json5 as shipped, built in so a binary run from any directory behaves the same.
-pub const DEFAULT_ZENOH_CONFIG: &str = include_str!("../../config/zenoh.json5");
+pub const DEFAULT_ZENOH_CONFIG: &str = include_str!("../../../../config/zenoh.json5");
 
 /// config/router.json5 as shipped: what `slipstream router` runs without -c.
-pub const DEFAULT_ROUTER_CONFIG: &str = include_str!("../../config/router.json5");
+pub const DEFAULT_ROUTER_CONFIG: &str = include_str!("../../../../config/router.json5");
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum ModeArg {

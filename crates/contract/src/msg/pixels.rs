@@ -9,9 +9,6 @@
 //! frame.
 
 use std::borrow::Cow;
-use std::io::Cursor;
-
-use image::ImageEncoder as _;
 
 use super::image_encoding::ImageEncoding;
 
@@ -50,26 +47,7 @@ pub fn encode(rgb: &[u8], width: u32, height: u32, encoding: ImageEncoding, qual
     match encoding {
         ImageEncoding::Rgb8 => Ok(rgb.to_vec()),
         ImageEncoding::Lz4 => Ok(lz4_flex::block::compress(rgb)),
-        ImageEncoding::Jpeg => {
-            let mut out = Vec::with_capacity(rgb.len() / 8);
-            image::codecs::jpeg::JpegEncoder::new_with_quality(&mut out, quality.clamp(1, 100))
-                .encode(rgb, width, height, image::ExtendedColorType::Rgb8)
-                .map_err(|e| format!("JPEG encoding failed: {e}"))?;
-            Ok(out)
-        }
-        ImageEncoding::Png => {
-            let mut out = Vec::with_capacity(rgb.len() / 4);
-            // Fast compression with adaptive filtering: about 3x smaller than raw on rendered
-            // scenes at a fraction of the default level's time.
-            image::codecs::png::PngEncoder::new_with_quality(
-                &mut out,
-                image::codecs::png::CompressionType::Fast,
-                image::codecs::png::FilterType::Adaptive,
-            )
-            .write_image(rgb, width, height, image::ExtendedColorType::Rgb8)
-            .map_err(|e| format!("PNG encoding failed: {e}"))?;
-            Ok(out)
-        }
+        ImageEncoding::Jpeg | ImageEncoding::Png => super::compressed::encode(rgb, width, height, encoding, quality),
     }
 }
 
@@ -78,8 +56,8 @@ pub fn encode(rgb: &[u8], width: u32, height: u32, encoding: ImageEncoding, qual
 pub fn decode<'a>(data: &'a [u8], width: u32, height: u32, encoding: ImageEncoding) -> Result<Cow<'a, [u8]>, String> {
     check_size(width, height, encoding, data.len())?;
     let rgb_len = width as usize * height as usize * 3;
-    let format = match encoding {
-        ImageEncoding::Rgb8 => return Ok(Cow::Borrowed(data)),
+    match encoding {
+        ImageEncoding::Rgb8 => Ok(Cow::Borrowed(data)),
         ImageEncoding::Lz4 => {
             // The output is allocated at the size the frame states (bounded above), never at
             // a size the block claims.
@@ -88,18 +66,12 @@ pub fn decode<'a>(data: &'a [u8], width: u32, height: u32, encoding: ImageEncodi
             if rgb.len() != rgb_len {
                 return Err(format!("Lz4 block expands to {} bytes, {width}x{height} Rgb8 is {rgb_len}", rgb.len()));
             }
-            return Ok(Cow::Owned(rgb));
+            Ok(Cow::Owned(rgb))
         }
-        ImageEncoding::Jpeg => image::ImageFormat::Jpeg,
-        ImageEncoding::Png => image::ImageFormat::Png,
-    };
-    let reader = || image::ImageReader::with_format(Cursor::new(data), format);
-    let (w, h) = reader().into_dimensions().map_err(|e| format!("{encoding:?} header does not decode: {e}"))?;
-    if (w, h) != (width, height) {
-        return Err(format!("{encoding:?} image is {w}x{h}, the frame says {width}x{height}"));
+        ImageEncoding::Jpeg | ImageEncoding::Png => {
+            super::compressed::decode(data, width, height, encoding).map(Cow::Owned)
+        }
     }
-    let img = reader().decode().map_err(|e| format!("{encoding:?} image does not decode: {e}"))?.into_rgb8();
-    Ok(Cow::Owned(img.into_raw()))
 }
 
 #[cfg(test)]
@@ -120,15 +92,24 @@ mod tests {
         px
     }
 
+    /// The lossless encodings this build has (PNG with the `images` feature).
+    const LOSSLESS: &[ImageEncoding] = &[
+        ImageEncoding::Rgb8,
+        ImageEncoding::Lz4,
+        #[cfg(feature = "images")]
+        ImageEncoding::Png,
+    ];
+
     #[test]
     fn lossless_encodings_round_trip_bit_exact() {
         let rgb = scene(64, 48);
-        for enc in [ImageEncoding::Rgb8, ImageEncoding::Lz4, ImageEncoding::Png] {
+        for &enc in LOSSLESS {
             let bytes = encode(&rgb, 64, 48, enc, 85).unwrap();
             assert_eq!(decode(&bytes, 64, 48, enc).unwrap().as_ref(), &rgb[..], "{enc:?}");
         }
     }
 
+    #[cfg(feature = "images")]
     #[test]
     fn jpeg_round_trips_within_a_small_error() {
         let rgb = scene(64, 48);
@@ -151,7 +132,11 @@ mod tests {
     #[test]
     fn a_truncated_or_mislabelled_frame_is_an_error_not_a_panic() {
         let rgb = scene(64, 48);
-        for enc in [ImageEncoding::Lz4, ImageEncoding::Jpeg, ImageEncoding::Png] {
+        #[cfg(feature = "images")]
+        let encodings = [ImageEncoding::Lz4, ImageEncoding::Jpeg, ImageEncoding::Png];
+        #[cfg(not(feature = "images"))]
+        let encodings = [ImageEncoding::Lz4];
+        for enc in encodings {
             let bytes = encode(&rgb, 64, 48, enc, 85).unwrap();
             assert!(decode(&bytes[..bytes.len() / 2], 64, 48, enc).is_err(), "{enc:?} truncated");
             assert!(decode(&rgb[..bytes.len().min(rgb.len())], 64, 48, enc).is_err(), "raw bytes labelled {enc:?}");
@@ -161,6 +146,17 @@ mod tests {
         assert!(decode(&lz4, 32, 48, ImageEncoding::Lz4).is_err());
     }
 
+    #[cfg(not(feature = "images"))]
+    #[test]
+    fn jpeg_and_png_without_the_images_feature_are_errors_that_name_it() {
+        for enc in [ImageEncoding::Jpeg, ImageEncoding::Png] {
+            let err = encode(&scene(8, 8), 8, 8, enc, 85).unwrap_err();
+            assert!(err.contains("`images` feature"), "{err}");
+            assert!(decode(&[0xff, 0xd8, 0xff], 8, 8, enc).unwrap_err().contains("`images` feature"));
+        }
+    }
+
+    #[cfg(feature = "images")]
     #[test]
     fn a_compressed_image_stating_another_size_is_refused_from_its_header() {
         let big = encode(&scene(128, 96), 128, 96, ImageEncoding::Png, 85).unwrap();

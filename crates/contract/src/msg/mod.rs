@@ -18,6 +18,7 @@ mod acc;
 mod any;
 mod camera;
 mod codec;
+mod compressed;
 mod image_encoding;
 pub mod layout;
 mod objects;

@@ -31,10 +31,10 @@ const DEFAULT_QUEUE_MS: f64 = 500.0;
 
 /// The profiles that ship, by name (config/faults/<name>.json5).
 pub const BUILT_IN: &[(&str, &str)] = &[
-    ("wifi-busy", include_str!("../../config/faults/wifi-busy.json5")),
-    ("lossy-camera", include_str!("../../config/faults/lossy-camera.json5")),
-    ("congested-lan", include_str!("../../config/faults/congested-lan.json5")),
-    ("camera-outage", include_str!("../../config/faults/camera-outage.json5")),
+    ("wifi-busy", include_str!("../../../../config/faults/wifi-busy.json5")),
+    ("lossy-camera", include_str!("../../../../config/faults/lossy-camera.json5")),
+    ("congested-lan", include_str!("../../../../config/faults/congested-lan.json5")),
+    ("camera-outage", include_str!("../../../../config/faults/camera-outage.json5")),
 ];
 
 /// How jitter (extra delay on top of `delay_ms`) is drawn.
