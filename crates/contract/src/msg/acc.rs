@@ -76,7 +76,8 @@ impl Message for AccCommand {
     }
 }
 
-pub(crate) fn example_status() -> AccStatus {
+/// The AccStatus of docs/wire-format.md's byte example.
+pub fn example_status() -> AccStatus {
     AccStatus {
         mode: AccMode::Follow,
         set_speed_mps: 30.0,

@@ -144,7 +144,8 @@ impl Message for CameraInfo {
     }
 }
 
-pub(crate) fn example_info() -> CameraInfo {
+/// The CameraInfo of docs/wire-format.md's byte example.
+pub fn example_info() -> CameraInfo {
     CameraInfo::pinhole(
         640,
         480,

@@ -37,9 +37,9 @@ pub use pixels::{check_size as check_frame_size, decode as decode_pixels, encode
 pub use road::{Curve, LaneEnd, RoadSpec};
 pub use sim::{due, SimClock, SimEvent, SimEventKind, SimMode};
 pub use vehicle::{ControlCommand, ControlTiming, Speed, VehicleState};
-/// Example messages of docs/wire-format.md, for tests elsewhere in the crate.
-#[cfg(test)]
-pub(crate) use {acc::example_status, camera::example_info, objects::example_detections, vehicle::example_state};
+/// Example messages of docs/wire-format.md: the values its byte examples encode (tests of every
+/// layer build their messages from them; a decoder of the user's own can check against them).
+pub use {acc::example_status, camera::example_info, objects::example_detections, vehicle::example_state};
 
 use serde::{Deserialize, Serialize};
 

@@ -159,7 +159,8 @@ pub(super) fn example_ground_truth() -> GroundTruthObjects {
     }
 }
 
-pub(crate) fn example_detections() -> Detections {
+/// The Detections of docs/wire-format.md's byte example.
+pub fn example_detections() -> Detections {
     Detections {
         frame_seq: 25,
         frame_stamp_pub_ns: 1_700_000_000_100_000_000,

@@ -95,7 +95,8 @@ impl Message for ControlCommand {
     }
 }
 
-pub(crate) fn example_state() -> VehicleState {
+/// The VehicleState of docs/wire-format.md's byte example.
+pub fn example_state() -> VehicleState {
     VehicleState {
         step: 125,
         position_in_world_m: [31.25, -1.75, 0.0],
