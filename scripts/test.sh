@@ -54,7 +54,7 @@ fi
 step "rust build and tests (cargo test --release)"
 rm -f target/test-reports/scenario-sample.txt target/test-reports/sweep-40.txt
 SECONDS=0
-cargo build --release
+cargo build --release --workspace
 echo "build: ${SECONDS} s"
 SECONDS=0
 cargo test --release --workspace

@@ -39,22 +39,15 @@
 //! - [`bench`]: `slipstream bench`, the bus against raw Zenoh, UDP and TCP in one run.
 //! - [`cli`]: what every binary does first (Zenoh's runtime layout, logging).
 
-// The contract is a crate of its own (crates/contract), re-exported under its old paths.
-pub use slipstream_contract::{bus, config, msg, qos, topics};
+// The layers below the tools are crates of their own, re-exported under their module names.
+pub use slipstream_acc as acc;
+pub use slipstream_bench as bench;
+pub use slipstream_contract::{bus, config, msg, process, qos, topics};
+pub use slipstream_model::{road, vehicle};
+pub use slipstream_orchestration::{eval, launch, record, ros2, view};
+pub use slipstream_perception as perception;
+pub use slipstream_sim as sim;
 
-pub mod acc;
-pub mod perception;
-pub mod road;
-pub mod sim;
-pub mod vehicle;
-
-pub mod eval;
-pub mod launch;
-pub mod record;
-pub mod ros2;
-pub mod view;
-
-pub mod bench;
 pub mod cli;
 pub mod tools;
 

@@ -1,5 +1,5 @@
-//! The code's shape, read from its sources (src/ and every crate's under crates/): no function
-//! runs over 100 lines (tests excepted), the binaries only parse and hand over to the library, and no two files of one
+//! The code's shape, read from its sources (src/ and every crate's under crates/ and examples/):
+//! no function runs over 100 lines (test modules included), the binaries only parse and hand over to the library, and no two files of one
 //! module import each other, directly or round a longer circle. A change that breaks one of
 //! these fails here, naming the function, the binary or the circle.
 
@@ -27,9 +27,11 @@ impl Source {
 fn sources() -> Vec<Source> {
     let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
     let mut roots = vec!["src".to_string()];
-    let mut crates: Vec<_> = std::fs::read_dir(repo.join("crates")).map_or(Vec::new(), |d| d.flatten().collect());
-    crates.sort_by_key(|e| e.file_name());
-    roots.extend(crates.iter().map(|c| format!("crates/{}/src", c.file_name().to_string_lossy())));
+    for parent in ["crates", "examples"] {
+        let mut crates: Vec<_> = std::fs::read_dir(repo.join(parent)).map_or(Vec::new(), |d| d.flatten().collect());
+        crates.sort_by_key(|e| e.file_name());
+        roots.extend(crates.iter().map(|c| format!("{parent}/{}/src", c.file_name().to_string_lossy())));
+    }
     let mut out = Vec::new();
     for root in roots {
         let src = repo.join(&root);
@@ -130,18 +132,49 @@ fn is_ident(c: u8) -> bool {
     c.is_ascii_alphanumeric() || c == b'_'
 }
 
-/// Every function with a body: (name, first line, line count). Functions inside a
-/// `#[cfg(test)]` module are left out.
+/// The end (one past the closing brace) of the block whose `{` is the first one at or after
+/// `from` in `code`; the end of `code` when it never closes.
+fn block_end(code: &[u8], from: usize) -> usize {
+    let Some(open) = code[from..].iter().position(|&c| c == b'{') else { return code.len() };
+    let mut depth = 0i32;
+    for (k, &c) in code[from + open..].iter().enumerate() {
+        depth += (c == b'{') as i32 - (c == b'}') as i32;
+        if depth == 0 {
+            return from + open + k + 1;
+        }
+    }
+    code.len()
+}
+
+/// `code` with each `#[cfg(test)] mod ... { ... }` blanked (newlines kept): what the library
+/// itself is made of, wherever in the file its tests sit.
+fn without_test_modules(code: &[u8]) -> Vec<u8> {
+    let mut out = code.to_vec();
+    let mut i = 0;
+    while let Some(p) = out[i..].windows(12).position(|w| w == b"#[cfg(test)]") {
+        let at = i + p;
+        let rest = String::from_utf8_lossy(&out[at + 12..]).trim_start().to_string();
+        let end = if rest.starts_with("mod ") { block_end(&out, at) } else { at + 12 };
+        for c in &mut out[at..end] {
+            if *c != b'\n' {
+                *c = b' ';
+            }
+        }
+        i = end.min(out.len());
+    }
+    out
+}
+
+/// Every function with a body, test modules included: (name, first line, line count).
 fn functions(text: &str) -> Vec<(String, usize, usize)> {
     let code = code_only(text);
     let line_of = |pos: usize| code[..pos].iter().filter(|&&c| c == b'\n').count() + 1;
-    let test_from = text.find("#[cfg(test)]").unwrap_or(text.len());
     let mut out = Vec::new();
     let mut i = 0;
     while let Some(p) = code[i..].windows(3).position(|w| w == b"fn ") {
         let at = i + p;
         i = at + 3;
-        if at >= test_from || (at > 0 && is_ident(code[at - 1])) {
+        if at > 0 && is_ident(code[at - 1]) {
             continue;
         }
         let name: String = code[at + 3..].iter().take_while(|&&c| is_ident(c)).map(|&c| c as char).collect();
@@ -169,6 +202,12 @@ fn functions(text: &str) -> Vec<(String, usize, usize)> {
 fn the_function_finder_counts_code_not_text() {
     let text = "fn a() {\n    let s = \"}\";\n    let c = '{';\n    // }\n    x::<'a>();\n}\n\nfn b();\nfn c(x: u8) -> u8 {\n    x\n}\n";
     assert_eq!(functions(text), vec![("a".to_string(), 1, 6), ("c".to_string(), 9, 3)]);
+    // A function after a test module in the middle of a file is still a function.
+    let mid = "fn a() {}\n#[cfg(test)]\nmod tests {\n    fn t() {}\n}\nfn b() {\n}\n";
+    let names: Vec<String> = functions(mid).into_iter().map(|(n, _, _)| n).collect();
+    assert_eq!(names, ["a", "t", "b"]);
+    let lib = String::from_utf8(without_test_modules(mid.as_bytes())).unwrap();
+    assert!(lib.contains("fn a()") && lib.contains("fn b()") && !lib.contains("fn t()"), "{lib}");
 }
 
 #[test]
@@ -223,8 +262,8 @@ fn sibling_refs(file: &Path, text: &str, siblings: &BTreeSet<String>) -> BTreeSe
     if !in_mod {
         prefixes.push("super".to_string());
     }
-    let code = String::from_utf8(code_only(text)).unwrap();
-    let code = &code[..code.find("#[cfg(test)]").unwrap_or(code.len())];
+    let code = String::from_utf8(without_test_modules(&code_only(text))).unwrap();
+    let code = code.as_str();
     let mut refs = BTreeSet::new();
     for prefix in prefixes.iter().filter(|p| p.as_str() != "crate::") {
         let mut rest = code;

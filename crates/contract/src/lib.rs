@@ -21,6 +21,7 @@ pub mod topics;
 
 pub mod bus;
 pub mod config;
+pub mod process;
 
 pub use bus::{Bus, BusError};
 pub use config::{ConnectArgs, TopicMap};

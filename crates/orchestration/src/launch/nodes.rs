@@ -1,0 +1,685 @@
+//! The loop as child processes: slipstream-acc, slipstream-detect (camera perception only) and
+//! slipstream-sim, watched from an observer session of the launcher's own.
+//!
+//! The order is fixed: [`LoopRun::open`] joins the bus (the caller subscribes to what it records
+//! before anything is published), [`LoopRun::start`] starts the controllers, waits until their
+//! liveliness tokens are seen, then starts the simulator; [`LoopRun::check`] reports its end or
+//! a node's death; [`LoopRun::stop`] stops the simulator first (it publishes the scenario's
+//! end), lets the last messages land, then the others; [`LoopRun::close`] leaves the bus.
+//!
+//! Connection, by [`Network`]: with the user's flags in peer mode every node listens on a
+//! loopback port of its own and dials the observer and the nodes started before it, so the
+//! loop does not depend on discovery, and the observer also listens where the config says
+//! (by default tcp/127.0.0.1:7447, so `slipstream top` in another terminal finds the loop); in
+//! client mode (through a router) the nodes get the flags as given. [`Network::Isolated`] uses
+//! only loopback ports and a namespace of the run's own: nothing else on the machine is seen
+//! or disturbed (the suites).
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, ExitStatus, Stdio};
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use serde::Serialize;
+
+use super::child::{free_ports, sibling_binary, Child};
+use super::{DEFAULT_RUST_LOG, NODE_POLL, NODE_START_TIMEOUT, SETTLE, STOP_GRACE};
+use slipstream_acc::node::AccStats;
+use slipstream_acc::{PerceptionSource, VehicleClass};
+use slipstream_contract::config::{ConnectArgs, FaultProfile, DEFAULT_ZENOH_CONFIG};
+use slipstream_contract::Bus;
+use slipstream_perception::node::DetectStats;
+use slipstream_sim::SimReport;
+
+/// How the simulator's clock runs (slipstream-sim --mode).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum ClockMode {
+    /// Paced to the wall clock: watch it drive; latency is felt by the vehicle
+    Realtime,
+    /// As fast as the simulator can; the detector and the ACC may fall behind
+    Fast,
+    /// Every step waits for the ACC's answer: deterministic, as fast as the loop allows
+    Lockstep,
+}
+
+impl ClockMode {
+    pub fn name(self) -> &'static str {
+        match self {
+            ClockMode::Realtime => "realtime",
+            ClockMode::Fast => "fast",
+            ClockMode::Lockstep => "lockstep",
+        }
+    }
+}
+
+/// How the loop's processes on this host reach each other.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, clap::ValueEnum)]
+#[serde(rename_all = "lowercase")]
+pub enum LinkKind {
+    /// Unix sockets in a directory of the run's own: no TCP/IP stack between processes
+    /// (about half the latency of TCP on loopback, docs/performance.md)
+    #[default]
+    Unix,
+    /// TCP on loopback ports
+    Tcp,
+}
+
+/// Which loop to run.
+#[derive(Debug, Clone)]
+pub struct LoopSpec {
+    /// As given to slipstream-sim --scenario: a built-in name or a .json5 file.
+    pub scenario: String,
+    pub duration_s: f64,
+    pub clock: ClockMode,
+    pub perception: PerceptionSource,
+    pub set_speed_mps: f64,
+    /// The ACC's time gap; None: its own setting.
+    pub time_gap_s: Option<f64>,
+    /// The vehicle the ACC drives (the scenario's ego); None: its own setting.
+    pub vehicle: Option<VehicleClass>,
+    /// Faults every node injects into what it receives (`--faults`); None: none.
+    pub faults: Option<FaultProfile>,
+    /// The links between the loop's processes (peer mode).
+    pub link: LinkKind,
+}
+
+impl LoopSpec {
+    /// The vehicle the ACC drives for a scenario: its ego's.
+    pub fn vehicle_of(scenario: &slipstream_sim::Scenario) -> VehicleClass {
+        slipstream_contract::msg::ObjectClass::from(scenario.ego.class).into()
+    }
+
+    /// The nodes a run of this loop brings onto the bus: its observer, the ACC, the detector
+    /// with camera perception, and the simulator (which `up --sim external` does not start,
+    /// and a re-simulation replaces with its observer).
+    fn nodes<'a>(&self, observer: &'a str) -> Vec<&'a str> {
+        let mut v = vec![observer, ACC_NODE, SIM_NODE];
+        if self.perception == PerceptionSource::Camera {
+            v.push(DETECT_NODE);
+        }
+        v
+    }
+
+    /// Faults a node of this loop cannot take: in lockstep, every step waits for the ACC's
+    /// answer to its speed message and for the detections of its frame, so speed and camera
+    /// frames must arrive; their faults belong on what follows them.
+    fn check_faults(&self) -> Result<()> {
+        let Some(p) = &self.faults else { return Ok(()) };
+        if self.clock != ClockMode::Lockstep {
+            return Ok(());
+        }
+        for (topic, instead) in [
+            (slipstream_contract::topics::VEHICLE_SPEED.topic, "vehicle/state and vehicle/control"),
+            (slipstream_contract::topics::CAMERA_FRONT.topic, "perception/objects (ground truth: objects)"),
+        ] {
+            if p.topics.contains_key(&topic) {
+                bail!(
+                    "{}: key `topics.{topic}`: faults on {topic} cannot run in lockstep (each step waits for what follows from it) (fix: put them on {instead}, or use --mode realtime or fast)",
+                    p.name
+                );
+            }
+        }
+        Ok(())
+    }
+}
+
+/// How the loop's processes find each other.
+#[derive(Debug, Clone)]
+pub enum Network<'a> {
+    /// The user's connection and topic flags (see the module doc), in a namespace no other
+    /// loop holds ([`super::namespace`]). `sim_elsewhere`: the simulator is someone else's
+    /// (`up --sim external`), expected in the namespace.
+    User { connect: &'a ConnectArgs, sim_elsewhere: bool },
+    /// Loopback ports and a namespace of the run's own; the topic config file, if any.
+    Isolated { topics: Option<PathBuf>, namespace: String },
+}
+
+/// How a node process ended.
+#[derive(Debug, Clone, Serialize)]
+pub struct NodeEnd {
+    pub node: String,
+    pub pid: u32,
+    /// Exit code; None when killed by a signal.
+    pub exit_code: Option<i32>,
+    /// Ended on its own before the run was over.
+    pub died: bool,
+    pub log: PathBuf,
+}
+
+/// One input of one node as it ended: what arrived, what the network lost (sequence gaps) and
+/// what injected faults dropped, delayed or duplicated.
+#[derive(Debug, Clone, Serialize)]
+pub struct NodeInput {
+    pub node: String,
+    #[serde(flatten)]
+    pub stats: slipstream_contract::bus::StatsSnapshot,
+}
+
+impl NodeInput {
+    /// "perception/objects at acc: 1,200 arrived, 0 lost on the way, injected 240 dropped, ..."
+    pub fn line(&self) -> String {
+        let s = &self.stats;
+        format!(
+            "{} at {}: {} arrived, {} lost on the way; injected: {} dropped, {} delayed, {} duplicated",
+            s.topic, self.node, s.received, s.lost, s.injected_dropped, s.injected_delayed, s.injected_duplicated
+        )
+    }
+}
+
+/// What [`LoopRun::check`] saw.
+#[derive(Debug, Clone, Default)]
+pub struct Progress {
+    /// The simulator has exited, with this status.
+    pub sim_ended: Option<ExitStatus>,
+    /// Nodes that ended before the run was over (the simulator too, if it failed).
+    pub died: Vec<String>,
+}
+
+impl Progress {
+    /// Nothing more to wait for.
+    pub fn over(&self) -> bool {
+        self.sim_ended.is_some() || !self.died.is_empty()
+    }
+}
+
+/// The node binaries, in start order.
+const ACC: &str = "slipstream-acc";
+const DETECT: &str = "slipstream-detect";
+const SIM: &str = "slipstream-sim";
+/// The nodes' names on the bus (their liveliness tokens).
+const ACC_NODE: &str = "acc";
+const DETECT_NODE: &str = "detect";
+const SIM_NODE: &str = "sim";
+/// The file slipstream-sim --json writes its report to, in the logs directory.
+const SIM_REPORT: &str = "slipstream-sim.json";
+/// The file slipstream-acc --json writes its statistics to, in the logs directory.
+const ACC_REPORT: &str = "slipstream-acc.json";
+/// The file slipstream-detect --json writes its statistics to, in the logs directory.
+const DETECT_REPORT: &str = "slipstream-detect.json";
+/// The fault profile handed to the nodes, in the logs directory.
+const FAULTS_FILE: &str = "faults.json5";
+
+/// Zenoh settings of an isolated loop's sessions (the observer's and every node's). Each node
+/// dials the observer and every node started before it, so the sessions form a full mesh
+/// without gossip; with gossip on, a session's open waited out Zenoh's scouting delay (500 ms)
+/// about every other time, for a peer connection gossip had made in parallel. A node whose
+/// peer is not listening yet (they start together) dials again after 20 ms, not 250.
+const ISOLATED_CFG: [(&str, &str); 2] = [
+    ("scouting/gossip/enabled", "false"),
+    ("connect/retry", "{period_init_ms: 20, period_max_ms: 2000, period_increase_factor: 2}"),
+];
+
+/// Where the observer and each node listen: loopback ports or unix sockets.
+#[derive(Debug)]
+struct Endpoints {
+    observer: String,
+    acc: String,
+    detect: String,
+    sim: String,
+    /// Each node's low-latency session's endpoint, by its main endpoint.
+    low_latency: Vec<(String, String)>,
+    /// The unix sockets' directory (removed when the run ends).
+    dir: Option<PathBuf>,
+}
+
+impl Endpoints {
+    fn new(link: LinkKind) -> Result<Endpoints> {
+        match link {
+            LinkKind::Tcp => {
+                let [observer, acc, detect, sim, acc_ll, detect_ll, sim_ll] =
+                    free_ports::<7>()?.map(|p| format!("tcp/127.0.0.1:{p}"));
+                let low_latency = vec![(acc.clone(), acc_ll), (detect.clone(), detect_ll), (sim.clone(), sim_ll)];
+                Ok(Endpoints { observer, acc, detect, sim, low_latency, dir: None })
+            }
+            LinkKind::Unix => {
+                // Short: a socket's path has at most 107 bytes.
+                static RUNS: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+                let run = RUNS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                let dir = std::env::temp_dir().join(format!("slipstream-{}-{run}", std::process::id()));
+                std::fs::create_dir_all(&dir).with_context(|| format!("create {}", dir.display()))?;
+                let sock = |name: &str| format!("unixsock-stream/{}", dir.join(format!("{name}.sock")).display());
+                let low_latency = [ACC, DETECT, SIM].iter().map(|n| (sock(n), format!("{}.ll", sock(n)))).collect();
+                Ok(Endpoints {
+                    observer: sock("observer"),
+                    acc: sock(ACC),
+                    detect: sock(DETECT),
+                    sim: sock(SIM),
+                    low_latency,
+                    dir: Some(dir),
+                })
+            }
+        }
+    }
+}
+
+impl Drop for Endpoints {
+    fn drop(&mut self) {
+        if let Some(dir) = &self.dir {
+            let _ = std::fs::remove_dir_all(dir);
+        }
+    }
+}
+
+/// The loop's processes and the observer's session.
+pub struct LoopRun {
+    bus: Bus,
+    spec: LoopSpec,
+    logs: PathBuf,
+    /// Flags every node gets (config, topics, namespace, mode, ...).
+    base_flags: Vec<String>,
+    /// Endpoints the user gave with -e (peer mode: dialled besides the loop's own ports).
+    user_connect: Vec<String>,
+    /// Peer mode: each node listens on its own port and dials the ones before it.
+    peer: bool,
+    endpoints: Endpoints,
+    nodes: Vec<Child>,
+    died: Vec<String>,
+    /// See [`LoopRun::moved`].
+    moved: Option<(String, String)>,
+    /// The run's hold on its namespace on this machine, for as long as the run lasts.
+    _hold: Option<super::hold::Hold>,
+}
+
+impl LoopRun {
+    /// Joins the bus as `observer`, with the node logs going to `logs` (created). Nothing is
+    /// started yet: subscribe to what you record first, then [`LoopRun::start`].
+    pub async fn open(spec: LoopSpec, network: Network<'_>, logs: &Path, observer: &str) -> Result<LoopRun> {
+        std::fs::create_dir_all(logs).with_context(|| format!("create the log directory {}", logs.display()))?;
+        let endpoints = Endpoints::new(spec.link)?;
+        let isolated = matches!(network, Network::Isolated { .. });
+        let sim_elsewhere = matches!(network, Network::User { sim_elsewhere: true, .. });
+        let (config, topic_map, mut base_flags, user_connect, peer) = match network {
+            Network::User { connect, .. } => {
+                let mut config = connect.zenoh_config()?;
+                let mode = config.get_json("mode").ok().and_then(|m| serde_json::from_str::<String>(&m).ok());
+                anyhow::ensure!(
+                    mode.as_deref() != Some("router"),
+                    "the loop runs its nodes as peers or clients, not routers (-m)"
+                );
+                let peer = mode.as_deref().unwrap_or("peer") == "peer";
+                if peer {
+                    let mut listen: Vec<serde_json::Value> = config
+                        .get_json("listen/endpoints")
+                        .ok()
+                        .and_then(|s| serde_json::from_str(&s).ok())
+                        .unwrap_or_default();
+                    listen.push(endpoints.observer.clone().into());
+                    config
+                        .insert_json5("listen/endpoints", &serde_json::Value::Array(listen).to_string())
+                        .map_err(|e| anyhow::anyhow!("add a listen endpoint for the nodes: {e}"))?;
+                }
+                (config, connect.topic_map()?, user_flags(connect), connect.connect.clone(), peer)
+            }
+            Network::Isolated { topics, namespace } => {
+                let mut config = zenoh::Config::from_json5(DEFAULT_ZENOH_CONFIG).map_err(anyhow::Error::msg)?;
+                config
+                    .insert_json5("listen/endpoints", &format!("[\"{}\"]", endpoints.observer))
+                    .map_err(anyhow::Error::msg)?;
+                config.insert_json5("connect/endpoints", "[]").map_err(anyhow::Error::msg)?;
+                let map =
+                    slipstream_contract::TopicMap::load_or_default(topics.as_deref())?.with_namespace(&namespace)?;
+                let mut flags = vec!["-n".to_string(), namespace];
+                for (key, value) in ISOLATED_CFG {
+                    config.insert_json5(key, value).map_err(|e| anyhow::anyhow!("zenoh config key {key}: {e}"))?;
+                    flags.extend(["--cfg".into(), format!("{key}:{value}")]);
+                }
+                if let Some(file) = topics {
+                    flags.extend(["-t".into(), file.display().to_string()]);
+                }
+                (config, map, flags, Vec::new(), true)
+            }
+        };
+        let session = zenoh::open(config)
+            .await
+            .map_err(|e| anyhow::anyhow!("join the bus: {}", slipstream_contract::bus::zenoh_message(&e)))?;
+        let claimed = match isolated {
+            true => super::namespace::Claimed { map: topic_map, moved_to: None, beside: String::new(), hold: None },
+            false => {
+                let ours: Vec<&str> =
+                    spec.nodes(observer).into_iter().filter(|n| !(sim_elsewhere && *n == SIM_NODE)).collect();
+                super::namespace::claim(&session, topic_map, &ours, sim_elsewhere).await?
+            }
+        };
+        if let Some(ns) = &claimed.moved_to {
+            base_flags.extend(["-n".into(), ns.clone()]);
+        }
+        let moved = claimed.moved_to.clone().map(|ns| (ns, claimed.beside.clone()));
+        let hold = claimed.hold;
+        let bus = Bus::from_session(session, claimed.map, observer).await.context("join the bus")?;
+        Ok(LoopRun {
+            bus,
+            spec,
+            logs: logs.to_path_buf(),
+            base_flags,
+            user_connect,
+            peer,
+            endpoints,
+            nodes: Vec::new(),
+            died: Vec::new(),
+            moved,
+            _hold: hold,
+        })
+    }
+
+    /// Set when the default namespace held another loop and this one moved: the namespace it
+    /// moved to and why the default one was taken ([`super::namespace`]).
+    pub fn moved(&self) -> Option<&(String, String)> {
+        self.moved.as_ref()
+    }
+
+    /// The observer's session: subscribe here to what the run is judged by.
+    pub fn bus(&self) -> &Bus {
+        &self.bus
+    }
+
+    pub fn spec(&self) -> &LoopSpec {
+        &self.spec
+    }
+
+    /// Where the nodes' logs go: `<node>.log` (stderr), `<node>.out` (stdout).
+    pub fn logs(&self) -> &Path {
+        &self.logs
+    }
+
+    fn camera(&self) -> bool {
+        self.spec.perception == PerceptionSource::Camera
+    }
+
+    /// Starts the controllers, waits until they are alive on the bus (at most
+    /// [`NODE_START_TIMEOUT`]), then starts the simulator.
+    pub async fn start(&mut self) -> Result<()> {
+        self.start_controllers().await?;
+        self.start_sim()
+    }
+
+    /// Starts the ACC (and the detector with camera perception) and waits until they are alive:
+    /// what a replay drives in place of the simulator ([`crate::eval::resim`]).
+    pub async fn start_controllers(&mut self) -> Result<()> {
+        let spec = self.spec.clone();
+        spec.check_faults()?;
+        if let Some(p) = &spec.faults {
+            let path = self.logs.join(FAULTS_FILE);
+            std::fs::write(&path, p.to_json5()).with_context(|| format!("write {}", path.display()))?;
+            self.base_flags.extend(["--faults".into(), path.display().to_string()]);
+        }
+        let mut acc_args = vec![
+            "--json".to_string(),
+            "--set-speed".into(),
+            spec.set_speed_mps.to_string(),
+            "--perception".into(),
+            spec.perception.name().into(),
+        ];
+        if let Some(h) = spec.time_gap_s {
+            acc_args.extend(["--time-gap".into(), h.to_string()]);
+        }
+        if let Some(v) = spec.vehicle {
+            acc_args.extend(["--vehicle".into(), v.name().into()]);
+        }
+        if spec.clock == ClockMode::Lockstep {
+            acc_args.push("--lockstep".into());
+        }
+        let (acc, detect) = (self.endpoints.acc.clone(), self.endpoints.detect.clone());
+        self.spawn(ACC, acc_args, &acc, &[])?;
+        if self.camera() {
+            self.spawn(DETECT, vec!["--json".into()], &detect, &[&acc])?;
+        }
+        self.await_controllers().await
+    }
+
+    /// Starts the simulator, after [`LoopRun::start_controllers`].
+    fn start_sim(&mut self) -> Result<()> {
+        let spec = self.spec.clone();
+        let (acc, detect, sim) =
+            (self.endpoints.acc.clone(), self.endpoints.detect.clone(), self.endpoints.sim.clone());
+        let mut controllers = vec![acc.as_str()];
+        if self.camera() {
+            controllers.push(&detect);
+        }
+        let mut sim_args = vec![
+            "--scenario".to_string(),
+            spec.scenario.clone(),
+            "--mode".into(),
+            spec.clock.name().into(),
+            "--duration".into(),
+            spec.duration_s.to_string(),
+            "--json".into(),
+        ];
+        if spec.clock == ClockMode::Lockstep {
+            sim_args.extend(["--wait-for".into(), ACC_NODE.into()]);
+        }
+        self.spawn(SIM, sim_args, &sim, &controllers)
+    }
+
+    /// The simulator's first frame must find the detector and the ACC listening.
+    async fn await_controllers(&mut self) -> Result<()> {
+        let wanted: Vec<&str> = if self.camera() { vec![ACC_NODE, DETECT_NODE] } else { vec![ACC_NODE] };
+        let seen = self.bus.watch_nodes().await?;
+        let deadline = Instant::now() + NODE_START_TIMEOUT;
+        loop {
+            let alive = seen.names();
+            if wanted.iter().all(|w| alive.iter().any(|a| a == w)) {
+                return Ok(());
+            }
+            for n in &mut self.nodes {
+                if let Some(status) = n.exited() {
+                    let log = log_of(&self.logs, &n.name);
+                    let why = last_error(&log).map_or(String::new(), |e| format!(": {e}"));
+                    bail!("{} exited at start ({status}){why}\n(its log: {})", n.name, log.display());
+                }
+            }
+            anyhow::ensure!(
+                Instant::now() < deadline,
+                "{wanted:?} not all up after {NODE_START_TIMEOUT:?} (alive: {alive:?}); see the logs in {}",
+                self.logs.display()
+            );
+            tokio::time::sleep(NODE_POLL).await;
+        }
+    }
+
+    /// The flags of one node: the shared ones, then its own port and whom it dials. Its
+    /// low-latency session listens on an endpoint of its own and dials the observer's (main)
+    /// session and the earlier nodes' low-latency sessions, so the loop's real-time topics
+    /// cross low-latency links and the observer still receives them.
+    fn flags(&self, own: &str, earlier: &[&str]) -> Vec<String> {
+        let mut f = self.base_flags.clone();
+        if self.peer {
+            f.extend(["-l".into(), own.to_string()]);
+            for e in std::iter::once(self.endpoints.observer.as_str()).chain(earlier.iter().copied()) {
+                f.extend(["-e".into(), e.to_string()]);
+            }
+            let ll = |main: &str| self.endpoints.low_latency.iter().find(|(m, _)| m == main).map(|(_, l)| l.clone());
+            let two_sessions = self.base_flags.iter().any(|f| f == "--low-latency-session");
+            if let Some(own_ll) = ll(own).filter(|_| two_sessions) {
+                f.extend(["--low-latency-listen".into(), own_ll]);
+                f.extend(["--low-latency-connect".into(), self.endpoints.observer.clone()]);
+                for e in earlier.iter().filter_map(|e| ll(e)) {
+                    f.extend(["--low-latency-connect".into(), e]);
+                }
+                for e in &self.user_connect {
+                    f.extend(["--low-latency-connect".into(), e.clone()]);
+                }
+            }
+        }
+        for e in &self.user_connect {
+            f.extend(["-e".into(), e.clone()]);
+        }
+        f
+    }
+
+    fn spawn(&mut self, bin: &str, args: Vec<String>, own: &str, earlier: &[&str]) -> Result<()> {
+        let stderr = create(&log_of(&self.logs, bin))?;
+        let stdout_name = match bin {
+            SIM => SIM_REPORT.to_string(),
+            ACC => ACC_REPORT.to_string(),
+            DETECT => DETECT_REPORT.to_string(),
+            _ => format!("{bin}.out"),
+        };
+        let stdout = create(&self.logs.join(stdout_name))?;
+        let mut cmd = Command::new(sibling_binary(bin)?);
+        cmd.args(self.flags(own, earlier)).args(args).stdin(Stdio::null()).stdout(stdout).stderr(stderr);
+        if std::env::var_os("RUST_LOG").is_none() {
+            cmd.env("RUST_LOG", DEFAULT_RUST_LOG);
+        }
+        // Faults are the spec's, passed as a flag, never inherited.
+        cmd.env_remove("SLIPSTREAM_FAULTS");
+        self.nodes.push(Child::spawn(bin, &mut cmd)?);
+        Ok(())
+    }
+
+    /// Whether the simulator has ended and which nodes died (each named once, when first seen).
+    pub fn check(&mut self) -> Progress {
+        let mut progress = Progress::default();
+        for n in &mut self.nodes {
+            let Some(status) = n.exited() else { continue };
+            if n.name == SIM {
+                progress.sim_ended = Some(status);
+                if status.success() {
+                    continue;
+                }
+            }
+            if !self.died.contains(&n.name) {
+                self.died.push(n.name.clone());
+            }
+        }
+        progress.died = self.died.clone();
+        progress
+    }
+
+    /// Stops the simulator first (it publishes the scenario's end), then the others, and waits
+    /// [`SETTLE`] for the last messages. Returns how each node ended.
+    pub async fn stop(&mut self) -> Vec<NodeEnd> {
+        if let Some(sim) = self.nodes.iter_mut().find(|n| n.name == SIM) {
+            sim.stop(STOP_GRACE);
+        }
+        // What the controllers say after the simulator's end is not judged: they stop while
+        // the simulator's last messages land.
+        for n in &mut self.nodes {
+            n.interrupt();
+        }
+        tokio::time::sleep(SETTLE).await;
+        for n in &mut self.nodes {
+            n.stop(STOP_GRACE);
+        }
+        let logs = self.logs.clone();
+        self.nodes
+            .iter_mut()
+            .map(|n| NodeEnd {
+                node: n.name.clone(),
+                pid: n.pid(),
+                exit_code: n.exited().and_then(|s| s.code()),
+                died: self.died.contains(&n.name),
+                log: log_of(&logs, &n.name),
+            })
+            .collect()
+    }
+
+    /// The node processes started so far: (binary name, pid).
+    pub fn node_pids(&self) -> Vec<(String, u32)> {
+        self.nodes.iter().map(|n| (n.name.clone(), n.pid())).collect()
+    }
+
+    /// The simulator's report (its --json output), once it has ended.
+    pub fn sim_report(&self) -> Result<SimReport> {
+        let path = self.logs.join(SIM_REPORT);
+        let bytes = std::fs::read(&path).with_context(|| format!("read {}", path.display()))?;
+        serde_json::from_slice(&bytes).with_context(|| format!("{} is no simulator report", path.display()))
+    }
+
+    /// The ACC's statistics (its --json output), once it has been stopped.
+    pub fn acc_report(&self) -> Result<AccStats> {
+        let path = self.logs.join(ACC_REPORT);
+        let bytes = std::fs::read(&path).with_context(|| format!("read {}", path.display()))?;
+        serde_json::from_slice(&bytes).with_context(|| format!("{} holds no ACC statistics", path.display()))
+    }
+
+    /// The detector's statistics (its --json output), once it has been stopped; None without
+    /// camera perception.
+    pub fn detect_report(&self) -> Result<Option<DetectStats>> {
+        if !self.camera() {
+            return Ok(None);
+        }
+        let path = self.logs.join(DETECT_REPORT);
+        let bytes = std::fs::read(&path).with_context(|| format!("read {}", path.display()))?;
+        serde_json::from_slice(&bytes)
+            .map(Some)
+            .with_context(|| format!("{} holds no detector statistics", path.display()))
+    }
+
+    /// The inputs of the ACC and the simulator as they ended (after [`LoopRun::stop`]): what
+    /// was lost on the way and what the faults injected. Empty for a node whose report is
+    /// missing.
+    pub fn inputs(&self) -> Vec<NodeInput> {
+        let mut v: Vec<NodeInput> = self
+            .acc_report()
+            .map(|a| a.inputs.into_iter().map(|stats| NodeInput { node: ACC_NODE.into(), stats }).collect())
+            .unwrap_or_default();
+        if let Ok(sim) = self.sim_report() {
+            v.push(NodeInput { node: SIM_NODE.into(), stats: sim.control_input });
+        }
+        v
+    }
+
+    /// Leaves the bus ([`Bus::leave`]: bounded, never failing): other sessions still attached
+    /// (a `top`, a Python client) must not hold up the caller's report.
+    pub async fn close(self) {
+        self.bus.leave().await;
+    }
+}
+
+/// A node's stderr log in `logs`.
+pub fn log_of(logs: &Path, node: &str) -> PathBuf {
+    logs.join(format!("{node}.log"))
+}
+
+/// How far back from its end a node's log is read for its error.
+const ERROR_TAIL_BYTES: u64 = 16 * 1024;
+
+/// The error a node printed last (after "Error: ", with its "caused by" lines, as every binary
+/// prints them: `cli::error_report`), from the end of its log; None when there is none.
+pub fn last_error(log: &Path) -> Option<String> {
+    use std::io::{Read, Seek, SeekFrom};
+    let mut file = std::fs::File::open(log).ok()?;
+    let len = file.metadata().ok()?.len();
+    file.seek(SeekFrom::Start(len.saturating_sub(ERROR_TAIL_BYTES))).ok()?;
+    let mut bytes = Vec::new();
+    file.take(ERROR_TAIL_BYTES).read_to_end(&mut bytes).ok()?;
+    let tail = String::from_utf8_lossy(&bytes);
+    let lines: Vec<&str> = tail.lines().collect();
+    let at = lines.iter().rposition(|l| l.starts_with("Error: "))?;
+    let first = lines[at].trim_start_matches("Error: ");
+    let error: Vec<&str> =
+        std::iter::once(first).chain(lines[at + 1..].iter().copied().take_while(|l| l.starts_with("  "))).collect();
+    Some(error.join("\n"))
+}
+
+fn create(path: &Path) -> Result<std::fs::File> {
+    std::fs::File::create(path).with_context(|| format!("create {}", path.display()))
+}
+
+/// The user's flags as the nodes take them (endpoints are added per node).
+fn user_flags(connect: &ConnectArgs) -> Vec<String> {
+    let mut base: Vec<String> = Vec::new();
+    if let Some(c) = &connect.zenoh_config {
+        base.extend(["-c".into(), c.display().to_string()]);
+    }
+    if let Some(t) = &connect.topics {
+        base.extend(["-t".into(), t.display().to_string()]);
+    }
+    if let Some(n) = &connect.namespace {
+        base.extend(["-n".into(), n.clone()]);
+    }
+    if let Some(m) = connect.mode {
+        base.extend(["-m".into(), format!("{m:?}").to_lowercase()]);
+    }
+    if connect.no_multicast_scouting {
+        base.push("--no-multicast-scouting".into());
+    }
+    for kv in &connect.cfg {
+        base.extend(["--cfg".into(), kv.clone()]);
+    }
+    if connect.low_latency_session {
+        base.push("--low-latency-session".into());
+    }
+    base
+}

@@ -1,0 +1,353 @@
+//! The live view: a Foxglove WebSocket server fed from the bus.
+//!
+//! The bus side only keeps the latest message of each kind (Zenoh's receive thread stores a
+//! handle, nothing is decoded twice or encoded there); a task of its own turns the latest into
+//! Foxglove messages at most `rate_hz` times a second, and only for what a viewer subscribed
+//! to. Each viewer's queue holds [`BACKLOG`] messages; beyond it the server drops the oldest,
+//! so a slow viewer skips ahead instead of slowing anyone. The loop never waits for a viewer.
+
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+
+use anyhow::{Context as _, Result};
+use foxglove::schemas::{CameraCalibration, CompressedImage, FrameTransforms, ImageAnnotations, RawImage, SceneUpdate};
+use foxglove::{Channel, Context, Encode, PartialMetadata, RawChannel, WebSocketServerHandle};
+use parking_lot::Mutex;
+use serde::Serialize;
+
+use super::scene::{self, Image, SceneContext};
+use slipstream_contract::bus::{Bus, CallbackSubscriber, FrameSample, Received};
+use slipstream_contract::msg::{
+    AccStatus, CameraInfo, Detections, GroundTruthObjects, SimEvent, SimEventKind, VehicleState,
+};
+use slipstream_contract::topics;
+use slipstream_sim::Scenario;
+
+/// Where the server listens unless told otherwise: loopback only (docs/viewing.md shows the
+/// SSH tunnel for a viewer on another PC).
+pub const DEFAULT_HOST: &str = "127.0.0.1";
+pub const DEFAULT_PORT: u16 = 8765;
+/// Updates per second at most: the camera's default rate.
+pub const DEFAULT_RATE_HZ: f64 = 20.0;
+/// Messages queued per viewer before the server drops the oldest (about 0.3 s of updates).
+pub const BACKLOG: usize = 32;
+
+/// The viewer's topics (Foxglove's names, fixed whatever the bus's namespace and remapping:
+/// the layout in config/foxglove-layout.json refers to them).
+pub const TOPIC_CAMERA: &str = "/camera/front";
+pub const TOPIC_ANNOTATIONS: &str = "/camera/front/annotations";
+pub const TOPIC_CALIBRATION: &str = "/camera/front/calibration";
+pub const TOPIC_VEHICLES: &str = "/scene/vehicles";
+pub const TOPIC_ROAD: &str = "/scene/road";
+pub const TOPIC_TF: &str = "/tf";
+pub const TOPIC_ACC: &str = "/acc";
+
+/// What the server serves and where.
+#[derive(Debug, Clone)]
+pub struct ViewOptions {
+    pub host: String,
+    pub port: u16,
+    pub rate_hz: f64,
+    /// The road and ego to draw; without a scenario the view takes the one the simulator
+    /// announces (a built-in one) and draws no road for others.
+    pub context: SceneContext,
+}
+
+impl ViewOptions {
+    pub fn new(host: &str, port: u16) -> ViewOptions {
+        ViewOptions { host: host.into(), port, rate_hz: DEFAULT_RATE_HZ, context: SceneContext::default() }
+    }
+
+    /// The road and ego of `scenario`.
+    pub fn with_scenario(mut self, scenario: &Scenario) -> ViewOptions {
+        self.context = SceneContext::of(Some(scenario));
+        self
+    }
+}
+
+/// What the view sent so far.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct ViewStats {
+    pub viewers: usize,
+    pub images: u64,
+    pub annotations: u64,
+    pub scenes: u64,
+    pub series: u64,
+}
+
+/// The latest of everything the view draws; `fresh_*` says whether it changed since the
+/// last update sent.
+#[derive(Default)]
+struct Latest {
+    frame: Option<FrameSample>,
+    camera_info: Option<CameraInfo>,
+    detections: Option<Detections>,
+    fresh_detections: bool,
+    truth: Option<GroundTruthObjects>,
+    state: Option<(u64, u64, VehicleState)>,
+    fresh_state: bool,
+    status: Option<AccStatus>,
+    scenario: Option<String>,
+}
+
+#[derive(Default)]
+struct Counters {
+    images: AtomicU64,
+    annotations: AtomicU64,
+    scenes: AtomicU64,
+    series: AtomicU64,
+}
+
+/// The viewer's channels, in a context of their own (nothing else in the process logs there).
+struct Channels {
+    ctx: Arc<Context>,
+    raw: Option<Channel<RawImage>>,
+    compressed: Option<Channel<CompressedImage>>,
+    annotations: Channel<ImageAnnotations>,
+    calibration: Channel<CameraCalibration>,
+    vehicles: Channel<SceneUpdate>,
+    road: Channel<SceneUpdate>,
+    tf: Channel<FrameTransforms>,
+    acc: Arc<RawChannel>,
+}
+
+impl Channels {
+    fn new(ctx: &Arc<Context>) -> Result<Channels> {
+        let acc =
+            ctx.channel_builder(TOPIC_ACC).message_encoding("json").schema(scene::acc_series_schema()).build_raw()?;
+        Ok(Channels {
+            ctx: ctx.clone(),
+            raw: None,
+            compressed: None,
+            annotations: ctx.channel_builder(TOPIC_ANNOTATIONS).build(),
+            calibration: ctx.channel_builder(TOPIC_CALIBRATION).build(),
+            vehicles: ctx.channel_builder(TOPIC_VEHICLES).build(),
+            road: ctx.channel_builder(TOPIC_ROAD).build(),
+            tf: ctx.channel_builder(TOPIC_TF).build(),
+            acc,
+        })
+    }
+
+    /// Logs `msg` stamped with `stamp_ns` when a viewer subscribed to `ch`; whether it did.
+    fn log<T: Encode>(ch: &Channel<T>, msg: &T, stamp_ns: u64) -> bool {
+        let wanted = ch.has_sinks();
+        if wanted {
+            ch.log_with_meta(msg, PartialMetadata { log_time: Some(stamp_ns) });
+        }
+        wanted
+    }
+
+    /// The camera channel is made with the first frame: its schema follows the frames'
+    /// encoding (raw pixels or a compressed image).
+    fn image(&mut self, sample: FrameSample) -> bool {
+        let stamp = sample.header().stamp_pub_ns;
+        let ctx = &self.ctx;
+        match scene::image(sample) {
+            None => false,
+            Some(Image::Raw(img)) => {
+                Self::log(self.raw.get_or_insert_with(|| ctx.channel_builder(TOPIC_CAMERA).build()), &img, stamp)
+            }
+            Some(Image::Compressed(img)) => {
+                Self::log(self.compressed.get_or_insert_with(|| ctx.channel_builder(TOPIC_CAMERA).build()), &img, stamp)
+            }
+        }
+    }
+}
+
+/// The state of the update task between ticks.
+struct Painter {
+    channels: Channels,
+    context: SceneContext,
+    counters: Arc<Counters>,
+}
+
+impl Painter {
+    /// One update: whatever changed since the last, to the channels viewers subscribed to.
+    fn tick(&mut self, latest: &Mutex<Latest>) {
+        let (frame, info, detections, truth, state, status, scenario) = {
+            let mut l = latest.lock();
+            let detections = std::mem::take(&mut l.fresh_detections).then(|| l.detections.clone()).flatten();
+            let state = std::mem::take(&mut l.fresh_state).then_some(l.state.clone()).flatten();
+            let frame = l.frame.take();
+            let info = frame.as_ref().and(l.camera_info.clone());
+            (frame, info, detections, l.truth.clone(), state, l.status.clone(), l.scenario.take())
+        };
+        if let Some(name) = scenario {
+            self.context.announced(&name);
+        }
+        let frame_stamp = frame.as_ref().map(|f| f.header().stamp_pub_ns);
+        if let Some(f) = frame {
+            count(&self.counters.images, self.channels.image(f));
+        }
+        if let (Some(stamp), Some(info)) = (frame_stamp, info) {
+            Channels::log(&self.channels.calibration, &scene::calibration(stamp, &info), stamp);
+        }
+        if let Some(stamp) = detections.as_ref().map(|d| d.frame_stamp_pub_ns).or(frame_stamp) {
+            let lead = status.as_ref().and_then(|s| s.lead.map(|l| l.id));
+            let a = scene::annotations(stamp, detections.as_ref(), truth.as_ref(), lead);
+            count(&self.counters.annotations, Channels::log(&self.channels.annotations, &a, stamp));
+        }
+        if let Some((stamp, stamp_sim, ego)) = state {
+            self.scene(stamp, stamp_sim, &ego, truth.as_ref(), status.as_ref());
+        }
+    }
+
+    fn scene(
+        &mut self,
+        stamp: u64,
+        stamp_sim: u64,
+        ego: &VehicleState,
+        truth: Option<&GroundTruthObjects>,
+        status: Option<&AccStatus>,
+    ) {
+        let c = &self.channels;
+        let params = self.context.ego();
+        let vehicles = scene::vehicles(stamp, ego, &params, truth);
+        count(&self.counters.scenes, Channels::log(&c.vehicles, &vehicles, stamp));
+        Channels::log(&c.tf, &scene::ego_frame(stamp, ego), stamp);
+        if c.road.has_sinks() {
+            if let Some(road) = self.context.road_around(stamp, ego) {
+                Channels::log(&c.road, &road, stamp);
+            }
+        }
+        if c.acc.has_sinks() {
+            let series = scene::acc_series(ego, stamp_sim, &params, status, truth);
+            if let Ok(json) = serde_json::to_vec(&series) {
+                c.acc.log_with_meta(&json, PartialMetadata { log_time: Some(stamp) });
+                self.counters.series.fetch_add(1, Ordering::Relaxed);
+            }
+        }
+    }
+}
+
+fn count(counter: &AtomicU64, sent: bool) {
+    if sent {
+        counter.fetch_add(1, Ordering::Relaxed);
+    }
+}
+
+/// A running live view; [`LiveView::stop`] ends it (dropping it stops the updates too).
+pub struct LiveView {
+    server: Option<WebSocketServerHandle>,
+    task: tokio::task::JoinHandle<()>,
+    counters: Arc<Counters>,
+    _subs: Vec<CallbackSubscriber>,
+}
+
+impl LiveView {
+    /// Subscribes to the loop on `bus` and starts the server. Fails with the address when the
+    /// port is taken.
+    pub async fn start(bus: &Bus, opts: ViewOptions) -> Result<LiveView> {
+        anyhow::ensure!(
+            opts.rate_hz.is_finite() && opts.rate_hz > 0.0,
+            "the view's rate must be a number of updates per second > 0"
+        );
+        let latest: Arc<Mutex<Latest>> = Arc::default();
+        let subs = subscribe(bus, &latest).await?;
+        let ctx = Context::new();
+        let channels = Channels::new(&ctx)?;
+        let server = ctx
+            .websocket_server()
+            .name(format!("slipstream {}", env!("CARGO_PKG_VERSION")))
+            .bind(opts.host.clone(), opts.port)
+            .message_backlog_size(BACKLOG)
+            .start()
+            .await
+            .with_context(|| {
+                format!(
+                    "cannot serve the live view on {}:{} (another `slipstream view` or `up --view`? pick another with --view-port)",
+                    opts.host, opts.port
+                )
+            })?;
+        let counters = Arc::new(Counters::default());
+        let mut painter = Painter { channels, context: opts.context.clone(), counters: counters.clone() };
+        let period = Duration::from_secs_f64(1.0 / opts.rate_hz);
+        let task = tokio::spawn(async move {
+            let mut every = tokio::time::interval(period);
+            every.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Skip);
+            loop {
+                every.tick().await;
+                painter.tick(&latest);
+            }
+        });
+        Ok(LiveView { server: Some(server), task, counters, _subs: subs })
+    }
+
+    /// The port the server listens on (the one asked for, or the one chosen for port 0).
+    pub fn port(&self) -> u16 {
+        self.server.as_ref().map_or(0, |s| s.port())
+    }
+
+    pub fn stats(&self) -> ViewStats {
+        let c = &self.counters;
+        ViewStats {
+            viewers: self.server.as_ref().map_or(0, |s| s.client_count()),
+            images: c.images.load(Ordering::Relaxed),
+            annotations: c.annotations.load(Ordering::Relaxed),
+            scenes: c.scenes.load(Ordering::Relaxed),
+            series: c.series.load(Ordering::Relaxed),
+        }
+    }
+
+    /// Stops the updates and the server, closing the viewers' connections.
+    pub async fn stop(mut self) -> ViewStats {
+        let stats = self.stats();
+        self.task.abort();
+        if let Some(server) = self.server.take() {
+            server.stop().wait().await;
+        }
+        stats
+    }
+}
+
+impl Drop for LiveView {
+    fn drop(&mut self) {
+        self.task.abort();
+        if let Some(server) = self.server.take() {
+            server.stop().detach_all();
+        }
+    }
+}
+
+/// The subscriptions that keep `latest` current: short handlers on Zenoh's receive thread.
+async fn subscribe(bus: &Bus, latest: &Arc<Mutex<Latest>>) -> Result<Vec<CallbackSubscriber>> {
+    let l = latest.clone();
+    let frames = bus.subscribe_frames_with(topics::CAMERA_FRONT, move |f| l.lock().frame = Some(f)).await?;
+    let l = latest.clone();
+    let info = bus
+        .subscribe_with(topics::CAMERA_FRONT_INFO, move |i: Received<CameraInfo>| l.lock().camera_info = Some(i.msg))
+        .await?;
+    let l = latest.clone();
+    let detections = bus
+        .subscribe_with(topics::PERCEPTION_OBJECTS, move |d: Received<Detections>| {
+            let mut l = l.lock();
+            l.detections = Some(d.msg);
+            l.fresh_detections = true;
+        })
+        .await?;
+    let l = latest.clone();
+    let truth = bus
+        .subscribe_with(topics::OBJECTS, move |o: Received<GroundTruthObjects>| l.lock().truth = Some(o.msg))
+        .await?;
+    let l = latest.clone();
+    let state = bus
+        .subscribe_with(topics::VEHICLE_STATE, move |s: Received<VehicleState>| {
+            let mut l = l.lock();
+            l.state = Some((s.header.stamp_pub_ns, s.header.stamp_sim_ns, s.msg));
+            l.fresh_state = true;
+        })
+        .await?;
+    let l = latest.clone();
+    let status =
+        bus.subscribe_with(topics::ACC_STATUS, move |s: Received<AccStatus>| l.lock().status = Some(s.msg)).await?;
+    let l = latest.clone();
+    let events = bus
+        .subscribe_with(topics::SIM_EVENTS, move |e: Received<SimEvent>| {
+            if let SimEventKind::ScenarioStart { name, .. } = e.msg.kind {
+                l.lock().scenario = Some(name);
+            }
+        })
+        .await?;
+    Ok(vec![frames, info, detections, truth, state, status, events])
+}
