@@ -108,7 +108,7 @@ impl AccArgs {
         if self.disengaged {
             s.enabled = false;
         }
-        s.check().map_err(|(key, problem, fix)| ConfigError::new("command line", key, problem, fix))?;
+        s.check().map_err(|i| i.at("command line"))?;
         Ok(s)
     }
 }

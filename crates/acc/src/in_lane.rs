@@ -7,6 +7,7 @@
 //! this is the plain threshold: in the lane below `lane.in_lane_m`.
 
 use serde::Deserialize;
+use slipstream_contract::config::Invalid;
 
 /// The uncertainty (standard deviation, m) of a vehicle's measured place across the road, by
 /// range band (`range_m`: each band's far end, ascending) and by the tightest bend between the
@@ -36,18 +37,18 @@ impl OffsetSigma {
         column[band]
     }
 
-    /// (problem, fix) when the table is not one finite, non-negative figure per ascending band.
-    pub fn check(&self) -> Result<(), (String, String)> {
+    /// Why the table, at `key`, is not one finite, non-negative figure per ascending band.
+    pub fn check(&self, key: &str) -> Result<(), Invalid> {
         let n = self.range_m.len();
         let ascending = self.range_m.windows(2).all(|w| w[0] < w[1]);
         let columns = [&self.straight, &self.gentle, &self.bend, &self.tight];
         let figures = columns.iter().all(|c| c.len() == n && c.iter().all(|s| s.is_finite() && *s >= 0.0));
         if n == 0 || !ascending || !figures {
-            return Err((
+            return Invalid::err(
+                key,
                 format!("{self:?}"),
-                "give range_m ascending and one sigma >= 0 per range band in each of straight, gentle, bend, tight"
-                    .into(),
-            ));
+                "give range_m ascending and one sigma >= 0 per range band in each of straight, gentle, bend, tight",
+            );
         }
         Ok(())
     }
@@ -126,11 +127,11 @@ mod tests {
         assert_eq!(t.at(150.0, Some(1500.0)), 0.4);
         assert_eq!(t.at(80.0, Some(-700.0)), 0.5);
         assert_eq!(t.at(250.0, Some(300.0)), 0.8, "beyond the last band: its figure");
-        assert!(t.check().is_ok());
+        assert!(t.check("lane.offset_sigma").is_ok());
         let short = OffsetSigma { tight: vec![0.7], ..t.clone() };
-        assert!(short.check().is_err());
+        assert!(short.check("lane.offset_sigma").is_err());
         let unordered = OffsetSigma { range_m: vec![200.0, 80.0], ..t };
-        assert!(unordered.check().is_err());
+        assert!(unordered.check("lane.offset_sigma").is_err());
         assert_eq!(OffsetSigma::exact().at(1e6, Some(100.0)), 0.0);
     }
 }

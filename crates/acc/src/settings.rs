@@ -7,7 +7,7 @@ use serde::Deserialize;
 
 use super::in_lane::OffsetSigma;
 use super::tuning::Tuning;
-use slipstream_contract::config::{parse_layered, read_config, ConfigError};
+use slipstream_contract::config::{parse_layered, read_config, ConfigError, Invalid};
 use slipstream_model::vehicle::VehicleParams;
 
 pub const DEFAULT_ACC_CONFIG: &str = include_str!("../../../config/acc.json5");
@@ -220,29 +220,28 @@ impl AccSettings {
     /// Parses settings text laid over the defaults.
     pub fn parse(text: &str, origin: &str) -> Result<AccSettings, ConfigError> {
         let s: AccSettings = parse_layered(DEFAULT_ACC_CONFIG, DEFAULT_ACC_CONFIG_PATH, text, origin, FIX)?;
-        s.check().map_err(|(key, problem, fix)| ConfigError::new(origin, key, problem, fix))?;
+        s.check().map_err(|i| i.at(origin))?;
         Ok(s)
     }
 
-    /// Ranges and relations serde cannot check: (key, problem, fix) of the first one off.
-    pub fn check(&self) -> Result<(), (String, String, String)> {
+    /// Ranges and relations serde cannot check: the first one off.
+    pub fn check(&self) -> Result<(), Invalid> {
         self.check_law()?;
         self.check_inputs_and_vehicle()?;
         self.tuning.check()
     }
 
     /// The control law: speeds, gaps, comfort limits, gains, emergency and stale thresholds.
-    fn check_law(&self) -> Result<(), (String, String, String)> {
-        let err = |key: &str, problem: String, fix: &str| Err((key.to_string(), problem, fix.to_string()));
+    fn check_law(&self) -> Result<(), Invalid> {
         let positive = |v: f64| v.is_finite() && v > 0.0;
         if !(self.set_speed_mps.is_finite() && (0.0..=70.0).contains(&self.set_speed_mps)) {
-            return err("set_speed_mps", format!("{}", self.set_speed_mps), "use 0 to 70 m/s");
+            return Invalid::err("set_speed_mps", format!("{}", self.set_speed_mps), "use 0 to 70 m/s");
         }
         if !TIME_GAP_RANGE_S.contains(&self.time_gap_s) {
-            return err("time_gap_s", format!("{} s", self.time_gap_s), "use 0.8 to 3.0 s");
+            return Invalid::err("time_gap_s", format!("{} s", self.time_gap_s), "use 0.8 to 3.0 s");
         }
         if !(self.standstill_m.is_finite() && (1.0..=20.0).contains(&self.standstill_m)) {
-            return err("standstill_m", format!("{} m", self.standstill_m), "use 1 to 20 m");
+            return Invalid::err("standstill_m", format!("{} m", self.standstill_m), "use 1 to 20 m");
         }
         let l = &self.limits;
         for (key, v) in [
@@ -252,18 +251,18 @@ impl AccSettings {
             ("limits.jerk_mps3", l.jerk_mps3),
         ] {
             if !positive(v) {
-                return err(key, format!("{v}"), "give a limit > 0");
+                return Invalid::err(key, format!("{v}"), "give a limit > 0");
             }
         }
         if l.decel_mps2 >= self.vehicle.max_brake_decel_mps2 {
-            return err(
+            return Invalid::err(
                 "limits.decel_mps2",
                 format!("{} is not below the vehicle's {} m/s2", l.decel_mps2, self.vehicle.max_brake_decel_mps2),
                 "keep the comfort limit below vehicle.max_brake_decel_mps2 (emergencies use the rest)",
             );
         }
         if !(l.decel_mps2..self.vehicle.max_brake_decel_mps2).contains(&l.low_speed_decel_mps2) {
-            return err(
+            return Invalid::err(
                 "limits.low_speed_decel_mps2",
                 format!(
                     "{} is not between limits.decel_mps2 ({}) and the vehicle's {} m/s2",
@@ -279,7 +278,7 @@ impl AccSettings {
             ("gains.cruise_per_s", g.cruise_per_s),
         ] {
             if !positive(v) {
-                return err(key, format!("{v}"), "give a gain > 0");
+                return Invalid::err(key, format!("{v}"), "give a gain > 0");
             }
         }
         let e = &self.emergency;
@@ -288,7 +287,7 @@ impl AccSettings {
             && e.brake_ttc_s <= e.warn_ttc_s
             && e.brake_ttc_s < e.release_ttc_s)
         {
-            return err(
+            return Invalid::err(
                 "emergency",
                 format!(
                     "full_brake {} / brake {} / warn {} / release {} s",
@@ -298,10 +297,10 @@ impl AccSettings {
             );
         }
         if self.stale.speed_max_age_ms == 0 || self.stale.perception_max_age_ms == 0 {
-            return err("stale", "an age of 0 ms".into(), "give ages > 0");
+            return Invalid::err("stale", "an age of 0 ms", "give ages > 0");
         }
         if !(positive(self.stale.decel_mps2) && self.stale.decel_mps2 <= l.decel_mps2) {
-            return err(
+            return Invalid::err(
                 "stale.decel_mps2",
                 format!("{}", self.stale.decel_mps2),
                 "use a value in (0, limits.decel_mps2]",
@@ -311,8 +310,7 @@ impl AccSettings {
     }
 
     /// Lead selection, the lead estimator, the vehicle model, the status rate, the detector.
-    fn check_inputs_and_vehicle(&self) -> Result<(), (String, String, String)> {
-        let err = |key: &str, problem: String, fix: &str| Err((key.to_string(), problem, fix.to_string()));
+    fn check_inputs_and_vehicle(&self) -> Result<(), Invalid> {
         let positive = |v: f64| v.is_finite() && v > 0.0;
         let n = &self.lane;
         if !(positive(n.in_lane_m)
@@ -320,22 +318,20 @@ impl AccSettings {
             && positive(n.range_m)
             && n.lateral_lookahead_s >= 0.0)
         {
-            return err(
+            return Invalid::err(
                 "lane",
                 format!("{n:?}"),
                 "in_lane_m > 0, stay_in_lane_m >= in_lane_m, range_m > 0, lookahead >= 0",
             );
         }
         if !(n.in_lane_probability > 0.0 && n.in_lane_probability < 1.0) {
-            return err(
+            return Invalid::err(
                 "lane.in_lane_probability",
                 format!("{}", n.in_lane_probability),
                 "give a value between 0 and 1",
             );
         }
-        if let Err((problem, fix)) = n.offset_sigma.check() {
-            return err("lane.offset_sigma", problem, &fix);
-        }
+        n.offset_sigma.check("lane.offset_sigma")?;
         let e = &self.estimator;
         for (key, x) in [
             ("estimator.gap_sigma_m", e.gap_sigma_m),
@@ -343,7 +339,7 @@ impl AccSettings {
             ("estimator.lead_jerk_sigma_mps3", e.lead_jerk_sigma_mps3),
         ] {
             if !positive(x) {
-                return err(key, format!("{x}"), "give a value > 0");
+                return Invalid::err(key, format!("{x}"), "give a value > 0");
             }
         }
         for (key, x) in [
@@ -353,7 +349,7 @@ impl AccSettings {
             ("estimator.hard_braking_margin_mps2", e.hard_braking_margin_mps2),
         ] {
             if !(x.is_finite() && x >= 0.0) {
-                return err(key, format!("{x}"), "give a value >= 0");
+                return Invalid::err(key, format!("{x}"), "give a value >= 0");
             }
         }
         let v = &self.vehicle;
@@ -364,17 +360,17 @@ impl AccSettings {
             ("vehicle.max_brake_decel_mps2", v.max_brake_decel_mps2),
         ] {
             if !positive(x) {
-                return err(key, format!("{x}"), "give a value > 0");
+                return Invalid::err(key, format!("{x}"), "give a value > 0");
             }
         }
         if !(positive(self.status_hz) && self.status_hz <= 100.0) {
-            return err("status_hz", format!("{}", self.status_hz), "use (0, 100] Hz");
+            return Invalid::err("status_hz", format!("{}", self.status_hz), "use (0, 100] Hz");
         }
         if self.perception_node.is_empty() {
-            return err("perception_node", "empty".into(), "name the detector node, e.g. \"detect\"");
+            return Invalid::err("perception_node", "empty", "name the detector node, e.g. \"detect\"");
         }
         if self.perception_wait_ms > MAX_PERCEPTION_WAIT_MS {
-            return err(
+            return Invalid::err(
                 "perception_wait_ms",
                 format!("{} ms", self.perception_wait_ms),
                 &format!("use 0 to {MAX_PERCEPTION_WAIT_MS} ms: an answer held longer than the speed messages' period (10 ms at 100 Hz) makes the next ones queue"),

@@ -3,6 +3,7 @@
 //! config/acc.json5, which gives each one's unit, meaning and why it has its value).
 
 use serde::Deserialize;
+use slipstream_contract::config::Invalid;
 
 /// The `tuning` settings group.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -158,19 +159,19 @@ impl Tuning {
         ]
     }
 
-    /// (key, problem, fix) of the first number that is not a finite, non-negative value, or of
-    /// a share or a filter constant above 1.
-    pub fn check(&self) -> Result<(), (String, String, String)> {
+    /// The first number that is not a finite, non-negative value, or a share or a filter
+    /// constant above 1.
+    pub fn check(&self) -> Result<(), Invalid> {
         for (key, v) in self.entries() {
             if !(v.is_finite() && v >= 0.0) {
-                return Err((key.into(), format!("{v}"), "give a finite value >= 0".into()));
+                return Invalid::err(key, format!("{v}"), "give a finite value >= 0");
             }
             let unit_interval = key.ends_with("_share")
                 || key.ends_with("_filter")
                 || key.ends_with("_gain")
                 || key.ends_with("hold_brake");
             if unit_interval && v > 1.0 {
-                return Err((key.into(), format!("{v}"), "give a value from 0 to 1".into()));
+                return Invalid::err(key, format!("{v}"), "give a value from 0 to 1");
             }
         }
         Ok(())

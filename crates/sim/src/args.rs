@@ -90,7 +90,7 @@ impl SimArgs {
             s.camera.width = w;
             s.camera.height = h;
         }
-        s.check().map_err(|(key, problem, fix)| ConfigError::new("command line", key, problem, fix))?;
+        s.check().map_err(|i| i.at("command line"))?;
         Ok(s)
     }
 

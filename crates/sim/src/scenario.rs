@@ -6,7 +6,7 @@ use std::path::Path;
 
 use serde::Deserialize;
 
-use slipstream_contract::config::{parse_json5, ConfigError};
+use slipstream_contract::config::{parse_json5, ConfigError, Invalid};
 use slipstream_contract::msg::ObjectClass;
 use slipstream_model::road::RoadSpec;
 
@@ -36,9 +36,6 @@ pub const BUILT_IN: &[(&str, &str)] = &[
 pub const MAX_SHOULDER_M: f64 = 3.0;
 
 const FIX: &str = "see docs/simulator.md (scenario format) for every field and its allowed values";
-
-/// A check that failed: (key, problem, fix).
-type Invalid = (String, String, String);
 
 /// Vehicle class as written in scenario files.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Deserialize)]
@@ -327,12 +324,12 @@ impl Scenario {
     /// Parses and checks scenario text; `origin` names it in errors.
     pub fn parse(text: &str, origin: &str) -> Result<Scenario, ConfigError> {
         let scenario: Scenario = parse_json5(text, origin, FIX)?;
-        scenario.check().map_err(|(key, problem, fix)| ConfigError::new(origin, key, problem, fix))?;
+        scenario.check().map_err(|i| i.at(origin))?;
         Ok(scenario)
     }
 
     /// The checks serde cannot make: ranges and references between fields. The first one
-    /// off, as (key, problem, fix).
+    /// off.
     fn check(&self) -> Result<(), Invalid> {
         self.check_road_and_ego()?;
         for (i, t) in self.traffic.iter().enumerate() {
@@ -343,87 +340,109 @@ impl Scenario {
         }
         self.check_variation_and_noise()?;
         match self.expect.min_gap_m {
-            Some(g) if !(g.is_finite() && (0.0..=100.0).contains(&g)) => Err((
-                "expect.min_gap_m".into(),
+            Some(g) if !(g.is_finite() && (0.0..=100.0).contains(&g)) => Invalid::err(
+                "expect.min_gap_m",
                 format!("{g} m"),
-                "give a gap of 0 to 100 m, or leave it out (any gap above 0)".into(),
-            )),
+                "give a gap of 0 to 100 m, or leave it out (any gap above 0)",
+            ),
             _ => Ok(()),
         }
     }
 
     fn check_road_and_ego(&self) -> Result<(), Invalid> {
-        let err = |key: &str, problem: String, fix: &str| Err((key.to_string(), problem, fix.to_string()));
         let lanes = self.road.lanes;
         let lane_fix = format!("lanes are numbered 0 (rightmost) to {}", lanes.saturating_sub(1));
         let speed_ok = |v: f64| v.is_finite() && (0.0..=70.0).contains(&v);
         if !(self.duration_s.is_finite() && self.duration_s > 0.0) {
-            return err("duration_s", format!("{} is not a positive duration", self.duration_s), "give seconds > 0");
+            return Invalid::err(
+                "duration_s",
+                format!("{} is not a positive duration", self.duration_s),
+                "give seconds > 0",
+            );
         }
         if let Some(invalid) = self.road.invalid() {
             return Err(invalid);
         }
         if self.ego.lane >= lanes {
-            return err("ego.lane", format!("lane {} does not exist on a {lanes}-lane road", self.ego.lane), &lane_fix);
+            return Invalid::err(
+                "ego.lane",
+                format!("lane {} does not exist on a {lanes}-lane road", self.ego.lane),
+                &lane_fix,
+            );
         }
         if let Some(end) = self.road.lane_end(self.ego.lane) {
-            return err(
+            return Invalid::err(
                 "ego.lane",
                 format!("lane {} ends at {} m and the ego keeps its lane", end.lane, end.end_m),
                 "start the ego in a lane that goes on; traffic in the ending lane merges",
             );
         }
         if !speed_ok(self.ego.speed_mps) {
-            return err("ego.speed_mps", format!("{} m/s", self.ego.speed_mps), "use 0 to 70 m/s");
+            return Invalid::err("ego.speed_mps", format!("{} m/s", self.ego.speed_mps), "use 0 to 70 m/s");
         }
         if let Some(h) = self.ego.time_gap_s.filter(|h| !(0.8..=3.0).contains(h)) {
-            return err("ego.time_gap_s", format!("{h} s"), "use 0.8 to 3.0 s (ISO 15622 asks at least 0.8 s)");
+            return Invalid::err(
+                "ego.time_gap_s",
+                format!("{h} s"),
+                "use 0.8 to 3.0 s (ISO 15622 asks at least 0.8 s)",
+            );
         }
         Ok(())
     }
 
     /// Scripted vehicle `i`: its lane, speed, start gap and actions.
     fn check_traffic(&self, i: usize, t: &TrafficSpec) -> Result<(), Invalid> {
-        let err = |key: &str, problem: String, fix: &str| Err((key.to_string(), problem, fix.to_string()));
         let lanes = self.road.lanes;
         let lane_fix = format!("lanes are numbered 0 (rightmost) to {}", lanes.saturating_sub(1));
         let speed_ok = |v: f64| v.is_finite() && (0.0..=70.0).contains(&v);
         let key = |field: &str| format!("traffic[{i}].{field}");
         if t.lane >= lanes {
-            return err(&key("lane"), format!("lane {} does not exist on a {lanes}-lane road", t.lane), &lane_fix);
+            return Invalid::err(
+                &key("lane"),
+                format!("lane {} does not exist on a {lanes}-lane road", t.lane),
+                &lane_fix,
+            );
         }
         if !speed_ok(t.speed_mps) {
-            return err(&key("speed_mps"), format!("{} m/s", t.speed_mps), "use 0 to 70 m/s");
+            return Invalid::err(&key("speed_mps"), format!("{} m/s", t.speed_mps), "use 0 to 70 m/s");
         }
         if !self.offset_ok(t.offset_m) {
-            return err(&key("offset_m"), format!("{} m", t.offset_m), &self.offset_fix());
+            return Invalid::err(&key("offset_m"), format!("{} m", t.offset_m), &self.offset_fix());
         }
         if t.lane == self.ego.lane && t.gap_m.abs() < 2.0 {
-            return err(&key("gap_m"), format!("{} m overlaps the ego in its lane", t.gap_m), "use |gap_m| >= 2");
+            return Invalid::err(
+                &key("gap_m"),
+                format!("{} m overlaps the ego in its lane", t.gap_m),
+                "use |gap_m| >= 2",
+            );
         }
         for (j, a) in t.actions.iter().enumerate() {
             let key = |field: &str| format!("traffic[{i}].actions[{j}]{field}");
             match (a.at_s, a.when_gap_m) {
                 (Some(_), None) | (None, Some(_)) => {}
-                _ => return err(&key(""), "needs exactly one trigger".into(), "give either at_s or when_gap_m"),
+                _ => return Invalid::err(&key(""), "needs exactly one trigger", "give either at_s or when_gap_m"),
             }
             if a.speed_mps.is_none() && a.lane.is_none() && a.offset_m.is_none() {
-                return err(&key(""), "does nothing".into(), "give speed_mps, lane, offset_m or several");
+                return Invalid::err(&key(""), "does nothing", "give speed_mps, lane, offset_m or several");
             }
             if let Some(o) = a.offset_m.filter(|o| !self.offset_ok(*o)) {
-                return err(&key(".offset_m"), format!("{o} m"), &self.offset_fix());
+                return Invalid::err(&key(".offset_m"), format!("{o} m"), &self.offset_fix());
             }
             if let Some(v) = a.speed_mps.filter(|v| !speed_ok(*v)) {
-                return err(&key(".speed_mps"), format!("{v} m/s"), "use 0 to 70 m/s");
+                return Invalid::err(&key(".speed_mps"), format!("{v} m/s"), "use 0 to 70 m/s");
             }
             if let Some(l) = a.lane.filter(|l| *l >= lanes) {
-                return err(&key(".lane"), format!("lane {l} does not exist on a {lanes}-lane road"), &lane_fix);
+                return Invalid::err(
+                    &key(".lane"),
+                    format!("lane {l} does not exist on a {lanes}-lane road"),
+                    &lane_fix,
+                );
             }
             if !(a.accel_mps2 > 0.0 && a.accel_mps2 <= 10.0) {
-                return err(&key(".accel_mps2"), format!("{} m/s2", a.accel_mps2), "use (0, 10] m/s2");
+                return Invalid::err(&key(".accel_mps2"), format!("{} m/s2", a.accel_mps2), "use (0, 10] m/s2");
             }
             if !(a.duration_s >= 0.5 && a.duration_s <= 30.0) {
-                return err(&key(".duration_s"), format!("{} s", a.duration_s), "use 0.5 to 30 s");
+                return Invalid::err(&key(".duration_s"), format!("{} s", a.duration_s), "use 0.5 to 30 s");
             }
         }
         Ok(())
@@ -442,39 +461,45 @@ impl Scenario {
     }
 
     fn check_random_traffic(&self, r: &RandomTraffic) -> Result<(), Invalid> {
-        let err = |key: &str, problem: String, fix: &str| Err((key.to_string(), problem, fix.to_string()));
         let lanes = self.road.lanes;
         let lane_fix = format!("lanes are numbered 0 (rightmost) to {}", lanes.saturating_sub(1));
         let speed_ok = |v: f64| v.is_finite() && (0.0..=70.0).contains(&v);
         if let Some(l) = r.lanes.iter().find(|l| **l >= lanes) {
-            return err("random_traffic.lanes", format!("lane {l} does not exist on a {lanes}-lane road"), &lane_fix);
+            return Invalid::err(
+                "random_traffic.lanes",
+                format!("lane {l} does not exist on a {lanes}-lane road"),
+                &lane_fix,
+            );
         }
         if r.count > 500 {
-            return err("random_traffic.count", format!("{} vehicles", r.count), "use at most 500");
+            return Invalid::err("random_traffic.count", format!("{} vehicles", r.count), "use at most 500");
         }
         if !(speed_ok(r.speed_mps[0]) && speed_ok(r.speed_mps[1]) && r.speed_mps[0] <= r.speed_mps[1]) {
-            return err("random_traffic.speed_mps", format!("{:?}", r.speed_mps), "give [low, high] within 0..70 m/s");
+            return Invalid::err(
+                "random_traffic.speed_mps",
+                format!("{:?}", r.speed_mps),
+                "give [low, high] within 0..70 m/s",
+            );
         }
         if r.range_m[0].is_nan() || r.range_m[0] >= r.range_m[1] {
-            return err(
+            return Invalid::err(
                 "random_traffic.range_m",
                 format!("{:?}", r.range_m),
                 "give [behind, ahead] with behind < ahead",
             );
         }
         if r.min_spacing_m.is_nan() || r.min_spacing_m < 8.0 {
-            return err("random_traffic.min_spacing_m", format!("{} m", r.min_spacing_m), "use at least 8 m");
+            return Invalid::err("random_traffic.min_spacing_m", format!("{} m", r.min_spacing_m), "use at least 8 m");
         }
         if !(0.0..=1.0).contains(&(r.van_share + r.truck_share)) || r.van_share < 0.0 || r.truck_share < 0.0 {
-            return err("random_traffic.van_share", "shares must be >= 0 and add up to <= 1".into(), FIX);
+            return Invalid::err("random_traffic.van_share", "shares must be >= 0 and add up to <= 1", FIX);
         }
         Ok(())
     }
 
     fn check_variation_and_noise(&self) -> Result<(), Invalid> {
-        let err = |key: &str, problem: String, fix: &str| Err((key.to_string(), problem, fix.to_string()));
         if let Some(d) = self.end.ego_distance_m.filter(|d| d.is_nan() || *d <= 0.0) {
-            return err("end.ego_distance_m", format!("{d} m"), "give a distance > 0");
+            return Invalid::err("end.ego_distance_m", format!("{d} m"), "give a distance > 0");
         }
         for (key, v) in [
             ("variation.gap_m", self.variation.gap_m),
@@ -483,11 +508,11 @@ impl Scenario {
             ("noise.camera_stddev", self.noise.camera_stddev),
         ] {
             if !(v.is_finite() && v >= 0.0) {
-                return err(key, format!("{v}"), "use a value >= 0");
+                return Invalid::err(key, format!("{v}"), "use a value >= 0");
             }
         }
         if !(0.0..0.9).contains(&self.noise.brightness) {
-            return err("noise.brightness", format!("{}", self.noise.brightness), "use 0 to 0.9");
+            return Invalid::err("noise.brightness", format!("{}", self.noise.brightness), "use 0 to 0.9");
         }
         Ok(())
     }

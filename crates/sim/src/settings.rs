@@ -7,7 +7,7 @@ use std::path::Path;
 
 use serde::Deserialize;
 
-use slipstream_contract::config::{parse_layered, read_config, ConfigError};
+use slipstream_contract::config::{parse_layered, read_config, ConfigError, Invalid};
 use slipstream_contract::msg::{CameraInfo, ImageEncoding, SimMode};
 
 /// The settings file shipped with the project; its values are the built-in defaults.
@@ -93,8 +93,8 @@ impl CameraSpec {
         )
     }
 
-    fn check(&self, key: &str) -> Result<(), (String, String, String)> {
-        let err = |k: &str, problem: String, fix: &str| Err((format!("{key}{k}"), problem, fix.to_string()));
+    fn check(&self, key: &str) -> Result<(), Invalid> {
+        let err = |k: &str, problem: String, fix: &str| Invalid::err(format!("{key}{k}"), problem, fix);
         if !(16..=4096).contains(&self.width) || !(16..=4096).contains(&self.height) {
             return err("", format!("{}x{}", self.width, self.height), "use 16 to 4096 pixels a side");
         }
@@ -172,18 +172,17 @@ impl SimSettings {
     /// Parses settings text laid over the defaults: a file needs only the keys it changes.
     pub fn parse(text: &str, origin: &str) -> Result<SimSettings, ConfigError> {
         let s: SimSettings = parse_layered(DEFAULT_SIM_CONFIG, DEFAULT_SIM_CONFIG_PATH, text, origin, FIX)?;
-        s.check().map_err(|(key, problem, fix)| ConfigError::new(origin, key, problem, fix))?;
+        s.check().map_err(|i| i.at(origin))?;
         Ok(s)
     }
 
     /// Ranges and relations serde cannot check.
-    pub fn check(&self) -> Result<(), (String, String, String)> {
-        let err = |key: &str, problem: String, fix: &str| Err((key.to_string(), problem, fix.to_string()));
+    pub fn check(&self) -> Result<(), Invalid> {
         if !(10..=2000).contains(&self.physics_hz) {
-            return err("physics_hz", format!("{} Hz", self.physics_hz), "use 10 to 2000 Hz");
+            return Invalid::err("physics_hz", format!("{} Hz", self.physics_hz), "use 10 to 2000 Hz");
         }
         if !(self.realtime_factor > 0.0 && self.realtime_factor <= 100.0) {
-            return err("realtime_factor", format!("{}", self.realtime_factor), "use a factor in (0, 100]");
+            return Invalid::err("realtime_factor", format!("{}", self.realtime_factor), "use a factor in (0, 100]");
         }
         let r = &self.rates_hz;
         for (key, v) in [
@@ -193,28 +192,32 @@ impl SimSettings {
             ("rates_hz.camera", r.camera),
         ] {
             if !(v > 0.0 && v <= self.physics_hz as f64) {
-                return err(key, format!("{v} Hz"), &format!("use a rate in (0, physics_hz = {}]", self.physics_hz));
+                return Invalid::err(
+                    key,
+                    format!("{v} Hz"),
+                    &format!("use a rate in (0, physics_hz = {}]", self.physics_hz),
+                );
             }
         }
         self.camera.check("camera")?;
         if !self.camera.enabled {
-            return err("camera.enabled", "false".into(), "the front camera is always on; remove the key");
+            return Invalid::err("camera.enabled", "false", "the front camera is always on; remove the key");
         }
         if self.narrow_camera.enabled {
             self.narrow_camera.check("narrow_camera")?;
         }
         if self.mode == Mode::Lockstep && self.lockstep.wait_for.is_empty() {
-            return err(
+            return Invalid::err(
                 "lockstep.wait_for",
-                "lockstep with no node to wait for".into(),
+                "lockstep with no node to wait for",
                 "name the controller node(s), e.g. [\"acc\"]",
             );
         }
         if self.lockstep.step_timeout_ms == 0 {
-            return err("lockstep.step_timeout_ms", "0 ms".into(), "give a timeout > 0");
+            return Invalid::err("lockstep.step_timeout_ms", "0 ms", "give a timeout > 0");
         }
         if !(0.0..=1.0).contains(&self.control.timeout_brake) {
-            return err("control.timeout_brake", format!("{}", self.control.timeout_brake), "use 0 to 1");
+            return Invalid::err("control.timeout_brake", format!("{}", self.control.timeout_brake), "use 0 to 1");
         }
         Ok(())
     }

@@ -43,6 +43,33 @@ impl fmt::Display for ConfigError {
 
 impl std::error::Error for ConfigError {}
 
+/// A value that breaks a rule, found where the file it came from is not known: the dotted
+/// key, what is wrong and how to fix it. [`Invalid::at`] names the file and makes it the
+/// [`ConfigError`] a person reads. Every check of a settings or scenario value returns it.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("key `{key}`: {problem} (fix: {fix})")]
+pub struct Invalid {
+    pub key: String,
+    pub problem: String,
+    pub fix: String,
+}
+
+impl Invalid {
+    pub fn new(key: impl Into<String>, problem: impl Into<String>, fix: impl Into<String>) -> Self {
+        Invalid { key: key.into(), problem: problem.into(), fix: fix.into() }
+    }
+
+    /// `Err(Invalid::new(..))`: the shape every check returns its first problem in.
+    pub fn err<T>(key: impl Into<String>, problem: impl Into<String>, fix: impl Into<String>) -> Result<T, Invalid> {
+        Err(Invalid::new(key, problem, fix))
+    }
+
+    /// The same problem, in the file (or other origin) it came from.
+    pub fn at(self, origin: impl Into<String>) -> ConfigError {
+        ConfigError::new(origin, self.key, self.problem, self.fix)
+    }
+}
+
 /// Parses JSON5 text into `T`, naming the file (`origin`), the dotted key and `fix` on error.
 pub fn parse_json5<T: serde::de::DeserializeOwned>(text: &str, origin: &str, fix: &str) -> Result<T, ConfigError> {
     from_value(parse_json5_value(text, origin)?, origin, fix)

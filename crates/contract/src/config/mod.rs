@@ -9,7 +9,9 @@ mod topic_map;
 mod zenoh_error;
 
 pub use connect::{ConnectArgs, ModeArg, DEFAULT_ZENOH_CONFIG, DEFAULT_ZENOH_CONFIG_PATH};
-pub use error::{from_value, merge_json, parse_json5, parse_json5_value, parse_layered, read_config, ConfigError};
+pub use error::{
+    from_value, merge_json, parse_json5, parse_json5_value, parse_layered, read_config, ConfigError, Invalid,
+};
 pub use faults::{FaultArgs, FaultProfile, GilbertElliott, Jitter, JitterDist, Loss, Outage, TopicFaults};
 pub use low_latency::{dial_own_main, low_latency_config, LowLatencyEndpoints};
 pub use topic_map::{CameraEncoding, CameraSettings, ResolvedTopic, TopicMap, DEFAULT_SLIPSTREAM_CONFIG_PATH};

@@ -5,6 +5,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::{Message, MessageKind};
+use crate::config::Invalid;
 
 /// A constant-radius curve on the centre line.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -59,10 +60,9 @@ impl RoadSpec {
         self.lane_ends.iter().find(|e| e.lane == lane)
     }
 
-    /// The limits a scenario's road must keep (docs/simulator.md): the first one off, as
-    /// (key, problem, fix).
-    pub fn invalid(&self) -> Option<(String, String, String)> {
-        let bad = |key: &str, problem: String, fix: &str| Some((key.to_string(), problem, fix.to_string()));
+    /// The limits a scenario's road must keep (docs/simulator.md): the first one off.
+    pub fn invalid(&self) -> Option<Invalid> {
+        let bad = |key: &str, problem: String, fix: &str| Some(Invalid::new(key, problem, fix));
         if !(1..=8).contains(&self.lanes) {
             return bad("road.lanes", format!("{} lanes", self.lanes), "use 1 to 8 lanes");
         }
@@ -116,6 +116,6 @@ impl Message for RoadSpec {
     const KIND: MessageKind = MessageKind::RoadMap;
 
     fn check(&self) -> Result<(), String> {
-        self.invalid().map_or(Ok(()), |(key, problem, _)| Err(format!("{key}: {problem}")))
+        self.invalid().map_or(Ok(()), |i| Err(format!("{}: {}", i.key, i.problem)))
     }
 }
