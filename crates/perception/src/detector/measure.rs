@@ -6,20 +6,20 @@ use super::*;
 
 impl Detector {
     /// Checks a dark component as a vehicle's contact band and measures the vehicle above it.
-    pub(super) fn candidate(&self, rgb: &[u8], w: usize, h: usize, c: &Component) -> Result<FrameDetection, String> {
+    pub(super) fn candidate(&self, rgb: &[u8], w: usize, h: usize, c: &Component) -> Result<FrameDetection, Rejection> {
         let p = &self.params;
         // The contact line is the lower edge of the component's lowest row; its horizontal
         // extent is that of the component's bottom rows.
         let contact_v = c.v1 as f64 + 1.0;
         if c.v1 as usize >= h - 1 {
-            return Err("runs off the image bottom: the contact line is not seen".into());
+            return Err(Rejection::OffTheBottom);
         }
         let (bu0, bu1) = (c.flat_u0, c.flat_u1);
         let centre_u = (bu0 + bu1 + 1) as f64 / 2.0;
         let edge_v = self.contact_edge(w, h, c).unwrap_or(contact_v);
-        let contact = self.camera.ground_point(centre_u, edge_v).ok_or("contact above the horizon")?;
+        let contact = self.camera.ground_point(centre_u, edge_v).ok_or(Rejection::AboveTheHorizon)?;
         if contact.x < 1.0 || contact.x > p.max_distance_m {
-            return Err(format!("contact at {:.1} m", contact.x));
+            return Err(Rejection::ContactAt(contact.x));
         }
         let origin = self.camera.origin_in_body();
         let px_per_m = self.camera.info.fx_px / (contact.x - origin.x).max(0.5);
@@ -95,19 +95,18 @@ impl Detector {
         (u0, u1): (usize, usize),
         contact_v: f64,
         px_per_m: f64,
-    ) -> Result<(usize, f64, (usize, usize)), String> {
+    ) -> Result<(usize, f64, (usize, usize)), Rejection> {
         let p = &self.params;
         let max_rows = (p.max_height_m * px_per_m) as usize;
         // The background columns just outside a0..=a1, where the image has them.
         let beside = |a0: usize, a1: usize| [a0.checked_sub(FLANK_PX), (a1 + FLANK_PX < w).then_some(a1 + FLANK_PX)];
         let flanks = beside(u0, u1);
-        let height_from = |flanks: [Option<usize>; 2]| -> Result<(usize, f64), String> {
-            let top = self
-                .top_row(rgb, w, (u0, u1), (c.v1 as usize, max_rows), flanks)
-                .ok_or("nothing rises above the contact")?;
+        let height_from = |flanks: [Option<usize>; 2]| -> Result<(usize, f64), Rejection> {
+            let top =
+                self.top_row(rgb, w, (u0, u1), (c.v1 as usize, max_rows), flanks).ok_or(Rejection::NothingAbove)?;
             let height_m = (contact_v - top as f64) / px_per_m;
             if height_m < p.min_height_m || height_m > p.max_height_m {
-                return Err(format!("height {height_m:.2} m"));
+                return Err(Rejection::Height(height_m));
             }
             Ok((top, height_m))
         };
@@ -136,10 +135,16 @@ impl Detector {
     /// and the vehicle is placed by its rear's outer edge. Returns that side, None for a rear
     /// (or one whose side is too level to show: placed by the band's centre, off by at most
     /// half the side's width), or why a band of `width_m` is no vehicle.
-    pub(super) fn oblique_side(&self, w: usize, h: usize, c: &Component, width_m: f64) -> Result<Option<Side>, String> {
+    pub(super) fn oblique_side(
+        &self,
+        w: usize,
+        h: usize,
+        c: &Component,
+        width_m: f64,
+    ) -> Result<Option<Side>, Rejection> {
         let p = &self.params;
         if width_m < p.min_width_m {
-            return Err(format!("width {width_m:.2} m"));
+            return Err(Rejection::Width(width_m));
         }
         let side = if width_m > MAX_REAR_WIDTH_M { self.receding_side(w, h, c) } else { None };
         if side.is_some() && width_m <= MAX_OBLIQUE_WIDTH_M {
@@ -147,7 +152,7 @@ impl Detector {
         } else if width_m <= p.max_width_m.max(MAX_LEVEL_OBLIQUE_WIDTH_M) {
             Ok(None)
         } else {
-            Err(format!("width {width_m:.2} m"))
+            Err(Rejection::Width(width_m))
         }
     }
 

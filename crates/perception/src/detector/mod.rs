@@ -23,10 +23,12 @@
 
 mod lamps;
 mod measure;
+mod rejection;
 mod segment;
 
 use lamps::lit_pixels;
 pub(crate) use measure::part_of;
+pub use rejection::Rejection;
 use segment::{luma_noise, road_luma, smooth_rows};
 
 use super::geometry::CameraModel;
