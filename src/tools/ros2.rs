@@ -128,9 +128,9 @@ pub fn types() -> Result<Vec<TypeRow>> {
         .map(|t| {
             Ok(TypeRow {
                 type_name: t,
-                dds: schema::dds_name(t).map_err(anyhow::Error::msg)?,
-                hash: schema::type_hash(t).map_err(anyhow::Error::msg)?,
-                definition: schema::ros2msg(t).map_err(anyhow::Error::msg)?,
+                dds: schema::dds_name(t)?,
+                hash: schema::type_hash(t)?,
+                definition: schema::ros2msg(t)?,
             })
         })
         .collect()

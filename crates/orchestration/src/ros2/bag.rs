@@ -74,7 +74,7 @@ impl Bag {
                 let schema = match open.schemas.get(type_name) {
                     Some(id) => *id,
                     None => {
-                        let text = schema::ros2msg(type_name).map_err(anyhow::Error::msg)?;
+                        let text = schema::ros2msg(type_name)?;
                         let id = open.writer.add_schema(type_name, SCHEMA_ENCODING, text.as_bytes()).map_err(fail)?;
                         open.schemas.insert(type_name.clone(), id);
                         id

@@ -76,7 +76,7 @@ impl Bridge {
                     let (payload, outlet, translator) = (sample.payload().clone(), outlet.clone(), translator.clone());
                     let job: Job = Box::new(move || {
                         let bytes = payload.to_bytes();
-                        match translator.encode(route, topic, &bytes).map_err(anyhow::Error::msg)? {
+                        match translator.encode(route, topic, &bytes)? {
                             Some((header, cdr)) => {
                                 let n = cdr.len();
                                 outlet.put(route, &header, cdr)?;

@@ -2,7 +2,7 @@
 //!
 //! These are the public interfaces of ROS 2's standard packages (common_interfaces,
 //! rcl_interfaces, ackermann_msgs), the same in Humble and Jazzy. They are the one source the
-//! bridge derives everything from: the CDR layout its structs must follow (src/ros2/messages.rs,
+//! bridge derives everything from: the CDR layout its structs must follow (crates/orchestration/src/ros2/messages.rs,
 //! checked by a test), the type hash in every key (RIHS01) and the `ros2msg` schema in
 //! recordings. Comments, constants and default values are left out: none of them changes the
 //! layout or the hash.

@@ -30,6 +30,36 @@ pub const DEFAULT_DECEL_MPS2: f64 = 3.5;
 /// Speed error to acceleration (1/s): 1 m/s short asks 0.8 m/s2, within the limits.
 pub const SPEED_GAIN_PER_S: f64 = 0.8;
 
+/// Why a command is refused: a `Copy` value with the figure that ruled it out, said only when
+/// counted and logged.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Refusal {
+    /// A second publisher (its gid) while the first is still sending.
+    SecondPublisher([u8; 16]),
+    /// A field that is NaN or infinite.
+    NotFinite(&'static str, f32),
+    /// A speed outside 0..[`MAX_SPEED_MPS`] (no reverse).
+    Speed(f32),
+    /// An acceleration beyond [`MAX_ACCEL_MPS2`] either way.
+    Acceleration(f32),
+    /// A steering angle beyond the vehicle's (angle, the vehicle's largest).
+    Steering(f32, f32),
+}
+
+impl std::fmt::Display for Refusal {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Refusal::SecondPublisher(gid) => {
+                write!(f, "a second publisher (gid {}) while the first is sending", hex(gid))
+            }
+            Refusal::NotFinite(name, v) => write!(f, "{name} is {v}"),
+            Refusal::Speed(v) => write!(f, "speed {v} m/s is outside 0..{MAX_SPEED_MPS} (no reverse)"),
+            Refusal::Acceleration(v) => write!(f, "acceleration {v} m/s2 is beyond {MAX_ACCEL_MPS2}"),
+            Refusal::Steering(v, max) => write!(f, "steering angle {v} rad is beyond the vehicle's {max}"),
+        }
+    }
+}
+
 /// What happened to the commands so far.
 #[derive(Debug, Clone, Default, PartialEq, serde::Serialize)]
 pub struct CommandStats {
@@ -58,7 +88,7 @@ impl CommandGate {
         now_ns: u64,
         drive: &AckermannDrive,
         params: &VehicleParams,
-    ) -> Result<(), String> {
+    ) -> Result<(), Refusal> {
         let verdict = self.judge(gid, now_ns, drive, params);
         match &verdict {
             Ok(()) => {
@@ -72,7 +102,7 @@ impl CommandGate {
     }
 
     /// Counts a refused command, logging why at most once a second.
-    pub fn refuse(&mut self, now_ns: u64, why: &str) {
+    pub fn refuse(&mut self, now_ns: u64, why: &dyn std::fmt::Display) {
         self.stats.refused += 1;
         self.refused_since_log += 1;
         self.stats.last_refusal = Some(why.to_string());
@@ -83,10 +113,10 @@ impl CommandGate {
         }
     }
 
-    fn judge(&self, gid: [u8; 16], now_ns: u64, d: &AckermannDrive, params: &VehicleParams) -> Result<(), String> {
+    fn judge(&self, gid: [u8; 16], now_ns: u64, d: &AckermannDrive, params: &VehicleParams) -> Result<(), Refusal> {
         if let (Some(owner), Some((_, at))) = (self.owner, self.latest) {
             if owner != gid && now_ns.saturating_sub(at) < STALE_AFTER_NS {
-                return Err(format!("a second publisher (gid {}) while the first is sending", hex(&gid)));
+                return Err(Refusal::SecondPublisher(gid));
             }
         }
         let fields = [
@@ -97,17 +127,17 @@ impl CommandGate {
             ("jerk", d.jerk),
         ];
         if let Some((name, v)) = fields.iter().find(|(_, v)| !v.is_finite()) {
-            return Err(format!("{name} is {v}"));
+            return Err(Refusal::NotFinite(name, *v));
         }
         if !(0.0..=MAX_SPEED_MPS).contains(&d.speed) {
-            return Err(format!("speed {} m/s is outside 0..{MAX_SPEED_MPS} (no reverse)", d.speed));
+            return Err(Refusal::Speed(d.speed));
         }
         if d.acceleration.abs() > MAX_ACCEL_MPS2 {
-            return Err(format!("acceleration {} m/s2 is beyond {MAX_ACCEL_MPS2}", d.acceleration));
+            return Err(Refusal::Acceleration(d.acceleration));
         }
         let max_steer = params.max_steer_rad as f32;
         if d.steering_angle.abs() > max_steer {
-            return Err(format!("steering angle {} rad is beyond the vehicle's {max_steer}", d.steering_angle));
+            return Err(Refusal::Steering(d.steering_angle, max_steer));
         }
         Ok(())
     }
@@ -183,7 +213,7 @@ mod tests {
         }
         assert_eq!(gate.control(0, 10.0, &CAR), None);
         gate.offer([1; 16], 0, &drive(10.0), &CAR).unwrap();
-        let err = gate.offer([2; 16], 1, &drive(30.0), &CAR).unwrap_err();
+        let err = gate.offer([2; 16], 1, &drive(30.0), &CAR).unwrap_err().to_string();
         assert!(err.contains("second publisher"), "{err}");
         // The first publisher's command still holds.
         assert!(gate.control(2, 20.0, &CAR).unwrap().brake > 0.0);

@@ -15,6 +15,7 @@
 use serde::{Deserialize, Serialize};
 use zenoh::bytes::ZBytes;
 
+use super::error::Ros2Error;
 use super::schema::{dds_name, Distro};
 
 /// Reliability, durability and history depth of one endpoint: what ROS 2 matches publishers
@@ -132,7 +133,7 @@ impl NodeId {
     }
 
     /// The data key of `topic` (already resolved) with `type_name`.
-    pub fn data_key(&self, topic: &str, type_name: &str) -> Result<String, String> {
+    pub fn data_key(&self, topic: &str, type_name: &str) -> Result<String, Ros2Error> {
         let topic = topic.trim_matches('/');
         Ok(format!("{}/{topic}/{}/{}", self.domain, dds_name(type_name)?, self.distro.hash_of(type_name)?))
     }
@@ -145,7 +146,7 @@ impl NodeId {
         topic: &str,
         type_name: &str,
         qos: &RosQos,
-    ) -> Result<String, String> {
+    ) -> Result<String, Ros2Error> {
         let kind = match kind {
             EndpointKind::Publisher => "MP",
             EndpointKind::Subscription => "MS",
@@ -203,14 +204,14 @@ impl Attachment {
         ser.finish()
     }
 
-    pub fn from_zbytes(bytes: &ZBytes) -> Result<Attachment, String> {
+    pub fn from_zbytes(bytes: &ZBytes) -> Result<Attachment, Ros2Error> {
         let mut de = zenoh_ext::ZDeserializer::new(bytes);
-        let bad = |e: zenoh_ext::ZDeserializeError| format!("the attachment is not rmw_zenoh's: {e:?}");
+        let bad = |e: zenoh_ext::ZDeserializeError| Ros2Error::Attachment(format!("{e:?}"));
         let sequence_number = de.deserialize::<i64>().map_err(bad)?;
         let source_timestamp_ns = de.deserialize::<i64>().map_err(bad)?;
         let source_gid = de.deserialize::<[u8; 16]>().map_err(bad)?;
         if !de.done() {
-            return Err("the attachment has bytes after the gid".into());
+            return Err(Ros2Error::Attachment("bytes after the gid".into()));
         }
         Ok(Attachment { sequence_number, source_timestamp_ns, source_gid })
     }

@@ -10,6 +10,7 @@ use zenoh::liveliness::LivelinessToken;
 use zenoh::sample::Sample;
 
 use super::command::{CommandGate, CommandStats};
+use super::error::Ros2Error;
 use super::graph::Attachment;
 use super::mapping::Entry;
 use super::messages::{from_cdr, AckermannDriveStamped};
@@ -74,10 +75,10 @@ impl CommandPath {
 }
 
 /// The publisher's gid and the command of one sample.
-fn read(sample: &Sample) -> Result<([u8; 16], AckermannDriveStamped), String> {
+fn read(sample: &Sample) -> Result<([u8; 16], AckermannDriveStamped), Ros2Error> {
     let attachment = sample
         .attachment()
-        .ok_or("no attachment: not an rmw_zenoh publisher".to_string())
+        .ok_or(Ros2Error::Attachment("none: not an rmw_zenoh publisher".into()))
         .and_then(Attachment::from_zbytes)?;
     let cmd = from_cdr::<AckermannDriveStamped>(&sample.payload().to_bytes())?;
     Ok((attachment.source_gid, cmd))

@@ -10,6 +10,7 @@ use std::collections::BTreeMap;
 
 use serde::Deserialize;
 
+use super::error::Ros2Error;
 use super::graph::{Durability, NodeId, Reliability, RosQos};
 use super::schema::Distro;
 use slipstream_contract::config::{from_value, CameraEncoding, ConfigError, TopicMap};
@@ -201,9 +202,8 @@ impl Ros2Config {
                 .map_err(|e| ConfigError { key: format!("ros2.{}", e.key).trim_end_matches('.').into(), ..e })?,
         };
         let namespace = match raw.namespace {
-            Some(ns) => {
-                ros_namespace(&ns).map_err(|p| ConfigError::new(origin, "ros2.namespace", p, "use `/` or `/name`"))?
-            }
+            Some(ns) => ros_namespace(&ns)
+                .map_err(|p| ConfigError::new(origin, "ros2.namespace", p.to_string(), "use `/` or `/name`"))?,
             None => format!("/{}", topics.namespace()).trim_end_matches('/').to_string(),
         };
         let node = raw.node.unwrap_or_else(|| "slipstream".into());
@@ -334,12 +334,12 @@ fn valid_topic(name: &str) -> bool {
     !body.is_empty() && body.split('/').all(valid_name_part)
 }
 
-fn ros_namespace(ns: &str) -> Result<String, String> {
+fn ros_namespace(ns: &str) -> Result<String, Ros2Error> {
     if ns == "/" || ns.is_empty() {
         return Ok("/".into());
     }
     if !ns.starts_with('/') || !valid_topic(ns) {
-        return Err(format!("`{ns}` is not a ROS namespace"));
+        return Err(Ros2Error::Namespace(ns.to_string()));
     }
     Ok(ns.trim_end_matches('/').to_string())
 }

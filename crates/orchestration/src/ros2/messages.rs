@@ -7,33 +7,35 @@
 
 use serde::{Deserialize, Serialize};
 
+use super::error::Ros2Error;
+
 /// CDR, little endian, no options: the encapsulation header of every ROS 2 payload.
 pub const CDR_LE: [u8; 4] = [0x00, 0x01, 0x00, 0x00];
 
 /// Serializes `msg` behind the encapsulation header.
-pub fn to_cdr<T: Serialize>(msg: &T, size_hint: usize) -> Result<Vec<u8>, String> {
+pub fn to_cdr<T: Serialize>(msg: &T, size_hint: usize) -> Result<Vec<u8>, Ros2Error> {
     let mut buf = Vec::with_capacity(size_hint + CDR_LE.len());
     buf.extend_from_slice(&CDR_LE);
     let mut ser = hiroz_cdr::CdrSerializer::<hiroz_cdr::LittleEndian>::new(&mut buf);
-    msg.serialize(&mut ser).map_err(|e| format!("CDR encoding failed: {e}"))?;
+    msg.serialize(&mut ser).map_err(|e| Ros2Error::Encode(e.to_string()))?;
     Ok(buf)
 }
 
 /// Deserializes a CDR payload (either byte order), refusing a bad header and trailing bytes
 /// beyond CDR's 4-byte padding.
-pub fn from_cdr<T: for<'de> Deserialize<'de>>(payload: &[u8]) -> Result<T, String> {
+pub fn from_cdr<T: for<'de> Deserialize<'de>>(payload: &[u8]) -> Result<T, Ros2Error> {
     if payload.len() < 4 {
-        return Err(format!("{} bytes is shorter than the CDR header", payload.len()));
+        return Err(Ros2Error::Cdr(format!("{} bytes is shorter than the CDR header", payload.len())));
     }
     let body = &payload[4..];
     let (msg, used) = match payload[..2] {
         [0x00, 0x01] => hiroz_cdr::from_bytes::<T, hiroz_cdr::LittleEndian>(body),
         [0x00, 0x00] => hiroz_cdr::from_bytes::<T, hiroz_cdr::BigEndian>(body),
-        _ => return Err(format!("encapsulation {:02x?} is not plain CDR", &payload[..2])),
+        _ => return Err(Ros2Error::Cdr(format!("encapsulation {:02x?} is not plain CDR", &payload[..2]))),
     }
-    .map_err(|e| format!("CDR does not decode: {e}"))?;
+    .map_err(|e| Ros2Error::Cdr(format!("CDR does not decode: {e}")))?;
     if body.len() - used > 3 {
-        return Err(format!("{} bytes left after the message", body.len() - used));
+        return Err(Ros2Error::Cdr(format!("{} bytes left after the message", body.len() - used)));
     }
     Ok(msg)
 }

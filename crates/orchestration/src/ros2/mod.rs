@@ -21,6 +21,7 @@ pub mod bridge;
 pub mod catalog;
 pub mod command;
 pub mod convert;
+pub mod error;
 pub mod face;
 pub mod graph;
 pub mod inbound;

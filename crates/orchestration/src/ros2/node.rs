@@ -47,9 +47,8 @@ impl RosNode {
         qos: &RosQos,
     ) -> Result<(String, String, String)> {
         let topic = self.id.resolve(topic);
-        let key = self.id.data_key(&topic, type_name).map_err(anyhow::Error::msg)?;
-        let token =
-            self.id.endpoint_token(self.entity_id(), kind, &topic, type_name, qos).map_err(anyhow::Error::msg)?;
+        let key = self.id.data_key(&topic, type_name)?;
+        let token = self.id.endpoint_token(self.entity_id(), kind, &topic, type_name, qos)?;
         Ok((topic, key, token))
     }
 

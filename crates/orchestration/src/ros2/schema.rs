@@ -12,6 +12,7 @@ use std::sync::OnceLock;
 use hiroz_schema::{FieldDescription, FieldTypeDescription, TypeDescription, TypeDescriptionMsg, TypeId};
 
 use super::catalog::TYPES;
+use super::error::Ros2Error;
 
 /// The separator between definitions in a `ros2msg` schema (as rosbag2 writes it).
 const SEPARATOR: &str = "================================================================================";
@@ -26,7 +27,7 @@ pub enum Distro {
 
 impl Distro {
     /// The hash part of a key: RIHS01 from Iron on, a fixed word in Humble.
-    pub fn hash_of(self, type_name: &str) -> Result<String, String> {
+    pub fn hash_of(self, type_name: &str) -> Result<String, Ros2Error> {
         match self {
             Distro::Humble => Ok("TypeHashNotSupported".to_string()),
             Distro::Jazzy => type_hash(type_name),
@@ -63,7 +64,7 @@ impl Field {
         format!("{base}{suffix} {}", self.name)
     }
 
-    fn description(&self) -> Result<FieldTypeDescription, String> {
+    fn description(&self) -> Result<FieldTypeDescription, Ros2Error> {
         let id = match self.base.as_str() {
             "bool" => TypeId::BOOL,
             "byte" => TypeId::BYTE,
@@ -79,7 +80,7 @@ impl Field {
             "float64" => TypeId::FLOAT64,
             "string" => TypeId::STRING,
             _ if self.nested().is_some() => TypeId::NESTED_TYPE,
-            other => return Err(format!("field `{}` has an unknown type `{other}`", self.name)),
+            other => return Err(definition(&format!("field `{}`", self.name), format!("unknown type `{other}`"))),
         };
         let (offset, capacity) = match self.array {
             None => (0, 0),
@@ -96,16 +97,20 @@ impl Field {
 }
 
 /// Parses one definition; `package` resolves bare nested names.
-fn parse(full_name: &str, text: &str) -> Result<Vec<Field>, String> {
+fn parse(full_name: &str, text: &str) -> Result<Vec<Field>, Ros2Error> {
     let package = full_name.split('/').next().unwrap_or_default();
     let mut fields = Vec::new();
     for line in text.lines().map(str::trim).filter(|l| !l.is_empty()) {
-        let (ty, name) = line.split_once(' ').ok_or_else(|| format!("{full_name}: `{line}` is not `type name`"))?;
+        let (ty, name) =
+            line.split_once(' ').ok_or_else(|| definition(full_name, format!("`{line}` is not `type name`")))?;
         let (base, array) = match ty.split_once('[') {
             None => (ty, None),
             Some((base, "]")) => (base, Some(None)),
             Some((base, rest)) => {
-                let n = rest.trim_end_matches(']').parse().map_err(|_| format!("{full_name}: bad array `{ty}`"))?;
+                let n = rest
+                    .trim_end_matches(']')
+                    .parse()
+                    .map_err(|_| definition(full_name, format!("bad array `{ty}`")))?;
                 (base, Some(Some(n)))
             }
         };
@@ -129,12 +134,16 @@ fn table() -> &'static BTreeMap<&'static str, Vec<Field>> {
     })
 }
 
-fn fields_of(name: &str) -> Result<&'static [Field], String> {
+fn fields_of(name: &str) -> Result<&'static [Field], Ros2Error> {
     table().get(name).map(Vec::as_slice).ok_or_else(|| unknown(name))
 }
 
-fn unknown(name: &str) -> String {
-    format!("`{name}` is not a type the bridge knows (known: {})", known_types().join(", "))
+fn unknown(name: &str) -> Ros2Error {
+    Ros2Error::UnknownType { name: name.to_string(), known: known_types().join(", ") }
+}
+
+fn definition(type_name: &str, problem: String) -> Ros2Error {
+    Ros2Error::Definition { type_name: type_name.to_string(), problem }
 }
 
 /// The types a mapping may name.
@@ -143,7 +152,7 @@ pub fn known_types() -> Vec<&'static str> {
 }
 
 /// Every type `name` refers to, directly or not, sorted by name.
-fn dependencies(name: &str) -> Result<BTreeSet<&'static str>, String> {
+fn dependencies(name: &str) -> Result<BTreeSet<&'static str>, Ros2Error> {
     let mut found = BTreeSet::new();
     let mut todo = vec![name.to_string()];
     while let Some(next) = todo.pop() {
@@ -159,32 +168,32 @@ fn dependencies(name: &str) -> Result<BTreeSet<&'static str>, String> {
     Ok(found)
 }
 
-fn description(name: &str) -> Result<TypeDescription, String> {
+fn description(name: &str) -> Result<TypeDescription, Ros2Error> {
     let fields = fields_of(name)?
         .iter()
         .map(|f| {
             Ok(FieldDescription { name: f.name.clone(), field_type: f.description()?, default_value: String::new() })
         })
-        .collect::<Result<_, String>>()?;
+        .collect::<Result<_, Ros2Error>>()?;
     Ok(TypeDescription { type_name: name.to_string(), fields })
 }
 
 /// The RIHS01 hash of `name`: `RIHS01_<64 hex digits>`.
-pub fn type_hash(name: &str) -> Result<String, String> {
+pub fn type_hash(name: &str) -> Result<String, Ros2Error> {
     let referenced = dependencies(name)?.into_iter().map(description).collect::<Result<_, _>>()?;
     let msg = TypeDescriptionMsg { type_description: description(name)?, referenced_type_descriptions: referenced };
     Ok(hiroz_schema::calculate_hash(&msg).to_rihs_string())
 }
 
 /// The DDS name rmw_zenoh puts in keys: `sensor_msgs::msg::dds_::Image_`.
-pub fn dds_name(name: &str) -> Result<String, String> {
+pub fn dds_name(name: &str) -> Result<String, Ros2Error> {
     fields_of(name)?;
-    hiroz_schema::dds_from_canonical(name).ok_or_else(|| format!("`{name}` is not `package/msg/Type`"))
+    hiroz_schema::dds_from_canonical(name).ok_or_else(|| Ros2Error::BadTypeName(name.to_string()))
 }
 
 /// The complete `ros2msg` definition: the type's fields, then each type it refers to under
 /// `MSG: package/Type`, as rosbag2 writes it into MCAP schemas.
-pub fn ros2msg(name: &str) -> Result<String, String> {
+pub fn ros2msg(name: &str) -> Result<String, Ros2Error> {
     let mut text = lines(name)?;
     for dep in dependencies(name)? {
         text.push_str(&format!("\n{SEPARATOR}\nMSG: {}\n{}", dep.replace("/msg/", "/"), lines(dep)?));
@@ -192,7 +201,7 @@ pub fn ros2msg(name: &str) -> Result<String, String> {
     Ok(text)
 }
 
-fn lines(name: &str) -> Result<String, String> {
+fn lines(name: &str) -> Result<String, Ros2Error> {
     Ok(fields_of(name)?.iter().map(Field::line).collect::<Vec<_>>().join("\n"))
 }
 
@@ -229,7 +238,8 @@ mod tests {
     fn dds_names_and_unknown_types() {
         assert_eq!(dds_name("sensor_msgs/msg/Image").unwrap(), "sensor_msgs::msg::dds_::Image_");
         let err = dds_name("sensor_msgs/msg/PointCloud2").unwrap_err();
-        assert!(err.contains("sensor_msgs/msg/Image"), "{err}");
+        assert!(matches!(&err, Ros2Error::UnknownType { name, .. } if name == "sensor_msgs/msg/PointCloud2"), "{err}");
+        assert!(err.to_string().contains("sensor_msgs/msg/Image"), "{err}");
         assert_eq!(Distro::Humble.hash_of("sensor_msgs/msg/Image").unwrap(), "TypeHashNotSupported");
     }
 }

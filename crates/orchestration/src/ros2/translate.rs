@@ -8,6 +8,7 @@ use parking_lot::Mutex;
 use serde::Serialize;
 
 use super::convert::{self, Frames, RosImage};
+use super::error::Ros2Error;
 use super::mapping::Route;
 use super::messages::{to_cdr, TfMessage, TransformStamped};
 use slipstream_contract::msg::{
@@ -45,12 +46,12 @@ pub struct Translator {
     mounts: Mutex<BTreeMap<&'static str, Vec<TransformStamped>>>,
 }
 
-fn cdr<T: Serialize>(header: Header, msg: &T, hint: usize) -> Result<Option<(Header, Vec<u8>)>, String> {
+fn cdr<T: Serialize>(header: Header, msg: &T, hint: usize) -> Result<Option<(Header, Vec<u8>)>, Ros2Error> {
     Ok(Some((header, to_cdr(msg, hint)?)))
 }
 
-fn decoded<'a, M: msg::Message + serde::Deserialize<'a>>(payload: &'a [u8]) -> Result<msg::Stamped<M>, String> {
-    msg::decode::<M>(payload).map_err(|e| e.to_string())
+fn decoded<'a, M: msg::Message + serde::Deserialize<'a>>(payload: &'a [u8]) -> Result<msg::Stamped<M>, Ros2Error> {
+    Ok(msg::decode::<M>(payload)?)
 }
 
 impl Translator {
@@ -69,7 +70,7 @@ impl Translator {
 
     /// `route`'s message from `payload`, a message of `topic` (one of the route's sources),
     /// with the payload's header; None when the route sends nothing for it.
-    pub fn encode(&self, route: Route, topic: Topic, payload: &[u8]) -> Result<Option<(Header, Vec<u8>)>, String> {
+    pub fn encode(&self, route: Route, topic: Topic, payload: &[u8]) -> Result<Option<(Header, Vec<u8>)>, Ros2Error> {
         let f = &self.frames;
         match route {
             Route::CameraFront | Route::CameraNarrow => {
@@ -79,7 +80,7 @@ impl Translator {
                 let pixels;
                 let frame = match s.msg.encoding {
                     slipstream_contract::msg::ImageEncoding::Lz4 => {
-                        pixels = s.msg.to_rgb8().map_err(|e| e.to_string())?;
+                        pixels = s.msg.to_rgb8()?;
                         CameraFrameRef {
                             encoding: slipstream_contract::msg::ImageEncoding::Rgb8,
                             data: &pixels,
@@ -92,13 +93,13 @@ impl Translator {
                 match (convert::image(s.header.stamp_sim_ns, optical, &frame), self.compressed.contains(&route)) {
                     (RosImage::Raw(img), false) => cdr(s.header, &img, hint),
                     (RosImage::Compressed(img), true) => cdr(s.header, &img, hint),
-                    (_, compressed) => Err(format!(
-                        "{topic} frames are {:?} but ros2.topics.{}.type is {} (fix: set it to {}, or leave it out)",
-                        s.msg.encoding,
-                        route.id(),
-                        if compressed { "CompressedImage" } else { "Image" },
-                        if compressed { "sensor_msgs/msg/Image" } else { "sensor_msgs/msg/CompressedImage" },
-                    )),
+                    (_, compressed) => Err(Ros2Error::FrameType {
+                        topic: topic.to_string(),
+                        encoding: s.msg.encoding,
+                        route: route.id(),
+                        configured: if compressed { "CompressedImage" } else { "Image" },
+                        fix: if compressed { "sensor_msgs/msg/Image" } else { "sensor_msgs/msg/CompressedImage" },
+                    }),
                 }
             }
             Route::CameraFrontInfo | Route::CameraNarrowInfo => {
@@ -130,7 +131,7 @@ impl Translator {
         }
     }
 
-    fn encode_signal(&self, route: Route, payload: &[u8]) -> Result<Option<(Header, Vec<u8>)>, String> {
+    fn encode_signal(&self, route: Route, payload: &[u8]) -> Result<Option<(Header, Vec<u8>)>, Ros2Error> {
         let f = &self.frames;
         match route {
             Route::Objects => {
@@ -172,6 +173,7 @@ mod tests {
         let (_, odo) = t.encode(Route::Odometry, Topic::VehicleState, &state).unwrap().unwrap();
         assert_eq!(&odo[..4], &super::super::messages::CDR_LE);
         let err = t.encode(Route::Clock, Topic::SimClock, &state).unwrap_err();
+        let err = err.to_string();
         assert!(err.contains("SimClock"), "{err}");
     }
 
@@ -181,7 +183,7 @@ mod tests {
             msg::CameraFrameRef { width: 4, height: 2, encoding: msg::ImageEncoding::Jpeg, data: &[0xff, 0xd8, 1, 2] };
         let payload = msg::encode(&Header::default(), &jpeg);
         let plain = Translator::new("");
-        let err = plain.encode(Route::CameraFront, Topic::CameraFront, &payload).unwrap_err();
+        let err = plain.encode(Route::CameraFront, Topic::CameraFront, &payload).unwrap_err().to_string();
         assert!(err.contains("ros2.topics.camera_front.type") && err.contains("CompressedImage"), "{err}");
         let typed = Translator::new("").with_types([(Route::CameraFront, "sensor_msgs/msg/CompressedImage")]);
         let (_, cdr) = typed.encode(Route::CameraFront, Topic::CameraFront, &payload).unwrap().unwrap();
