@@ -245,7 +245,7 @@ async fn a_realtime_answer_waits_briefly_for_its_frames_perception() {
     });
 }
 
-/// The watchdog over the bus: its timing is unit-tested on an injected clock (src/acc/node.rs);
+/// The watchdog over the bus: its timing is unit-tested on an injected clock (crates/acc/src/node.rs);
 /// here, that its commands and status reach the simulator and stop when speed returns.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn stale_speed_makes_the_watchdog_brake_until_speed_returns() {
@@ -389,9 +389,7 @@ async fn a_lockstep_acc_stops_waiting_for_a_detector_that_sends_nothing() {
 }
 
 fn acc_bin() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_slipstream-acc"));
-    c.env_remove("RUST_LOG").env_remove("SLIPSTREAM_ACC_CONFIG");
-    c
+    common::bin("slipstream-acc")
 }
 
 fn run(cmd: Command, limit: Duration) -> Output {
@@ -450,10 +448,8 @@ fn eval_acc_drives_the_vehicle_its_scenario_gives_the_ego() {
             ),
         )
         .unwrap();
-        let mut c = Command::new(env!("CARGO_BIN_EXE_slipstream"));
-        c.env_remove("RUST_LOG")
-            .args(["eval", "acc", "--json", "--perception", "ground-truth", "--scenario"])
-            .arg(&file);
+        let mut c = common::bin("slipstream");
+        c.args(["eval", "acc", "--json", "--perception", "ground-truth", "--scenario"]).arg(&file);
         let out = run(c, Duration::from_secs(300));
         let report: serde_json::Value = serde_json::from_slice(&out.stdout)
             .unwrap_or_else(|e| panic!("{class}: {e}: {}", String::from_utf8_lossy(&out.stderr)));
@@ -470,8 +466,8 @@ fn eval_acc_runs_every_scenario_as_separate_processes_without_a_collision() {
     let _serial = common::serial();
     let plots = std::env::temp_dir().join(format!("slipstream-acc-plots-{}", std::process::id()));
     for perception in ["ground-truth", "camera"] {
-        let mut c = Command::new(env!("CARGO_BIN_EXE_slipstream"));
-        c.env_remove("RUST_LOG").args(["eval", "acc", "--json", "--perception", perception, "--plots"]).arg(&plots);
+        let mut c = common::bin("slipstream");
+        c.args(["eval", "acc", "--json", "--perception", perception, "--plots"]).arg(&plots);
         let out = run(c, Duration::from_secs(900));
         let stdout = String::from_utf8_lossy(&out.stdout);
         let report: serde_json::Value = serde_json::from_str(&stdout)

@@ -8,9 +8,7 @@ use std::time::Duration;
 use crate::common;
 
 fn bin() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_slipstream"));
-    c.env_remove("RUST_LOG").env_remove("SLIPSTREAM_CONFIG").env_remove("SLIPSTREAM_NAMESPACE");
-    c
+    common::bin("slipstream")
 }
 
 fn run(cmd: Command, limit: Duration) -> Output {
@@ -18,8 +16,7 @@ fn run(cmd: Command, limit: Duration) -> Output {
 }
 
 fn free_endpoint() -> String {
-    let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
-    format!("tcp/127.0.0.1:{port}")
+    common::ep(common::free_port())
 }
 
 fn temp_file(name: &str, text: &str) -> PathBuf {

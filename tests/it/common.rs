@@ -1,4 +1,6 @@
-//! Test helpers: loopback sessions with scouting off, timeouts on every await.
+//! Test helpers, in one place: loopback sessions with scouting off, timeouts on every await,
+//! the binaries without the user's settings, free ports, scratch directories, and child
+//! processes killed when a test ends.
 
 use std::time::Duration;
 
@@ -90,5 +92,53 @@ pub fn rust_files(dir: &std::path::Path, out: &mut Vec<std::path::PathBuf>) {
         } else if path.extension().is_some_and(|e| e == "rs") {
             out.push(path);
         }
+    }
+}
+
+/// A binary of this build (`slipstream`, `slipstream-sim`, `slipstream-detect`,
+/// `slipstream-acc`), with none of the caller's settings: no RUST_LOG, no SLIPSTREAM_*.
+pub fn bin(name: &str) -> std::process::Command {
+    let path = match name {
+        "slipstream" => env!("CARGO_BIN_EXE_slipstream"),
+        "slipstream-sim" => env!("CARGO_BIN_EXE_slipstream-sim"),
+        "slipstream-detect" => env!("CARGO_BIN_EXE_slipstream-detect"),
+        "slipstream-acc" => env!("CARGO_BIN_EXE_slipstream-acc"),
+        other => panic!("no binary {other}"),
+    };
+    let mut c = std::process::Command::new(path);
+    c.env_remove("RUST_LOG");
+    for (var, _) in std::env::vars_os() {
+        if var.to_string_lossy().starts_with("SLIPSTREAM_") {
+            c.env_remove(var);
+        }
+    }
+    c
+}
+
+/// A loopback port free at the time of asking.
+pub fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+}
+
+/// The Zenoh endpoint of a loopback port.
+pub fn ep(port: u16) -> String {
+    format!("tcp/127.0.0.1:{port}")
+}
+
+/// An empty scratch directory of this test process's own, named `name`.
+pub fn temp_dir(name: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("slipstream-it-{}-{name}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).unwrap();
+    dir
+}
+
+/// A child process killed and reaped when the test ends, passed or failed.
+pub struct Killed(pub std::process::Child);
+
+impl Drop for Killed {
+    fn drop(&mut self) {
+        let _ = self.0.kill();
+        let _ = self.0.wait();
     }
 }

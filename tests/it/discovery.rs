@@ -5,6 +5,7 @@
 
 use std::time::Duration;
 
+use crate::common::free_port;
 use slipstream::msg::Speed;
 use slipstream::topics::VEHICLE_SPEED;
 use slipstream::{Bus, TopicMap};
@@ -13,10 +14,6 @@ fn default_config_on(port: u16) -> zenoh::Config {
     let text = slipstream::config::DEFAULT_ZENOH_CONFIG.replace("127.0.0.1:7447", &format!("127.0.0.1:{port}"));
     assert_ne!(text, slipstream::config::DEFAULT_ZENOH_CONFIG, "the default config names the rendezvous port");
     zenoh::Config::from_json5(&text).unwrap()
-}
-
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
 }
 
 async fn node(port: u16, name: &str) -> Bus {

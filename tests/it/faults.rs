@@ -2,30 +2,15 @@
 //! inputs seen by the ACC during an outage, refused where lockstep cannot take them; the
 //! envelope sweep of `slipstream eval faults`.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 
 use crate::common;
+use crate::common::{free_port, temp_dir};
 
 fn slipstream() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_slipstream"));
-    for var in ["RUST_LOG", "SLIPSTREAM_CONFIG", "SLIPSTREAM_NAMESPACE", "SLIPSTREAM_ZENOH_CONFIG", "SLIPSTREAM_FAULTS"]
-    {
-        c.env_remove(var);
-    }
-    c
-}
-
-fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("slipstream-faults-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
-
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+    common::bin("slipstream")
 }
 
 /// `up` in lockstep with ground truth and `profile`; its report.json.

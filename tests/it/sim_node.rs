@@ -2,7 +2,7 @@
 //! determinism, lockstep timeouts, collisions on sim/events, and the binary's errors.
 
 use std::collections::BTreeMap;
-use std::process::{Child, Command, Stdio};
+use std::process::{Command, Stdio};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -12,7 +12,7 @@ use slipstream::sim::settings::{Mode, OnTimeout, SimSettings};
 use slipstream::sim::{Scenario, World};
 use slipstream::{topics, Bus, TopicMap};
 
-use crate::common::{connected_session, listening_session};
+use crate::common::{connected_session, listening_session, Killed};
 
 /// Every sim topic reliable and blocking, so a recorder sees every message.
 fn lossless_map() -> TopicMap {
@@ -326,22 +326,8 @@ async fn jpeg_frames_when_configured_and_malformed_control_is_counted_not_applie
     assert_eq!(info.map(|i| i.encoding), Some(msg::ImageEncoding::Jpeg));
 }
 
-struct Killed(Child);
-
-impl Drop for Killed {
-    fn drop(&mut self) {
-        let _ = self.0.kill();
-        let _ = self.0.wait();
-    }
-}
-
 fn sim_bin() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_slipstream-sim"));
-    c.env_remove("RUST_LOG")
-        .env_remove("SLIPSTREAM_CONFIG")
-        .env_remove("SLIPSTREAM_NAMESPACE")
-        .env_remove("SLIPSTREAM_SIM_CONFIG");
-    c
+    crate::common::bin("slipstream-sim")
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]

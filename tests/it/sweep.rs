@@ -11,9 +11,7 @@ use serde_json::Value;
 use crate::common;
 
 fn slipstream() -> Command {
-    let mut c = Command::new(env!("CARGO_BIN_EXE_slipstream"));
-    c.env_remove("RUST_LOG");
-    c
+    common::bin("slipstream")
 }
 
 fn run(cmd: Command, limit: Duration) -> Output {

@@ -1,39 +1,13 @@
 //! `slipstream up`, `top` and `echo` as a user runs them, on loopback ports of their own.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
+use std::path::Path;
+use std::process::Stdio;
 use std::time::{Duration, Instant};
 
 use crate::common;
+use crate::common::{bin, ep, free_port, temp_dir};
 use slipstream::msg::{self, MessageKind};
 use slipstream::topics::Topic;
-
-fn bin(name: &str) -> Command {
-    let path = match name {
-        "slipstream" => env!("CARGO_BIN_EXE_slipstream"),
-        "slipstream-sim" => env!("CARGO_BIN_EXE_slipstream-sim"),
-        other => panic!("no binary {other}"),
-    };
-    let mut c = Command::new(path);
-    c.env_remove("RUST_LOG").env_remove("SLIPSTREAM_CONFIG").env_remove("SLIPSTREAM_NAMESPACE");
-    c.env_remove("SLIPSTREAM_ZENOH_CONFIG");
-    c
-}
-
-fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
-}
-
-fn ep(port: u16) -> String {
-    format!("tcp/127.0.0.1:{port}")
-}
-
-fn temp_dir(name: &str) -> PathBuf {
-    let dir = std::env::temp_dir().join(format!("slipstream-tools-{}-{name}", std::process::id()));
-    let _ = std::fs::remove_dir_all(&dir);
-    std::fs::create_dir_all(&dir).unwrap();
-    dir
-}
 
 fn report(dir: &Path) -> serde_json::Value {
     let text = std::fs::read_to_string(dir.join("report.json")).expect("report.json written");
