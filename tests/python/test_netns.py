@@ -250,9 +250,10 @@ def test_router_mode_closes_the_loop_and_recovers_from_a_link_and_a_router_loss(
     # Commands the ACC queued during the outage arrive late; the simulator applies none of them
     # (control.max_age_ms).
     assert stale == 0 and stale_long == 0, result
+    # The loop closed again after each outage (each wait fails the test when it does not within
+    # its cap); how long it took is a figure of the report (docs/deployment.md), not a
+    # pass/fail bound a loaded machine could break.
     assert all(still_running.values()), still_running
-    # Generous bounds (a hang fails); the measured times are in the report.
-    assert link_recovery < 30 and long_recovery < 30 and router_recovery < 30, result
 
 
 def netns_run(lan, role, *argv):
