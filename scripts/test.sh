@@ -10,9 +10,11 @@
 #     zenoh-ros2-sdk (independent ROS 2 CDR, type hashes and graph discovery, for the ROS 2
 #     bridge; no ROS install), carla and coppeliasim-zmqremoteapi-client (the simulators' own
 #     client packages, which the adapters use against stand-ins of their servers);
-#   - the Rust tests in the release profile, the profile of the quick start's
-#     `cargo build --release`: the package has no dev-dependencies and resolves the same
-#     features for both, so after that build no dependency (Zenoh included) compiles again;
+#   - the Rust tests of every crate of the workspace in the release profile, the profile of the
+#     quick start's `cargo build --release`: no crate has dev-dependencies, and every crate
+#     takes its dependencies from the workspace's one list with the same features, so after
+#     that build no dependency (Zenoh included) compiles again; the example node
+#     (examples/own-controller) builds on what is built already;
 #   - `cargo install --path .` and `pip install ./clients/python[numpy]` into a scratch
 #     directory, checked from outside the checkout (scripts/check-install.sh);
 #   - the Python tests against the release binaries.
@@ -51,10 +53,16 @@ fi
 .venv/bin/pip install --quiet --disable-pip-version-check -e 'clients/python[numpy,lz4,mcap,carla,coppeliasim]'
 .venv/bin/python -c 'import zenoh; print("eclipse-zenoh", zenoh.__version__ if hasattr(zenoh, "__version__") else "installed")'
 
+step "rust formatting (cargo fmt --check)"
+cargo fmt --all --check
+echo ok
+
 step "rust build and tests (cargo test --release)"
 rm -f target/test-reports/scenario-sample.txt target/test-reports/sweep-40.txt
 SECONDS=0
-cargo build --release --workspace
+cargo build --release
+# The node of your own on the contract alone, as docs/own-node.md types it.
+cargo build --release -p slipstream-example-own-controller
 echo "build: ${SECONDS} s"
 SECONDS=0
 cargo test --release --workspace
