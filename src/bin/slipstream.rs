@@ -1,5 +1,5 @@
 //! `slipstream`: the tools. Parses the command line and hands each command to its tool's
-//! `command()` in the library (src/tools/, src/bench/command.rs).
+//! `command()` in the library (src/tools/, crates/bench/src/command.rs).
 
 use std::process::ExitCode;
 

@@ -358,3 +358,58 @@ fn the_circle_finder_finds_a_circle_and_nothing_in_a_tree() {
     let tree = g(&[("judge", "trace"), ("judge", "metrics"), ("metrics", "trace")]);
     assert!(tree.keys().all(|k| circle_through(&tree, k).is_none()));
 }
+
+/// The source files a table cell of docs/architecture.md names: comma-separated paths, a bare
+/// file name meaning the directory of the path before it, a path ending in `/` a whole directory
+/// (returned with its slash). Empty for a cell that is not a list of paths.
+fn files_in_cell(cell: &str) -> Vec<String> {
+    let items: Vec<&str> = cell.split(", ").map(str::trim).collect();
+    let path_like = |i: &str| i.ends_with('/') || i.ends_with(".rs") || i.ends_with(".py");
+    if !items.first().is_some_and(|i| i.contains('/')) || !items.iter().all(|i| path_like(i)) {
+        return Vec::new();
+    }
+    let mut dir = String::new();
+    let mut out = Vec::new();
+    for item in items {
+        if let Some(slash) = item.rfind('/') {
+            dir = item[..=slash].to_string();
+            out.push(item.to_string());
+        } else {
+            out.push(format!("{dir}{item}"));
+        }
+    }
+    out
+}
+
+#[test]
+fn the_cell_reader_expands_bare_names_and_skips_prose() {
+    assert_eq!(files_in_cell("crates/sim/src/node.rs, args.rs"), ["crates/sim/src/node.rs", "crates/sim/src/args.rs"]);
+    assert_eq!(files_in_cell("crates/sim/src/render/"), ["crates/sim/src/render/"]);
+    assert!(files_in_cell("the simulated world, src/x.rs").is_empty());
+}
+
+#[test]
+fn docs_architecture_lists_every_source_file_and_no_other() {
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let doc = std::fs::read_to_string(repo.join("docs/architecture.md")).unwrap();
+    let listed: Vec<String> = doc
+        .lines()
+        .filter(|l| l.starts_with('|'))
+        .flat_map(|l| l.trim_matches('|').split('|').flat_map(files_in_cell).collect::<Vec<_>>())
+        .collect();
+    let mut problems = Vec::new();
+    let sources = sources();
+    for s in &sources {
+        let path = s.shown();
+        if !listed.iter().any(|l| *l == path || (l.ends_with('/') && path.starts_with(l.as_str()))) {
+            problems.push(format!("{path} is in no row of docs/architecture.md's module table"));
+        }
+    }
+    for l in &listed {
+        if !repo.join(l).exists() {
+            problems.push(format!("docs/architecture.md names {l}, which does not exist"));
+        }
+    }
+    assert!(sources.len() > 100, "only {} sources read", sources.len());
+    assert!(problems.is_empty(), "{}", problems.join("\n"));
+}

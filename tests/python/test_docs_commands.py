@@ -1,6 +1,6 @@
 """The docs' commands, typed as a user types them.
 
-README.md, docs/tools.md and docs/recording.md (their ```sh blocks) and every `--help`
+README.md, docs/tools.md, docs/recording.md and docs/own-node.md (their ```sh blocks) and every `--help`
 example are run here on a host of their own (tests/python/user_host.py: the default config
 and port, nodes started by hand in separate processes, tools beside a live loop, two and three
 loops at once, signals). Each run checks what a user meets first: the exit code, that a
@@ -51,8 +51,8 @@ ELSEWHERE = {
         "tests/it/faults.rs runs `eval faults --scenario steady-follow ... --duration 4`: the envelope takes minutes",
 }
 
-BINS = ("slipstream", "slipstream-sim", "slipstream-detect", "slipstream-acc")
-DOCS = ("README.md", "docs/tools.md", "docs/recording.md")
+BINS = ("slipstream", "slipstream-sim", "slipstream-detect", "slipstream-acc", "own-controller")
+DOCS = ("README.md", "docs/tools.md", "docs/recording.md", "docs/own-node.md")
 
 
 def typed(command, **placeholders):
@@ -286,6 +286,20 @@ def test_a_controller_and_a_simulator_by_hand_and_a_loop_beside_them(host):
 
 
 @needs_host
+def test_a_controller_of_your_own_beside_a_simulator(host):
+    """docs/own-node.md: the example node on the contract crate alone drives the simulator."""
+    sim = host.start("target/release/slipstream-sim --scenario steady-follow")
+    own = host.start("target/release/own-controller --set-speed 25")
+    host.wait_for(sim, "joined the bus", 30)
+    top = one_shot(host, "slipstream top --json --duration 4", work_s=4)
+    assert "own-controller" in top.stdout(), top.stdout()[-2000:]
+    sent = stopped(host, own).stdout()
+    assert re.fullmatch(r"own-controller: \d+ commands sent\n", sent) and not sent.startswith("own-controller: 0 "), sent
+    summary = summary_of(stopped(host, sim))
+    assert "collisions: 0 ego" in summary and "bad control messages 0" in summary, summary
+
+
+@needs_host
 def test_a_simulator_alone_in_fast_mode_and_a_preview(host):
     (host.dir / "my.json5").write_text((ROOT / "scenarios" / "steady-follow.json5").read_text())
     fast = one_shot(host, "slipstream-sim --scenario my.json5 --mode fast --seed 7", work_s=60)
@@ -489,7 +503,7 @@ def is_argument(words):
 def typed_here():
     """The command literals of this file, placeholders as written."""
     source = pathlib.Path(__file__).read_text()
-    literals = re.findall(r'"((?:target/release/)?slipstream[^"]*)"', source)
+    literals = re.findall(r'"((?:target/release/)?(?:slipstream|own-controller)[^"]*)"', source)
     typed_parts = set()
     for literal in literals:
         for p in parts(literal):

@@ -43,7 +43,7 @@ class Collected:
         self.bytes += size
         self.highest = seq if self.highest is None else max(self.highest, seq)
         # The span: from the first message's publication to the last one's arrival (the
-        # Rust receiver's definition, src/bench/spec.rs RecvReport.span_s).
+        # Rust receiver's definition, crates/bench/src/spec.rs RecvReport.span_s).
         self.first = stamp_ns if self.first is None else min(self.first, stamp_ns)
         self.last = now_ns
 

@@ -15,7 +15,7 @@ pub enum Transport {
     /// Length-prefixed messages on one TCP connection (the seed design's image port).
     Tcp,
     /// The seed design itself: a Python script (standard library) sending the speed as text,
-    /// one UDP datagram per message (src/bench/seed.py).
+    /// one UDP datagram per message (crates/bench/src/seed.py).
     SeedPythonUdp,
     /// The seed design's camera link: the same script pickling each frame and sending it over
     /// one TCP connection behind a 4-byte length.

@@ -1,8 +1,8 @@
 //! The vehicle model shared by the simulator and the controllers: a vehicle type's parameters
 //! and the inverse longitudinal model (the throttle or brake that gives an acceleration).
 //!
-//! It sits below both: the simulator's forces (src/sim/dynamics.rs) and the ACC's low-level
-//! loop (src/acc/low_level.rs) read the same numbers, and the ACC links none of the simulator.
+//! It sits below both: the simulator's forces (crates/sim/src/dynamics.rs) and the ACC's low-level
+//! loop (crates/acc/src/low_level.rs) read the same numbers, and the ACC links none of the simulator.
 //!
 //! Longitudinally, per vehicle:
 //! - drive force = throttle * min(max_drive_force, max_power / speed), along the heading;

@@ -1,6 +1,6 @@
 //! The simulator's forward vehicle dynamics: the forces a vehicle's engine, brakes, air, tyres
 //! and steering put on its body, from the shared parameters in [`slipstream_model::vehicle`]. Pure
-//! functions on nalgebra types; src/sim/physics.rs hands the result to rapier.
+//! functions on nalgebra types; crates/sim/src/physics.rs hands the result to rapier.
 //!
 //! The body moves in the road plane (x, y, yaw). Per step, longitudinal forces as documented in
 //! [`slipstream_model::vehicle`], never reversing the motion; each axle's tyres resist sliding sideways

@@ -3,7 +3,7 @@
 //! rapier 0.36 speaks glam (f32); everything else in the simulator speaks nalgebra (f64). The
 //! conversions live here and nowhere else. Each vehicle is a dynamic rigid body with a box
 //! collider, free to move only in the road plane (x, y translation, yaw): the vehicle model
-//! (src/sim/dynamics.rs) supplies its forces as impulses each step; rapier integrates them and
+//! (crates/sim/src/dynamics.rs) supplies its forces as impulses each step; rapier integrates them and
 //! resolves contacts between vehicles, which become collision events.
 
 use std::collections::BTreeSet;

@@ -1,5 +1,5 @@
 //! The simulated world: road, ego and traffic, stepped at a fixed rate. No I/O: the node
-//! (src/sim/node.rs) feeds it commands and publishes what it reports.
+//! (crates/sim/src/node.rs) feeds it commands and publishes what it reports.
 
 use nalgebra::{Rotation2, Vector2};
 

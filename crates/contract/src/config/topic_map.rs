@@ -90,7 +90,7 @@ pub struct CameraSettings {
     pub read: Option<CameraEncoding>,
     /// A frame reader on a thread of its own (the detector) is awake and polling in a short
     /// window around each frame of a periodic camera instead of being woken for it
-    /// (src/bus/cadence.rs): ~60 us less per frame for ~2 % of a core per camera at 20 Hz.
+    /// (crates/contract/src/bus/cadence.rs): ~60 us less per frame for ~2 % of a core per camera at 20 Hz.
     pub poll_before_frame: bool,
 }
 
@@ -126,7 +126,7 @@ pub struct TopicMap {
     pub camera: CameraSettings,
     /// The file it was read from, for messages.
     pub origin: String,
-    /// The `ros2` block as written (the ROS 2 bridge reads and checks it: src/ros2/mapping.rs);
+    /// The `ros2` block as written (the ROS 2 bridge reads and checks it: crates/orchestration/src/ros2/mapping.rs);
     /// None when the file has none.
     pub ros2: Option<serde_json::Value>,
 }

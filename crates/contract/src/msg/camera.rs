@@ -56,7 +56,7 @@ impl<'a> CameraFrameRef<'a> {
     }
 
     /// The image as RGB8 pixels, whatever its encoding: raw frames are borrowed as they are,
-    /// the others decoded (and must have the size the frame states; src/msg/pixels.rs).
+    /// the others decoded (and must have the size the frame states; crates/contract/src/msg/pixels.rs).
     pub fn to_rgb8(&self) -> Result<std::borrow::Cow<'a, [u8]>, DecodeError> {
         super::pixels::decode(self.data, self.width, self.height, self.encoding)
             .map_err(|reason| DecodeError::Invalid { expected: "CameraFrame", reason })

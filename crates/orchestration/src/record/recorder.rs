@@ -424,7 +424,7 @@ fn add_channel(
     let schema = match (schemas.get(&key.1), key.1) {
         (Some(id), _) => *id,
         (None, Some(kind)) => {
-            // The type's layout as data (src/msg/layout.rs): with docs/wire-format.md's rules a
+            // The type's layout as data (crates/contract/src/msg/layout.rs): with docs/wire-format.md's rules a
             // reader decodes the channel without this crate.
             let data = serde_json::to_vec(&slipstream_contract::msg::layout::schema_data(kind)).unwrap_or_default();
             let id =
