@@ -454,8 +454,9 @@ def normalized(command):
 
 
 def parts(line):
-    """A documented line's commands (`a & b`, `a && b` typed in turn), slipstream's only."""
-    pieces = [normalized(p) for p in re.split(r"\s&&?\s", normalized(line))]
+    """A documented line's commands (`a & b`, `a && b` typed in turn, `a &` in the background),
+    slipstream's only."""
+    pieces = [normalized(p) for p in re.split(r"\s&&?(?:\s|$)", normalized(line))]
     return [p for p in pieces if p.split()[:1] and p.split()[0] in BINS]
 
 
