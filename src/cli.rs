@@ -192,42 +192,6 @@ impl<S> Filter<S> for AclRefusals {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::{error_report, is_rendezvous_noise};
-
-    #[test]
-    fn only_access_control_refusals_pass_and_each_once_a_while() {
-        let f = super::AclRefusals::default();
-        let t0 = std::time::Instant::now();
-        let refused = "zid on car1-acc is unauthorized to put on car2/vehicle/control";
-        assert!(f.admits(refused, t0));
-        assert!(!f.admits(&format!("Using cached result: {refused}"), t0 + std::time::Duration::from_secs(1)));
-        assert!(f.admits(refused, t0 + super::REFUSAL_LOG_EVERY));
-        assert!(!f.admits("zid on car1-acc is authorized to put on car1/vehicle/control", t0));
-    }
-
-    #[test]
-    fn an_error_is_reported_with_each_cause_on_a_line_of_its_own() {
-        let e = anyhow::anyhow!("no such file").context("read scenarios/x.json5").context("scenario `x`");
-        assert_eq!(
-            error_report(&e),
-            "Error: scenario `x`\n  caused by: read scenarios/x.json5\n  caused by: no such file\n"
-        );
-    }
-
-    #[test]
-    fn only_the_expected_zenoh_notes_are_noise() {
-        assert!(is_rendezvous_noise("Can not create a new UnixSocketStream link bound to \"/tmp/s/acc.sock\""));
-        // A unix socket that cannot be reached is an error worth seeing.
-        assert!(!is_rendezvous_noise(
-            "Can not create a new UnixSocketStream link bound to \"/tmp/s/acc.sock\": No such file or directory (os error 2)"
-        ));
-        assert!(is_rendezvous_noise("Unable to open listener tcp/127.0.0.1:7447: Address already in use"));
-        assert!(!is_rendezvous_noise("Unable to open listener tcp/10.0.0.1:7447: Address already in use"));
-    }
-}
-
 /// Opens a bus as `node` on `connect`'s config, runs `f` with it and leaves it: the frame of
 /// every tool that is one participant on the bus for its whole run. Leaving cannot fail the
 /// tool ([`crate::Bus::leave`]); a tool prints its verdict inside `f`, so nothing on the way
@@ -273,4 +237,40 @@ pub fn print_report<R: serde::Serialize>(json: bool, report: &R, markdown: fn(&R
     writeln!(out, "{text}")?;
     out.flush()?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{error_report, is_rendezvous_noise};
+
+    #[test]
+    fn only_access_control_refusals_pass_and_each_once_a_while() {
+        let f = super::AclRefusals::default();
+        let t0 = std::time::Instant::now();
+        let refused = "zid on car1-acc is unauthorized to put on car2/vehicle/control";
+        assert!(f.admits(refused, t0));
+        assert!(!f.admits(&format!("Using cached result: {refused}"), t0 + std::time::Duration::from_secs(1)));
+        assert!(f.admits(refused, t0 + super::REFUSAL_LOG_EVERY));
+        assert!(!f.admits("zid on car1-acc is authorized to put on car1/vehicle/control", t0));
+    }
+
+    #[test]
+    fn an_error_is_reported_with_each_cause_on_a_line_of_its_own() {
+        let e = anyhow::anyhow!("no such file").context("read scenarios/x.json5").context("scenario `x`");
+        assert_eq!(
+            error_report(&e),
+            "Error: scenario `x`\n  caused by: read scenarios/x.json5\n  caused by: no such file\n"
+        );
+    }
+
+    #[test]
+    fn only_the_expected_zenoh_notes_are_noise() {
+        assert!(is_rendezvous_noise("Can not create a new UnixSocketStream link bound to \"/tmp/s/acc.sock\""));
+        // A unix socket that cannot be reached is an error worth seeing.
+        assert!(!is_rendezvous_noise(
+            "Can not create a new UnixSocketStream link bound to \"/tmp/s/acc.sock\": No such file or directory (os error 2)"
+        ));
+        assert!(is_rendezvous_noise("Unable to open listener tcp/127.0.0.1:7447: Address already in use"));
+        assert!(!is_rendezvous_noise("Unable to open listener tcp/10.0.0.1:7447: Address already in use"));
+    }
 }

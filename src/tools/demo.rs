@@ -82,12 +82,12 @@ pub async fn publish(bus: &Bus, duration: Duration) -> Result<()> {
         let t_s = t_ns as f64 * 1e-9;
         speed.put(t_ns, &Speed { speed_mps: 20.0 + 5.0 * (t_s * 0.5).sin() })?;
         clock.put(t_ns, &SimClock { step, real_time_factor: 1.0, mode: SimMode::Realtime, physics_hz: 100.0 })?;
-        if step % 5 == 0 {
+        if step.is_multiple_of(5) {
             frames.put_with(t_ns, WIDTH, HEIGHT, ImageEncoding::Rgb8, (WIDTH * HEIGHT * 3) as usize, |px| {
                 paint(px, t_s)
             })?;
         }
-        if step % 100 == 0 {
+        if step.is_multiple_of(100) {
             info.put(t_ns, &cam_info)?;
         }
         step += 1;

@@ -375,7 +375,9 @@ fn plot(r: &SoakReport, path: &Path) -> Result<()> {
         let panels = root.split_evenly((2, 1));
         let t_end = r.samples.last().map_or(1.0, |s| s.t_min).max(0.1);
         let colors = [RGBColor(31, 119, 180), RGBColor(255, 127, 14), RGBColor(44, 160, 44), RGBColor(214, 39, 40)];
-        let pick: [(&str, fn(&Usage) -> f64); 2] = [
+        /// A panel: its label and the figure it plots.
+        type Panel = (&'static str, fn(&Usage) -> f64);
+        let pick: [Panel; 2] = [
             ("resident memory (MB)", |u| u.rss_kib as f64 / 1024.0),
             ("threads + open files", |u| (u.threads + u.fds) as f64),
         ];

@@ -74,9 +74,13 @@ pub struct TopView {
     pub node_inputs: Vec<NodeInput>,
 }
 
+/// Each key seen (with the publisher's encoding, for keys that are not the loop's): its
+/// statistics and the message kind it carries.
+type KeyStats = BTreeMap<(String, Option<String>), (Arc<TopicStats>, Option<MessageKind>)>;
+
 #[derive(Default)]
 struct Seen {
-    keys: BTreeMap<(String, Option<String>), (Arc<TopicStats>, Option<MessageKind>)>,
+    keys: KeyStats,
     sim: Option<SimView>,
     node_inputs: BTreeMap<String, Vec<StatsSnapshot>>,
 }
@@ -271,7 +275,7 @@ pub async fn run(bus: &Bus, args: &TopArgs) -> Result<()> {
         } else {
             // A screen of its own on the terminal: cleared, then drawn.
             console::Term::stdout().clear_screen()?;
-            write!(out, "{}(Ctrl-C to quit)\n", render(&view))?;
+            writeln!(out, "{}(Ctrl-C to quit)", render(&view))?;
         }
         out.flush()?;
         if deadline.is_some_and(|d| Instant::now() >= d) {

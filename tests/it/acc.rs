@@ -94,7 +94,7 @@ impl FakeSim {
             let t_ns = self.step * 10_000_000;
             self.speed.put(t_ns, &Speed { speed_mps: 20.0 }).unwrap();
             self.state.put(t_ns, &state(self.step, 20.0)).unwrap();
-            if perception && self.step % 5 == 0 {
+            if perception && self.step.is_multiple_of(5) {
                 self.objects.put(t_ns, &lead_truth(self.step, 40.0)).unwrap();
             }
             self.step += 1;

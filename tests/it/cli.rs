@@ -264,7 +264,7 @@ fn eval_detect_measures_the_lateral_and_across_road_errors_far_ahead_in_the_swee
         assert!(counted > 0, "{table}: vehicles 40-200 m ahead were matched: {cells:?}");
         for c in cells.iter().filter(|c| c["count"].as_u64().unwrap() > 1) {
             let sigma = c["sigma_m"].as_f64().unwrap();
-            assert!(sigma >= 0.0 && sigma < 3.5, "{table}: a lane's width at most: {c}");
+            assert!((0.0..3.5).contains(&sigma), "{table}: a lane's width at most: {c}");
         }
     }
 }

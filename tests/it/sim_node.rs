@@ -331,6 +331,8 @@ fn sim_bin() -> Command {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 4)]
+// The serial lock is held for the whole test on purpose: it keeps whole-loop tests apart.
+#[allow(clippy::await_holding_lock)]
 async fn another_process_receives_every_topic_at_its_rate() {
     let _serial = crate::common::serial();
     let (session, ep) = listening_session().await;

@@ -288,7 +288,9 @@ fn sibling_refs(file: &Path, text: &str, siblings: &BTreeSet<String>) -> BTreeSe
 #[test]
 fn no_two_files_of_a_module_import_each_other() {
     let files = sources();
-    let mut by_dir: BTreeMap<(String, PathBuf), Vec<(String, &str, &Path)>> = BTreeMap::new();
+    /// Each directory of a crate (source root, path) and its files (stem, text, path).
+    type ByDir<'a> = BTreeMap<(String, PathBuf), Vec<(String, &'a str, &'a Path)>>;
+    let mut by_dir: ByDir = BTreeMap::new();
     for s in &files {
         let stem = s.file.file_stem().unwrap().to_string_lossy().into_owned();
         let dir = (s.root.clone(), s.file.parent().unwrap().to_path_buf());

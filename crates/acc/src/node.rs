@@ -583,7 +583,7 @@ fn answers_step(st: &State, t_ns: u64) -> Option<u64> {
     }
     let hz = st.physics_hz?;
     let ahead = ((t_ns as f64 - stamp as f64) / 1e9 * hz).round();
-    (step as f64 + ahead >= 0.0).then(|| (step as f64 + ahead) as u64)
+    (step as f64 + ahead >= 0.0).then_some((step as f64 + ahead) as u64)
 }
 
 fn take_perception(st: &mut State, frame: &PerceptionFrame, pub_ns: u64) {

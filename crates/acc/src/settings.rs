@@ -373,7 +373,7 @@ impl AccSettings {
             return Invalid::err(
                 "perception_wait_ms",
                 format!("{} ms", self.perception_wait_ms),
-                &format!("use 0 to {MAX_PERCEPTION_WAIT_MS} ms: an answer held longer than the speed messages' period (10 ms at 100 Hz) makes the next ones queue"),
+                format!("use 0 to {MAX_PERCEPTION_WAIT_MS} ms: an answer held longer than the speed messages' period (10 ms at 100 Hz) makes the next ones queue"),
             );
         }
         Ok(())

@@ -699,7 +699,7 @@ fn brake_lights_coming_on_start_comfort_braking_before_the_speed_shows_it() {
     assert!((a - b).abs() < 0.3, "3.5 s after the pedal: {a:.2} m/s2 with the lamps, {b:.2} without");
     // A lead slowing at 1 m/s2 from t = 6 s (engine braking, say) whose lamps come on 4 s
     // later: braked for as without the lamps.
-    let slowing = |t: f64| if t > 6.0 { -1.0 * (1.0 - (-(t - 6.0) / 0.3).exp()) } else { 0.0 };
+    let slowing = |t: f64| if t > 6.0 { -(1.0 - (-(t - 6.0) / 0.3).exp()) } else { 0.0 };
     let (lit, unlit) = (behind_lead_at(30.0, pressed, slowing), behind_lead_at(30.0, never, slowing));
     assert!(
         deepest(&lit) > deepest(&unlit) - 0.15,

@@ -116,7 +116,10 @@ struct RouterUse {
     peak_rss_mib: Option<f64>,
 }
 
-fn run_once(specs: &[CaseSpec]) -> Result<(Vec<(SendReport, Vec<RecvReport>)>, Option<RouterUse>)> {
+/// One run of a case's processes: each sender's report with its receivers', and the router's use.
+type Run = (Vec<(SendReport, Vec<RecvReport>)>, Option<RouterUse>);
+
+fn run_once(specs: &[CaseSpec]) -> Result<Run> {
     if specs.iter().any(|s| s.via_router) {
         let router = RouterProcess::start()?;
         let cpu_before = router.cpu_s();

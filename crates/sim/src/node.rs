@@ -303,7 +303,7 @@ impl Pace {
                 tokio::time::sleep_until(target.into()).await;
             }
             Mode::Fast | Mode::Lockstep => {
-                if k % YIELD_EVERY_STEPS == 0 {
+                if k.is_multiple_of(YIELD_EVERY_STEPS) {
                     tokio::task::yield_now().await;
                 }
             }

@@ -398,20 +398,20 @@ impl Scenario {
         let key = |field: &str| format!("traffic[{i}].{field}");
         if t.lane >= lanes {
             return Invalid::err(
-                &key("lane"),
+                key("lane"),
                 format!("lane {} does not exist on a {lanes}-lane road", t.lane),
                 &lane_fix,
             );
         }
         if !speed_ok(t.speed_mps) {
-            return Invalid::err(&key("speed_mps"), format!("{} m/s", t.speed_mps), "use 0 to 70 m/s");
+            return Invalid::err(key("speed_mps"), format!("{} m/s", t.speed_mps), "use 0 to 70 m/s");
         }
         if !self.offset_ok(t.offset_m) {
-            return Invalid::err(&key("offset_m"), format!("{} m", t.offset_m), &self.offset_fix());
+            return Invalid::err(key("offset_m"), format!("{} m", t.offset_m), self.offset_fix());
         }
         if t.lane == self.ego.lane && t.gap_m.abs() < 2.0 {
             return Invalid::err(
-                &key("gap_m"),
+                key("gap_m"),
                 format!("{} m overlaps the ego in its lane", t.gap_m),
                 "use |gap_m| >= 2",
             );
@@ -420,29 +420,29 @@ impl Scenario {
             let key = |field: &str| format!("traffic[{i}].actions[{j}]{field}");
             match (a.at_s, a.when_gap_m) {
                 (Some(_), None) | (None, Some(_)) => {}
-                _ => return Invalid::err(&key(""), "needs exactly one trigger", "give either at_s or when_gap_m"),
+                _ => return Invalid::err(key(""), "needs exactly one trigger", "give either at_s or when_gap_m"),
             }
             if a.speed_mps.is_none() && a.lane.is_none() && a.offset_m.is_none() {
-                return Invalid::err(&key(""), "does nothing", "give speed_mps, lane, offset_m or several");
+                return Invalid::err(key(""), "does nothing", "give speed_mps, lane, offset_m or several");
             }
             if let Some(o) = a.offset_m.filter(|o| !self.offset_ok(*o)) {
-                return Invalid::err(&key(".offset_m"), format!("{o} m"), &self.offset_fix());
+                return Invalid::err(key(".offset_m"), format!("{o} m"), self.offset_fix());
             }
             if let Some(v) = a.speed_mps.filter(|v| !speed_ok(*v)) {
-                return Invalid::err(&key(".speed_mps"), format!("{v} m/s"), "use 0 to 70 m/s");
+                return Invalid::err(key(".speed_mps"), format!("{v} m/s"), "use 0 to 70 m/s");
             }
             if let Some(l) = a.lane.filter(|l| *l >= lanes) {
                 return Invalid::err(
-                    &key(".lane"),
+                    key(".lane"),
                     format!("lane {l} does not exist on a {lanes}-lane road"),
                     &lane_fix,
                 );
             }
             if !(a.accel_mps2 > 0.0 && a.accel_mps2 <= 10.0) {
-                return Invalid::err(&key(".accel_mps2"), format!("{} m/s2", a.accel_mps2), "use (0, 10] m/s2");
+                return Invalid::err(key(".accel_mps2"), format!("{} m/s2", a.accel_mps2), "use (0, 10] m/s2");
             }
             if !(a.duration_s >= 0.5 && a.duration_s <= 30.0) {
-                return Invalid::err(&key(".duration_s"), format!("{} s", a.duration_s), "use 0.5 to 30 s");
+                return Invalid::err(key(".duration_s"), format!("{} s", a.duration_s), "use 0.5 to 30 s");
             }
         }
         Ok(())

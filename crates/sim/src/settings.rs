@@ -195,7 +195,7 @@ impl SimSettings {
                 return Invalid::err(
                     key,
                     format!("{v} Hz"),
-                    &format!("use a rate in (0, physics_hz = {}]", self.physics_hz),
+                    format!("use a rate in (0, physics_hz = {}]", self.physics_hz),
                 );
             }
         }

@@ -72,7 +72,7 @@ impl Answerer {
     /// The answer to step `k`: a light throttle on even steps, coasting on odd ones (the ego
     /// slows gently), so a state showing the answer to an older step is told apart.
     fn command(k: u64) -> ControlCommand {
-        let throttle = if k % 2 == 0 { 0.125 } else { 0.0 };
+        let throttle = if k.is_multiple_of(2) { 0.125 } else { 0.0 };
         ControlCommand { throttle, brake: 0.0, steer: 0.0, answers_step: Some(k), perception_stamp_pub_ns: None }
     }
 
@@ -279,11 +279,13 @@ fn take_frame(tap: &Tap, sample: &Sample, front: bool) {
 async fn wait_first(tap: &Tap, wait: Duration) -> bool {
     let deadline = Instant::now() + wait;
     loop {
-        let o = tap.observed.lock();
-        if !o.speed.seen.is_empty() || o.speed.bad > 0 || !o.state.seen.is_empty() {
+        let arrived = {
+            let o = tap.observed.lock();
+            !o.speed.seen.is_empty() || o.speed.bad > 0 || !o.state.seen.is_empty()
+        };
+        if arrived {
             return true;
         }
-        drop(o);
         if Instant::now() >= deadline {
             return false;
         }

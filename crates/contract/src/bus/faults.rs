@@ -405,7 +405,7 @@ mod tests {
         let v: Vec<Fate> = (0..40).map(|s| m.fate(&h(s), 2_500)).collect();
         assert_eq!(v[0], Fate::Deliver { at_ns: 20_000_000, copies: 1 });
         assert_eq!(v[1], Fate::Deliver { at_ns: 40_000_000, copies: 1 });
-        assert!(v.iter().any(|f| *f == Fate::Drop(Dropped::Queue)), "{v:?}");
+        assert!(v.contains(&Fate::Drop(Dropped::Queue)), "{v:?}");
         for (seq, f) in v.iter().enumerate() {
             if let Fate::Deliver { at_ns, .. } = f {
                 assert!(at_ns - seq as u64 * 10_000_000 <= 100_000_000, "queued beyond queue_ms");

@@ -261,7 +261,7 @@ pub fn evaluate_scenario(
     let every = (settings.physics_hz as f64 / settings.rates_hz.camera).round().max(1.0) as u64;
     let last_step = (max_seconds * settings.physics_hz as f64) as u64;
     while world.ended().is_none() && world.step_count() <= last_step {
-        if world.step_count() % every == 0 {
+        if world.step_count().is_multiple_of(every) {
             let vis = cameras.draw(&world);
             let truth = ground_truth(&world, &vis);
             let t_s = world.time_ns() as f64 / 1e9;

@@ -129,7 +129,7 @@ impl LoopLatency {
 /// Inserts, and now and then drops the entries older than `KEEP_NS` (keys are wall-clock ns).
 fn insert_bounded(map: &mut HashMap<u64, u64>, key: u64, value: u64) {
     map.insert(key, value);
-    if map.len() % 1024 == 0 {
+    if map.len().is_multiple_of(1024) {
         map.retain(|k, _| k + KEEP_NS >= key);
     }
 }

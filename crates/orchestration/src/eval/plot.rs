@@ -186,7 +186,7 @@ pub fn plot_latency(lat: &LoopLatency, t0_ns: u64, title: &str, path: &Path) -> 
     let t_end = series.iter().flatten().map(|p| p.0).fold(1.0f64, f64::max);
     let hi = series.iter().flatten().map(|p| p.1).fold(1.0f64, f64::max) * 1.1;
     png(path, (w, h), |root| {
-        let mut chart = ChartBuilder::on(&root)
+        let mut chart = ChartBuilder::on(root)
             .caption(title, ("sans-serif", 20))
             .margin(10)
             .x_label_area_size(40)

@@ -251,14 +251,14 @@ impl Detector {
         if first_ground_row + 4 >= h {
             return Vec::new();
         }
-        self.to_luma(rgb);
+        self.fill_luma(rgb);
         // A noisy sensor (low light, high gain): the frame is smoothed along its rows first,
         // which leaves the contact row (the range) where it is. Only then: the copy and the
         // luma again cost about 2 ms a frame for both cameras (docs/perception.md).
         if luma_noise(&self.luma, w, h, first_ground_row) > SMOOTH_ABOVE_NOISE {
             let mut smooth = std::mem::take(&mut self.smooth);
             smooth_rows(rgb, &mut smooth, w);
-            self.to_luma(&smooth);
+            self.fill_luma(&smooth);
             let found = self.detect_in(&smooth, first_ground_row);
             self.smooth = smooth;
             return found;
@@ -267,7 +267,7 @@ impl Detector {
     }
 
     /// The luma of an RGB8 frame.
-    fn to_luma(&mut self, rgb: &[u8]) {
+    fn fill_luma(&mut self, rgb: &[u8]) {
         self.luma.resize(rgb.len() / 3, 0);
         // Weights summing to 256 in 16 bits: the loop vectorises.
         for (y, p) in self.luma.iter_mut().zip(rgb.chunks_exact(3)) {

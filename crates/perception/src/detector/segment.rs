@@ -216,7 +216,7 @@ pub(super) fn luma_noise(luma: &[u8], w: usize, h: usize, first_row: usize) -> f
 /// channel; the full window divides by multiplying (x / 5 = x * 13108 >> 16 for x <= 1275).
 pub(super) fn smooth_rows(rgb: &[u8], out: &mut Vec<u8>, w: usize) {
     const R: usize = SMOOTH_WINDOW / 2;
-    const FULL: u32 = ((1 << 16) + SMOOTH_WINDOW as u32 - 1) / SMOOTH_WINDOW as u32;
+    const FULL: u32 = (1u32 << 16).div_ceil(SMOOTH_WINDOW as u32);
     out.resize(rgb.len(), 0);
     if w <= SMOOTH_WINDOW {
         out.copy_from_slice(rgb);
@@ -244,7 +244,7 @@ pub(super) fn smooth_rows(rgb: &[u8], out: &mut Vec<u8>, w: usize) {
             let n = (u + R).min(w - 1) + 1 - u.saturating_sub(R);
             for c in 0..3 {
                 dst[u * 3 + c] =
-                    if n == SMOOTH_WINDOW { (sum[c] * FULL >> 16) as u8 } else { (sum[c] / n as u32) as u8 };
+                    if n == SMOOTH_WINDOW { ((sum[c] * FULL) >> 16) as u8 } else { (sum[c] / n as u32) as u8 };
             }
         }
     }

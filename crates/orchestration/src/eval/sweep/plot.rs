@@ -9,7 +9,9 @@ use crate::eval::plot::{draw_legend, png};
 /// Draws the rates of `families` into a PNG at `path`.
 pub fn rates(families: &[Rates], path: &Path) -> anyhow::Result<()> {
     use plotters::prelude::*;
-    let bars: [(&str, RGBColor, fn(&Rates) -> f64); 3] = [
+    /// A bar: its label, its colour and the rate it shows.
+    type Bar = (&'static str, RGBColor, fn(&Rates) -> f64);
+    let bars: [Bar; 3] = [
         ("collisions", RGBColor(200, 30, 30), |r| r.per_1000_km.collisions),
         ("unwarranted emergencies", RGBColor(230, 140, 20), |r| r.per_1000_km.unwarranted_emergencies),
         ("phantom-braking events", RGBColor(40, 90, 200), |r| r.per_1000_km.phantom_braking_events),
