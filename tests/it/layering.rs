@@ -43,8 +43,14 @@ fn violation(from: &str, to: &str, dev: bool) -> Option<String> {
     None
 }
 
-/// Each workspace crate and its dependencies on other workspace crates (name, is-dev).
-fn workspace_edges() -> BTreeMap<String, Vec<(String, bool)>> {
+/// Each workspace crate and its dependencies on other workspace crates (name, is-dev), read
+/// once for every test here.
+fn workspace_edges() -> &'static BTreeMap<String, Vec<(String, bool)>> {
+    static EDGES: std::sync::OnceLock<BTreeMap<String, Vec<(String, bool)>>> = std::sync::OnceLock::new();
+    EDGES.get_or_init(read_workspace_edges)
+}
+
+fn read_workspace_edges() -> BTreeMap<String, Vec<(String, bool)>> {
     let out = std::process::Command::new(env!("CARGO"))
         .args(["metadata", "--offline", "--no-deps", "--format-version", "1"])
         .current_dir(env!("CARGO_MANIFEST_DIR"))
@@ -72,7 +78,7 @@ fn dependencies_point_down_the_layers_and_the_domain_crates_stand_alone() {
     let edges = workspace_edges();
     assert!(edges.len() >= 8, "only {} workspace crates found: {:?}", edges.len(), edges.keys());
     let mut problems = Vec::new();
-    for (from, deps) in &edges {
+    for (from, deps) in edges {
         if layer(from).is_none() {
             problems.push(format!("`{from}` has no layer: add it to LAYER_OF and docs/architecture.md"));
         }

@@ -11,7 +11,7 @@
 //! set speed, or a time gap behind the nearest vehicle ahead in the ego's lane, whichever asks
 //! for less, with no estimator and no emergency logic.
 
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use clap::Parser;
 use slipstream_contract::config::FaultArgs;
@@ -91,15 +91,21 @@ async fn drive(bus: &Bus, args: &Args) -> Result<u64, Box<dyn std::error::Error>
     let objects = bus.subscriber(topics::OBJECTS).await?;
     let control = bus.publisher(topics::VEHICLE_CONTROL).await?;
     let (mut lead, mut sent) = (None, 0);
-    let end = (args.duration > 0.0).then(|| Instant::now() + Duration::from_secs_f64(args.duration));
+    // One stop and one deadline for the whole run, not a timer per speed message.
     let stop = process::stop_requested();
-    tokio::pin!(stop);
+    let deadline = async {
+        if args.duration > 0.0 {
+            tokio::time::sleep(Duration::from_secs_f64(args.duration)).await
+        } else {
+            std::future::pending().await
+        }
+    };
+    tokio::pin!(stop, deadline);
     loop {
-        let left = end.map_or(Duration::from_secs(3600), |e| e.saturating_duration_since(Instant::now()));
         let s = tokio::select! {
             s = speed.recv() => s,
             _ = &mut stop => break,
-            _ = tokio::time::sleep(left) => break,
+            _ = &mut deadline => break,
         };
         while let Some(o) = objects.try_recv() {
             lead = lead_of(&o.msg);
