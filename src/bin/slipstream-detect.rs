@@ -4,7 +4,7 @@
 use anyhow::{Context, Result};
 use clap::Parser;
 use slipstream::perception::args::DetectCli;
-use slipstream::perception::DetectorParams;
+use slipstream::perception::DetectSettings;
 
 fn main() -> std::process::ExitCode {
     slipstream::cli::exit_code(run().map(|()| std::process::ExitCode::SUCCESS))
@@ -14,6 +14,7 @@ fn run() -> Result<()> {
     slipstream::cli::apply_zenoh_runtime_default();
     let cli = DetectCli::parse();
     slipstream::cli::init_tracing(slipstream::cli::LogLevel::Node);
+    let settings = DetectSettings::resolve(cli.settings.as_deref())?;
     let rt = tokio::runtime::Runtime::new()?;
     rt.block_on(async {
         let bus =
@@ -21,7 +22,7 @@ fn run() -> Result<()> {
         let shutdown = async {
             slipstream::cli::stop_requested().await;
         };
-        let stats = slipstream::perception::node::run(&bus, DetectorParams::default(), shutdown)
+        let stats = slipstream::perception::node::run(&bus, settings, shutdown)
             .await
             .context("detect: run")?;
         tracing::info!(

@@ -72,6 +72,11 @@ pub struct DetectArgs {
     /// built-in]
     #[arg(long, value_name = "FILE", env = "SLIPSTREAM_SIM_CONFIG")]
     pub settings: Option<std::path::PathBuf>,
+    /// Detector settings to measure (thresholds, tracker, camera fusion), as
+    /// `slipstream-detect --settings` takes them [default: config/detect.json5 when present,
+    /// else built-in]
+    #[arg(long, value_name = "FILE", env = "SLIPSTREAM_DETECT_CONFIG")]
+    pub detect_settings: Option<std::path::PathBuf>,
     /// Put every frame through this encoding and back before the detector sees it, as a
     /// link copy would (raw, lz4, jpeg, png), and report its size and encode/decode time
     #[arg(long, value_name = "ENCODING")]
@@ -121,6 +126,7 @@ fn detect(args: &DetectArgs) -> Result<ExitCode> {
     use crate::eval::{detect, link_codec::LinkCodec};
     let scenarios = detect::scenarios(&args.scenarios, args.family, args.count, args.seed)?;
     let settings = crate::sim::SimSettings::load_or_default(args.settings.as_deref())?;
+    let detector = crate::perception::DetectSettings::resolve(args.detect_settings.as_deref())?;
     let codec = match args.frames.as_deref() {
         None => None,
         Some(name) => {
@@ -130,7 +136,7 @@ fn detect(args: &DetectArgs) -> Result<ExitCode> {
             Some(LinkCodec::new(e, args.jpeg_quality))
         }
     };
-    let report = detect::evaluate(scenarios, args.seconds, &settings, codec);
+    let report = detect::evaluate(scenarios, args.seconds, (&settings, &detector), codec);
     print_report(args.json, &report, detect::markdown)?;
     Ok(ExitCode::SUCCESS)
 }

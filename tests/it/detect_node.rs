@@ -7,7 +7,7 @@ use std::time::Duration;
 
 use parking_lot::Mutex;
 use slipstream::msg::{self, Detections, GroundTruthObjects};
-use slipstream::perception::DetectorParams;
+use slipstream::perception::DetectSettings;
 use slipstream::sim::settings::{Mode, SimSettings};
 use slipstream::sim::{Scenario, World};
 use slipstream::{topics, Bus, TopicMap};
@@ -54,7 +54,7 @@ async fn the_detector_node_reports_the_lead_matched_to_ground_truth_by_time() {
     let det_bus = Bus::from_session(s_det, map.clone(), "detect").await.unwrap();
     let (stop_tx, stop_rx) = tokio::sync::oneshot::channel::<()>();
     let detector = tokio::spawn(async move {
-        let stats = slipstream::perception::node::run(&det_bus, DetectorParams::default(), async {
+        let stats = slipstream::perception::node::run(&det_bus, DetectSettings::default(), async {
             let _ = stop_rx.await;
         })
         .await;

@@ -119,7 +119,7 @@ fn cameras_ms(frames: usize) -> Result<f64> {
     let mut rig = slipstream_perception::CameraRig::new(
         cameras.front.info(),
         cameras.narrow_info(),
-        slipstream_perception::DetectorParams::default(),
+        &slipstream_perception::DetectSettings::default(),
     );
     let mut times = Vec::with_capacity(frames);
     for _ in 0..frames {

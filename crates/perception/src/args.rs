@@ -19,6 +19,10 @@ pub struct DetectCli {
     /// This node's name on the bus
     #[arg(long, default_value = "detect")]
     pub name: String,
+    /// Settings file (detector thresholds, tracker, camera fusion); only the keys it changes
+    /// are needed [default: config/detect.json5 when present, else built-in]
+    #[arg(long, value_name = "FILE", env = "SLIPSTREAM_DETECT_CONFIG")]
+    pub settings: Option<std::path::PathBuf>,
     /// At exit, print the run's statistics as JSON on stdout (frames, detections, time spent
     /// detecting)
     #[arg(long)]

@@ -5,6 +5,7 @@
 //! - [`detector`]: one frame -> vehicles, classical computer vision (pixels + camera info only).
 //! - [`tracker`]: detections joined into tracks; distance and relative speed by a Kalman filter.
 //! - [`rig`]: the front and the narrow camera together: each vehicle once, tracked.
+//! - [`settings`]: every number of the above, from config/detect.json5 (`--settings`).
 //! - [`node`]: slipstream-detect on the bus (camera/front, camera/narrow -> perception/objects);
 //!   [`args`]: its command line.
 //!
@@ -18,9 +19,11 @@ pub mod detector;
 pub mod geometry;
 pub mod node;
 pub mod rig;
+pub mod settings;
 pub mod tracker;
 
 pub use detector::{Detector, DetectorParams, FrameDetection};
 pub use geometry::CameraModel;
 pub use rig::CameraRig;
-pub use tracker::Tracker;
+pub use settings::DetectSettings;
+pub use tracker::{Tracker, TrackerParams};

@@ -11,8 +11,8 @@ use std::time::{Duration, Instant};
 
 use serde::Serialize;
 
-use super::detector::DetectorParams;
 use super::rig::CameraRig;
+use super::settings::DetectSettings;
 use slipstream_contract::bus::{Bus, BusError, Following, FrameSample, FrameSubscriber, Publisher, Subscriber};
 use slipstream_contract::msg::{CameraFrameRef, CameraInfo, Detections};
 use slipstream_contract::topics;
@@ -39,10 +39,6 @@ pub struct DetectStats {
     /// Wall time spent detecting, fusing and tracking (not waiting for frames), seconds.
     pub busy_s: f64,
 }
-
-/// How long a front frame waits for the narrow camera's frame of the same instant (the
-/// simulator publishes that one first, so it is normally in already).
-const NARROW_WAIT: Duration = Duration::from_millis(50);
 
 /// A camera's latched info, from the publisher that named itself first.
 struct InfoInput {
@@ -80,7 +76,7 @@ const STOP_POLL: Duration = Duration::from_millis(100);
 /// and detection is CPU work that must not hold an async worker.
 pub async fn run(
     bus: &Bus,
-    params: DetectorParams,
+    settings: DetectSettings,
     shutdown: impl Future<Output = ()>,
 ) -> Result<DetectStats, BusError> {
     let inputs = Inputs {
@@ -92,7 +88,7 @@ pub async fn run(
     };
     let stop = Arc::new(AtomicBool::new(false));
     let flag = stop.clone();
-    let mut reader = tokio::task::spawn_blocking(move || inputs.run(params, &flag));
+    let mut reader = tokio::task::spawn_blocking(move || inputs.run(settings, &flag));
     let joined = |done: Result<Result<DetectStats, BusError>, tokio::task::JoinError>| match done {
         Ok(done) => done,
         Err(e) => std::panic::resume_unwind(e.into_panic()),
@@ -128,7 +124,7 @@ struct Reading {
 
 impl Inputs {
     /// Reads frames until `stop` (a blocking loop: call it on a thread of its own).
-    fn run(mut self, params: DetectorParams, stop: &AtomicBool) -> Result<DetectStats, BusError> {
+    fn run(mut self, settings: DetectSettings, stop: &AtomicBool) -> Result<DetectStats, BusError> {
         let mut r = Reading {
             stats: DetectStats::default(),
             rig: None,
@@ -140,7 +136,7 @@ impl Inputs {
         while !stop.load(Ordering::Relaxed) {
             let Some(sample) = self.frames.recv_blocking(STOP_POLL) else { continue };
             if r.frames_from.accept(sample.source().as_deref(), Instant::now()) {
-                self.detect(&sample, params, &mut r)?;
+                self.detect(&sample, &settings, &mut r)?;
             }
         }
         let mut stats = r.stats;
@@ -178,7 +174,7 @@ impl Inputs {
     }
 
     /// One front frame: its narrow partner, detection, tracking, the Detections message.
-    fn detect(&mut self, sample: &FrameSample, params: DetectorParams, r: &mut Reading) -> Result<(), BusError> {
+    fn detect(&mut self, sample: &FrameSample, settings: &DetectSettings, r: &mut Reading) -> Result<(), BusError> {
         let Some(front_info) = self.front_info(r) else {
             r.stats.without_info += 1;
             if r.stats.without_info.is_power_of_two() && r.stats.without_info >= 8 {
@@ -186,13 +182,15 @@ impl Inputs {
             }
             return Ok(());
         };
-        let rig = r.rig.get_or_insert_with(|| CameraRig::new(&front_info, self.narrow_info.known.as_ref(), params));
+        let rig = r.rig.get_or_insert_with(|| CameraRig::new(&front_info, self.narrow_info.known.as_ref(), settings));
         let frame = sample.frame();
         let header = frame.header;
         let Some(rgb) = usable(&frame.msg, &front_info, header.seq, &mut r.stats) else { return Ok(()) };
         let narrow_sample = match rig.narrow() {
             Some(_) => {
-                let found = narrow_at(&self.narrow_frames, &mut r.narrow_held, &mut r.narrow_from, header.stamp_sim_ns);
+                let wait = settings.narrow_wait();
+                let found =
+                    narrow_at(&self.narrow_frames, &mut r.narrow_held, &mut r.narrow_from, header.stamp_sim_ns, wait);
                 r.stats.narrow_missing += found.is_none() as u64;
                 found
             }
@@ -244,13 +242,14 @@ fn usable<'a>(
     None
 }
 
-/// The narrow camera's frame stamped `stamp_ns`: already in, or in within [`NARROW_WAIT`];
-/// None when it does not come or a later one replaced it.
+/// The narrow camera's frame stamped `stamp_ns`: already in, or in within `wait` (the
+/// settings' `narrow_wait_ms`); None when it does not come or a later one replaced it.
 fn narrow_at(
     frames: &FrameSubscriber,
     held: &mut Option<FrameSample>,
     from: &mut Following,
     stamp_ns: u64,
+    wait: Duration,
 ) -> Option<FrameSample> {
     let mut waited = false;
     loop {
@@ -266,7 +265,7 @@ fn narrow_at(
             _ => {}
         }
         waited = true;
-        if let Some(s) = frames.recv_blocking(NARROW_WAIT) {
+        if let Some(s) = frames.recv_blocking(wait) {
             if from.accept(s.source().as_deref(), Instant::now()) {
                 *held = Some(s);
             }

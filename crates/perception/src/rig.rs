@@ -10,14 +10,9 @@
 //! measured distance.
 
 use super::detector::{part_of, Detector, DetectorParams, FrameDetection};
+use super::settings::{DetectSettings, FusionParams};
 use super::tracker::Tracker;
 use slipstream_contract::msg::{BoundingBox2d, CameraInfo, Detection};
-
-/// Two detections of one vehicle differ by less than this in distance (share of it, at least
-/// `SAME_MIN_M`) and in lateral offset.
-const SAME_DISTANCE_SHARE: f64 = 0.1;
-const SAME_MIN_M: f64 = 2.0;
-const SAME_LATERAL_M: f64 = 1.2;
 
 /// A box within this many pixels of an image border is cut by it (or may be).
 const BORDER_PX: f32 = 1.0;
@@ -27,18 +22,21 @@ pub struct CameraRig {
     front: Detector,
     narrow: Option<Detector>,
     tracker: Tracker,
+    fusion: FusionParams,
 }
 
 impl CameraRig {
     /// Detectors for the cameras `front` and `narrow` describe. The narrow camera's farthest
     /// distance is the front one's scaled by their focal lengths: a vehicle is as many pixels
     /// wide at either limit.
-    pub fn new(front: &CameraInfo, narrow: Option<&CameraInfo>, params: DetectorParams) -> CameraRig {
+    pub fn new(front: &CameraInfo, narrow: Option<&CameraInfo>, settings: &DetectSettings) -> CameraRig {
+        let params = settings.detector;
         let narrow = narrow.map(|n| {
             let scale = (n.fx_px / front.fx_px).max(1.0);
             Detector::new(n, DetectorParams { max_distance_m: params.max_distance_m * scale, ..params })
         });
-        CameraRig { front: Detector::new(front, params), narrow, tracker: Tracker::new() }
+        let tracker = Tracker::new(settings.tracker);
+        CameraRig { front: Detector::new(front, params), narrow, tracker, fusion: settings.fusion }
     }
 
     pub fn narrow(&self) -> Option<&CameraInfo> {
@@ -52,7 +50,7 @@ impl CameraRig {
         match (self.narrow.as_mut(), narrow_rgb) {
             (Some(narrow), Some(rgb)) => {
                 let far = narrow.detect(rgb);
-                fuse(front, far, narrow, &self.front)
+                fuse(front, far, narrow, &self.front, self.fusion)
             }
             _ => front,
         }
@@ -80,10 +78,11 @@ fn fuse(
     far: Vec<FrameDetection>,
     narrow: &Detector,
     wide: &Detector,
+    p: FusionParams,
 ) -> Vec<FrameDetection> {
     let same = |a: &FrameDetection, b: &FrameDetection| {
-        (a.distance_m - b.distance_m).abs() < (SAME_DISTANCE_SHARE * b.distance_m).max(SAME_MIN_M)
-            && (a.lateral_offset_m - b.lateral_offset_m).abs() < SAME_LATERAL_M
+        (a.distance_m - b.distance_m).abs() < (p.same_distance_share * b.distance_m).max(p.same_min_m)
+            && (a.lateral_offset_m - b.lateral_offset_m).abs() < p.same_lateral_m
     };
     let mut out = front;
     for mut n in far {
@@ -167,12 +166,14 @@ mod tests {
     fn a_vehicle_both_cameras_see_is_kept_once_as_the_better_one_measured_it() {
         let (front, narrow) = (info(640, 480, 60.0, 3.0), info(640, 240, 20.0, 1.0));
         let (wide, tele) = (Detector::new(&front, Default::default()), Detector::new(&narrow, Default::default()));
+        let fusion = DetectSettings::default().fusion;
         // Seen whole by both: the narrow camera's measurement, its box mapped into the front image.
         let fused = fuse(
             vec![det(71.0, 0.1, [313.0, 200.0, 327.0, 215.0])],
             vec![det(70.0, 0.0, [297.0, 80.0, 343.0, 120.0])],
             &tele,
             &wide,
+            fusion,
         );
         assert_eq!(fused.len(), 1, "{fused:?}");
         assert_eq!(fused[0].distance_m, 70.0);
@@ -185,6 +186,7 @@ mod tests {
             vec![det(31.0, -3.0, [0.0, 80.0, 40.0, 200.0])],
             &tele,
             &wide,
+            fusion,
         );
         assert_eq!((fused.len(), fused[0].distance_m), (1, 30.0), "{fused:?}");
         // Only the narrow camera sees it (too far for the front one): added.
@@ -193,6 +195,7 @@ mod tests {
             vec![det(150.0, 0.0, [308.0, 88.0, 332.0, 106.0])],
             &tele,
             &wide,
+            fusion,
         );
         assert_eq!(fused.len(), 2, "{fused:?}");
         assert!(fused[1].bbox.u_max_px - fused[1].bbox.u_min_px < 9.0, "{:?}", fused[1].bbox);
@@ -203,6 +206,7 @@ mod tests {
             vec![det(41.3, 0.0, [262.0, 60.0, 378.0, 140.0])],
             &tele,
             &wide,
+            fusion,
         );
         assert_eq!(fused.len(), 1, "{fused:?}");
     }

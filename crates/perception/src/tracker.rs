@@ -6,13 +6,56 @@ use nalgebra::{Matrix2, Vector2};
 use super::detector::FrameDetection;
 use slipstream_contract::msg::{BoundingBox2d, Detection, ObjectClass};
 
-/// Acceleration noise of the constant-velocity model, m/s2 (a lead can brake hard).
-const ACCEL_NOISE_MPS2: f64 = 8.0;
-/// A new track's relative speed: unknown, anything from a vehicle as fast as the ego to one
-/// standing (closing at motorway speed) or oncoming.
-const NEW_TRACK_SPEED_SIGMA_MPS: f64 = 30.0;
-/// A track not seen for this long is dropped.
-const MAX_COAST_S: f64 = 0.5;
+/// The tracker's numbers: the `tracker` section of config/detect.json5, which says what each
+/// means and holds the defaults.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TrackerParams {
+    /// Acceleration noise of the constant-velocity model, m/s2 (a lead can brake hard).
+    pub accel_noise_mps2: f64,
+    /// A new track's relative speed: unknown, anything from a vehicle as fast as the ego to
+    /// one standing (closing at motorway speed) or oncoming.
+    pub new_track_speed_sigma_mps: f64,
+    /// A track not seen for this long is dropped.
+    pub max_coast_s: f64,
+    /// Association: box overlap (IoU) above this, distance within gate_m + gate_share * d.
+    pub min_overlap: f32,
+    pub gate_m: f64,
+    pub gate_share: f64,
+    /// Seen this often, a track is confirmed; before, its confidence is scaled down.
+    pub confirm_hits: u32,
+    pub unconfirmed_confidence: f32,
+    /// The share of the gap to a new lateral offset closed per frame.
+    pub lateral_smoothing: f64,
+}
+
+impl Default for TrackerParams {
+    fn default() -> Self {
+        crate::settings::DetectSettings::default().tracker
+    }
+}
+
+impl TrackerParams {
+    /// The rules config/detect.json5 states for its `tracker` section (`prefix`).
+    pub fn check(&self, prefix: &str) -> Result<(), slipstream_contract::config::Invalid> {
+        use crate::settings::{positive, share};
+        let key = |k: &str| format!("{prefix}.{k}");
+        positive(&key("accel_noise_mps2"), self.accel_noise_mps2)?;
+        positive(&key("new_track_speed_sigma_mps"), self.new_track_speed_sigma_mps)?;
+        positive(&key("max_coast_s"), self.max_coast_s)?;
+        positive(&key("gate_m"), self.gate_m)?;
+        positive(&key("gate_share"), self.gate_share)?;
+        if !(0.0..1.0).contains(&self.min_overlap) {
+            let problem = format!("{}", self.min_overlap);
+            return slipstream_contract::config::Invalid::err(key("min_overlap"), problem, "give a share in [0, 1)");
+        }
+        if self.confirm_hits == 0 {
+            return slipstream_contract::config::Invalid::err(key("confirm_hits"), "0", "give a count >= 1");
+        }
+        share(&key("unconfirmed_confidence"), f64::from(self.unconfirmed_confidence), true)?;
+        share(&key("lateral_smoothing"), self.lateral_smoothing, true)
+    }
+}
 
 /// One tracked vehicle.
 #[derive(Debug, Clone)]
@@ -42,15 +85,15 @@ impl Track {
         (self.p[(0, 0)].max(0.0).sqrt(), self.p[(1, 1)].max(0.0).sqrt())
     }
 
-    fn predict(&mut self, dt: f64) {
+    fn predict(&mut self, dt: f64, accel_noise_mps2: f64) {
         let f = Matrix2::new(1.0, dt, 0.0, 1.0);
-        let q = ACCEL_NOISE_MPS2 * ACCEL_NOISE_MPS2;
+        let q = accel_noise_mps2 * accel_noise_mps2;
         let noise = Matrix2::new(dt.powi(4) / 4.0, dt.powi(3) / 2.0, dt.powi(3) / 2.0, dt * dt) * q;
         self.x = f * self.x;
         self.p = f * self.p * f.transpose() + noise;
     }
 
-    fn update(&mut self, d: &FrameDetection, t_s: f64) {
+    fn update(&mut self, d: &FrameDetection, t_s: f64, lateral_smoothing: f64) {
         // Measurement noise: the detector's, from the ground a row covers at that distance
         // through the camera that measured it.
         let r = d.distance_sigma_m * d.distance_sigma_m;
@@ -60,7 +103,7 @@ impl Track {
         self.x += k * innovation;
         let i_kh = Matrix2::new(1.0 - k[0], 0.0, -k[1], 1.0);
         self.p = i_kh * self.p;
-        self.lateral_m += 0.5 * (d.lateral_offset_m - self.lateral_m);
+        self.lateral_m += lateral_smoothing * (d.lateral_offset_m - self.lateral_m);
         self.bbox = d.bbox;
         self.class = d.class;
         self.hits += 1;
@@ -69,16 +112,17 @@ impl Track {
 }
 
 /// Keeps the tracks of one camera.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub struct Tracker {
+    params: TrackerParams,
     tracks: Vec<Track>,
     next_id: u32,
     last_t_s: Option<f64>,
 }
 
 impl Tracker {
-    pub fn new() -> Self {
-        Tracker { tracks: Vec::new(), next_id: 1, last_t_s: None }
+    pub fn new(params: TrackerParams) -> Self {
+        Tracker { params, tracks: Vec::new(), next_id: 1, last_t_s: None }
     }
 
     pub fn tracks(&self) -> &[Track] {
@@ -90,16 +134,17 @@ impl Tracker {
     pub fn update(&mut self, detections: &[FrameDetection], t_s: f64) -> Vec<Detection> {
         let dt = self.last_t_s.map_or(0.0, |last| (t_s - last).max(0.0));
         self.last_t_s = Some(t_s);
+        let p = self.params;
         for t in &mut self.tracks {
-            t.predict(dt);
+            t.predict(dt, p.accel_noise_mps2);
         }
         // Greedy association, best box overlap first, gated on distance.
         let mut pairs: Vec<(f32, usize, usize)> = Vec::new();
         for (i, d) in detections.iter().enumerate() {
             for (j, t) in self.tracks.iter().enumerate() {
                 let overlap = d.bbox.iou(&t.bbox);
-                let gate = (d.distance_m - t.distance_m()).abs() < 3.0 + 0.15 * d.distance_m;
-                if overlap > 0.1 && gate {
+                let gate = (d.distance_m - t.distance_m()).abs() < p.gate_m + p.gate_share * d.distance_m;
+                if overlap > p.min_overlap && gate {
                     pairs.push((overlap, i, j));
                 }
             }
@@ -117,14 +162,14 @@ impl Tracker {
         for (i, d) in detections.iter().enumerate() {
             let j = match track_of[i] {
                 Some(j) => {
-                    self.tracks[j].update(d, t_s);
+                    self.tracks[j].update(d, t_s, p.lateral_smoothing);
                     j
                 }
                 None => {
                     self.tracks.push(Track {
                         id: self.next_id,
                         x: Vector2::new(d.distance_m, 0.0),
-                        p: Matrix2::new(d.distance_sigma_m.powi(2), 0.0, 0.0, NEW_TRACK_SPEED_SIGMA_MPS.powi(2)),
+                        p: Matrix2::new(d.distance_sigma_m.powi(2), 0.0, 0.0, p.new_track_speed_sigma_mps.powi(2)),
                         lateral_m: d.lateral_offset_m,
                         bbox: d.bbox,
                         class: d.class,
@@ -138,7 +183,7 @@ impl Tracker {
             let t = &self.tracks[j];
             // A new track's speed is unknown (its sigma says how much): its confidence is
             // lowered until seen again.
-            let settle = if t.hits >= 3 { 1.0 } else { 0.6 };
+            let settle = if t.hits >= p.confirm_hits { 1.0 } else { p.unconfirmed_confidence };
             let (distance_sigma_m, relative_speed_sigma_mps) = t.sigmas();
             out.push(Detection {
                 track_id: t.id,
@@ -153,7 +198,7 @@ impl Tracker {
                 brake_lights: d.brake_lights,
             });
         }
-        self.tracks.retain(|t| t_s - t.last_seen_s <= MAX_COAST_S);
+        self.tracks.retain(|t| t_s - t.last_seen_s <= p.max_coast_s);
         out
     }
 }
@@ -178,7 +223,7 @@ mod tests {
 
     #[test]
     fn a_closing_vehicle_keeps_its_id_and_its_relative_speed_converges() {
-        let mut tracker = Tracker::new();
+        let mut tracker = Tracker::new(TrackerParams::default());
         let mut last = Vec::new();
         for k in 0..40 {
             let t = k as f64 * 0.05;
@@ -195,7 +240,7 @@ mod tests {
     fn a_new_tracks_speed_is_reported_unknown_until_frames_have_measured_it() {
         // A car standing 150 m ahead of the ego at 30 m/s: ranges 1.5 m apart from frame to
         // frame, each good to the detector's sigma.
-        let mut tracker = Tracker::new();
+        let mut tracker = Tracker::new(TrackerParams::default());
         let mut sigmas = Vec::new();
         let mut last = Vec::new();
         for k in 0..20 {
@@ -204,7 +249,7 @@ mod tests {
             last = tracker.update(&[det(150.0 - 30.0 * t + noise, 300.0)], t);
             sigmas.push(last[0].relative_speed_sigma_mps);
         }
-        assert_eq!(sigmas[0], NEW_TRACK_SPEED_SIGMA_MPS, "nothing measured yet");
+        assert_eq!(sigmas[0], TrackerParams::default().new_track_speed_sigma_mps, "nothing measured yet");
         assert!(sigmas[1] > 10.0, "two ranges 1.5 m apart with 0.65 m noise: {:.1}", sigmas[1]);
         assert!(sigmas.windows(2).take(8).all(|w| w[1] < w[0]), "shrinks as frames come: {sigmas:.1?}");
         assert!(sigmas[19] < 3.0 && (last[0].relative_speed_mps + 30.0).abs() < 3.0, "{:?}", last[0]);
@@ -217,7 +262,7 @@ mod tests {
 
     #[test]
     fn separate_vehicles_get_separate_ids_and_lost_tracks_expire() {
-        let mut tracker = Tracker::new();
+        let mut tracker = Tracker::new(TrackerParams::default());
         let a = tracker.update(&[det(20.0, 100.0), det(35.0, 400.0)], 0.0);
         assert_eq!((a[0].track_id, a[1].track_id), (1, 2));
         let b = tracker.update(&[det(35.0, 401.0)], 0.05);

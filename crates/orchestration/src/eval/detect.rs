@@ -14,7 +14,7 @@ use serde::Serialize;
 use super::bend_lateral::{self, LateralCell, RoadView};
 use super::link_codec::{LinkCodec, LinkCost};
 use slipstream_contract::msg::{Detection, GroundTruthObject};
-use slipstream_perception::{CameraRig, DetectorParams};
+use slipstream_perception::{CameraRig, DetectSettings};
 use slipstream_sim::cameras::Cameras;
 use slipstream_sim::ground_truth::ground_truth;
 use slipstream_sim::settings::SimSettings;
@@ -250,14 +250,14 @@ fn percentiles(values: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
 pub fn evaluate_scenario(
     scenario: Scenario,
     seed: u64,
-    settings: &SimSettings,
+    (settings, detect): (&SimSettings, &DetectSettings),
     max_seconds: f64,
     tally: &mut Tally,
     mut codec: Option<&mut LinkCodec>,
 ) {
     let mut world = World::new(scenario, seed, settings.physics_hz);
     let mut cameras = Cameras::new(settings, &world);
-    let mut rig = CameraRig::new(cameras.front.info(), cameras.narrow_info(), DetectorParams::default());
+    let mut rig = CameraRig::new(cameras.front.info(), cameras.narrow_info(), detect);
     let every = (settings.physics_hz as f64 / settings.rates_hz.camera).round().max(1.0) as u64;
     let last_step = (max_seconds * settings.physics_hz as f64) as u64;
     while world.ended().is_none() && world.step_count() <= last_step {
@@ -375,11 +375,12 @@ impl ScenarioScore {
     }
 }
 
-/// Evaluates `scenarios` (each for at most `seconds` simulated); progress on stderr.
+/// Evaluates `scenarios` (each for at most `seconds` simulated) with the cameras of `settings`
+/// and the detector of `detect`; progress on stderr.
 pub fn evaluate(
     scenarios: Vec<Scenario>,
     seconds: f64,
-    settings: &SimSettings,
+    (settings, detect): (&SimSettings, &DetectSettings),
     mut codec: Option<LinkCodec>,
 ) -> DetectReport {
     let mut overall = Tally::default();
@@ -390,7 +391,7 @@ pub fn evaluate(
         let mut t = Tally::default();
         let started = std::time::Instant::now();
         let name = scenario.name.clone();
-        evaluate_scenario(scenario, seed, settings, seconds, &mut t, codec.as_mut());
+        evaluate_scenario(scenario, seed, (settings, detect), seconds, &mut t, codec.as_mut());
         eprintln!("[{}/{total}] {name}: {} frames in {:.1} s", i + 1, t.frames, started.elapsed().as_secs_f64());
         scores.push(ScenarioScore::from_tally(&name, &t));
         overall.merge(t);
@@ -480,7 +481,7 @@ pub fn markdown(report: &DetectReport) -> String {
 #[cfg(test)]
 mod rendered {
     use slipstream_contract::msg::{ImageEncoding, ObjectClass};
-    use slipstream_perception::{Detector, DetectorParams, FrameDetection};
+    use slipstream_perception::{DetectSettings, Detector, DetectorParams, FrameDetection};
     use slipstream_sim::ground_truth::ground_truth;
     use slipstream_sim::render::{FrameLook, Renderer};
     use slipstream_sim::rng::SimRng;
@@ -606,7 +607,7 @@ mod rendered {
         let camera = slipstream_perception::geometry::CameraModel::new(&info);
         let tyre = camera.ground_point((first_col + 8) as f64, (first_row + PATCH.len()) as f64).unwrap().x;
         let mut rig =
-            slipstream_perception::CameraRig::new(cameras.front.info(), Some(&info), DetectorParams::default());
+            slipstream_perception::CameraRig::new(cameras.front.info(), Some(&info), &DetectSettings::default());
         for d in rig.detect(&cameras.front.rgb, Some(&narrow)) {
             assert!((d.distance_m - tyre).abs() < 0.1 * tyre, "{:.1} m, the tyre at {tyre:.1} m: {d:?}", d.distance_m);
         }
@@ -729,7 +730,7 @@ mod rendered {
         let mut rig = slipstream_perception::CameraRig::new(
             cameras.front.info(),
             cameras.narrow_info(),
-            DetectorParams::default(),
+            &DetectSettings::default(),
         );
         (rig.detect(&cameras.front.rgb, cameras.narrow_rgb()), ground_truth(&world, &vis))
     }
@@ -753,7 +754,7 @@ mod rendered {
             let mut rig = slipstream_perception::CameraRig::new(
                 cameras.front.info(),
                 cameras.narrow_info(),
-                DetectorParams::default(),
+                &DetectSettings::default(),
             );
             let dets = rig.detect(&cameras.front.rgb, cameras.narrow_rgb());
             let what = format!("{class}{color} in lane {lane}, {gap} m, at {t_s} s");
@@ -891,7 +892,7 @@ mod rendered {
         let mut rig = slipstream_perception::CameraRig::new(
             cameras.front.info(),
             cameras.narrow_info(),
-            DetectorParams::default(),
+            &DetectSettings::default(),
         );
         let dets = rig.detect(&cameras.front.rgb, cameras.narrow_rgb());
         assert_eq!(truth.objects.len(), 2);

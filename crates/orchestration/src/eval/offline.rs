@@ -6,7 +6,7 @@
 use super::trace::{truth_in_lane, Sample, Trace};
 use slipstream_acc::{AccSettings, Controller, EgoNow, PerceptionFrame, PerceptionSource, Pose};
 use slipstream_contract::msg::{due, ControlCommand};
-use slipstream_perception::{CameraRig, DetectorParams};
+use slipstream_perception::{CameraRig, DetectSettings};
 use slipstream_sim::cameras::Cameras;
 use slipstream_sim::ground_truth::ground_truth;
 use slipstream_sim::settings::SimSettings;
@@ -22,7 +22,7 @@ struct Camera {
 impl Camera {
     fn new(world: &World) -> Camera {
         let cameras = Cameras::new(&SimSettings::default(), world);
-        let rig = CameraRig::new(cameras.front.info(), cameras.narrow_info(), DetectorParams::default());
+        let rig = CameraRig::new(cameras.front.info(), cameras.narrow_info(), &DetectSettings::default());
         Camera { cameras, rig }
     }
 

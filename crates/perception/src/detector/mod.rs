@@ -35,8 +35,10 @@ use super::geometry::CameraModel;
 use slipstream_contract::msg::{BoundingBox2d, CameraInfo, ObjectClass};
 use slipstream_model::vehicle::VehicleParams;
 
-/// Tunable thresholds (the defaults are what docs/perception.md measures).
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// Tunable thresholds: the `detector` section of config/detect.json5, which documents each
+/// and holds the defaults (what docs/perception.md measures).
+#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
 pub struct DetectorParams {
     /// A pixel is "contact-dark" below this share of the road's luminance.
     pub dark_ratio: f32,
@@ -57,16 +59,27 @@ pub struct DetectorParams {
 
 impl Default for DetectorParams {
     fn default() -> Self {
-        DetectorParams {
-            dark_ratio: 0.78,
-            min_width_m: 0.6,
-            max_width_m: 3.6,
-            min_height_m: 0.7,
-            max_height_m: 4.5,
-            contrast: 24,
-            max_distance_m: 80.0,
-            band_ratio: 0.5,
+        crate::settings::DetectSettings::default().detector
+    }
+}
+
+impl DetectorParams {
+    /// The rules config/detect.json5 states for its `detector` section (`prefix`).
+    pub fn check(&self, prefix: &str) -> Result<(), slipstream_contract::config::Invalid> {
+        use crate::settings::{positive, range, share};
+        share(&format!("{prefix}.dark_ratio"), f64::from(self.dark_ratio), false)?;
+        share(&format!("{prefix}.band_ratio"), f64::from(self.band_ratio), false)?;
+        range(prefix, ("min_width_m", self.min_width_m), ("max_width_m", self.max_width_m))?;
+        range(prefix, ("min_height_m", self.min_height_m), ("max_height_m", self.max_height_m))?;
+        positive(&format!("{prefix}.max_distance_m"), self.max_distance_m)?;
+        if !(1..=765).contains(&self.contrast) {
+            return slipstream_contract::config::Invalid::err(
+                format!("{prefix}.contrast"),
+                format!("{}", self.contrast),
+                "give a colour difference from 1 to 765 (the sum over R, G and B)",
+            );
         }
+        Ok(())
     }
 }
 
