@@ -61,12 +61,11 @@ impl LeadBelief {
     }
 
     /// The least braking the lead plausibly does. Far away a camera's ranges leave the
-    /// estimate wandering within its uncertainty (-1.1 m/s2 against a sigma of 1.3 for a van
-    /// 165 m ahead at constant speed), and taken as it was that drew comfort braking for a lead
-    /// that did not brake. Held lamps on a lead whose speed reads finely vouch for the estimate;
-    /// a flash of them does not (a driver dabbing the pedal to hold a speed 170 m ahead), nor
-    /// lamps on a lead whose speed reads coarsely (143 m ahead, estimated at -6.6 m/s2 half a
-    /// second after its pedal where stopping behind it needed 0.8).
+    /// estimate wandering within its uncertainty (about a sigma's worth for a lead at constant
+    /// speed 150 m ahead), so the estimate as it stands would brake for a lead that does not.
+    /// Held lamps on a lead whose speed reads finely vouch for the estimate; a flash of them
+    /// does not (a driver dabbing the pedal to hold a speed), nor lamps on a lead whose speed
+    /// reads coarsely (its estimate then overshoots its real braking several times).
     pub(super) fn mildest_accel(&self) -> f64 {
         if self.lamps_vouch {
             return self.accel_mps2;
@@ -93,9 +92,9 @@ impl LeadBelief {
         let b = &s.tuning.belief;
         let limit = s.limits.decel_mps2;
         self.settled
-            && self.speed_mps > b.hard_braking_min_speed_mps
+            && self.speed_mps > b.hard_braking_min_speed_mps.get()
             && (self.mildest_accel() < -limit - margin
-                || (was_hard && self.accel_mps2 < -limit + b.hard_braking_release_mps2))
+                || (was_hard && self.accel_mps2 < -limit + b.hard_braking_release_mps2.get()))
     }
 
     /// Whether the lead has been measured over `confirm_s` (in more than one frame; a lead
@@ -136,20 +135,20 @@ impl LeadBelief {
         let within_comfort =
             |worse: Threat| if worse.needed_decel_mps2 <= decel { threat.or_worse(&worse) } else { threat };
         if !self.settled {
-            let slowest = (self.speed_mps - b.unmeasured_sigmas * self.speed_sigma_mps).max(0.0);
+            let slowest = (self.speed_mps - b.unmeasured_sigmas.get() * self.speed_sigma_mps).max(0.0);
             let slower = |gap_m: f64| self::threat(&s.tuning.threat, gap_m, v, slowest, self.mildest_accel());
-            let far = self.gap_m > s.standstill_m + s.tuning.command.far_time_gaps * time_gap_s * v;
-            let wait_s = (s.tuning.filter.settle_s - self.followed_s).max(0.0);
+            let far = self.gap_m > s.standstill_m + s.tuning.command.far_time_gaps.get() * time_gap_s * v;
+            let wait_s = (s.tuning.filter.settle_s.get() - self.followed_s).max(0.0);
             let waited = slower(self.gap_m - (v - slowest).max(0.0) * wait_s);
-            if far && waited.needed_decel_mps2 <= b.unsettled_wait_share * decel {
+            if far && waited.needed_decel_mps2 <= b.unsettled_wait_share.get() * decel {
                 return revealed;
             }
             return Some(within_comfort(slower(self.gap_m)));
         }
-        if self.lit_for_s.is_some_and(|t| t < b.lit_anticipation_s) {
+        if self.lit_for_s.is_some_and(|t| t < b.lit_anticipation_s.get()) {
             let hardest = self.mildest_accel().min(-s.limits.decel_mps2);
             let hard = self::threat(&s.tuning.threat, self.gap_m, v, self.speed_mps, hardest);
-            if hard.needed_decel_mps2 >= b.lit_need_share * decel {
+            if hard.needed_decel_mps2 >= b.lit_need_share.get() * decel {
                 return Some(within_comfort(hard));
             }
         }

@@ -6,7 +6,7 @@
 
 use super::belief::LeadBelief;
 use super::settings::AccSettings;
-use super::threat::Threat;
+use super::threat::{Threat, MIN_ROOM_M};
 use slipstream_contract::msg::AccMode;
 
 /// A command above this (m/s2) brakes for nothing the release need track.
@@ -65,10 +65,10 @@ impl Command {
         };
         let target = target.clamp(-decel, lim.accel_mps2);
         let step = lim.jerk_mps3 * x.dt;
-        let beyond_m = x.s.tuning.select.beyond_lead_m;
+        let beyond_m = x.s.tuning.select.beyond_lead_m.get();
         let gone =
             self.braking_for.is_some_and(|(id, gap)| x.lead.is_none_or(|l| l.id != id && l.gap_m > gap + beyond_m));
-        let release = x.s.tuning.command.release_jerk_mps3 * x.dt;
+        let release = x.s.tuning.command.release_jerk_mps3.get() * x.dt;
         let up = if gone {
             (self.accel_cmd + release).min(target.min(0.0)).max(self.accel_cmd + step)
         } else if self.accel_cmd < -decel {
@@ -92,13 +92,15 @@ impl Command {
         let law = s.gains.gap_per_s2 * (l.gap_m - desired_gap) + s.gains.speed_per_s * (l.speed_mps - v);
         let needed = x.plan.map_or(0.0, |t| t.needed_decel_mps2);
         let mut a = match x.plan {
-            Some(t) if needed > s.tuning.decision.needed_guard_mps2 => {
+            Some(t) if needed > s.tuning.decision.needed_guard_mps2.get() => {
                 law.min(-needed.min(far_cap_mps2(s, &t, v, x.time_gap_s, l)))
             }
             _ => law,
         };
-        if v < s.tuning.low_level.standstill_mps && !(l.gap_m > s.standstill_m + 1.0 && l.speed_mps > 0.5) {
-            a = a.min(-0.5);
+        let c = &s.tuning.command;
+        let driven_off = l.gap_m > s.standstill_m + c.drive_off_gap_m.get() && l.speed_mps > c.drive_off_lead_mps.get();
+        if v < s.tuning.low_level.standstill_mps.get() && !driven_off {
+            a = a.min(-c.standstill_hold_mps2.get());
         }
         a
     }
@@ -107,22 +109,22 @@ impl Command {
 /// The most the command brakes for a threat: a vehicle beyond `far_time_gaps` time gaps that
 /// the ego is not closing on fast (matching its speed short of the standstill distance needs
 /// less than `far_closing_mps2`) is answered by easing off, at most `far_decel_mps2`, unless
-/// `lead` is seen braking harder than `far_braking_mps2` with its lamps lit. Such a lead
-/// braking for a moment 4 s ahead (following its own lead) drew 1.6 m/s2 and then 1.45 m/s2
-/// of acceleration again; one that keeps braking is soon near or closing fast, and braked for
+/// `lead` is seen braking harder than `far_braking_mps2` with its lamps lit. A lead braking
+/// for a moment several time gaps ahead (following its own lead) is no reason to brake and
+/// then accelerate again; one that keeps braking is soon near or closing fast, and braked for
 /// in full.
 fn far_cap_mps2(s: &AccSettings, t: &Threat, v: f64, time_gap_s: f64, lead: &LeadBelief) -> f64 {
     let c = &s.tuning.command;
-    let gap = t.room_m + s.tuning.threat.margin_m;
-    let room = (gap - s.standstill_m).max(0.1);
+    let gap = t.room_m + s.tuning.threat.margin_m.get();
+    let room = (gap - s.standstill_m).max(MIN_ROOM_M);
     let closing = (v - t.lead_speed_mps).max(0.0);
-    let far = gap > s.standstill_m + c.far_time_gaps * time_gap_s * v;
+    let far = gap > s.standstill_m + c.far_time_gaps.get() * time_gap_s * v;
     // The lead as estimated, not as comfort braking may plan for it (braking at the comfort
-    // limit while its lamps are new): planned for that far ahead, a touch of the pedal drew
-    // 1.3 m/s2.
-    let easing = !lead.seen_braking(c.far_braking_mps2);
-    if far && easing && closing * closing / (2.0 * room) < c.far_closing_mps2 {
-        c.far_decel_mps2
+    // limit while its lamps are new): planned for that far ahead, a touch of the lead's pedal
+    // would brake the ego hard for nothing.
+    let easing = !lead.seen_braking(c.far_braking_mps2.get());
+    if far && easing && closing * closing / (2.0 * room) < c.far_closing_mps2.get() {
+        c.far_decel_mps2.get()
     } else {
         f64::INFINITY
     }

@@ -19,7 +19,7 @@ use super::lead_filter::Noise;
 use super::low_level::LowLevel;
 use super::objects::PerceptionFrame;
 use super::select::LeadSelect;
-use super::settings::{AccSettings, TIME_GAP_RANGE_S};
+use super::settings::{AccSettings, SET_SPEED_RANGE_MPS, TIME_GAP_RANGE_S};
 use super::threat::Threat;
 use slipstream_contract::msg::{AccCommand, AccMode, AccStatus, AccWarning, LeadInfo, RoadSpec};
 use slipstream_model::road::Road;
@@ -32,6 +32,11 @@ pub struct Output {
     pub brake: f32,
     pub status: AccStatus,
 }
+
+/// The longest step the controller integrates over, s (jerk limit, integrator, filters): after
+/// a pause in its inputs (a stale speed, a paused simulator) it goes on from where it was
+/// instead of jumping by the whole pause. 20 speed periods at 100 Hz.
+const MAX_STEP_S: f64 = 0.2;
 
 pub struct Controller {
     s: AccSettings,
@@ -93,7 +98,7 @@ impl Controller {
             }
         }
         if let Some(v) = cmd.set_speed_mps {
-            self.set_speed_mps = v.clamp(0.0, 70.0);
+            self.set_speed_mps = v.clamp(*SET_SPEED_RANGE_MPS.start(), *SET_SPEED_RANGE_MPS.end());
             tracing::info!(set_speed_mps = self.set_speed_mps, "acc/command: set speed");
         }
         if let Some(h) = cmd.time_gap_s {
@@ -125,7 +130,7 @@ impl Controller {
     /// One control step. `warnings` are the node's findings about its inputs (stale speed or
     /// perception, perception lost); any of them puts the ACC in Stale mode.
     pub fn step(&mut self, ego: &EgoNow, warnings: &[AccWarning]) -> Output {
-        let dt = self.last_t_s.map_or(0.0, |t| (ego.t_s - t).clamp(0.0, 0.2));
+        let dt = self.last_t_s.map_or(0.0, |t| (ego.t_s - t).clamp(0.0, MAX_STEP_S));
         self.last_t_s = Some(ego.t_s);
         let v = ego.speed_mps.max(0.0);
         let mut warnings: Vec<AccWarning> = warnings.to_vec();
@@ -155,7 +160,7 @@ impl Controller {
         // emergency, is not anticipated beyond twice the jerk limit; a release up to its jerk,
         // so that it ends where the target does instead of overshooting it).
         let down = 2.0 * self.s.limits.jerk_mps3;
-        let up = down.max(self.s.tuning.command.release_jerk_mps3);
+        let up = down.max(self.s.tuning.command.release_jerk_mps3.get());
         let from = self.command.accel_cmd;
         let rate = if dt > 0.0 { ((accel - from) / dt).clamp(-down, up) } else { 0.0 };
         let lag_lead = self.params.actuator_lag_s * rate;
@@ -197,7 +202,7 @@ impl Controller {
         let accel_cmd = self.command.accel_cmd;
         // What may start an emergency for being beyond comfort: the threat of a lead, and of a
         // vehicle it hides or reveals, each seen in more than one frame.
-        let confirm_s = self.s.tuning.decision.confirm_s;
+        let confirm_s = self.s.tuning.decision.confirm_s.get();
         let confirmed = lead.filter(|l| l.confirmed(confirm_s)).map(|l| {
             let t = l.threat(&self.s.tuning.threat, v);
             self.select.revealed_for(&self.s.tuning.threat, t_s, v, confirm_s).map_or(t, |r| t.or_worse(&r))

@@ -60,13 +60,14 @@ impl Decision {
         // 15 m/s is stopped behind at 3 m/s2).
         let hard_and_needed = x.hard.is_some_and(|h| {
             let h = h.or_worse(t);
-            h.needed_decel_mps2 > d.emergency_factor * d.needed_guard_mps2 && !can_wait(s, &h, v, x.accel_cmd)
+            h.needed_decel_mps2 > d.emergency_factor.get() * d.needed_guard_mps2.get()
+                && !can_wait(s, &h, v, x.accel_cmd)
         });
         // A short TTC alone is no emergency while the ego already brakes about as hard as the
         // threat needs: in a planned stop the TTC (at constant speeds) falls below any
         // threshold as the car comes to rest behind the lead.
         let closing_fast = x.confirmed.is_some_and(|c| {
-            let behind_need = c.needed_decel_mps2 > -x.accel_cmd + d.under_braking_s * lim.jerk_mps3;
+            let behind_need = c.needed_decel_mps2 > -x.accel_cmd + d.under_braking_s.get() * lim.jerk_mps3;
             c.ttc_s.is_some_and(|ttc| ttc < e.brake_ttc_s) && behind_need
         });
         if !self.emergency && (closing_fast || beyond_comfort || hard_and_needed) {
@@ -79,10 +80,10 @@ impl Decision {
             );
             self.emergency = true;
         } else if self.emergency
-            && (v < s.tuning.low_level.standstill_mps
-                || ((!hard_lead || t.needed_decel_mps2 < d.needed_guard_mps2)
+            && (v < s.tuning.low_level.standstill_mps.get()
+                || ((!hard_lead || t.needed_decel_mps2 < d.needed_guard_mps2.get())
                     && ttc > e.release_ttc_s
-                    && t.needed_decel_mps2 < 0.8 * lim.decel_mps2))
+                    && t.needed_decel_mps2 < d.release_share.get() * lim.decel_mps2))
         {
             tracing::info!(t_s = x.t_s, ttc_s = ttc, "emergency over");
             self.emergency = false;
@@ -104,8 +105,10 @@ impl Decision {
         let hard_lead = self.hard_lead.is_some();
         let floor = if hard_lead && ttc >= s.emergency.brake_ttc_s { 0.0 } else { s.limits.decel_mps2 };
         let (behind_standstill, k) = (short_of_standstill(s, t), &s.tuning.threat);
-        let standstill_need = threat(k, behind_standstill.room_m + k.margin_m, v, t.lead_speed_mps, t.lead_accel_mps2);
-        let need = (s.tuning.decision.emergency_factor * t.needed_decel_mps2).max(standstill_need.needed_decel_mps2);
+        let standstill_need =
+            threat(k, behind_standstill.room_m + k.margin_m.get(), v, t.lead_speed_mps, t.lead_accel_mps2);
+        let need =
+            (s.tuning.decision.emergency_factor.get() * t.needed_decel_mps2).max(standstill_need.needed_decel_mps2);
         need.clamp(floor, vehicle_max)
     }
 }
@@ -137,7 +140,7 @@ fn beyond_comfort(s: &AccSettings, t: &Threat, v: f64, accel_cmd: f64) -> bool {
 /// `tuning.decision.planned_emergency_mps2` would still stop the standstill distance behind.
 fn can_wait(s: &AccSettings, t: &Threat, v: f64, accel_cmd: f64) -> bool {
     let d = &s.tuning.decision;
-    let later = Plan { comfort_s: d.wait_s, then_decel_mps2: d.planned_emergency_mps2 };
+    let later = Plan { comfort_s: d.wait_s.get(), then_decel_mps2: d.planned_emergency_mps2.get() };
     comfort_avoids(s, t, v, accel_cmd) || keeps_clear(s, t, v, accel_cmd, later)
 }
 

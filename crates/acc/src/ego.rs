@@ -17,9 +17,9 @@ pub struct EgoNow {
 /// The ego's speed as the ACC uses it: vehicle/speed carried forward by the measured
 /// acceleration and pulled toward each new reading over EGO_SPEED_TAU_S (a complementary
 /// filter). A wheel-speed reading's noise would otherwise reach everything the ACC derives
-/// from the speed: with 0.05 m/s of it (busy-traffic's), a lead braking at 2.5 m/s2 was
-/// estimated anywhere between 0 and -4.1 from one 50 ms frame to the next with ground truth,
-/// and drew emergencies. Carried by the acceleration it does not lag a braking car. Without an
+/// from the speed: differenced over a 50 ms frame, a few cm/s of noise become metres per
+/// second squared in the lead's estimated acceleration, even with ground truth. Carried by
+/// the acceleration it does not lag a braking car. Without an
 /// acceleration (no vehicle/state yet) the reading is taken as it is; a jump beyond
 /// EGO_SPEED_RESET_MPS (a replay starting over, a reset vehicle) is too.
 #[derive(Debug, Clone, Copy, Default)]

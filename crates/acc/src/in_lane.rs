@@ -23,14 +23,20 @@ pub struct OffsetSigma {
     pub tight: Vec<f64>,
 }
 
+/// The table's bend classes by the tightest radius (m): `gentle` from GENTLE_MIN_RADIUS_M up,
+/// `bend` from BEND_MIN_RADIUS_M up, `tight` below. `eval detect` measures the lateral error by
+/// the same classes, so the table can be filled from its output.
+pub const GENTLE_MIN_RADIUS_M: f64 = 1000.0;
+pub const BEND_MIN_RADIUS_M: f64 = 500.0;
+
 impl OffsetSigma {
     /// The sigma at `range_m` seen through a bend of `radius_m` (None: a straight): the figure
     /// of the first band reaching that far (the last band's beyond it).
     pub fn at(&self, range_m: f64, radius_m: Option<f64>) -> f64 {
         let column = match radius_m.map(f64::abs) {
             None => &self.straight,
-            Some(r) if r >= 1000.0 => &self.gentle,
-            Some(r) if r >= 500.0 => &self.bend,
+            Some(r) if r >= GENTLE_MIN_RADIUS_M => &self.gentle,
+            Some(r) if r >= BEND_MIN_RADIUS_M => &self.bend,
             Some(_) => &self.tight,
         };
         let band = self.range_m.iter().position(|&far| range_m <= far).unwrap_or(self.range_m.len() - 1);

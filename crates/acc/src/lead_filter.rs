@@ -49,7 +49,7 @@ impl LeadFilter {
         let p = Matrix3::from_diagonal(&Vector3::new(
             n.gap_sigma(gap_m).powi(2),
             speed_sigma_mps.max(n.speed_steady_mps).powi(2),
-            n.filter.new_lead_accel_sigma_mps2.powi(2),
+            n.filter.new_lead_accel_sigma_mps2.get().powi(2),
         ));
         LeadFilter {
             id,
@@ -81,11 +81,11 @@ impl LeadFilter {
         // Against the measurement's own noise: the estimate's spread, wide while smoothing,
         // would hide the lead's first braking.
         let nu = (z - self.x[1]) / sigma;
-        self.drift += self.k.manoeuvre_drift_gain * (nu - self.drift);
+        self.drift += self.k.manoeuvre_drift_gain.get() * (nu - self.drift);
         if self.settled() && self.t_s >= self.manoeuvre_until_s && !self.brake_lights {
-            self.speed_noise_var += self.k.speed_noise_gain * ((z - self.x[1]).powi(2) - self.speed_noise_var);
+            self.speed_noise_var += self.k.speed_noise_gain.get() * ((z - self.x[1]).powi(2) - self.speed_noise_var);
         }
-        if self.settled() && self.drift.abs() > self.k.manoeuvre_drift {
+        if self.settled() && self.drift.abs() > self.k.manoeuvre_drift.get() {
             tracing::debug!(id = self.id, t_s = self.t_s, drift = self.drift, "lead manoeuvre");
             self.manoeuvre();
         }
@@ -99,24 +99,24 @@ impl LeadFilter {
     /// While a new lead's speed converges on what perception measures (from the ego's speed
     /// at first, over tenths of a second far away), that change is the measurement's, not
     /// the lead's: the acceleration stays unknown (zero, at its first uncertainty) until the
-    /// lead is settled. Taken as the lead's, a car standing 175 m ahead read as braking at
-    /// 4.2 m/s2 when followed for a second and drew an emergency 7.8 s from it.
+    /// lead is settled. Taken as the lead's, the convergence of a far car's speed reads as
+    /// hard braking, and hard braking starts emergencies.
     pub(super) fn unknown_accel(&mut self) {
         self.x[2] = 0.0;
         for i in 0..2 {
             self.p[(i, 2)] = 0.0;
             self.p[(2, i)] = 0.0;
         }
-        self.p[(2, 2)] = self.k.new_lead_accel_sigma_mps2.powi(2);
+        self.p[(2, 2)] = self.k.new_lead_accel_sigma_mps2.get().powi(2);
     }
 
     /// The lead changed what it does: the acceleration's uncertainty (and the speed's that
     /// builds over a window of it) is opened up and its speed followed closely for a while.
     pub(super) fn manoeuvre(&mut self) {
-        self.p[(2, 2)] += self.k.manoeuvre_accel_sigma_mps2 * self.k.manoeuvre_accel_sigma_mps2;
-        self.p[(1, 1)] += (self.k.manoeuvre_accel_sigma_mps2 * self.k.manoeuvre_window_s).powi(2);
+        self.p[(2, 2)] += self.k.manoeuvre_accel_sigma_mps2.get() * self.k.manoeuvre_accel_sigma_mps2.get();
+        self.p[(1, 1)] += (self.k.manoeuvre_accel_sigma_mps2.get() * self.k.manoeuvre_window_s.get()).powi(2);
         self.drift = 0.0;
-        self.manoeuvre_until_s = self.t_s + self.k.manoeuvre_hold_s;
+        self.manoeuvre_until_s = self.t_s + self.k.manoeuvre_hold_s.get();
     }
 
     /// The lead's brake lights in a frame: coming on, they start a manoeuvre at once (the
@@ -127,12 +127,12 @@ impl LeadFilter {
         // nor a driver dabbing the pedal to hold a speed (lamps flickering every few frames: a
         // car ending its braking 170 m ahead, each flash a new manoeuvre, had its speed followed
         // at the range's noise for seconds and read as braking at 13 m/s2).
-        if on && !self.brake_lights && self.settled() && self.t_s - self.lit_last_s >= self.k.relit_s {
+        if on && !self.brake_lights && self.settled() && self.t_s - self.lit_last_s >= self.k.relit_s.get() {
             tracing::debug!(id = self.id, t_s = self.t_s, "lead brake lights on");
             self.manoeuvre();
             // Not for the lamps of a lead already seen slowing: its deceleration is measured,
             // the lamps add nothing to it.
-            self.lit_from_s = (self.x[2] >= -self.k.slowing_mps2).then_some(self.t_s);
+            self.lit_from_s = (self.x[2] >= -self.k.slowing_mps2.get()).then_some(self.t_s);
         }
         if on && !self.brake_lights {
             self.lit_run_from_s = self.t_s;
@@ -151,8 +151,8 @@ impl LeadFilter {
     /// Its brake lights vouch for its estimated acceleration (`LeadNow::lamps_vouch`).
     pub(super) fn lamps_vouch(&self) -> bool {
         self.brake_lights
-            && self.t_s - self.lit_run_from_s >= self.k.lit_held_s - 1e-9
-            && self.speed_noise_mps() <= self.k.lamps_vouch_noise_mps
+            && self.t_s - self.lit_run_from_s >= self.k.lit_held_s.get() - 1e-9
+            && self.speed_noise_mps() <= self.k.lamps_vouch_noise_mps.get()
     }
 
     /// How long ago the lead's brake lights came on, while they are on.
@@ -169,7 +169,7 @@ impl LeadFilter {
         // A lead whose brake lights came on builds its deceleration: for the manoeuvre's
         // hold its acceleration may change as fast as a brake application makes it.
         let jerk_sigma = if self.brake_lights && self.t_s < self.manoeuvre_until_s {
-            jerk_sigma.max(self.k.braking_jerk_sigma_mps3)
+            jerk_sigma.max(self.k.braking_jerk_sigma_mps3.get())
         } else {
             jerk_sigma
         };
@@ -190,7 +190,7 @@ impl LeadFilter {
 
     /// Followed long enough for its speed and acceleration to mean something.
     pub(super) fn settled(&self) -> bool {
-        self.t_s - self.since_s >= self.k.settle_s
+        self.t_s - self.since_s >= self.k.settle_s.get()
     }
 
     /// A scalar measurement of state component `i`.
@@ -220,6 +220,11 @@ pub(super) struct Noise {
     pub(super) filter: FilterTuning,
 }
 
+/// The noise the filter assumes for ground truth's gap and speed (m, m/s): the truth is exact,
+/// and a floor keeps the filter's covariance positive (a zero measurement noise makes its gain
+/// 1 and its covariance singular).
+const GROUND_TRUTH_SIGMA: f64 = 0.05;
+
 impl Noise {
     /// The perception source's noise, from the settings: the camera's from the estimator
     /// group; ground truth's exact measurements, which the filter follows.
@@ -237,13 +242,13 @@ impl Noise {
                 filter: s.tuning.filter,
             },
             PerceptionSource::GroundTruth => Noise {
-                gap_base_m: 0.05,
+                gap_base_m: GROUND_TRUTH_SIGMA,
                 gap_per_m2: 0.0,
-                speed_base_mps: 0.05,
+                speed_base_mps: GROUND_TRUTH_SIGMA,
                 speed_per_m2: 0.0,
-                speed_steady_mps: 0.05,
+                speed_steady_mps: GROUND_TRUTH_SIGMA,
                 jerk_sigma_mps3: e.lead_jerk_sigma_mps3,
-                hard_braking_margin_mps2: s.tuning.belief.ground_truth_hard_braking_margin_mps2,
+                hard_braking_margin_mps2: s.tuning.belief.ground_truth_hard_braking_margin_mps2.get(),
                 filter: s.tuning.filter,
             },
         }
@@ -261,7 +266,7 @@ impl Noise {
     /// `tuning.filter.steady_full_gap_m` on, less nearer, with the square of the gap (as the range's error),
     /// never below the measurement's own noise.
     pub(super) fn speed_steady(&self, gap_m: f64) -> f64 {
-        let share = (gap_m.max(0.0) / self.filter.steady_full_gap_m).powi(2).min(1.0);
+        let share = (gap_m.max(0.0) / self.filter.steady_full_gap_m.get()).powi(2).min(1.0);
         (self.speed_steady_mps * share).max(self.speed_sigma(gap_m))
     }
 }

@@ -45,8 +45,8 @@ impl LowLevel {
             }
             _ => {
                 if v > 1.0 && accel.abs() < s.limits.decel_mps2 {
-                    self.integral = (self.integral + t.integral_gain_per_s * (accel - measured) * dt)
-                        .clamp(-t.integral_max_mps2, t.integral_max_mps2);
+                    self.integral = (self.integral + t.integral_gain_per_s.get() * (accel - measured) * dt)
+                        .clamp(-t.integral_max_mps2.get(), t.integral_max_mps2.get());
                 }
             }
         }
@@ -56,9 +56,9 @@ impl LowLevel {
             throttle = throttle.min(self.last_throttle);
         }
         self.last_throttle = throttle;
-        if v < t.standstill_mps && accel <= 0.0 {
+        if v < t.standstill_mps.get() && accel <= 0.0 {
             self.last_throttle = 0.0;
-            return (0.0, (brake as f32).max(t.hold_brake as f32));
+            return (0.0, (brake as f32).max(t.hold_brake.get() as f32));
         }
         (throttle as f32, brake as f32)
     }

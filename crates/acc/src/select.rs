@@ -22,6 +22,13 @@ const SETTINGS_LANE_WIDTH_M: f64 = 3.5;
 const TRACK_MEMORY_S: f64 = 2.0;
 /// A track's lateral speed counts once it has been seen in this many frames.
 const RATE_AFTER_FRAMES: u32 = 4;
+/// Without a map, the path ahead bends by the ego's yaw rate over its speed, that speed taken
+/// as at least this (m/s): near standstill the quotient is noise (a steering wheel turned at
+/// rest would bend the path into a circle).
+const PATH_MIN_SPEED_MPS: f64 = 2.0;
+/// A predicted path curving less than this (1/m: a 100 km radius) is a straight for the
+/// offset's uncertainty.
+const STRAIGHT_BELOW_PER_M: f64 = 1e-5;
 
 /// What lead selection remembers of one track (for its lateral speed).
 #[derive(Debug, Clone, Copy)]
@@ -114,7 +121,7 @@ impl LeadSelect {
         // moves out only at the last moment is braked for from when it is seen over the van,
         // not once the van has gone. A vehicle beyond at the lead's speed or faster asks for
         // nothing.
-        let beyond = best.and_then(|(_, lead_gap)| nearest(lead_gap + s.tuning.select.beyond_lead_m));
+        let beyond = best.and_then(|(_, lead_gap)| nearest(lead_gap + s.tuning.select.beyond_lead_m.get()));
         self.next_in_lane = match (best, entering) {
             (Some((b, _)), Some(e)) if e.0.id != b.id => Some(e),
             _ => beyond,
@@ -150,7 +157,7 @@ impl LeadSelect {
         ego: &EgoNow,
     ) -> (Option<InLane<'f>>, Vec<InLane<'f>>) {
         let front = s.vehicle.front_overhang_from_origin_m;
-        let kappa = ego.yaw_rate_radps / ego.speed_mps.max(2.0);
+        let kappa = ego.yaw_rate_radps / ego.speed_mps.max(PATH_MIN_SPEED_MPS);
         let lane_ahead = LaneAhead::find(self.road.as_ref(), &mut self.road_s_m, ego);
         let lane = &s.lane;
         // The limits are for a 3.5 m lane: on the map's lanes they move with its width (a car
@@ -176,12 +183,15 @@ impl LeadSelect {
                 (_, Some(l)) => {
                     lane.offset_sigma.at(o.distance_m, l.road.tightest_radius_between(l.s_m, l.s_m + o.distance_m))
                 }
-                (_, None) => lane.offset_sigma.at(o.distance_m, (kappa.abs() > 1e-5).then(|| 1.0 / kappa)),
+                (_, None) => {
+                    lane.offset_sigma.at(o.distance_m, (kappa.abs() > STRAIGHT_BELOW_PER_M).then(|| 1.0 / kappa))
+                }
             };
             // Where it is, and where its lateral speed takes it within lateral_lookahead_s,
             // with that prediction's own uncertainty (the rate's scatter: small for a car
             // cutting in near, large for one far round a bend whose offset reads noisily).
-            let rate_sigma = if sigma > 0.0 { track.rate_sigma_mps(s.tuning.select.lateral_rate_filter) } else { 0.0 };
+            let rate_sigma =
+                if sigma > 0.0 { track.rate_sigma_mps(s.tuning.select.lateral_rate_filter.get()) } else { 0.0 };
             let predicted = (track.seen >= RATE_AFTER_FRAMES).then(|| {
                 let ahead_s = lane.lateral_lookahead_s;
                 (off + track.lateral_rate_mps * ahead_s, sigma.hypot(rate_sigma * ahead_s))
@@ -213,8 +223,8 @@ impl LeadSelect {
     fn coasting(&self, s: &AccSettings, frame: &PerceptionFrame, best: Option<InLane>) -> bool {
         let t = &s.tuning.select;
         self.lead.is_some_and(|f| {
-            let standing = f.settled() && f.x[1] < t.standing_lead_mps;
-            let coast_s = if standing { t.standing_coast_s } else { t.lead_coast_s };
+            let standing = f.settled() && f.x[1] < t.standing_lead_mps.get();
+            let coast_s = if standing { t.standing_coast_s.get() } else { t.lead_coast_s.get() };
             !frame.objects.iter().any(|o| o.id == f.id)
                 && frame.stamp_s - f.seen_s < coast_s
                 && best.is_none_or(|b| b.1 > f.x[0])
@@ -255,9 +265,9 @@ impl LeadSelect {
 fn track(tracks: &mut HashMap<u32, Track>, t: &SelectTuning, id: u32, off: f64, stamp_s: f64) -> Track {
     let track = match tracks.get(&id) {
         Some(p) if stamp_s > p.stamp_s => {
-            let max = t.max_lateral_rate_mps;
+            let max = t.max_lateral_rate_mps.get();
             let lat_rate = ((off - p.lateral_m) / (stamp_s - p.stamp_s)).clamp(-max, max);
-            let k = t.lateral_rate_filter;
+            let k = t.lateral_rate_filter.get();
             Track {
                 stamp_s,
                 lateral_m: off,

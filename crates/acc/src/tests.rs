@@ -691,7 +691,7 @@ fn brake_lights_coming_on_start_comfort_braking_before_the_speed_shows_it() {
     let gentle = behind_lead_at(30.0, pressed, pressed_at_10_s(0.5));
     let (gentle_deepest, ramp) = (
         deepest(&gentle),
-        AccSettings::default().limits.jerk_mps3 * AccSettings::default().tuning.belief.lit_anticipation_s,
+        AccSettings::default().limits.jerk_mps3 * AccSettings::default().tuning.belief.lit_anticipation_s.get(),
     );
     assert!(gentle_deepest > -ramp - 0.15, "deepest {gentle_deepest:.2} m/s2 for a lead at 0.5 (ramp {ramp:.2})");
     let unlit = behind_lead_at(30.0, never, pressed_at_10_s(0.5));
@@ -1135,7 +1135,7 @@ fn a_standing_lead_hidden_for_a_moment_is_still_braked_for() {
 #[test]
 fn braking_for_a_lead_that_has_gone_is_released_at_the_release_jerk() {
     let s = AccSettings { set_speed_mps: 25.0, ..truth() };
-    let (jerk, release) = (s.limits.jerk_mps3, s.tuning.command.release_jerk_mps3);
+    let (jerk, release) = (s.limits.jerk_mps3, s.tuning.command.release_jerk_mps3.get());
     assert!(release > 2.0 * jerk, "the release jerk is not much larger than the comfort jerk");
     // Braking at least 2 m/s2 for a car closing at 10 m/s from 70 to 40 m; then, at 3 s, the
     // car is seen 4 m to the side (it has moved out), or it drives away at 10 m/s (still the
@@ -1177,7 +1177,7 @@ fn braking_for_a_lead_that_has_gone_is_released_at_the_release_jerk() {
 #[test]
 fn the_tuning_group_is_overridable_and_checked() {
     let s = AccSettings::parse("{ tuning: { command: { release_jerk_mps3: 20 } } }", "mine.json5").unwrap();
-    assert_eq!(s.tuning.command.release_jerk_mps3, 20.0);
+    assert_eq!(s.tuning.command.release_jerk_mps3.get(), 20.0);
     assert_eq!(s.tuning.decision, AccSettings::default().tuning.decision);
     let e = AccSettings::parse("{ tuning: { belief: { lit_need_share: 1.5 } } }", "mine.json5").unwrap_err();
     let text = e.to_string();

@@ -3,6 +3,13 @@
 
 use super::tuning::ThreatTuning;
 
+/// The least room a need is computed for, m: at or inside the margin the need would divide by
+/// zero or turn negative, and this small a room asks the most of the brakes, as it should.
+pub(super) const MIN_ROOM_M: f64 = 0.1;
+/// Closing slower than this (m/s), a lead has no time to collision: the gap's change is within
+/// the estimate's noise, and a TTC from it would be hours or noise.
+const MIN_CLOSING_MPS: f64 = 0.1;
+
 /// The threat a lead poses now.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Threat {
@@ -33,8 +40,8 @@ impl Threat {
 /// a stop), keeping `k.margin_m`.
 pub fn threat(k: &ThreatTuning, gap_m: f64, ego_speed_mps: f64, lead_speed_mps: f64, lead_accel_mps2: f64) -> Threat {
     let closing = ego_speed_mps - lead_speed_mps;
-    let ttc_s = (closing > 0.1).then(|| gap_m.max(0.0) / closing);
-    let room = (gap_m - k.margin_m).max(0.1);
+    let ttc_s = (closing > MIN_CLOSING_MPS).then(|| gap_m.max(0.0) / closing);
+    let room = (gap_m - k.margin_m.get()).max(MIN_ROOM_M);
     let lead_decel = (-lead_accel_mps2).max(0.0);
     // Both keep braking until the speeds match: the relative motion decides.
     let matching = if closing > 0.0 { lead_decel + closing * closing / (2.0 * room) } else { 0.0 };
@@ -42,11 +49,11 @@ pub fn threat(k: &ThreatTuning, gap_m: f64, ego_speed_mps: f64, lead_speed_mps: 
     let of = |needed_decel_mps2: f64| Threat {
         ttc_s,
         needed_decel_mps2,
-        room_m: gap_m - k.margin_m,
+        room_m: gap_m - k.margin_m.get(),
         lead_speed_mps: lead_speed,
         lead_accel_mps2,
     };
-    if lead_accel_mps2 >= -k.braking_mps2 {
+    if lead_accel_mps2 >= -k.braking_mps2.get() {
         return of(matching);
     }
     // A braking lead: does it stop before the speeds would match?

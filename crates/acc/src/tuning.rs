@@ -3,7 +3,6 @@
 //! config/acc.json5, which gives each one's unit, meaning and why it has its value).
 
 use serde::Deserialize;
-use slipstream_contract::config::Invalid;
 
 /// The `tuning` settings group.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
@@ -22,12 +21,12 @@ pub struct Tuning {
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SelectTuning {
-    pub lateral_rate_filter: f64,
-    pub max_lateral_rate_mps: f64,
-    pub lead_coast_s: f64,
-    pub standing_coast_s: f64,
-    pub standing_lead_mps: f64,
-    pub beyond_lead_m: f64,
+    pub lateral_rate_filter: Share,
+    pub max_lateral_rate_mps: Amount,
+    pub lead_coast_s: Amount,
+    pub standing_coast_s: Amount,
+    pub standing_lead_mps: Amount,
+    pub beyond_lead_m: Amount,
 }
 
 /// The lead estimate (the Kalman filter): manoeuvre detection, the lamps, a new lead's
@@ -35,145 +34,148 @@ pub struct SelectTuning {
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct FilterTuning {
-    pub settle_s: f64,
-    pub new_lead_accel_sigma_mps2: f64,
-    pub manoeuvre_drift_gain: f64,
-    pub manoeuvre_drift: f64,
-    pub manoeuvre_accel_sigma_mps2: f64,
-    pub manoeuvre_window_s: f64,
-    pub manoeuvre_hold_s: f64,
-    pub braking_jerk_sigma_mps3: f64,
-    pub slowing_mps2: f64,
-    pub relit_s: f64,
-    pub lit_held_s: f64,
-    pub lamps_vouch_noise_mps: f64,
-    pub speed_noise_gain: f64,
-    pub steady_full_gap_m: f64,
+    pub settle_s: Amount,
+    pub new_lead_accel_sigma_mps2: Amount,
+    pub manoeuvre_drift_gain: Share,
+    pub manoeuvre_drift: Amount,
+    pub manoeuvre_accel_sigma_mps2: Amount,
+    pub manoeuvre_window_s: Amount,
+    pub manoeuvre_hold_s: Amount,
+    pub braking_jerk_sigma_mps3: Amount,
+    pub slowing_mps2: Amount,
+    pub relit_s: Amount,
+    pub lit_held_s: Amount,
+    pub lamps_vouch_noise_mps: Amount,
+    pub speed_noise_gain: Share,
+    pub steady_full_gap_m: Amount,
 }
 
 /// The threat: the margin it keeps, and when a lead counts as braking to a stop.
 #[derive(Debug, Clone, Copy, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ThreatTuning {
-    pub margin_m: f64,
-    pub braking_mps2: f64,
+    pub margin_m: Amount,
+    pub braking_mps2: Amount,
 }
 
 /// The lead belief: what the lead plausibly does, from its estimate, lamps and age.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct BeliefTuning {
-    pub unmeasured_sigmas: f64,
-    pub unsettled_wait_share: f64,
-    pub lit_anticipation_s: f64,
-    pub lit_need_share: f64,
-    pub hard_braking_min_speed_mps: f64,
-    pub hard_braking_release_mps2: f64,
-    pub ground_truth_hard_braking_margin_mps2: f64,
+    pub unmeasured_sigmas: Amount,
+    pub unsettled_wait_share: Share,
+    pub lit_anticipation_s: Amount,
+    pub lit_need_share: Share,
+    pub hard_braking_min_speed_mps: Amount,
+    pub hard_braking_release_mps2: Amount,
+    pub ground_truth_hard_braking_margin_mps2: Amount,
 }
 
 /// The decision between comfort braking and an emergency.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct DecisionTuning {
-    pub needed_guard_mps2: f64,
-    pub emergency_factor: f64,
-    pub under_braking_s: f64,
-    pub confirm_s: f64,
-    pub wait_s: f64,
-    pub planned_emergency_mps2: f64,
+    pub needed_guard_mps2: Amount,
+    pub emergency_factor: Amount,
+    pub under_braking_s: Amount,
+    pub confirm_s: Amount,
+    pub wait_s: Amount,
+    pub planned_emergency_mps2: Amount,
+    pub release_share: Share,
 }
 
 /// The comfort command: the far cap and the release of braking.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CommandTuning {
-    pub far_time_gaps: f64,
-    pub far_closing_mps2: f64,
-    pub far_decel_mps2: f64,
-    pub far_braking_mps2: f64,
-    pub release_jerk_mps3: f64,
+    pub far_time_gaps: Amount,
+    pub far_closing_mps2: Amount,
+    pub far_decel_mps2: Amount,
+    pub far_braking_mps2: Amount,
+    pub release_jerk_mps3: Amount,
+    pub standstill_hold_mps2: Amount,
+    pub drive_off_gap_m: Amount,
+    pub drive_off_lead_mps: Amount,
 }
 
 /// The low-level loop from target acceleration to throttle and brake.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct LowLevelTuning {
-    pub standstill_mps: f64,
-    pub hold_brake: f64,
-    pub integral_gain_per_s: f64,
-    pub integral_max_mps2: f64,
+    pub standstill_mps: Amount,
+    pub hold_brake: Share,
+    pub integral_gain_per_s: Amount,
+    pub integral_max_mps2: Amount,
 }
 
-impl Tuning {
-    /// Every number by its key, for the settings' check.
-    pub fn entries(&self) -> Vec<(&'static str, f64)> {
-        let (s, f, b, d, c, l) =
-            (&self.select, &self.filter, &self.belief, &self.decision, &self.command, &self.low_level);
-        let t = &self.threat;
-        vec![
-            ("tuning.select.lateral_rate_filter", s.lateral_rate_filter),
-            ("tuning.select.max_lateral_rate_mps", s.max_lateral_rate_mps),
-            ("tuning.select.lead_coast_s", s.lead_coast_s),
-            ("tuning.select.standing_coast_s", s.standing_coast_s),
-            ("tuning.select.standing_lead_mps", s.standing_lead_mps),
-            ("tuning.select.beyond_lead_m", s.beyond_lead_m),
-            ("tuning.filter.settle_s", f.settle_s),
-            ("tuning.filter.new_lead_accel_sigma_mps2", f.new_lead_accel_sigma_mps2),
-            ("tuning.filter.manoeuvre_drift_gain", f.manoeuvre_drift_gain),
-            ("tuning.filter.manoeuvre_drift", f.manoeuvre_drift),
-            ("tuning.filter.manoeuvre_accel_sigma_mps2", f.manoeuvre_accel_sigma_mps2),
-            ("tuning.filter.manoeuvre_window_s", f.manoeuvre_window_s),
-            ("tuning.filter.manoeuvre_hold_s", f.manoeuvre_hold_s),
-            ("tuning.filter.braking_jerk_sigma_mps3", f.braking_jerk_sigma_mps3),
-            ("tuning.filter.slowing_mps2", f.slowing_mps2),
-            ("tuning.filter.relit_s", f.relit_s),
-            ("tuning.filter.lit_held_s", f.lit_held_s),
-            ("tuning.filter.lamps_vouch_noise_mps", f.lamps_vouch_noise_mps),
-            ("tuning.filter.speed_noise_gain", f.speed_noise_gain),
-            ("tuning.filter.steady_full_gap_m", f.steady_full_gap_m),
-            ("tuning.threat.margin_m", t.margin_m),
-            ("tuning.threat.braking_mps2", t.braking_mps2),
-            ("tuning.belief.unmeasured_sigmas", b.unmeasured_sigmas),
-            ("tuning.belief.unsettled_wait_share", b.unsettled_wait_share),
-            ("tuning.belief.lit_anticipation_s", b.lit_anticipation_s),
-            ("tuning.belief.lit_need_share", b.lit_need_share),
-            ("tuning.belief.hard_braking_min_speed_mps", b.hard_braking_min_speed_mps),
-            ("tuning.belief.hard_braking_release_mps2", b.hard_braking_release_mps2),
-            ("tuning.belief.ground_truth_hard_braking_margin_mps2", b.ground_truth_hard_braking_margin_mps2),
-            ("tuning.decision.needed_guard_mps2", d.needed_guard_mps2),
-            ("tuning.decision.emergency_factor", d.emergency_factor),
-            ("tuning.decision.under_braking_s", d.under_braking_s),
-            ("tuning.decision.confirm_s", d.confirm_s),
-            ("tuning.decision.wait_s", d.wait_s),
-            ("tuning.decision.planned_emergency_mps2", d.planned_emergency_mps2),
-            ("tuning.command.far_time_gaps", c.far_time_gaps),
-            ("tuning.command.far_closing_mps2", c.far_closing_mps2),
-            ("tuning.command.far_decel_mps2", c.far_decel_mps2),
-            ("tuning.command.far_braking_mps2", c.far_braking_mps2),
-            ("tuning.command.release_jerk_mps3", c.release_jerk_mps3),
-            ("tuning.low_level.standstill_mps", l.standstill_mps),
-            ("tuning.low_level.hold_brake", l.hold_brake),
-            ("tuning.low_level.integral_gain_per_s", l.integral_gain_per_s),
-            ("tuning.low_level.integral_max_mps2", l.integral_max_mps2),
-        ]
-    }
+/// A tuning number: finite and at least 0, checked as it is read, so that no key of the
+/// tuning can hold anything else (a key is typed `Amount` or `Share`, never a bare f64).
+#[derive(Debug, Clone, Copy, PartialEq, PartialOrd, Deserialize)]
+#[serde(try_from = "f64")]
+pub struct Amount(f64);
 
-    /// The first number that is not a finite, non-negative value, or a share or a filter
-    /// constant above 1.
-    pub fn check(&self) -> Result<(), Invalid> {
-        for (key, v) in self.entries() {
-            if !(v.is_finite() && v >= 0.0) {
-                return Invalid::err(key, format!("{v}"), "give a finite value >= 0");
-            }
-            let unit_interval = key.ends_with("_share")
-                || key.ends_with("_filter")
-                || key.ends_with("_gain")
-                || key.ends_with("hold_brake");
-            if unit_interval && v > 1.0 {
-                return Invalid::err(key, format!("{v}"), "give a value from 0 to 1");
+/// A share, a gain per frame or a filter constant: 0 to 1, checked as it is read.
+#[derive(Debug, Clone, Copy, PartialEq, PartialOrd, Deserialize)]
+#[serde(try_from = "f64")]
+pub struct Share(f64);
+
+impl Amount {
+    pub const fn get(self) -> f64 {
+        self.0
+    }
+}
+
+impl Share {
+    pub const fn get(self) -> f64 {
+        self.0
+    }
+}
+
+impl TryFrom<f64> for Amount {
+    type Error = String;
+    fn try_from(v: f64) -> Result<Self, String> {
+        match v.is_finite() && v >= 0.0 {
+            true => Ok(Amount(v)),
+            false => Err(format!("{v} is not a finite value >= 0")),
+        }
+    }
+}
+
+impl TryFrom<f64> for Share {
+    type Error = String;
+    fn try_from(v: f64) -> Result<Self, String> {
+        match (0.0..=1.0).contains(&v) {
+            true => Ok(Share(v)),
+            false => Err(format!("{v} is not a share from 0 to 1")),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::settings::{AccSettings, DEFAULT_ACC_CONFIG};
+
+    /// Every key of the shipped tuning, set to -1 alone, is refused under its own name; set
+    /// to 1.5, refused exactly when it is a share (the file says 0..1 for those).
+    #[test]
+    fn every_tuning_key_is_range_checked_as_it_is_read() {
+        let shipped = slipstream_contract::config::parse_json5_value(DEFAULT_ACC_CONFIG, "shipped").unwrap();
+        let tuning = shipped["tuning"].as_object().expect("a tuning section");
+        let shares = ["lateral_rate_filter", "manoeuvre_drift_gain", "speed_noise_gain", "unsettled_wait_share"];
+        let shares = [&shares[..], &["lit_need_share", "hold_brake", "release_share"]].concat();
+        let mut checked = 0;
+        for (part, keys) in tuning {
+            for key in keys.as_object().expect("a part").keys() {
+                let refused = |v: &str| {
+                    let text = format!("{{ tuning: {{ {part}: {{ {key}: {v} }} }} }}");
+                    AccSettings::parse(&text, "mine.json5").err().map(|e| e.key)
+                };
+                let name = format!("tuning.{part}.{key}");
+                assert_eq!(refused("-1").as_deref(), Some(name.as_str()), "{name} = -1");
+                assert_eq!(refused("1.5").is_some(), shares.contains(&key.as_str()), "{name} = 1.5");
+                checked += 1;
             }
         }
-        Ok(())
+        assert!(checked >= 48, "{checked} keys");
     }
 }

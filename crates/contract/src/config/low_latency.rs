@@ -64,8 +64,9 @@ pub fn low_latency_config(
         ("connect/endpoints", list(&connect)),
         // Its links to sessions without the low-latency transport (an observer, a tool, a
         // router) have no priorities: one queue, the data priority's, 2 batches by default.
-        // Every express message takes a batch, and a transmit task a millisecond late dropped
-        // most of a simulator's states at 100 Hz (seen: 2 of 300 reached `up`'s observer).
+        // Every express message takes a batch, so two batches overflow whenever the transmit
+        // task is a millisecond late, and at 100 Hz most of a simulator's states would drop on
+        // those links; 16 batches ride out such a delay.
         ("transport/link/tx/queue/size/data", "16".to_string()),
         // Its messages are far below the shared-memory threshold: no pool of its own.
         ("transport/shared_memory/enabled", "false".to_string()),

@@ -10,18 +10,19 @@
 use nalgebra::Vector2;
 use serde::Serialize;
 
+use slipstream_acc::in_lane::{BEND_MIN_RADIUS_M, GENTLE_MIN_RADIUS_M};
 use slipstream_contract::msg::GroundTruthObject;
 use slipstream_model::road::Road;
 
 /// Range bands, metres ahead.
 pub const RANGE_BANDS_M: [(f64, f64); 4] = [(40.0, 80.0), (80.0, 120.0), (120.0, 160.0), (160.0, 200.0)];
 /// Bend bands by the tightest radius seen through, metres: straight (no curve between the ego
-/// and the vehicle), then ever tighter.
+/// and the vehicle), then ever tighter: the ACC's table's classes (crates/acc/src/in_lane.rs).
 pub const BEND_BANDS: [(&str, f64, f64); 4] = [
     ("straight", f64::INFINITY, f64::INFINITY),
-    ("R >= 1000 m", 1000.0, f64::INFINITY),
-    ("R 500-1000 m", 500.0, 1000.0),
-    ("R < 500 m", 0.0, 500.0),
+    ("R >= 1000 m", GENTLE_MIN_RADIUS_M, f64::INFINITY),
+    ("R 500-1000 m", BEND_MIN_RADIUS_M, GENTLE_MIN_RADIUS_M),
+    ("R < 500 m", 0.0, BEND_MIN_RADIUS_M),
 ];
 
 /// The road as seen from the ego's pose: the bend each vehicle is seen through, and where a
