@@ -364,7 +364,7 @@ fn write_outputs(r: &SoakReport, dir: &Path) -> Result<()> {
 fn plot(r: &SoakReport, path: &Path) -> Result<()> {
     use plotters::prelude::*;
     let (w, h) = (1100u32, 800u32);
-    crate::eval::plot::png(path, (w, h), |root| {
+    crate::eval::plot::png(path, (w, h), |root| -> Result<()> {
         let title = format!(
             "slipstream soak: {:.0} min, {} clock, {} perception",
             r.minutes,
@@ -401,7 +401,8 @@ fn plot(r: &SoakReport, path: &Path) -> Result<()> {
             crate::eval::plot::draw_legend(&mut chart)?;
         }
         Ok(())
-    })
+    })?;
+    Ok(())
 }
 
 /// The report for people.

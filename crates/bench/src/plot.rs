@@ -23,14 +23,15 @@ pub fn growth(report: &BenchReport, path: &Path) -> Result<()> {
     let (w, h) = (1300u32, 420 * rows.len() as u32 + 40);
     // The command without the binary's directory.
     let command = report.command.split_once(' ').map_or("slipstream bench", |(_, args)| args);
-    png(path, (w, h), |root| {
+    png(path, (w, h), |root| -> Result<()> {
         let root = root.titled(&format!("How the cost grows (slipstream {command})"), ("sans-serif", 16))?;
         let areas = root.split_evenly((rows.len(), 2));
         for (i, panel) in rows.into_iter().flatten().enumerate() {
             draw_panel(&areas[i], panel)?;
         }
         Ok(())
-    })
+    })?;
+    Ok(())
 }
 
 /// e. Complete loops side by side: real-time factor and loop latency.

@@ -11,9 +11,13 @@
 //!   and ROS 2 commands into the loop.
 //! - [`record`]: the bus into MCAP files, lossless and with every loss counted.
 //! - [`eval`]: recording a run, metrics, plots, latency per hop; the detect and ACC suites.
+//! - [`error`]: what can go wrong in any of them, one type for the crate.
 
+pub mod error;
 pub mod eval;
 pub mod launch;
 pub mod record;
 pub mod ros2;
 pub mod view;
+
+pub use error::{Error, Result};

@@ -11,7 +11,7 @@
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
 
-use anyhow::{bail, Context, Result};
+use crate::error::{Error, Result};
 use serde::Serialize;
 
 use super::judge::judge;
@@ -160,7 +160,7 @@ pub struct AccReport {
 /// Runs at once: `--jobs`, else one per CPU core, at most [`MAX_DEFAULT_JOBS`].
 pub(crate) fn jobs(arg: Option<usize>) -> Result<usize> {
     match arg {
-        Some(0) => bail!("--jobs must be at least 1"),
+        Some(0) => Err(Error::flag("--jobs", "must be at least 1")),
         Some(n) => Ok(n),
         None => Ok(std::thread::available_parallelism().map_or(1, |n| n.get()).min(MAX_DEFAULT_JOBS)),
     }
@@ -180,9 +180,11 @@ pub fn run(args: &EvalAccArgs, connect: &slipstream_contract::config::ConnectArg
     };
     let scenarios: Vec<Scenario> = names.iter().map(|n| Scenario::find(n)).collect::<Result<_, _>>()?;
     if let Some(dir) = &args.plots {
-        std::fs::create_dir_all(dir).with_context(|| format!("create {}", dir.display()))?;
+        std::fs::create_dir_all(dir).map_err(Error::file("create", dir))?;
     }
-    anyhow::ensure!(args.timeout > 0.0, "--timeout must be > 0");
+    if args.timeout <= 0.0 || args.timeout.is_nan() {
+        return Err(Error::flag("--timeout", "must be > 0"));
+    }
     let logs = match &args.logs {
         Some(dir) => dir.clone(),
         None => std::env::temp_dir().join(format!("slipstream-eval-acc-{}", std::process::id())),
@@ -230,7 +232,7 @@ pub(crate) fn run_all(
     mut done: impl FnMut(usize, &str, &Result<ScenarioResult>),
 ) -> Result<Vec<Result<ScenarioResult>>> {
     let total = runs.len();
-    let rt = tokio::runtime::Runtime::new()?;
+    let rt = tokio::runtime::Runtime::new().map_err(Error::system("start the async runtime"))?;
     rt.block_on(async {
         let slots = std::sync::Arc::new(tokio::sync::Semaphore::new(jobs.max(1)));
         let mut running = tokio::task::JoinSet::new();
@@ -245,20 +247,33 @@ pub(crate) fn run_all(
                 let name = scenario.name.clone();
                 let result = run_one(&arg, scenario, &args, faults, topics.as_deref(), &run_logs)
                     .await
-                    .with_context(|| format!("scenario {name} (node logs in {})", run_logs.display()));
+                    .map_err(|e| Error::Run { run: format!("scenario {name}"), logs: run_logs, source: Box::new(e) });
                 (i, name, result)
             });
         }
         let mut results: Vec<Option<Result<ScenarioResult>>> = (0..total).map(|_| None).collect();
         let mut finished = 0;
         while let Some(joined) = running.join_next().await {
-            let (i, name, result) = joined.context("a scenario's task failed")?;
+            let (i, name, result) = joined?;
             finished += 1;
             done(finished, &name, &result);
             results[i] = Some(result);
         }
         Ok(results.into_iter().flatten().collect())
     })
+}
+
+/// Whether the run ended as a run should: the simulator finished within `timeout_s` and no
+/// node died before it.
+fn ended_in_time(progress: &crate::launch::Progress, timeout_s: f64) -> Result<()> {
+    if progress.sim_ended.is_none() && progress.died.is_empty() {
+        let problem = format!("did not finish within {timeout_s} s (--timeout)");
+        return Err(Error::node("slipstream-sim", problem));
+    }
+    if !progress.died.is_empty() {
+        return Err(Error::node(progress.died.join(", "), "ended before the run was over"));
+    }
+    Ok(())
 }
 
 /// One scenario through the launch layer, judged; `faults` injected by every node.
@@ -271,7 +286,9 @@ pub(crate) async fn run_one(
     logs: &Path,
 ) -> Result<ScenarioResult> {
     if let Some(d) = args.duration {
-        anyhow::ensure!(d > 0.0, "--duration must be > 0");
+        if d <= 0.0 || d.is_nan() {
+            return Err(Error::flag("--duration", "must be > 0"));
+        }
         scenario.duration_s = d;
     }
     let name = scenario.name.clone();
@@ -315,10 +332,7 @@ pub(crate) async fn run_one(
         (lp.acc_report().map_or(0.0, |a| a.busy_s), lp.detect_report().ok().flatten().map_or(0.0, |d| d.busy_s));
     lp.close().await;
     let wall_s = opened.elapsed().as_secs_f64();
-    if progress.sim_ended.is_none() && progress.died.is_empty() {
-        bail!("slipstream-sim did not finish within {} s (--timeout)", args.timeout);
-    }
-    anyhow::ensure!(progress.died.is_empty(), "{} ended before the run was over", progress.died.join(", "));
+    ended_in_time(&progress, args.timeout)?;
     let sim = sim?;
     let time = RunTime {
         simulated_s: sim.sim_time_s,
@@ -331,9 +345,9 @@ pub(crate) async fn run_one(
 
     let judged = judge(&rec, &scenario, Some(&sim), "stopped");
     let trace = judged.trace;
-    let metrics = judged
-        .metrics
-        .with_context(|| format!("recorded only {} states (did the nodes connect?)", trace.samples.len()))?;
+    let metrics = judged.metrics.ok_or_else(|| {
+        Error::Unjudged(format!("recorded only {} states (did the nodes connect?)", trace.samples.len()))
+    })?;
     let plot = match &args.plots {
         Some(dir) => {
             let path = dir.join(format!("{name}-{}.png", args.perception.name()));

@@ -13,7 +13,8 @@
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{Context, Result};
+use crate::error::{Error, Result};
+use crate::eval::plot::Drawn;
 use serde::Serialize;
 
 use super::acc::{run_one, EvalAccArgs, ScenarioResult};
@@ -233,19 +234,22 @@ pub fn judge(baseline: &Metrics, run: &Metrics, lockstep_timeouts: u64) -> Optio
 /// The sweep's flags, checked before any run starts: every value of every axis rises and makes
 /// a valid fault profile.
 fn check_args(args: &EvalFaultsArgs) -> Result<()> {
-    anyhow::ensure!(args.timeout > 0.0, "--timeout must be > 0");
-    anyhow::ensure!(args.burst_len >= 1.0, "--burst-len must be >= 1 (messages)");
+    if args.timeout <= 0.0 || args.timeout.is_nan() {
+        return Err(Error::flag("--timeout", "must be > 0"));
+    }
+    if args.burst_len < 1.0 || args.burst_len.is_nan() {
+        return Err(Error::flag("--burst-len", "must be >= 1 (messages)"));
+    }
     for axis in Axis::ALL {
         let v = axis.values(args);
-        anyhow::ensure!(
-            v.windows(2).all(|w| w[0] < w[1]),
-            "the values of {} must rise: {v:?}",
-            axis.title(args.burst_len)
-        );
+        let title = axis.title(args.burst_len);
+        if !v.windows(2).all(|w| w[0] < w[1]) {
+            return Err(Error::flag(format!("the values of {title}"), format!("must rise: {v:?}")));
+        }
         // Every value makes a valid profile (probabilities in range, delays >= 0).
         for &x in v {
             FaultProfile::parse(&axis.profile(x, args).to_json5(), "--losses/--delays-ms", "check")
-                .with_context(|| format!("{} = {x}", axis.title(args.burst_len)))?;
+                .map_err(|e| Error::flag(format!("{title} = {x}"), format!("makes no valid fault profile: {e}")))?;
         }
     }
     Ok(())
@@ -276,7 +280,7 @@ pub fn run(args: &EvalFaultsArgs, connect: &slipstream_contract::config::Connect
         link: Default::default(),
         faults: FaultArgs::default(),
     };
-    let rt = tokio::runtime::Runtime::new()?;
+    let rt = tokio::runtime::Runtime::new().map_err(Error::system("start the async runtime"))?;
     let total_runs: usize = names.len() * (1 + Axis::ALL.iter().map(|a| a.values(args).len()).sum::<usize>());
     let mut done_runs = 0usize;
     let started = Instant::now();
@@ -287,10 +291,11 @@ pub fn run(args: &EvalFaultsArgs, connect: &slipstream_contract::config::Connect
             *done_runs += 1;
             eprint!("[{done_runs}/<={total_runs}, {:.0} s] {name}: {label} ... ", started.elapsed().as_secs_f64());
             let dir = logs.join(&name).join(label.replace([' ', '%', '/'], "_"));
-            let r = rt
-                .block_on(run_one(arg, scenario.clone(), &acc_args, faults, None, &dir))
-                .with_context(|| format!("{name}, {label} (node logs in {})", dir.display()))?;
-            Ok(r)
+            rt.block_on(run_one(arg, scenario.clone(), &acc_args, faults, None, &dir)).map_err(|e| Error::Run {
+                run: format!("{name}, {label}"),
+                logs: dir.clone(),
+                source: Box::new(e),
+            })
         };
         let base = one("fault-free", None, &mut done_runs)?;
         eprintln!(
@@ -389,7 +394,7 @@ pub fn markdown(r: &FaultsReport) -> String {
 pub fn plot(r: &FaultsReport, path: &Path) -> Result<()> {
     use plotters::prelude::*;
     let (w, h) = (1200u32, 1000u32);
-    super::plot::png(path, (w, h), |root| {
+    super::plot::png(path, (w, h), |root| -> Drawn {
         let title = format!(
             "ACC safety envelope under injected faults ({} perception, seed {}): bars held (green: at every value tried), red x: first failure",
             r.perception.name(),

@@ -20,7 +20,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use anyhow::{anyhow, bail, Result};
+use crate::error::{Error, Result};
 use parking_lot::{Condvar, Mutex};
 use serde::Serialize;
 
@@ -153,7 +153,10 @@ impl Recorded {
             }
             Ok(())
         })?;
-        anyhow::ensure!(rec.inputs > 0, "{} holds no simulator messages to replay", path.display());
+        if rec.inputs == 0 {
+            let problem = "holds no simulator messages to replay".to_string();
+            return Err(Error::Recording { path: path.to_path_buf(), problem });
+        }
         Ok(rec)
     }
 
@@ -180,11 +183,11 @@ impl Recorded {
     fn check(&self, path: &Path) -> Result<()> {
         let missing = self.missing();
         if !missing.is_empty() {
-            bail!(
-                "{} cannot be re-simulated: it has no {}, and the detector uses no frame without its camera's calibration (fix: record the run again with its latched topics: `up --record`, or `slipstream record` with no keys or with these ones named)",
-                path.display(),
+            let problem = format!(
+                "cannot be re-simulated: it has no {}, and the detector uses no frame without its camera's calibration (fix: record the run again with its latched topics: `up --record`, or `slipstream record` with no keys or with these ones named)",
                 missing.join(" and ")
             );
+            return Err(Error::Recording { path: path.to_path_buf(), problem });
         }
         let road = slipstream_contract::TopicMap::default().key(Topic::SimRoad);
         if !self.keys.contains(road.as_str()) {
@@ -278,11 +281,6 @@ pub struct ReplayStats {
     pub interrupted: bool,
 }
 
-/// The replay was asked to stop.
-#[derive(Debug, thiserror::Error)]
-#[error("the replay was stopped")]
-struct Interrupted;
-
 /// Inputs read ahead and played in simulated-time order: the recorder receives each key on
 /// its own path, so a step's state may sit in the file after the next step's speed.
 const REORDER_WINDOW: usize = 512;
@@ -354,16 +352,17 @@ impl Replayer<'_> {
             return Ok(());
         }
         if self.stop.load(Ordering::Relaxed) {
-            return Err(Interrupted.into());
+            return Err(Error::Interrupted);
         }
         self.stats.steps_timed_out += 1;
         self.in_a_row += 1;
         if self.in_a_row >= GIVE_UP_AFTER {
-            bail!(
-                "today's nodes stopped answering: {} steps in a row without their outputs (at {:.2} s simulated); see their logs",
+            let problem = format!(
+                "stopped answering: {} steps in a row without their outputs (at {:.2} s simulated); see their logs",
                 self.in_a_row,
                 stamp as f64 / 1e9
             );
+            return Err(Error::node("today's nodes", problem));
         }
         Ok(())
     }
@@ -396,7 +395,7 @@ fn replay(
     let mut index = 0u64;
     let read = each_message(path, |m| {
         if stop.load(Ordering::Relaxed) {
-            return Err(Interrupted.into());
+            return Err(Error::Interrupted);
         }
         let (channel, bytes) = (m.channel, m.data.into_owned());
         let Ok(kind) = msg::peek_kind(&bytes) else { return Ok(()) };
@@ -420,7 +419,7 @@ fn replay(
         r.finish_step()
     });
     match rest {
-        Err(e) if e.is::<Interrupted>() => r.stats.interrupted = true,
+        Err(Error::Interrupted) => r.stats.interrupted = true,
         other => other?,
     }
     r.stats.wall_s = started.elapsed().as_secs_f64();
@@ -562,7 +561,8 @@ pub async fn run(
         clock: recorded.clock(),
         perception: recorded.perception(),
         set_speed_mps: recorded.set_speed_mps.ok_or_else(|| {
-            anyhow!("{} has no acc/status: the ACC's set speed is unknown (record every key)", path.display())
+            let problem = "has no acc/status: the ACC's set speed is unknown (record every key)".to_string();
+            Error::Recording { path: path.to_path_buf(), problem }
         })?,
         time_gap_s: scenario.as_ref().and_then(|s| s.ego.time_gap_s),
         vehicle: scenario.as_ref().map(LoopSpec::vehicle_of),

@@ -7,7 +7,7 @@
 use std::path::Path;
 use std::sync::Arc;
 
-use anyhow::Context;
+use crate::error::{Error, Result};
 use parking_lot::Mutex;
 use serde::Serialize;
 
@@ -131,7 +131,7 @@ pub struct Recorder {
 }
 
 impl Recorder {
-    pub async fn start(bus: &Bus) -> anyhow::Result<Recorder> {
+    pub async fn start(bus: &Bus) -> Result<Recorder> {
         let rec = Arc::new(Mutex::new(Recorded::default()));
         let r = rec.clone();
         let s1 = bus.subscribe_with(topics::VEHICLE_STATE, move |m| r.lock().states.push(m)).await?;
@@ -192,7 +192,7 @@ impl Trace {
     /// Writes the trace as CSV: one row per vehicle/state, what the plot shows, for a
     /// spreadsheet or pandas. Values rounded to what the loop resolves (ms, mm, mm/s); an
     /// unknown gap is an empty cell.
-    pub fn write_csv(&self, path: &Path) -> anyhow::Result<()> {
+    pub fn write_csv(&self, path: &Path) -> Result<()> {
         /// One row of trace.csv; the field names are the header.
         #[derive(Serialize)]
         struct Row {
@@ -208,7 +208,8 @@ impl Trace {
             truth_lead_speed_mps: Option<f64>,
         }
         let r = |v: f64, digits: i32| (v * 10f64.powi(digits)).round() / 10f64.powi(digits);
-        let mut out = csv::Writer::from_path(path).with_context(|| format!("write {}", path.display()))?;
+        let csv_error = |source| Error::Csv { path: path.to_path_buf(), source };
+        let mut out = csv::Writer::from_path(path).map_err(csv_error)?;
         for x in &self.samples {
             out.serialize(Row {
                 t_s: r(x.t_s, 3),
@@ -221,8 +222,9 @@ impl Trace {
                 acc_gap_m: x.acc_gap_m.map(|v| r(v, 4)),
                 truth_gap_m: x.truth.map(|t| r(t.gap_m, 4)),
                 truth_lead_speed_mps: x.lead_speed_mps().map(|v| r(v, 4)),
-            })?;
+            })
+            .map_err(csv_error)?;
         }
-        out.flush().with_context(|| format!("write {}", path.display()))
+        out.flush().map_err(Error::file("write", path))
     }
 }

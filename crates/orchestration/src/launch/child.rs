@@ -6,12 +6,13 @@ use std::path::PathBuf;
 use std::process::{Command, ExitStatus};
 use std::time::{Duration, Instant};
 
-use anyhow::{bail, Context, Result};
+use crate::error::{Error, Result};
 
 /// The binary `name` next to the running one (cargo puts them side by side).
 pub fn sibling_binary(name: &str) -> Result<PathBuf> {
-    let exe = std::env::current_exe().context("where is this binary")?;
-    let dir = exe.parent().context("binary without a directory")?;
+    let exe =
+        std::env::current_exe().map_err(|source| Error::System { what: "find where this binary is".into(), source })?;
+    let dir = exe.parent().unwrap_or(&exe);
     // Test binaries live one level further down (target/<profile>/deps).
     for d in [dir, dir.parent().unwrap_or(dir)] {
         let p = d.join(format!("{name}{}", std::env::consts::EXE_SUFFIX));
@@ -19,16 +20,18 @@ pub fn sibling_binary(name: &str) -> Result<PathBuf> {
             return Ok(p);
         }
     }
-    bail!("{name} not found next to {} (build every binary: cargo build --release)", exe.display())
+    Err(Error::NoBinary { name: name.to_string(), beside: exe })
 }
 
 /// `N` distinct free loopback TCP ports (bound together, released together; the children take
 /// them right after). Released one at a time, the OS could hand out the same port twice.
 pub fn free_ports<const N: usize>() -> Result<[u16; N]> {
-    let listeners: Vec<TcpListener> = (0..N).map(|_| TcpListener::bind("127.0.0.1:0")).collect::<Result<_, _>>()?;
+    let port_error = |source| Error::System { what: "take a free loopback port".into(), source };
+    let listeners: Vec<TcpListener> =
+        (0..N).map(|_| TcpListener::bind("127.0.0.1:0")).collect::<Result<_, _>>().map_err(port_error)?;
     let mut ports = [0u16; N];
     for (p, l) in ports.iter_mut().zip(&listeners) {
-        *p = l.local_addr()?.port();
+        *p = l.local_addr().map_err(port_error)?.port();
     }
     Ok(ports)
 }
@@ -99,15 +102,11 @@ impl Child {
         let cmd = std::mem::replace(cmd, Command::new(cmd.get_program()));
         let program = cmd.get_program().to_owned();
         let (tx, rx) = std::sync::mpsc::channel();
-        spawner()
-            .lock()
-            .map_err(|_| anyhow::anyhow!("the process spawner is gone"))?
-            .send((cmd, tx))
-            .map_err(|_| anyhow::anyhow!("the process spawner is gone"))?;
-        let child = rx
-            .recv()
-            .map_err(|_| anyhow::anyhow!("the process spawner is gone"))?
-            .with_context(|| format!("start {name} ({program:?})"))?;
+        let gone = || std::io::Error::other("the process spawner is gone");
+        let sent = spawner().lock().map_err(|_| gone()).and_then(|s| s.send((cmd, tx)).map_err(|_| gone()));
+        let child = sent
+            .and_then(|()| rx.recv().map_err(|_| gone())?)
+            .map_err(|source| Error::System { what: format!("start {name} ({program:?})"), source })?;
         Ok(Child { name: name.to_string(), child, status: None })
     }
     pub fn pid(&self) -> u32 {

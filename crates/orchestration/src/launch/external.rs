@@ -7,7 +7,7 @@
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use anyhow::{bail, Result};
+use crate::error::{Error, Result};
 use parking_lot::Mutex;
 
 use slipstream_contract::bus::{Bus, CallbackSubscriber, Received};
@@ -68,13 +68,16 @@ impl ExternalSim {
                 return Ok(());
             }
             if Instant::now() >= deadline {
-                bail!(
-                    "no simulator: nothing on {} after {:.0} s. Start one (python3 clients/python/examples/reference_sim.py, \
-                     a CARLA or CoppeliaSim adapter, slipstream-sim elsewhere) with the same -n/--namespace and a \
-                     link to this machine (-e), or raise --sim-wait; `slipstream conform sim` checks it",
-                    self.speed_key,
-                    timeout.as_secs_f64()
-                );
+                return Err(Error::node(
+                    "simulator",
+                    format!(
+                        "missing: nothing on {} after {:.0} s. Start one (python3 clients/python/examples/reference_sim.py, \
+                         a CARLA or CoppeliaSim adapter, slipstream-sim elsewhere) with the same -n/--namespace and a \
+                         link to this machine (-e), or raise --sim-wait; `slipstream conform sim` checks it",
+                        self.speed_key,
+                        timeout.as_secs_f64()
+                    ),
+                ));
             }
             tokio::time::sleep(Duration::from_millis(50)).await;
         }

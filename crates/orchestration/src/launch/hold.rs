@@ -12,7 +12,7 @@ use std::io::{Read, Seek, Write};
 use std::os::fd::AsRawFd;
 use std::path::PathBuf;
 
-use anyhow::{Context, Result};
+use crate::error::{Error, Result};
 
 /// A held namespace: the lock goes with this value (or with the process).
 #[derive(Debug)]
@@ -20,11 +20,19 @@ pub struct Hold {
     _file: std::fs::File,
 }
 
-/// Takes the hold of `namespace` ("" for the default one). Ok(Err(holder)) when another
-/// process holds it: what that process wrote (its pid and command line).
-pub fn take(namespace: &str) -> Result<std::result::Result<Hold, String>> {
+/// What an attempt at a namespace's hold got.
+#[derive(Debug)]
+pub enum Attempt {
+    /// The hold, this process's until it is dropped.
+    Held(Hold),
+    /// Another process holds it: what that process wrote (its pid and command line).
+    TakenBy(String),
+}
+
+/// Takes the hold of `namespace` ("" for the default one), or says who has it.
+pub fn take(namespace: &str) -> Result<Attempt> {
     let dir = lock_dir();
-    std::fs::create_dir_all(&dir).with_context(|| format!("create {}", dir.display()))?;
+    std::fs::create_dir_all(&dir).map_err(Error::file("create", &dir))?;
     let path = dir.join(file_name(namespace));
     let mut file = std::fs::OpenOptions::new()
         .read(true)
@@ -32,18 +40,17 @@ pub fn take(namespace: &str) -> Result<std::result::Result<Hold, String>> {
         .create(true)
         .truncate(false)
         .open(&path)
-        .with_context(|| format!("open {}", path.display()))?;
+        .map_err(Error::file("open", &path))?;
     // SAFETY: flock on a descriptor this function owns; no memory is shared.
     if unsafe { libc::flock(file.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } != 0 {
         let mut holder = String::new();
         let _ = file.read_to_string(&mut holder);
-        return Ok(Err(holder.trim().to_string()));
+        return Ok(Attempt::TakenBy(holder.trim().to_string()));
     }
     let me = format!("pid {}: {}", std::process::id(), std::env::args().collect::<Vec<_>>().join(" "));
-    file.set_len(0)?;
-    file.rewind()?;
-    file.write_all(me.as_bytes())?;
-    Ok(Ok(Hold { _file: file }))
+    let written = file.set_len(0).and_then(|()| file.rewind()).and_then(|_| file.write_all(me.as_bytes()));
+    written.map_err(Error::file("write", &path))?;
+    Ok(Attempt::Held(Hold { _file: file }))
 }
 
 /// `<temp>/slipstream-<uid>/net-<network namespace inode>`.
@@ -70,12 +77,11 @@ mod tests {
     #[test]
     fn a_namespace_is_held_once_and_free_again_when_its_hold_goes() {
         let ns = format!("hold-test-{}", std::process::id());
-        let first = take(&ns).unwrap().expect("free at first");
-        let again = take(&ns).unwrap();
-        let holder = again.expect_err("held by the first");
+        let Attempt::Held(first) = take(&ns).unwrap() else { panic!("free at first") };
+        let Attempt::TakenBy(holder) = take(&ns).unwrap() else { panic!("held by the first") };
         assert!(holder.starts_with(&format!("pid {}: ", std::process::id())), "{holder}");
         drop(first);
-        assert!(take(&ns).unwrap().is_ok(), "free once the hold is dropped");
+        assert!(matches!(take(&ns).unwrap(), Attempt::Held(_)), "free once the hold is dropped");
         assert_eq!(file_name("lab/rig2"), "lab%rig2.lock");
         assert_eq!(file_name(""), "_default.lock");
     }

@@ -31,7 +31,7 @@ pub mod nodes;
 
 pub use child::{free_ports, sibling_binary, Child};
 pub use external::ExternalSim;
-pub use nodes::{ClockMode, LinkKind, LoopRun, LoopSpec, Network, NodeEnd, NodeInput};
+pub use nodes::{ClockMode, LinkKind, LoopRun, LoopSpec, Network, NodeEnd, NodeInput, Progress};
 
 /// How long the controllers may take to appear on the bus.
 pub const NODE_START_TIMEOUT: Duration = Duration::from_secs(30);

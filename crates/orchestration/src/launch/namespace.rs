@@ -17,7 +17,8 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::time::Duration;
 
-use anyhow::{bail, Result};
+use super::hold::{Attempt, Hold};
+use crate::error::{Error, Result};
 
 use slipstream_contract::topics::NODES_PREFIX;
 use slipstream_contract::TopicMap;
@@ -42,7 +43,7 @@ pub struct Claimed {
     /// alive", "`up` (pid 42: slipstream up) holds it").
     pub beside: String,
     /// The run's hold on its namespace on this machine (none for an isolated loop).
-    pub hold: Option<super::hold::Hold>,
+    pub hold: Option<Hold>,
 }
 
 /// Claims `map`'s namespace for a run that brings the nodes `ours`, or moves (see the module
@@ -50,17 +51,20 @@ pub struct Claimed {
 pub async fn claim(session: &zenoh::Session, map: TopicMap, ours: &[&str], sim_elsewhere: bool) -> Result<Claimed> {
     settle(session).await;
     let alive = nodes_by_namespace(session).await?;
-    let taken_by = |ns: &str| -> Result<std::result::Result<super::hold::Hold, String>> {
+    let taken_by = |ns: &str| -> Result<Attempt> {
         let here: Vec<&str> =
             alive.get(ns).map_or(Vec::new(), |n| n.iter().map(String::as_str).filter(|n| ours.contains(n)).collect());
         if !here.is_empty() {
-            return Ok(Err(format!("its nodes {} are alive", here.join(", "))));
+            return Ok(Attempt::TakenBy(format!("its nodes {} are alive", here.join(", "))));
         }
-        Ok(super::hold::take(ns)?.map_err(|holder| format!("`up` ({holder}) holds it")))
+        Ok(match super::hold::take(ns)? {
+            Attempt::TakenBy(holder) => Attempt::TakenBy(format!("`up` ({holder}) holds it")),
+            held => held,
+        })
     };
     let why = match taken_by(map.namespace())? {
-        Ok(hold) => return Ok(Claimed { map, moved_to: None, beside: String::new(), hold: Some(hold) }),
-        Err(why) => why,
+        Attempt::Held(hold) => return Ok(Claimed { map, moved_to: None, beside: String::new(), hold: Some(hold) }),
+        Attempt::TakenBy(why) => why,
     };
     if !map.namespace().is_empty() || sim_elsewhere {
         let shown = if map.namespace().is_empty() {
@@ -68,16 +72,18 @@ pub async fn claim(session: &zenoh::Session, map: TopicMap, ours: &[&str], sim_e
         } else {
             format!("namespace `{}`", map.namespace())
         };
-        bail!(
+        return Err(Error::Refused(format!(
             "a loop is already running in {shown} ({why}): this one would mix with it (fix: stop it, or give this run a namespace of its own with -n NAME; `slipstream top -n NAME` then watches it)"
-        );
+        )));
     }
     for ns in (2..=MAX_LOOPS).map(|n| format!("loop-{n}")) {
-        if let Ok(hold) = taken_by(&ns)? {
+        if let Attempt::Held(hold) = taken_by(&ns)? {
             return Ok(Claimed { map: map.with_namespace(&ns)?, moved_to: Some(ns), beside: why, hold: Some(hold) });
         }
     }
-    bail!("loop-2 to loop-{MAX_LOOPS} all hold loops (fix: give this run a namespace of its own with -n NAME)")
+    Err(Error::Refused(format!(
+        "loop-2 to loop-{MAX_LOOPS} all hold loops (fix: give this run a namespace of its own with -n NAME)"
+    )))
 }
 
 /// Lets gossip link this session to the peers it learned of when it opened, so that the
@@ -101,9 +107,12 @@ async fn settle(session: &zenoh::Session) {
 /// Every node alive on the bus, by namespace ("" for the default one).
 async fn nodes_by_namespace(session: &zenoh::Session) -> Result<BTreeMap<String, BTreeSet<String>>> {
     let selector = format!("**/{NODES_PREFIX}/*");
-    let replies = session.liveliness().get(&selector).timeout(ASK_TIMEOUT).await.map_err(|e| {
-        anyhow::anyhow!("ask the bus for the nodes alive: {}", slipstream_contract::bus::zenoh_message(&e))
-    })?;
+    let replies = session
+        .liveliness()
+        .get(&selector)
+        .timeout(ASK_TIMEOUT)
+        .await
+        .map_err(Error::zenoh("ask the bus for the nodes alive"))?;
     let mut alive: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
     while let Ok(reply) = replies.recv_async().await {
         if let Ok(sample) = reply.result() {

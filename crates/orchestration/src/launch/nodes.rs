@@ -19,7 +19,7 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, ExitStatus, Stdio};
 use std::time::Instant;
 
-use anyhow::{bail, Context, Result};
+use crate::error::{Error, Result};
 use serde::Serialize;
 
 use super::child::{free_ports, sibling_binary, Child};
@@ -114,10 +114,10 @@ impl LoopSpec {
             (slipstream_contract::topics::CAMERA_FRONT.topic, "perception/objects (ground truth: objects)"),
         ] {
             if p.topics.contains_key(&topic) {
-                bail!(
+                return Err(Error::Refused(format!(
                     "{}: key `topics.{topic}`: faults on {topic} cannot run in lockstep (each step waits for what follows from it) (fix: put them on {instead}, or use --mode realtime or fast)",
                     p.name
-                );
+                )));
             }
         }
         Ok(())
@@ -237,7 +237,7 @@ impl Endpoints {
                 static RUNS: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
                 let run = RUNS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
                 let dir = std::env::temp_dir().join(format!("slipstream-{}-{run}", std::process::id()));
-                std::fs::create_dir_all(&dir).with_context(|| format!("create {}", dir.display()))?;
+                std::fs::create_dir_all(&dir).map_err(Error::file("create", &dir))?;
                 let sock = |name: &str| format!("unixsock-stream/{}", dir.join(format!("{name}.sock")).display());
                 let low_latency = [ACC, DETECT, SIM].iter().map(|n| (sock(n), format!("{}.ll", sock(n)))).collect();
                 Ok(Endpoints {
@@ -285,7 +285,7 @@ impl LoopRun {
     /// Joins the bus as `observer`, with the node logs going to `logs` (created). Nothing is
     /// started yet: subscribe to what you record first, then [`LoopRun::start`].
     pub async fn open(spec: LoopSpec, network: Network<'_>, logs: &Path, observer: &str) -> Result<LoopRun> {
-        std::fs::create_dir_all(logs).with_context(|| format!("create the log directory {}", logs.display()))?;
+        std::fs::create_dir_all(logs).map_err(Error::file("create the log directory", logs))?;
         let endpoints = Endpoints::new(spec.link)?;
         let isolated = matches!(network, Network::Isolated { .. });
         let sim_elsewhere = matches!(network, Network::User { sim_elsewhere: true, .. });
@@ -293,10 +293,9 @@ impl LoopRun {
             Network::User { connect, .. } => {
                 let mut config = connect.zenoh_config()?;
                 let mode = config.get_json("mode").ok().and_then(|m| serde_json::from_str::<String>(&m).ok());
-                anyhow::ensure!(
-                    mode.as_deref() != Some("router"),
-                    "the loop runs its nodes as peers or clients, not routers (-m)"
-                );
+                if mode.as_deref() == Some("router") {
+                    return Err(Error::Refused("the loop runs its nodes as peers or clients, not routers (-m)".into()));
+                }
                 let peer = mode.as_deref().unwrap_or("peer") == "peer";
                 if peer {
                     let mut listen: Vec<serde_json::Value> = config
@@ -307,21 +306,22 @@ impl LoopRun {
                     listen.push(endpoints.observer.clone().into());
                     config
                         .insert_json5("listen/endpoints", &serde_json::Value::Array(listen).to_string())
-                        .map_err(|e| anyhow::anyhow!("add a listen endpoint for the nodes: {e}"))?;
+                        .map_err(Error::zenoh("add a listen endpoint for the nodes"))?;
                 }
                 (config, connect.topic_map()?, user_flags(connect), connect.connect.clone(), peer)
             }
             Network::Isolated { topics, namespace } => {
-                let mut config = zenoh::Config::from_json5(DEFAULT_ZENOH_CONFIG).map_err(anyhow::Error::msg)?;
+                let mut config = zenoh::Config::from_json5(DEFAULT_ZENOH_CONFIG)
+                    .map_err(Error::zenoh("the built-in Zenoh configuration"))?;
                 config
                     .insert_json5("listen/endpoints", &format!("[\"{}\"]", endpoints.observer))
-                    .map_err(anyhow::Error::msg)?;
-                config.insert_json5("connect/endpoints", "[]").map_err(anyhow::Error::msg)?;
+                    .map_err(Error::zenoh("listen on the observer's endpoint"))?;
+                config.insert_json5("connect/endpoints", "[]").map_err(Error::zenoh("connect to nothing"))?;
                 let map =
                     slipstream_contract::TopicMap::load_or_default(topics.as_deref())?.with_namespace(&namespace)?;
                 let mut flags = vec!["-n".to_string(), namespace];
                 for (key, value) in ISOLATED_CFG {
-                    config.insert_json5(key, value).map_err(|e| anyhow::anyhow!("zenoh config key {key}: {e}"))?;
+                    config.insert_json5(key, value).map_err(Error::zenoh(format!("zenoh config key {key}")))?;
                     flags.extend(["--cfg".into(), format!("{key}:{value}")]);
                 }
                 if let Some(file) = topics {
@@ -330,9 +330,7 @@ impl LoopRun {
                 (config, map, flags, Vec::new(), true)
             }
         };
-        let session = zenoh::open(config)
-            .await
-            .map_err(|e| anyhow::anyhow!("join the bus: {}", slipstream_contract::bus::zenoh_message(&e)))?;
+        let session = zenoh::open(config).await.map_err(Error::zenoh("join the bus"))?;
         let claimed = match isolated {
             true => super::namespace::Claimed { map: topic_map, moved_to: None, beside: String::new(), hold: None },
             false => {
@@ -346,7 +344,7 @@ impl LoopRun {
         }
         let moved = claimed.moved_to.clone().map(|ns| (ns, claimed.beside.clone()));
         let hold = claimed.hold;
-        let bus = Bus::from_session(session, claimed.map, observer).await.context("join the bus")?;
+        let bus = Bus::from_session(session, claimed.map, observer).await?;
         Ok(LoopRun {
             bus,
             spec,
@@ -400,7 +398,7 @@ impl LoopRun {
         spec.check_faults()?;
         if let Some(p) = &spec.faults {
             let path = self.logs.join(FAULTS_FILE);
-            std::fs::write(&path, p.to_json5()).with_context(|| format!("write {}", path.display()))?;
+            std::fs::write(&path, p.to_json5()).map_err(Error::file("write", &path))?;
             self.base_flags.extend(["--faults".into(), path.display().to_string()]);
         }
         let mut acc_args = vec![
@@ -465,14 +463,19 @@ impl LoopRun {
                 if let Some(status) = n.exited() {
                     let log = log_of(&self.logs, &n.name);
                     let why = last_error(&log).map_or(String::new(), |e| format!(": {e}"));
-                    bail!("{} exited at start ({status}){why}\n(its log: {})", n.name, log.display());
+                    return Err(Error::node(
+                        &n.name,
+                        format!("exited at start ({status}){why}\n(its log: {})", log.display()),
+                    ));
                 }
             }
-            anyhow::ensure!(
-                Instant::now() < deadline,
-                "{wanted:?} not all up after {NODE_START_TIMEOUT:?} (alive: {alive:?}); see the logs in {}",
-                self.logs.display()
-            );
+            if Instant::now() >= deadline {
+                let problem = format!(
+                    "not all up after {NODE_START_TIMEOUT:?} (alive: {alive:?}); see the logs in {}",
+                    self.logs.display()
+                );
+                return Err(Error::node(format!("{wanted:?}"), problem));
+            }
             tokio::time::sleep(NODE_POLL).await;
         }
     }
@@ -582,15 +585,15 @@ impl LoopRun {
     /// The simulator's report (its --json output), once it has ended.
     pub fn sim_report(&self) -> Result<SimReport> {
         let path = self.logs.join(SIM_REPORT);
-        let bytes = std::fs::read(&path).with_context(|| format!("read {}", path.display()))?;
-        serde_json::from_slice(&bytes).with_context(|| format!("{} is no simulator report", path.display()))
+        let bytes = std::fs::read(&path).map_err(Error::file("read", &path))?;
+        serde_json::from_slice(&bytes).map_err(|source| Error::Json { path, what: "is no simulator report", source })
     }
 
     /// The ACC's statistics (its --json output), once it has been stopped.
     pub fn acc_report(&self) -> Result<AccStats> {
         let path = self.logs.join(ACC_REPORT);
-        let bytes = std::fs::read(&path).with_context(|| format!("read {}", path.display()))?;
-        serde_json::from_slice(&bytes).with_context(|| format!("{} holds no ACC statistics", path.display()))
+        let bytes = std::fs::read(&path).map_err(Error::file("read", &path))?;
+        serde_json::from_slice(&bytes).map_err(|source| Error::Json { path, what: "holds no ACC statistics", source })
     }
 
     /// The detector's statistics (its --json output), once it has been stopped; None without
@@ -600,10 +603,12 @@ impl LoopRun {
             return Ok(None);
         }
         let path = self.logs.join(DETECT_REPORT);
-        let bytes = std::fs::read(&path).with_context(|| format!("read {}", path.display()))?;
-        serde_json::from_slice(&bytes)
-            .map(Some)
-            .with_context(|| format!("{} holds no detector statistics", path.display()))
+        let bytes = std::fs::read(&path).map_err(Error::file("read", &path))?;
+        serde_json::from_slice(&bytes).map(Some).map_err(|source| Error::Json {
+            path,
+            what: "holds no detector statistics",
+            source,
+        })
     }
 
     /// The inputs of the ACC and the simulator as they ended (after [`LoopRun::stop`]): what
@@ -654,7 +659,7 @@ pub fn last_error(log: &Path) -> Option<String> {
 }
 
 fn create(path: &Path) -> Result<std::fs::File> {
-    std::fs::File::create(path).with_context(|| format!("create {}", path.display()))
+    std::fs::File::create(path).map_err(Error::file("create", path))
 }
 
 /// The user's flags as the nodes take them (endpoints are added per node).

@@ -8,7 +8,7 @@ use std::io::BufReader;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
-use anyhow::{anyhow, Context, Result};
+use crate::error::{Error, Result};
 use serde::Serialize;
 use zenoh::key_expr::OwnedKeyExpr;
 use zenoh::qos::CongestionControl;
@@ -63,7 +63,7 @@ impl Output {
         if let Some(a) = &self.attachment {
             put = put.attachment(a.clone());
         }
-        put.wait().map_err(|e| anyhow!("publish on {}: {e}", self.publisher.key_expr()))
+        put.wait().map_err(Error::zenoh(format!("publish on {}", self.publisher.key_expr())))
     }
 }
 
@@ -71,7 +71,7 @@ impl Output {
 /// recordings (`play`, re-simulation). A file cut by a crash is read up to the cut and
 /// `true` returned; a file that is no MCAP at all is an error.
 pub fn each_message(path: &Path, mut f: impl FnMut(mcap::Message<'static>) -> Result<()>) -> Result<bool> {
-    let file = File::open(path).with_context(|| format!("open {}", path.display()))?;
+    let file = File::open(path).map_err(Error::file("open", path))?;
     let mut seen = false;
     for message in mcap::io::MessageReader::new(BufReader::new(file)) {
         match message {
@@ -83,7 +83,10 @@ pub fn each_message(path: &Path, mut f: impl FnMut(mcap::Message<'static>) -> Re
                 tracing::warn!("{}: {e}; read up to there", path.display());
                 return Ok(true);
             }
-            Err(e) => return Err(anyhow!("{} is no readable MCAP file: {e}", path.display())),
+            Err(e) => {
+                let problem = format!("is no readable MCAP file: {e}");
+                return Err(Error::Recording { path: path.to_path_buf(), problem });
+            }
         }
     }
     Ok(false)
@@ -153,14 +156,16 @@ pub(crate) fn output_for(
         ns => channel.topic.strip_prefix(ns).and_then(|k| k.strip_prefix('/')).unwrap_or(&channel.topic),
     };
     let relative_key = OwnedKeyExpr::autocanonize(relative.to_string())
-        .map_err(|e| anyhow!("recorded key `{}`: {e}", channel.topic))?;
+        .map_err(Error::zenoh(format!("recorded key `{}`", channel.topic)))?;
     if !keys.is_empty() && !keys.iter().any(|k| k.intersects(&relative_key)) {
         return Ok(None);
     }
     let topics = bus.topics();
     let key = match topics.namespace() {
         "" => relative_key.clone(),
-        ns => OwnedKeyExpr::autocanonize(format!("{ns}/{relative}")).map_err(|e| anyhow!("{ns}/{relative}: {e}"))?,
+        ns => {
+            OwnedKeyExpr::autocanonize(format!("{ns}/{relative}")).map_err(Error::zenoh(format!("{ns}/{relative}")))?
+        }
     };
     // The topic's QoS where the key is one of slipstream's; "block" at --max so nothing drops.
     let qos = topics.topic_of(&key).map(|t| topics.qos(t));
@@ -175,6 +180,6 @@ pub(crate) fn output_for(
     if let Some(encoding) = channel.metadata.get("zenoh_encoding") {
         builder = builder.encoding(zenoh::bytes::Encoding::from(encoding.as_str()));
     }
-    let publisher = builder.wait().map_err(|e| anyhow!("declare a publisher on {key}: {e}"))?;
+    let publisher = builder.wait().map_err(Error::zenoh(format!("declare a publisher on {key}")))?;
     Ok(Some(Output { publisher, attachment: channel.metadata.get("publisher").cloned() }))
 }

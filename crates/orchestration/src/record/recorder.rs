@@ -10,7 +10,7 @@ use std::sync::Arc;
 use std::thread::JoinHandle;
 use std::time::Instant;
 
-use anyhow::{anyhow, Context, Result};
+use crate::error::{Error, Result};
 use parking_lot::Mutex;
 use serde::Serialize;
 use zenoh::key_expr::OwnedKeyExpr;
@@ -168,14 +168,14 @@ impl Recording {
         viewable: Option<Copies>,
     ) -> Result<Recording> {
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-            std::fs::create_dir_all(dir).with_context(|| format!("create {}", dir.display()))?;
+            std::fs::create_dir_all(dir).map_err(Error::file("create", dir))?;
         }
-        let file = File::create(path).with_context(|| format!("create {}", path.display()))?;
+        let file = File::create(path).map_err(Error::file("create", path))?;
         let options = mcap::WriteOptions::new()
             .compression(Some(mcap::Compression::Lz4))
             .profile("slipstream")
             .library(format!("slipstream {}", env!("CARGO_PKG_VERSION")));
-        let writer = options.create(BufWriter::new(file)).map_err(|e| anyhow!("start {}: {e}", path.display()))?;
+        let writer = options.create(BufWriter::new(file)).map_err(Error::mcap("start", path))?;
         let shared = Arc::new(Shared::default());
         let (tx, rx) = sync_channel(QUEUE_ITEMS);
         let mut about = BTreeMap::new();
@@ -190,7 +190,7 @@ impl Recording {
             std::thread::Builder::new()
                 .name("mcap-writer".into())
                 .spawn(move || write_loop(rx, shared, Files { writer, path, viewable }, about))
-                .context("start the recorder's writer thread")?
+                .map_err(|source| Error::System { what: "start the recorder's writer thread".into(), source })?
         };
         let mut subs = Vec::new();
         for sel in selectors {
@@ -218,8 +218,8 @@ impl Recording {
         self.shared.closing.store(true, Ordering::SeqCst);
         self.subs.clear();
         let _ = self.tx.send(ToWriter::Finish);
-        let thread = self.writer.take().context("recording already finished")?;
-        thread.join().map_err(|_| anyhow!("the recorder's writer thread panicked"))?
+        let writer = self.writer.take().ok_or(Error::Panicked("the recorder's writer thread"))?;
+        writer.join().map_err(|_| Error::Panicked("the recorder's writer thread"))?
     }
 }
 
@@ -329,7 +329,7 @@ fn write_loop(
     let mut channels: HashMap<ChannelKey, Channel> = HashMap::new();
     let mut schemas: HashMap<Option<MessageKind>, u16> = HashMap::new();
     let mut last_flush = Instant::now();
-    let fail = |e: mcap::McapError| anyhow!("write {}: {e}", path.display());
+    let fail = |e: mcap::McapError| Error::mcap("write", &path)(e);
     loop {
         let item = match rx.recv_timeout(FLUSH_EVERY) {
             Ok(ToWriter::Item(item)) => Some(item),
@@ -386,7 +386,11 @@ fn write_loop(
     about.insert("dropped_by_recorder".to_string(), summary.dropped_by_recorder.to_string());
     about.insert("viewable_copies_written".to_string(), summary.viewable_copies.to_string());
     about.insert("viewable_copies_skipped".to_string(), summary.viewable_skipped.to_string());
-    about.insert("channels".to_string(), serde_json::to_string(&summary.channels)?);
+    about.insert(
+        "channels".to_string(),
+        serde_json::to_string(&summary.channels)
+            .map_err(|e| Error::Bug(format!("the recording's channel table does not serialize: {e}")))?,
+    );
     writer
         .write_metadata(&mcap::records::Metadata { name: METADATA_NAME.to_string(), metadata: about })
         .map_err(fail)?;

@@ -10,7 +10,7 @@ use std::fs::File;
 use std::io::BufWriter;
 use std::path::{Path, PathBuf};
 
-use anyhow::{anyhow, Context as _, Result};
+use crate::error::{Error, Result};
 use parking_lot::Mutex;
 
 use super::mapping::{Direction, Ros2Config, Route};
@@ -43,15 +43,15 @@ impl Bag {
     /// namespace).
     pub fn create(path: &Path, config: &Ros2Config) -> Result<Bag> {
         if let Some(dir) = path.parent().filter(|d| !d.as_os_str().is_empty()) {
-            std::fs::create_dir_all(dir).with_context(|| format!("create {}", dir.display()))?;
+            std::fs::create_dir_all(dir).map_err(Error::file("create", dir))?;
         }
-        let file = File::create(path).with_context(|| format!("create {}", path.display()))?;
+        let file = File::create(path).map_err(Error::file("create", path))?;
         let writer = mcap::WriteOptions::new()
             .compression(Some(mcap::Compression::Lz4))
             .profile(PROFILE)
             .library(format!("slipstream {}", env!("CARGO_PKG_VERSION")))
             .create(BufWriter::new(file))
-            .map_err(|e| anyhow!("start {}: {e}", path.display()))?;
+            .map_err(Error::mcap("start", path))?;
         let node = config.node_id(String::new());
         let routes = config
             .enabled()
@@ -66,8 +66,9 @@ impl Bag {
     pub fn write(&self, route: Route, header: &Header, log_time_ns: u64, cdr: &[u8]) -> Result<()> {
         let Some((topic, type_name)) = self.routes.get(&route) else { return Ok(()) };
         let mut guard = self.open.lock();
-        let open = guard.as_mut().ok_or_else(|| anyhow!("{} is closed", self.path.display()))?;
-        let fail = |e: mcap::McapError| anyhow!("write {}: {e}", self.path.display());
+        let closed = || Error::Recording { path: self.path.clone(), problem: "is closed".into() };
+        let open = guard.as_mut().ok_or_else(closed)?;
+        let fail = |e: mcap::McapError| Error::mcap("write", &self.path)(e);
         let channel = match open.channels.get(&route) {
             Some(id) => *id,
             None => {
@@ -99,7 +100,7 @@ impl Bag {
     /// Writes the index and closes the file; the messages written.
     pub fn finish(&self) -> Result<u64> {
         let Some(mut open) = self.open.lock().take() else { return Ok(0) };
-        open.writer.finish().map_err(|e| anyhow!("finish {}: {e}", self.path.display()))?;
+        open.writer.finish().map_err(Error::mcap("finish", &self.path))?;
         Ok(open.messages)
     }
 }

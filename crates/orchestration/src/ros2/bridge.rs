@@ -10,7 +10,7 @@
 use std::collections::{BTreeMap, BTreeSet};
 use std::sync::Arc;
 
-use anyhow::Result;
+use crate::error::{Error, Result};
 use serde::Serialize;
 
 use super::mapping::Route;
@@ -56,8 +56,10 @@ impl Bridge {
             let c = counters.clone();
             Arc::new(move |r: Route| c[&r].clone())
         };
-        let (frames, frames_thread) = Outbox::start("ros2-frames", FRAME_BACKLOG, lookup.clone())?;
-        let (signals, signals_thread) = Outbox::start("ros2-signals", SIGNAL_BACKLOG, lookup)?;
+        let (frames, frames_thread) = Outbox::start("ros2-frames", FRAME_BACKLOG, lookup.clone())
+            .map_err(Error::system("start the ROS 2 frames' thread"))?;
+        let (signals, signals_thread) = Outbox::start("ros2-signals", SIGNAL_BACKLOG, lookup)
+            .map_err(Error::system("start the ROS 2 signals' thread"))?;
         let taken = outlet.routes();
         let types = taken.iter().map(|(r, _, t)| (*r, t.as_str()));
         let translator = Arc::new(Translator::new(bus.topics().namespace()).with_types(types));

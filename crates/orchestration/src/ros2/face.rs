@@ -4,7 +4,7 @@
 
 use std::sync::Arc;
 
-use anyhow::Result;
+use crate::error::Result;
 use serde::Serialize;
 
 use super::bridge::{Bridge, RouteStats};

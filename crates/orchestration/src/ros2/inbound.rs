@@ -4,7 +4,7 @@
 
 use std::sync::Arc;
 
-use anyhow::{Context as _, Result};
+use crate::error::{Error, Result};
 use parking_lot::Mutex;
 use zenoh::liveliness::LivelinessToken;
 use zenoh::sample::Sample;
@@ -50,8 +50,7 @@ impl CommandPath {
                 }
             })
             .await
-            .map_err(anyhow::Error::from_boxed)
-            .with_context(|| format!("subscribe to ROS 2 commands on {key}"))?;
+            .map_err(Error::zenoh(format!("subscribe to ROS 2 commands on {key}")))?;
         let control: Publisher<ControlCommand> = bus.publisher(topics::VEHICLE_CONTROL).await?;
         let g = gate.clone();
         let speed = bus

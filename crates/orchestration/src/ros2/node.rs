@@ -6,7 +6,7 @@
 use std::sync::atomic::{AtomicBool, AtomicI64, AtomicU32, Ordering};
 use std::sync::Arc;
 
-use anyhow::{Context as _, Result};
+use crate::error::{Error, Result};
 use zenoh::liveliness::LivelinessToken;
 use zenoh::qos::CongestionControl;
 use zenoh::Wait as _;
@@ -61,7 +61,9 @@ impl RosNode {
         };
         let builder = self.session.declare_publisher(key.clone()).congestion_control(congestion);
         let inner = match qos.durability {
-            Durability::Volatile => Inner::Plain(builder.await.map_err(anyhow::Error::from_boxed)?),
+            Durability::Volatile => {
+                Inner::Plain(builder.await.map_err(Error::zenoh(format!("declare a publisher on {key}")))?)
+            }
             Durability::TransientLocal => {
                 use zenoh_ext::AdvancedPublisherBuilderExt as _;
                 let cache = zenoh_ext::CacheConfig::default().max_samples(qos.depth as usize);
@@ -72,7 +74,7 @@ impl RosNode {
                     .sample_miss_detection(zenoh_ext::MissDetectionConfig::default())
                     .publisher_detection()
                     .await
-                    .map_err(anyhow::Error::from_boxed)?;
+                    .map_err(Error::zenoh(format!("declare a cached publisher on {key}")))?;
                 Inner::Cached(cached)
             }
         };
@@ -107,8 +109,7 @@ async fn declare_token(session: &zenoh::Session, key: &str) -> Result<Liveliness
         .liveliness()
         .declare_token(key.to_string())
         .await
-        .map_err(anyhow::Error::from_boxed)
-        .with_context(|| format!("declare the ROS 2 liveliness token {key}"))
+        .map_err(Error::zenoh(format!("declare the ROS 2 liveliness token {key}")))
 }
 
 enum Inner {
@@ -143,14 +144,14 @@ struct Watched {
 
 impl Watched {
     async fn declare(p: &zenoh::pubsub::Publisher<'static>) -> Result<Watched> {
-        let now = p.matching_status().await.map_err(anyhow::Error::from_boxed)?.matching();
+        let now = p.matching_status().await.map_err(Error::zenoh("ask a publisher whether it matches"))?.matching();
         let matching = Arc::new(AtomicBool::new(now));
         let m = matching.clone();
         let listener = p
             .matching_listener()
             .callback(move |s: zenoh::matching::MatchingStatus| m.store(s.matching(), Ordering::Relaxed))
             .await
-            .map_err(anyhow::Error::from_boxed)?;
+            .map_err(Error::zenoh("watch a publisher's matching"))?;
         Ok(Watched { matching, _listener: listener })
     }
 }
@@ -173,6 +174,6 @@ impl RosPublisher {
             Inner::Plain(p) => p.put(cdr).attachment(attachment).wait(),
             Inner::Cached(p) => p.put(cdr).attachment(attachment).wait(),
         };
-        sent.map_err(anyhow::Error::from_boxed).with_context(|| format!("put on {}", self.key))
+        sent.map_err(Error::zenoh(format!("put on {}", self.key)))
     }
 }

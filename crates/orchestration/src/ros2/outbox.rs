@@ -11,7 +11,7 @@ use parking_lot::{Condvar, Mutex};
 use super::mapping::Route;
 
 /// Work for the sending thread: convert and put one message. Returns the bytes sent.
-pub type Job = Box<dyn FnOnce() -> anyhow::Result<usize> + Send>;
+pub type Job = Box<dyn FnOnce() -> crate::error::Result<usize> + Send>;
 
 /// What one route has done so far.
 #[derive(Debug, Default)]
@@ -125,8 +125,9 @@ mod tests {
         outbox.push(
             Route::Clock,
             Box::new(move || {
-                started_tx.send(())?;
-                gate_rx.recv().map(|_| 1).map_err(Into::into)
+                let gone = |_| crate::error::Error::Panicked("the test");
+                started_tx.send(()).map_err(|_| gone(()))?;
+                gate_rx.recv().map(|_| 1).map_err(|_| gone(()))
             }),
         );
         started_rx.recv_timeout(std::time::Duration::from_secs(10)).unwrap();

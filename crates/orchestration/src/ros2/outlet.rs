@@ -4,7 +4,7 @@
 
 use std::collections::BTreeMap;
 
-use anyhow::Result;
+use crate::error::Result;
 
 use super::mapping::{Direction, Ros2Config, Route};
 use super::node::{RosNode, RosPublisher};

@@ -10,7 +10,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::Duration;
 
-use anyhow::{Context as _, Result};
+use crate::error::{Error, Result};
 use foxglove::schemas::{CameraCalibration, CompressedImage, FrameTransforms, ImageAnnotations, RawImage, SceneUpdate};
 use foxglove::{Channel, Context, Encode, PartialMetadata, RawChannel, WebSocketServerHandle};
 use parking_lot::Mutex;
@@ -114,8 +114,12 @@ struct Channels {
 
 impl Channels {
     fn new(ctx: &Arc<Context>) -> Result<Channels> {
-        let acc =
-            ctx.channel_builder(TOPIC_ACC).message_encoding("json").schema(scene::acc_series_schema()).build_raw()?;
+        let acc = ctx
+            .channel_builder(TOPIC_ACC)
+            .message_encoding("json")
+            .schema(scene::acc_series_schema())
+            .build_raw()
+            .map_err(|source| Error::View { what: format!("declare the view's channel {TOPIC_ACC}"), source })?;
         Ok(Channels {
             ctx: ctx.clone(),
             raw: None,
@@ -239,10 +243,9 @@ impl LiveView {
     /// Subscribes to the loop on `bus` and starts the server. Fails with the address when the
     /// port is taken.
     pub async fn start(bus: &Bus, opts: ViewOptions) -> Result<LiveView> {
-        anyhow::ensure!(
-            opts.rate_hz.is_finite() && opts.rate_hz > 0.0,
-            "the view's rate must be a number of updates per second > 0"
-        );
+        if !(opts.rate_hz.is_finite() && opts.rate_hz > 0.0) {
+            return Err(Error::flag("the view's rate", "must be a number of updates per second > 0"));
+        }
         let latest: Arc<Mutex<Latest>> = Arc::default();
         let subs = subscribe(bus, &latest).await?;
         let ctx = Context::new();
@@ -254,11 +257,12 @@ impl LiveView {
             .message_backlog_size(BACKLOG)
             .start()
             .await
-            .with_context(|| {
-                format!(
+            .map_err(|source| Error::View {
+                what: format!(
                     "cannot serve the live view on {}:{} (another `slipstream view` or `up --view`? pick another with --view-port)",
                     opts.host, opts.port
-                )
+                ),
+                source,
             })?;
         let counters = Arc::new(Counters::default());
         let mut painter = Painter { channels, context: opts.context.clone(), counters: counters.clone() };

@@ -4,10 +4,11 @@
 use std::path::Path;
 
 use super::rates::Rates;
-use crate::eval::plot::{draw_legend, png};
+use crate::error::Result;
+use crate::eval::plot::{draw_legend, png, Drawn};
 
 /// Draws the rates of `families` into a PNG at `path`.
-pub fn rates(families: &[Rates], path: &Path) -> anyhow::Result<()> {
+pub fn rates(families: &[Rates], path: &Path) -> Result<()> {
     use plotters::prelude::*;
     /// A bar: its label, its colour and the rate it shows.
     type Bar = (&'static str, RGBColor, fn(&Rates) -> f64);
@@ -18,7 +19,7 @@ pub fn rates(families: &[Rates], path: &Path) -> anyhow::Result<()> {
     ];
     let top = families.iter().flat_map(|r| bars.iter().map(move |b| (b.2)(r))).fold(1.0f64, f64::max) * 1.15;
     let n = families.len().max(1);
-    png(path, (1200, 600), |root| {
+    png(path, (1200, 600), |root| -> Drawn {
         let mut chart = ChartBuilder::on(root)
             .caption("eval sweep: events per 1,000 km, by family", ("sans-serif", 22))
             .margin(12)

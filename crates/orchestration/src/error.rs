@@ -1,0 +1,143 @@
+//! What can go wrong running and judging a loop, said for a person: one error type for the
+//! crate, so that a tool prints what failed with the cause under it (a file's I/O error, a
+//! node's own error) and a caller can tell a flag it cannot run with from a node that died or
+//! a file it could not write. The tools above add their context with anyhow; nothing in this
+//! crate does.
+
+use std::path::{Path, PathBuf};
+
+use slipstream_contract::bus::{zenoh_message, BusError};
+use slipstream_contract::config::ConfigError;
+
+use crate::ros2::error::Ros2Error;
+
+/// The crate's result.
+pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+/// What can go wrong in launch, record, view, ROS 2 and evaluation.
+#[derive(Debug, thiserror::Error)]
+pub enum Error {
+    /// A file or directory could not be opened, read, written or created.
+    #[error("{action} {}", path.display())]
+    File { action: &'static str, path: PathBuf, source: std::io::Error },
+    /// A file was read but does not hold what it should (`is no simulator report`).
+    #[error("{} {what}", path.display())]
+    Json { path: PathBuf, what: &'static str, source: serde_json::Error },
+    /// A recording that cannot serve what was asked of it, with the fix.
+    #[error("{} {problem}", path.display())]
+    Recording { path: PathBuf, problem: String },
+    /// An MCAP file could not be started, written, finished or read.
+    #[error("{action} {}", path.display())]
+    Mcap { action: &'static str, path: PathBuf, source: mcap::McapError },
+    /// A table could not be written.
+    #[error("write {}", path.display())]
+    Csv { path: PathBuf, source: csv::Error },
+    /// A plot could not be drawn or saved.
+    #[error("draw {}: {message}", path.display())]
+    Plot { path: PathBuf, message: String },
+    /// Zenoh refused an operation; `message` is its error without source locations.
+    #[error("{context}: {message}")]
+    Zenoh { context: String, message: String },
+    #[error(transparent)]
+    Bus(#[from] BusError),
+    #[error(transparent)]
+    Config(#[from] ConfigError),
+    #[error(transparent)]
+    Ros2(#[from] Ros2Error),
+    /// The live view's Foxglove server or one of its channels could not start.
+    #[error("{what}")]
+    View { what: String, source: foxglove::FoxgloveError },
+    /// A command-line value the command cannot run with.
+    #[error("{flag} {rule}")]
+    Flag { flag: String, rule: String },
+    /// A loop that cannot run as asked (faults it cannot honour, a namespace in use), with the
+    /// fix.
+    #[error("{0}")]
+    Refused(String),
+    /// A node of the loop did not start, ended early or stopped answering.
+    #[error("{node} {problem}")]
+    Node { node: String, problem: String },
+    /// A node binary is not beside this one.
+    #[error("{name} not found next to {} (build every binary: cargo build --release)", beside.display())]
+    NoBinary { name: String, beside: PathBuf },
+    /// The operating system refused what a run needs (a process, a thread, a port).
+    #[error("{what}")]
+    System { what: String, source: std::io::Error },
+    /// One run of a suite failed; `run` names it and where its node logs are.
+    #[error("{run} (node logs in {})", logs.display())]
+    Run { run: String, logs: PathBuf, source: Box<Error> },
+    /// A run's task ended without a result.
+    #[error("a run's task failed")]
+    Task(#[from] tokio::task::JoinError),
+    /// A run ended without what judging it needs (too few states recorded).
+    #[error("{0}")]
+    Unjudged(String),
+    /// Something slipstream made is not what it should be (a generated scenario that does not
+    /// parse): a defect to report, with what was made.
+    #[error("{0} (a bug of slipstream: please report it)")]
+    Bug(String),
+    /// A thread of the run ended by a panic (a defect: its message went to stderr).
+    #[error("{0} panicked")]
+    Panicked(&'static str),
+    /// The work was asked to stop (a signal) before it was done.
+    #[error("stopped before the end")]
+    Interrupted,
+}
+
+impl Error {
+    /// Maps an I/O error on `path` to [`Error::File`] (`action`: "create", "read", ...).
+    pub(crate) fn file<'a>(action: &'static str, path: &'a Path) -> impl FnOnce(std::io::Error) -> Error + 'a {
+        move |source| Error::File { action, path: path.to_path_buf(), source }
+    }
+
+    /// Maps a Zenoh error to [`Error::Zenoh`] with what was being done.
+    pub(crate) fn zenoh<E: std::fmt::Display>(context: impl Into<String>) -> impl FnOnce(E) -> Error {
+        let context = context.into();
+        move |e| Error::Zenoh { context, message: zenoh_message(&e) }
+    }
+
+    /// Maps an MCAP error on `path` to [`Error::Mcap`].
+    pub(crate) fn mcap<'a>(action: &'static str, path: &'a Path) -> impl FnOnce(mcap::McapError) -> Error + 'a {
+        move |source| Error::Mcap { action, path: path.to_path_buf(), source }
+    }
+
+    /// Maps a plotting error on `path` to [`Error::Plot`].
+    pub(crate) fn plot<E: std::fmt::Display>(path: &Path) -> impl FnOnce(E) -> Error + '_ {
+        move |e| Error::Plot { path: path.to_path_buf(), message: e.to_string() }
+    }
+
+    /// A command-line value the command cannot run with.
+    pub(crate) fn flag(flag: impl Into<String>, rule: impl Into<String>) -> Error {
+        Error::Flag { flag: flag.into(), rule: rule.into() }
+    }
+
+    /// The OS refused `what`.
+    pub(crate) fn system(what: impl Into<String>) -> impl FnOnce(std::io::Error) -> Error {
+        let what = what.into();
+        move |source| Error::System { what, source }
+    }
+
+    /// A node's failure.
+    pub(crate) fn node(node: impl Into<String>, problem: impl Into<String>) -> Error {
+        Error::Node { node: node.into(), problem: problem.into() }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_file_error_names_the_action_and_path_and_keeps_the_cause_below() {
+        let e = Error::file("create", Path::new("/x/y"))(std::io::Error::from(std::io::ErrorKind::PermissionDenied));
+        assert_eq!(e.to_string(), "create /x/y");
+        let cause = std::error::Error::source(&e).expect("the I/O error is the cause");
+        assert!(cause.to_string().to_lowercase().contains("permission"), "{cause}");
+    }
+
+    #[test]
+    fn a_zenoh_error_loses_its_source_location() {
+        let e = Error::zenoh("declare a publisher on a/b")("key is bad at /root/.cargo/x/y.rs:12.");
+        assert_eq!(e.to_string(), "declare a publisher on a/b: key is bad");
+    }
+}
