@@ -64,7 +64,7 @@ pub fn run(args: &ConvertArgs, topics: &TopicMap) -> Result<ConvertSummary> {
     let routes: Vec<Route> =
         config.enabled().filter(|(r, _)| r.direction() == Direction::ToRos).map(|(r, _)| r).collect();
     let types: Vec<(Route, &str)> = config.enabled().map(|(r, e)| (r, e.type_name.as_str())).collect();
-    summary.input_cut = crate::record::play::each_message(&args.input, |m| {
+    summary.input_cut = crate::record::each_message(&args.input, |m| {
         summary.read += 1;
         let found = keys.entry(m.channel.topic.clone()).or_insert_with(|| topic_of(topics, &m.channel));
         let Some((topic, ns)) = found else {

@@ -9,7 +9,7 @@ use anyhow::Result;
 use crate::bus::Bus;
 use crate::record::{Recording, RecordingSummary};
 use crate::topics::Topic;
-use crate::view::copies::Copies;
+use crate::view::Copies;
 
 /// How often the progress line is refreshed.
 const PROGRESS_EVERY: Duration = Duration::from_secs(1);

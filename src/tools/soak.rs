@@ -291,7 +291,7 @@ async fn sample_until_over(
     clock: &crate::bus::Subscriber<crate::msg::SimClock>,
     processes: &[(String, u32)],
     args: &SoakArgs,
-) -> (crate::launch::nodes::Progress, Vec<Sample>, f64) {
+) -> (crate::launch::Progress, Vec<Sample>, f64) {
     let started = Instant::now();
     let every = Duration::from_secs_f64(args.sample_s);
     let mut next = started;

@@ -86,7 +86,7 @@ pub struct UpArgs {
     #[arg(long)]
     pub view: bool,
     /// The live view's port (0: any free port, printed)
-    #[arg(long, default_value_t = crate::view::live::DEFAULT_PORT, requires = "view")]
+    #[arg(long, default_value_t = crate::view::DEFAULT_PORT, requires = "view")]
     pub view_port: u16,
     /// Show the loop to ROS 2 while it runs (`slipstream ros2` inside `up`): camera, camera
     /// info, odometry, /tf, boxes, /clock and the ACC's status on rmw_zenoh's keys, with the
@@ -469,16 +469,16 @@ impl Extras {
     async fn start(bus: &Bus, args: &UpArgs, scenario: &Scenario, dir: &Path) -> Result<Extras> {
         let recording = match args.record {
             true => {
-                let viewable = args.viewable.then(|| crate::view::copies::Copies::new(Some(scenario)));
+                let viewable = args.viewable.then(|| crate::view::Copies::new(Some(scenario)));
                 Some(Recording::start_with(bus, &bus.topics().loop_keys(), &dir.join(RECORDING), viewable).await?)
             }
             false => None,
         };
         let view = match args.view {
             true => {
-                let opts = ViewOptions::new(crate::view::live::DEFAULT_HOST, args.view_port).with_scenario(scenario);
+                let opts = ViewOptions::new(crate::view::DEFAULT_HOST, args.view_port).with_scenario(scenario);
                 let view = LiveView::start(bus, opts).await?;
-                eprintln!("{}", super::view::how_to_open(crate::view::live::DEFAULT_HOST, view.port()));
+                eprintln!("{}", super::view::how_to_open(crate::view::DEFAULT_HOST, view.port()));
                 Some(view)
             }
             false => None,
@@ -567,8 +567,8 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
     let stopped_by = watch_until_over(&mut lp, &watch, args, shown, external.as_ref()).await?;
     let sim_ran_s = sim_started.elapsed().as_secs_f64();
     for node in lp.check().died {
-        let log = crate::launch::nodes::log_of(lp.logs(), &node);
-        let why = crate::launch::nodes::last_error(&log).map_or(String::new(), |e| format!(": {e}"));
+        let log = crate::launch::log_of(lp.logs(), &node);
+        let why = crate::launch::last_error(&log).map_or(String::new(), |e| format!(": {e}"));
         eprintln!("{node} ended before the run was over{why}\n(its log: {})", log.display());
     }
     if let Some(signal) = stopped_by {

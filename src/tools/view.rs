@@ -8,8 +8,8 @@ use anyhow::Result;
 
 use crate::bus::Bus;
 use crate::sim::Scenario;
-use crate::view::live::{DEFAULT_HOST, DEFAULT_PORT, DEFAULT_RATE_HZ};
 use crate::view::{LiveView, ViewOptions, ViewStats};
+use crate::view::{DEFAULT_HOST, DEFAULT_PORT, DEFAULT_RATE_HZ};
 
 /// How often the status line is refreshed.
 const STATUS_EVERY: Duration = Duration::from_secs(2);

@@ -85,6 +85,8 @@ fn up_in_realtime_with_ground_truth_paces_the_wall_clock() {
     let started = Instant::now();
     let out = common::run_with_limit(cmd, Duration::from_secs(90));
     assert!(out.status.success(), "stderr: {}", String::from_utf8_lossy(&out.stderr));
+    // A floor, not a speed: realtime pacing never runs ahead of the wall clock, and a loaded
+    // machine can only make the run longer.
     assert!(started.elapsed() >= Duration::from_secs(4), "4 simulated seconds take 4 s in realtime");
     let r = report(&dir);
     let names: Vec<&str> = r["nodes"].as_array().unwrap().iter().map(|n| n["node"].as_str().unwrap()).collect();

@@ -23,25 +23,27 @@
 pub mod args;
 mod belief;
 mod command;
-pub mod controller;
+mod controller;
 mod decision;
-pub mod ego;
+mod ego;
 pub mod in_lane;
 mod lane;
 mod lead_filter;
 mod low_level;
 pub mod node;
-pub mod objects;
+mod objects;
 mod select;
 pub mod settings;
-pub mod threat;
-pub mod tuning;
+mod threat;
+mod tuning;
 
 pub use args::VehicleClass;
 pub use controller::Controller;
 pub use ego::{EgoNow, Pose};
 pub use objects::{Object, PerceptionFrame};
 pub use settings::{AccSettings, PerceptionSource};
+pub use threat::{threat, Threat};
+pub use tuning::{Amount, Share, Tuning};
 
 #[cfg(test)]
 mod tests;

@@ -15,15 +15,15 @@
 //! docs/perception.md describes the method, its limits and its measured scores.
 
 pub mod args;
-pub mod detector;
-pub mod geometry;
+mod detector;
+mod geometry;
 pub mod node;
-pub mod rig;
-pub mod settings;
-pub mod tracker;
+mod rig;
+mod settings;
+mod tracker;
 
-pub use detector::{Detector, DetectorParams, FrameDetection};
+pub use detector::{Detector, DetectorParams, FrameDetection, Rejection};
 pub use geometry::CameraModel;
 pub use rig::CameraRig;
-pub use settings::DetectSettings;
+pub use settings::{DetectSettings, FusionParams, DEFAULT_DETECT_CONFIG, DEFAULT_DETECT_CONFIG_PATH};
 pub use tracker::{Tracker, TrackerParams};

@@ -604,7 +604,7 @@ mod rendered {
             }
         }
         // Where the tyre meets the road: the lower edge of the patch's last row.
-        let camera = slipstream_perception::geometry::CameraModel::new(&info);
+        let camera = slipstream_perception::CameraModel::new(&info);
         let tyre = camera.ground_point((first_col + 8) as f64, (first_row + PATCH.len()) as f64).unwrap().x;
         let mut rig =
             slipstream_perception::CameraRig::new(cameras.front.info(), Some(&info), &DetectSettings::default());

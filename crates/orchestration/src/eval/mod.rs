@@ -23,19 +23,20 @@
 //!   faults (runs of [`acc`] with fault profiles).
 //! - [`detect`]: `slipstream eval detect`, the detector scored against ground truth, in process;
 //!   [`bend_lateral`]: its lateral error far ahead by range and bend.
-//! - [`offline`]: the closed loop in one process without the bus (tests and tuning).
+//! - `offline` (tests only): the closed loop in one process without the bus.
 //! - [`resim`]: a recording in place of the simulator: today's detector and ACC answer the
 //!   recorded inputs, and their outputs are compared with the recorded ones (`up --from`).
 
 pub mod acc;
-pub mod bend_lateral;
+pub(crate) mod bend_lateral;
 pub mod detect;
 pub mod faults;
 pub mod judge;
 pub mod latency;
 pub mod link_codec;
-pub mod metrics;
-pub mod offline;
+pub(crate) mod metrics;
+#[cfg(test)]
+pub(crate) mod offline;
 pub mod plot;
 pub mod resim;
 pub mod sweep;

@@ -577,10 +577,7 @@ pub async fn run(
     let replayed = tokio::task::block_in_place(|| replay(lp.bus(), path, &recorded.outputs, &inbox, progress, stop));
     tokio::time::sleep(crate::launch::SETTLE).await;
     for node in lp.check().died {
-        tracing::warn!(
-            "{node} ended during the replay; see {}",
-            crate::launch::nodes::log_of(lp.logs(), &node).display()
-        );
+        tracing::warn!("{node} ended during the replay; see {}", crate::launch::log_of(lp.logs(), &node).display());
     }
     let nodes = lp.stop().await;
     drop(subs);

@@ -24,14 +24,14 @@
 use std::time::Duration;
 
 pub mod child;
-pub mod external;
-pub mod hold;
-pub mod namespace;
-pub mod nodes;
+pub(crate) mod external;
+pub(crate) mod hold;
+pub(crate) mod namespace;
+pub(crate) mod nodes;
 
 pub use child::{free_ports, sibling_binary, Child};
 pub use external::ExternalSim;
-pub use nodes::{ClockMode, LinkKind, LoopRun, LoopSpec, Network, NodeEnd, NodeInput, Progress};
+pub use nodes::{last_error, log_of, ClockMode, LinkKind, LoopRun, LoopSpec, Network, NodeEnd, NodeInput, Progress};
 
 /// How long the controllers may take to appear on the bus.
 pub const NODE_START_TIMEOUT: Duration = Duration::from_secs(30);

@@ -18,10 +18,10 @@
 //! Every [`FLUSH_EVERY`] the writer closes its chunk, so a file cut by a crash is readable up
 //! to that point with any MCAP reader that reads a stream without its summary (docs/recording.md).
 
-pub mod play;
-pub mod recorder;
+pub(crate) mod play;
+pub(crate) mod recorder;
 
-pub use play::{play, Pace, PlayOptions, PlayReport};
+pub use play::{each_message, play, Pace, PlayOptions, PlayReport};
 pub use recorder::{ChannelSummary, Recording, RecordingSummary};
 
 use std::time::Duration;

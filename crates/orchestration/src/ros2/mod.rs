@@ -17,19 +17,19 @@
 //! - [`face`]: the node, its publishers and its commands together (`slipstream ros2`).
 
 pub mod bag;
-pub mod bridge;
-pub mod catalog;
-pub mod command;
-pub mod convert;
+pub(crate) mod bridge;
+pub(crate) mod catalog;
+pub(crate) mod command;
+pub(crate) mod convert;
 pub mod error;
-pub mod face;
+pub(crate) mod face;
 pub mod graph;
-pub mod inbound;
+pub(crate) mod inbound;
 pub mod mapping;
-pub mod messages;
-pub mod node;
-pub mod outbox;
-pub mod outlet;
+pub(crate) mod messages;
+pub(crate) mod node;
+pub(crate) mod outbox;
+pub(crate) mod outlet;
 pub mod schema;
 pub mod translate;
 

@@ -3,8 +3,9 @@
 //! the ACC's series. Used by `slipstream view` and `slipstream up --view` (docs/viewing.md),
 //! and as viewable copies in recordings (`record --viewable`, [`copies`]).
 
-pub mod copies;
-pub mod live;
-pub mod scene;
+pub(crate) mod copies;
+pub(crate) mod live;
+pub(crate) mod scene;
 
-pub use live::{LiveView, ViewOptions, ViewStats};
+pub use copies::Copies;
+pub use live::{LiveView, ViewOptions, ViewStats, DEFAULT_HOST, DEFAULT_PORT, DEFAULT_RATE_HZ};
