@@ -53,6 +53,17 @@ pub enum EvalCommand {
     ///   slipstream eval sweep --count 40 --seed 7 --report /tmp/sweep
     #[command(verbatim_doc_comment)]
     Sweep(crate::eval::sweep::EvalSweepArgs),
+    /// Joins the reports of a sweep's shards (`eval sweep --shard K/N`, e.g. one per machine
+    /// of a CI matrix) into the report of the whole sweep: its runs in order, its rates, its
+    /// worst runs and its verdict; exit 1 when it misses the bar, as `eval sweep`
+    ///
+    ///   slipstream eval sweep --count 6 --perception ground-truth --shard 1/2 --report shard-1   (machine 1)
+    ///
+    ///   slipstream eval sweep --count 6 --perception ground-truth --shard 2/2 --report shard-2   (machine 2)
+    ///
+    ///   slipstream eval sweep-merge shard-1 shard-2 --report sweep
+    #[command(verbatim_doc_comment)]
+    SweepMerge(crate::eval::sweep::shard::MergeArgs),
 }
 
 /// `eval detect`'s command line.
@@ -112,6 +123,7 @@ pub fn command(command: &EvalCommand, connect: &ConnectArgs) -> Result<ExitCode>
             Ok(ExitCode::SUCCESS)
         }
         EvalCommand::Sweep(args) => sweep(args, connect),
+        EvalCommand::SweepMerge(args) => sweep_merge(args),
         EvalCommand::Faults(args) => {
             use crate::eval::faults;
             let report = faults::run(args, connect)?;
@@ -141,6 +153,30 @@ fn detect(args: &DetectArgs) -> Result<ExitCode> {
     Ok(ExitCode::SUCCESS)
 }
 
+/// `eval sweep-merge`: the shards' reports as one, written and shown as `eval sweep`'s.
+fn sweep_merge(args: &crate::eval::sweep::shard::MergeArgs) -> Result<ExitCode> {
+    let report = crate::eval::sweep::shard::merge(args)?;
+    written(&report, &args.out, args.json)
+}
+
+/// A sweep's report: sweep.json in `out`, the table (or JSON), and an error when a family
+/// missed the bar.
+fn written(report: &crate::eval::sweep::SweepReport, out: &std::path::Path, json: bool) -> Result<ExitCode> {
+    let file = out.join("sweep.json");
+    std::fs::write(&file, serde_json::to_string_pretty(report)?)
+        .with_context(|| format!("write {}", file.display()))?;
+    print_report(json, report, crate::eval::sweep::markdown)?;
+    eprintln!(
+        "report: {}; plot: {}",
+        file.display(),
+        report.plot.as_ref().map_or("none".into(), |p| p.display().to_string())
+    );
+    if !report.pass {
+        anyhow::bail!("the sweep missed the bar (table above)");
+    }
+    Ok(ExitCode::SUCCESS)
+}
+
 /// `eval sweep`: sweep.json under --report, the table, and an error when a family missed the bar.
 fn sweep(args: &crate::eval::sweep::EvalSweepArgs, connect: &ConnectArgs) -> Result<ExitCode> {
     use crate::eval::sweep;
@@ -158,17 +194,5 @@ fn sweep(args: &crate::eval::sweep::EvalSweepArgs, connect: &ConnectArgs) -> Res
         }
     })?;
     shown.finish();
-    let file = args.out.join("sweep.json");
-    std::fs::write(&file, serde_json::to_string_pretty(&report)?)
-        .with_context(|| format!("write {}", file.display()))?;
-    print_report(args.json, &report, sweep::markdown)?;
-    eprintln!(
-        "report: {}; plot: {}",
-        file.display(),
-        report.plot.as_ref().map_or("none".into(), |p| p.display().to_string())
-    );
-    if !report.pass {
-        anyhow::bail!("the sweep missed the bar (table above)");
-    }
-    Ok(ExitCode::SUCCESS)
+    written(&report, &args.out, args.json)
 }

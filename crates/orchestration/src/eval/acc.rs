@@ -60,7 +60,7 @@ pub struct EvalAccArgs {
     pub faults: FaultArgs,
 }
 
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, serde::Deserialize)]
 pub struct ScenarioResult {
     pub scenario: String,
     pub perception: PerceptionSource,
@@ -100,7 +100,7 @@ impl ScenarioResult {
 }
 
 /// Where one run's wall time went, in seconds.
-#[derive(Debug, Clone, Copy, Default, Serialize)]
+#[derive(Debug, Clone, Copy, Default, Serialize, serde::Deserialize)]
 pub struct RunTime {
     /// Simulated time.
     pub simulated_s: f64,

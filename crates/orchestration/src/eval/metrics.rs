@@ -86,7 +86,7 @@ const COMFORT_MIN_SPEED_MPS: f64 = 2.0;
 /// the handover, not the controller's comfort. Jerk is judged from here on.
 const HANDOVER_S: f64 = 0.2;
 
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
 pub struct Check {
     pub name: String,
     pub value: Option<f64>,
@@ -94,7 +94,7 @@ pub struct Check {
     pub pass: bool,
 }
 
-#[derive(Debug, Clone, PartialEq, Serialize)]
+#[derive(Debug, Clone, PartialEq, Serialize, serde::Deserialize)]
 pub struct Metrics {
     pub duration_s: f64,
     pub collisions: u64,

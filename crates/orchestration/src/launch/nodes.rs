@@ -149,7 +149,7 @@ pub struct NodeEnd {
 
 /// One input of one node as it ended: what arrived, what the network lost (sequence gaps) and
 /// what injected faults dropped, delayed or duplicated.
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, serde::Deserialize)]
 pub struct NodeInput {
     pub node: String,
     #[serde(flatten)]

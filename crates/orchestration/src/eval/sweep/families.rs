@@ -14,7 +14,7 @@ use slipstream_sim::rng::SimRng;
 use slipstream_sim::scenario::Warranted;
 
 /// A family of generated scenarios.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, clap::ValueEnum, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, clap::ValueEnum, Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Family {
     /// Euro NCAP car-to-car rear, stationary: a vehicle standing in the lane, approached at

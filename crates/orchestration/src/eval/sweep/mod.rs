@@ -8,6 +8,7 @@
 pub mod families;
 pub mod plot;
 pub mod rates;
+pub mod shard;
 pub mod warrant;
 
 use std::path::{Path, PathBuf};
@@ -20,6 +21,7 @@ use super::acc::{jobs, run_all, EvalAccArgs};
 use crate::launch::LinkKind;
 use families::{nth, Family};
 use rates::{faults_of, worst, Rates, SweepRun};
+use shard::Shard;
 use slipstream_acc::PerceptionSource;
 use slipstream_contract::config::FaultArgs;
 use slipstream_sim::Scenario;
@@ -56,12 +58,26 @@ pub struct EvalSweepArgs {
     /// Wall-clock limit per run, seconds
     #[arg(long, default_value_t = 300.0)]
     pub timeout: f64,
+    /// Run only the K-th of N shares of the sweep (the runs whose index i has i % N == K - 1),
+    /// e.g. one per machine of a CI matrix with the same --seed and --count; `slipstream eval
+    /// sweep-merge` joins the shards' reports into the whole sweep's
+    #[arg(long, value_name = "K/N")]
+    pub shard: Option<Shard>,
 }
 
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, serde::Deserialize)]
 pub struct SweepReport {
     pub command: String,
     pub seed: u64,
+    /// The whole sweep's --count (a shard runs its share of it).
+    #[serde(default)]
+    pub count: usize,
+    /// --families as given (empty: all).
+    #[serde(default)]
+    pub asked_families: Vec<Family>,
+    /// The share of the sweep this report holds; None for a whole sweep (or a merge).
+    #[serde(default)]
+    pub shard: Option<Shard>,
     pub perception: PerceptionSource,
     pub jobs: usize,
     pub wall_s: f64,
@@ -84,6 +100,9 @@ fn write_scenarios(args: &EvalSweepArgs) -> Result<Vec<(SweepRun, Scenario)>> {
     std::fs::create_dir_all(&dir).map_err(Error::file("create (--report)", &dir))?;
     let mut out = Vec::with_capacity(args.count);
     for index in 0..args.count {
+        if args.shard.is_some_and(|s| !s.takes(index)) {
+            continue;
+        }
         // Dealt in turn, each family's j-th the full sweep's: --families picks scenarios out
         // of the full sweep, it does not draw others.
         let g = nth(families[index % families.len()], args.seed, index / families.len());
@@ -99,6 +118,7 @@ fn write_scenarios(args: &EvalSweepArgs) -> Result<Vec<(SweepRun, Scenario)>> {
             .map_err(|e| Error::Bug(format!("the generator wrote an invalid scenario: {e}\n{text}")))?;
         std::fs::write(&file, &text).map_err(Error::file("write", &file))?;
         let run = SweepRun {
+            index,
             name: g.name,
             family: g.family,
             description: scenario.description.clone(),
@@ -153,7 +173,28 @@ pub fn run(
         }
     }
     let wall_s = started.elapsed().as_secs_f64();
-    Ok(report(args, runs, jobs, wall_s))
+    let of = ReportOf {
+        seed: args.seed,
+        count: args.count,
+        perception: args.perception,
+        asked_families: args.families.clone(),
+        shard: args.shard,
+        out: &args.out,
+        worst: args.worst,
+    };
+    Ok(report(&of, runs, jobs, wall_s))
+}
+
+/// What a report says besides its runs: the sweep it is of, where it goes, how many worst runs
+/// it names.
+pub(crate) struct ReportOf<'a> {
+    pub(crate) seed: u64,
+    pub(crate) count: usize,
+    pub(crate) perception: PerceptionSource,
+    pub(crate) asked_families: Vec<Family>,
+    pub(crate) shard: Option<Shard>,
+    pub(crate) out: &'a Path,
+    pub(crate) worst: usize,
 }
 
 /// A run has finished: how many of how many, and why it failed if it did.
@@ -187,7 +228,7 @@ fn judged(
 }
 
 /// The rates, the worst runs and the plot.
-fn report(args: &EvalSweepArgs, runs: Vec<SweepRun>, jobs: usize, wall_s: f64) -> SweepReport {
+pub(crate) fn report(args: &ReportOf, runs: Vec<SweepRun>, jobs: usize, wall_s: f64) -> SweepReport {
     let all = Rates::of("all", runs.iter());
     let mut present: Vec<Family> = runs.iter().map(|r| r.family).collect();
     present.sort();
@@ -207,6 +248,9 @@ fn report(args: &EvalSweepArgs, runs: Vec<SweepRun>, jobs: usize, wall_s: f64) -
     SweepReport {
         command: std::env::args().collect::<Vec<_>>().join(" "),
         seed: args.seed,
+        count: args.count,
+        asked_families: args.asked_families.clone(),
+        shard: args.shard,
         perception: args.perception,
         jobs,
         wall_s,

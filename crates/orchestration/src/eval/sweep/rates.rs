@@ -10,8 +10,11 @@ use crate::eval::Metrics;
 
 /// One run of a sweep: its family, declaration, where its file is, and how it went (or why
 /// it did not run).
-#[derive(Debug, Clone, Serialize)]
+#[derive(Debug, Clone, Serialize, serde::Deserialize)]
 pub struct SweepRun {
+    /// Its place in the whole sweep (what `--shard` deals by and a merge orders by).
+    #[serde(default)]
+    pub index: usize,
     pub name: String,
     pub family: Family,
     pub description: String,
@@ -23,7 +26,7 @@ pub struct SweepRun {
 }
 
 /// The sums of a set of runs, and their rates per 1,000 km.
-#[derive(Debug, Clone, Default, Serialize)]
+#[derive(Debug, Clone, Default, Serialize, serde::Deserialize)]
 pub struct Rates {
     /// The family's name, or "all".
     pub family: String,
@@ -45,7 +48,7 @@ pub struct Rates {
 }
 
 /// Rates per 1,000 km driven.
-#[derive(Debug, Clone, Copy, Default, Serialize)]
+#[derive(Debug, Clone, Copy, Default, Serialize, serde::Deserialize)]
 pub struct PerDistance {
     pub collisions: f64,
     pub unwarranted_emergencies: f64,
@@ -162,6 +165,7 @@ mod tests {
     /// A run of `family` whose metrics come from `metrics`.
     fn run(name: &str, metrics: Metrics) -> SweepRun {
         SweepRun {
+            index: 0,
             name: name.into(),
             family: Family::CutIn,
             description: String::new(),
