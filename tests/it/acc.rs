@@ -278,6 +278,32 @@ async fn stale_speed_makes_the_watchdog_brake_until_speed_returns() {
     });
 }
 
+/// In lockstep the simulator waits for the ACC: speed late by the wall clock (a loaded
+/// machine, a simulator paused) is no stale input, and no watchdog command may step the
+/// controller between two answers (that made two runs of one scenario differ).
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_lockstep_acc_sends_no_watchdog_commands_while_the_simulator_pauses() {
+    within!(async {
+        let settings = AccSettings { lockstep: true, ..truth_settings() };
+        let max_age = Duration::from_millis(settings.stale.speed_max_age_ms);
+        let (task, stop, sim_bus, _) = acc_and_sim(settings).await;
+        let controls = Collect::new(&sim_bus, topics::VEHICLE_CONTROL).await;
+        let statuses = Collect::new(&sim_bus, topics::ACC_STATUS).await;
+        let mut sim = FakeSim::new(&sim_bus).await;
+        sim.run(100, true).await;
+        until(&controls, answer_from(90)).await;
+        tokio::time::sleep(max_age * 4).await;
+        sim.run(100, true).await;
+        until(&controls, answer_from(190)).await;
+        let unanswered = drain(&controls).iter().filter(|c| c.msg.answers_step.is_none()).count();
+        assert_eq!(unanswered, 0, "commands answering no step in lockstep");
+        let stale = drain(&statuses).iter().filter(|s| s.msg.warnings.contains(&AccWarning::StaleSpeed)).count();
+        assert_eq!(stale, 0, "StaleSpeed in lockstep");
+        stop.send(()).unwrap();
+        task.await.unwrap();
+    });
+}
+
 /// A detector node of its own dialling the ACC at `ep` (its perception/objects publisher,
 /// matched by the ACC), and camera/front/info at 20 Hz (every fifth step) from the simulator's
 /// bus, so the ACC knows which steps bring a frame.

@@ -397,14 +397,14 @@ def test_recording_playback_and_re_simulation(host):
 
 def verdicts(sweep):
     """A sweep report's runs as judged: names in order, whether each ran, every check's
-    verdict and the counted events (collisions, emergencies, phantom braking). The measured
-    figures (minimum gap, TTC) are not compared: two lockstep runs of one scenario on a loaded
-    machine have differed by centimetres (CHANGELOG, issue 55)."""
+    verdict, the counted events (collisions, emergencies, phantom braking) and the measured
+    figures (minimum gap, TTC, ...) rounded to 1e-9: lockstep runs repeat whatever runs beside
+    them."""
     def run(r):
         m = r["result"]["metrics"]
-        counted = {k: v for k, v in m.items() if isinstance(v, (int, bool)) and k != "checks"}
+        figures = {k: (round(v, 9) if isinstance(v, float) else v) for k, v in m.items() if k != "checks"}
         checks = [(c["name"], c["pass"]) for c in m["checks"]]
-        return r["index"], r["name"], r.get("error"), counted, checks
+        return r["index"], r["name"], r.get("error"), figures, checks
     return [run(r) for r in sweep["runs"]]
 
 

@@ -6,7 +6,8 @@
 //! - perception older than `stale.perception_max_age_ms` of simulated time (header stamps),
 //!   or the detector's liveliness token gone: StalePerception / PerceptionLost;
 //! - no vehicle/speed for `stale.speed_max_age_ms` of wall time: StaleSpeed, and the watchdog
-//!   keeps publishing braking commands (answering no step) until speed returns.
+//!   keeps publishing braking commands (answering no step) until speed returns; not in
+//!   lockstep, where the simulator waits for this node and wall time says nothing of staleness.
 //!
 //! Any of them puts the controller in Stale mode (throttle off, smooth braking); it recovers
 //! by itself when fresh data return.
@@ -247,7 +248,10 @@ pub async fn run(bus: &Bus, settings: AccSettings, shutdown: impl Future<Output 
                 }
                 answer_speed(&mut st, &inputs, &settings, speed).await
             }
-            _ = watchdog.tick() => match st.watchdog(Instant::now(), inputs.detector_alive()) {
+            // In lockstep the simulator does not step on without this node's answer: a speed
+            // message late by the wall clock is the simulator's pace on a loaded machine, not
+            // a stale input, and a watchdog step there would make the run depend on that pace.
+            _ = watchdog.tick(), if !settings.lockstep => match st.watchdog(Instant::now(), inputs.detector_alive()) {
                 Some(a) => a,
                 None => continue,
             },

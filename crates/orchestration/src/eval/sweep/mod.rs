@@ -63,6 +63,10 @@ pub struct EvalSweepArgs {
     /// sweep-merge` joins the shards' reports into the whole sweep's
     #[arg(long, value_name = "K/N")]
     pub shard: Option<Shard>,
+    /// Keep every run's node logs under --report/logs, not only those of the runs that missed
+    /// an aim (a thousand runs' logs take gigabytes)
+    #[arg(long)]
+    pub keep_logs: bool,
 }
 
 #[derive(Debug, Clone, Serialize, serde::Deserialize)]
@@ -164,7 +168,7 @@ pub fn run(
     let started = Instant::now();
     let total = runs.len();
     let results = run_all(scenarios, &acc_args, None, connect.topics.clone(), &logs, jobs, |done, name, result| {
-        on_run(RunDone { done, total, name, failed: judged(name, result, &logs, args.perception) })
+        on_run(RunDone { done, total, name, failed: judged(name, result, (&logs, args.keep_logs), args.perception) })
     })?;
     for (run, result) in runs.iter_mut().zip(results) {
         match result {
@@ -206,17 +210,19 @@ pub struct RunDone<'a> {
     pub failed: Option<String>,
 }
 
-/// Why a run failed (None: it passed). A clean run's logs are removed: a thousand runs' logs
-/// would fill the disk; the failures' are kept.
+/// Why a run failed (None: it passed). A clean run's logs are removed unless `keep` (a
+/// thousand runs' logs would fill the disk); the failures' are kept.
 fn judged(
     name: &str,
     result: &Result<crate::eval::acc::ScenarioResult>,
-    logs: &Path,
+    (logs, keep): (&Path, bool),
     perception: PerceptionSource,
 ) -> Option<String> {
     match result {
         Ok(r) if r.metrics.pass && r.lockstep_timeouts == 0 => {
-            let _ = std::fs::remove_dir_all(logs.join(format!("{name}-{}", perception.name())));
+            if !keep {
+                let _ = std::fs::remove_dir_all(logs.join(format!("{name}-{}", perception.name())));
+            }
             None
         }
         Ok(r) => {
