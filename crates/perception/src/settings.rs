@@ -40,8 +40,13 @@ pub struct FusionParams {
 }
 
 impl Default for DetectSettings {
+    /// The shipped file, parsed once per process (every `DetectorParams::default()` and
+    /// `TrackerParams::default()` comes here).
     fn default() -> Self {
-        DetectSettings::parse("{}", "built-in defaults").expect("config/detect.json5 is valid")
+        static SHIPPED: std::sync::OnceLock<DetectSettings> = std::sync::OnceLock::new();
+        SHIPPED
+            .get_or_init(|| DetectSettings::parse("{}", "built-in defaults").expect("config/detect.json5 is valid"))
+            .clone()
     }
 }
 
