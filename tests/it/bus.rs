@@ -446,3 +446,36 @@ async fn real_time_topics_ride_the_low_latency_session_and_plain_sessions_still_
     a.close().await.unwrap();
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A node's bus is seen (its liveliness token) only once it announces, after declaring its
+/// subscriptions: whoever sees the token and sends at once reaches them. The simulator in
+/// lockstep sends its first step on seeing the nodes it waits for.
+#[tokio::test(flavor = "multi_thread")]
+async fn a_node_is_seen_once_it_announces_and_whoever_sees_it_reaches_its_subscribers() {
+    use slipstream::msg::{SimEvent, SimEventKind};
+    use slipstream::topics::SIM_EVENTS;
+    let (s, ep) = common::listening_session().await;
+    let observer = slipstream::Bus::from_session(s, TopicMap::default(), "observer").await.unwrap();
+    let connect = slipstream::config::ConnectArgs {
+        connect: vec![ep],
+        listen: vec!["tcp/127.0.0.1:0".into()],
+        cfg: vec!["scouting/gossip/enabled:false".into()],
+        ..Default::default()
+    };
+    let node = slipstream::Bus::open_node(&connect, &Default::default(), "late-node").await.unwrap();
+    let events = node.subscriber(SIM_EVENTS).await.unwrap();
+    let publisher = observer.publisher(SIM_EVENTS).await.unwrap();
+    tokio::time::sleep(Duration::from_millis(300)).await;
+    assert_eq!(observer.nodes_alive().await.unwrap(), vec!["observer".to_string()], "seen before announcing");
+    node.announce().await.unwrap();
+    node.announce().await.unwrap();
+    within!(async {
+        while !observer.nodes_alive().await.unwrap().contains(&"late-node".to_string()) {
+            tokio::time::sleep(Duration::from_millis(10)).await;
+        }
+    });
+    publisher.put(0, &SimEvent { kind: SimEventKind::ScenarioStart { name: "first".into(), seed: 1 } }).unwrap();
+    let first = events.recv_timeout(TIMEOUT).await.expect("the first message after the token was seen");
+    assert!(matches!(first.msg.kind, SimEventKind::ScenarioStart { ref name, .. } if name == "first"));
+    node.leave().await;
+}

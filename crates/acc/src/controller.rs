@@ -122,6 +122,11 @@ impl Controller {
         self.select.set_road(Road::new(spec.clone()));
     }
 
+    /// Whether the road's map has come (sim/road).
+    pub fn has_road(&self) -> bool {
+        self.select.road.is_some()
+    }
+
     /// Takes a perception frame: lead selection and the lead estimate ([`super::select`]).
     pub fn perceive(&mut self, frame: &PerceptionFrame, ego: &EgoNow) {
         self.select.perceive(&self.s, frame, ego);

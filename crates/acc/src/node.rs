@@ -24,8 +24,8 @@ use super::settings::{AccSettings, PerceptionSource};
 use slipstream_contract::bus::{Arrivals, Bus, BusError, Following, NodeWatch, Received, StatsSnapshot, Subscriber};
 use slipstream_contract::config::ConfigError;
 use slipstream_contract::msg::{
-    AccCommand, AccMode, AccStatus, AccWarning, CameraInfo, ControlCommand, Detections, GroundTruthObjects, RoadSpec,
-    Speed, VehicleState,
+    AccCommand, AccMode, AccStatus, AccWarning, CameraInfo, ControlCommand, Detections, GroundTruthObjects, Message,
+    RoadSpec, Speed, VehicleState,
 };
 use slipstream_contract::topics;
 
@@ -140,7 +140,7 @@ struct State {
     /// header.stamp_pub_ns of the newest perception message taken (traced in vehicle/control).
     perception_pub_ns: Option<u64>,
     camera_rate_hz: Option<f64>,
-    info_waited: bool,
+    latched_waited: bool,
     /// Lockstep: a wait for a frame's perception ran out and none has come since. The next
     /// frames are not waited for until perception comes again: a detector that publishes
     /// nothing (no camera info, a stuck process) must not cost every frame step
@@ -228,6 +228,9 @@ pub async fn run(bus: &Bus, settings: AccSettings, shutdown: impl Future<Output 
     let inputs = Inputs::open(bus, &settings).await?;
     let control_pub = bus.publisher(topics::VEHICLE_CONTROL).await?;
     let status_pub = bus.publisher(topics::ACC_STATUS).await?;
+    // Seen once it listens: the simulator in lockstep steps on when it sees us, and the
+    // perception of a step published before our subscriber existed would never come.
+    bus.announce().await?;
     tracing::info!(
         perception = ?settings.perception,
         lockstep = settings.lockstep,
@@ -305,10 +308,7 @@ async fn answer_speed(st: &mut State, inputs: &Inputs, settings: &AccSettings, s
             tracing::warn!("acc/command: {note}");
         }
     }
-    take_camera_info(st, &inputs.info, settings).await;
-    while let Some(road) = inputs.road.try_recv() {
-        st.ctl.set_road(&road.msg);
-    }
+    take_latched(st, inputs, settings).await;
     while let Some((frame, pub_ns, source)) = inputs.perception.frame() {
         if st.perception_from.accept(source.as_deref(), Instant::now()) {
             take_perception(st, &frame, pub_ns);
@@ -370,23 +370,55 @@ async fn await_state(
     }
 }
 
-/// The camera's rate, from camera/front/info. In lockstep, which steps bring a frame follows
-/// from it: wait for the (latched) info once, or a frame answered a step late makes the run
-/// differ.
-async fn take_camera_info(st: &mut State, sub: &Subscriber<CameraInfo>, settings: &AccSettings) {
-    while let Some(info) = sub.try_recv() {
+/// The camera's rate (camera/front/info) and the road's map (sim/road), both latched. In
+/// lockstep the answers follow from them (which steps bring a frame, where the lane goes): wait
+/// for the missing ones once, together, or one taken a step late makes the run differ.
+async fn take_latched(st: &mut State, inputs: &Inputs, settings: &AccSettings) {
+    while let Some(info) = inputs.info.try_recv() {
         st.camera_rate_hz = Some(info.msg.rate_hz);
     }
-    if settings.lockstep && st.camera_rate_hz.is_none() && !st.info_waited {
-        st.info_waited = true;
-        match sub.recv_timeout(Duration::from_millis(settings.lockstep_wait_ms)).await {
-            Some(info) => st.camera_rate_hz = Some(info.msg.rate_hz),
-            None => tracing::warn!(
-                waited_ms = settings.lockstep_wait_ms,
-                "lockstep: no camera/front/info; perception is awaited only for the first frame"
-            ),
-        }
+    while let Some(road) = inputs.road.try_recv() {
+        st.ctl.set_road(&road.msg);
     }
+    if !settings.lockstep || st.latched_waited {
+        return;
+    }
+    st.latched_waited = true;
+    let wait = Duration::from_millis(settings.lockstep_wait_ms);
+    let (info, road) = tokio::join!(
+        awaited(st.camera_rate_hz.is_none(), &inputs.info, wait),
+        awaited(!st.ctl.has_road(), &inputs.road, wait)
+    );
+    match info {
+        Awaited::Came(info) => st.camera_rate_hz = Some(info.msg.rate_hz),
+        Awaited::Missing => tracing::warn!(
+            waited_ms = settings.lockstep_wait_ms,
+            "lockstep: no camera/front/info; perception is awaited only for the first frame"
+        ),
+        Awaited::Known => {}
+    }
+    match road {
+        Awaited::Came(road) => st.ctl.set_road(&road.msg),
+        Awaited::Missing => tracing::info!(
+            waited_ms = settings.lockstep_wait_ms,
+            "lockstep: no sim/road (optional); the lane ahead is predicted from the yaw rate"
+        ),
+        Awaited::Known => {}
+    }
+}
+
+/// A latched input in lockstep: known already, come within the wait, or missing.
+enum Awaited<M> {
+    Known,
+    Came(Received<M>),
+    Missing,
+}
+
+async fn awaited<M: Message>(missing: bool, sub: &Subscriber<M>, wait: Duration) -> Awaited<M> {
+    if !missing {
+        return Awaited::Known;
+    }
+    sub.recv_timeout(wait).await.map_or(Awaited::Missing, Awaited::Came)
 }
 
 /// Waits up to `wait_ms` for the perception of the frame at `t_ns` to arrive (taken when
@@ -448,7 +480,7 @@ impl State {
             perception_stamp_s: None,
             perception_pub_ns: None,
             camera_rate_hz: None,
-            info_waited: false,
+            latched_waited: false,
             perception_overdue: false,
             last_speed_at: None,
             mode: None,

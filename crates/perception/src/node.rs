@@ -86,6 +86,8 @@ pub async fn run(
         narrow_info: InfoInput::new(bus.subscriber(topics::CAMERA_NARROW_INFO).await?, "camera/narrow/info"),
         out: bus.publisher(topics::PERCEPTION_OBJECTS).await?,
     };
+    // Seen once it listens: the simulator in lockstep sends the first frame when it sees us.
+    bus.announce().await?;
     let stop = Arc::new(AtomicBool::new(false));
     let flag = stop.clone();
     let mut reader = tokio::task::spawn_blocking(move || inputs.run(settings, &flag));

@@ -621,6 +621,7 @@ async fn run_loop(
     stop: &AtomicBool,
 ) -> Result<SimReport, SimError> {
     let mut node = Node::open(bus, world, settings).await?;
+    bus.announce().await?;
     node.start(bus, world, stop).await?;
     let mut pace = Pace::new();
     let mut lap = Instant::now();
@@ -674,7 +675,7 @@ async fn wait_for_nodes(bus: &Bus, names: &[String], timeout_ms: u64, stop: &Ato
         }
         if Instant::now() >= deadline || stop.load(Ordering::SeqCst) {
             return Err(SimError::Lockstep(format!(
-                "{} not up after {} ms (start them, or change lockstep.wait_for in the settings)",
+                "{} not up after {} ms (start them, or change lockstep.wait_for in the settings; a node is up once it declares its liveliness token nodes/<name>, Bus::announce in Rust)",
                 missing.iter().map(|s| s.as_str()).collect::<Vec<_>>().join(", "),
                 timeout_ms
             )));

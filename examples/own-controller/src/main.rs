@@ -90,6 +90,8 @@ async fn drive(bus: &Bus, args: &Args) -> Result<u64, Box<dyn std::error::Error>
     let speed = bus.subscriber(topics::VEHICLE_SPEED).await?;
     let objects = bus.subscriber(topics::OBJECTS).await?;
     let control = bus.publisher(topics::VEHICLE_CONTROL).await?;
+    // Listening now: let the loop see this node (a simulator in lockstep waits for it).
+    bus.announce().await?;
     let (mut lead, mut sent) = (None, 0);
     // One stop and one deadline for the whole run, not a timer per speed message.
     let stop = process::stop_requested();

@@ -44,6 +44,7 @@ async fn speeds(namespace: &str, until_s: f64) -> Vec<(f64, f64)> {
     let connect = ConnectArgs { namespace: Some(namespace.to_string()), ..ConnectArgs::default() };
     let bus = Bus::open_node(&connect, &FaultArgs::default(), "own-controller-test").await.unwrap();
     let speed = bus.subscriber(topics::VEHICLE_SPEED).await.unwrap();
+    bus.announce().await.unwrap();
     let (mut seen, cap) = (Vec::new(), Instant::now() + Duration::from_secs(120));
     while Instant::now() < cap {
         let Some(s) = speed.recv_timeout(Duration::from_secs(1)).await else { continue };

@@ -49,7 +49,8 @@ pub struct Bus {
     clock: Arc<NodeClock>,
     /// The statistics of every subscription declared here (reported with faults on).
     inputs: Arc<parking_lot::Mutex<Vec<std::sync::Weak<TopicStats>>>>,
-    _token: zenoh::liveliness::LivelinessToken,
+    /// The node's liveliness token once announced ([`Bus::announce`]).
+    token: tokio::sync::Mutex<Option<zenoh::liveliness::LivelinessToken>>,
 }
 
 impl Bus {
@@ -60,7 +61,9 @@ impl Bus {
     }
 
     /// A node process's bus: the connection and topic flags, and the faults `--faults` names
-    /// injected into the node's inputs.
+    /// injected into the node's inputs. Not yet announced: declare the node's subscriptions,
+    /// then call [`Bus::announce`]. The simulator in lockstep starts stepping once it sees the
+    /// nodes it waits for, so a node seen before it listens would miss the first steps.
     pub async fn open_node(
         connect: &crate::config::ConnectArgs,
         faults: &crate::config::FaultArgs,
@@ -69,7 +72,7 @@ impl Bus {
         let profile = faults.profile()?;
         let main = connect.zenoh_config()?;
         let low_latency = connect.low_latency_config(&main)?;
-        let mut bus = Bus::open_sessions(main, low_latency, connect.topic_map()?, node).await?;
+        let mut bus = Bus::join(main, low_latency, connect.topic_map()?, node).await?;
         if let Some(p) = profile {
             bus.inject_faults(p);
         }
@@ -77,8 +80,20 @@ impl Bus {
     }
 
     /// Opens the main session with `main` and, given its config, the low-latency session
-    /// (`ConnectArgs::low_latency_config`), and joins as `node`.
+    /// (`ConnectArgs::low_latency_config`), and joins as `node`, announced.
     pub async fn open_sessions(
+        main: zenoh::Config,
+        low_latency: Option<zenoh::Config>,
+        topics: TopicMap,
+        node: &str,
+    ) -> Result<Bus, BusError> {
+        let bus = Bus::join(main, low_latency, topics, node).await?;
+        bus.announce().await?;
+        Ok(bus)
+    }
+
+    /// Opens the sessions as [`Bus::open_sessions`] does, not yet announced.
+    async fn join(
         main: zenoh::Config,
         low_latency: Option<zenoh::Config>,
         topics: TopicMap,
@@ -93,7 +108,7 @@ impl Bus {
             }
             None => None,
         };
-        Bus::from_sessions(session, low_latency, topics, node).await
+        Bus::unannounced(session, low_latency, topics, node)
     }
 
     /// Joins with an already-open session (tests hand in a loopback session): every topic on it.
@@ -102,19 +117,25 @@ impl Bus {
     }
 
     /// Joins with already-open sessions: the main one, and the one for the topics whose QoS
-    /// names the low-latency session.
+    /// names the low-latency session. Announced at once.
     pub async fn from_sessions(
         session: zenoh::Session,
         low_latency: Option<zenoh::Session>,
         topics: TopicMap,
         node: &str,
     ) -> Result<Bus, BusError> {
-        let token_key = topics.node_key(node)?;
-        let token = session
-            .liveliness()
-            .declare_token(token_key.clone())
-            .await
-            .map_err(zerr(format!("declare liveliness token {token_key}")))?;
+        let bus = Bus::unannounced(session, low_latency, topics, node)?;
+        bus.announce().await?;
+        Ok(bus)
+    }
+
+    fn unannounced(
+        session: zenoh::Session,
+        low_latency: Option<zenoh::Session>,
+        topics: TopicMap,
+        node: &str,
+    ) -> Result<Bus, BusError> {
+        topics.node_key(node)?;
         let low_latency_zid = low_latency.as_ref().map(|s| s.zid().to_string());
         tracing::info!(node, zid = %session.zid(), ?low_latency_zid, namespace = topics.namespace(), "joined the bus");
         Ok(Bus {
@@ -125,8 +146,22 @@ impl Bus {
             faults: None,
             clock: Arc::new(NodeClock::default()),
             inputs: Arc::default(),
-            _token: token,
+            token: tokio::sync::Mutex::new(None),
         })
+    }
+
+    /// Declares the node's liveliness token (`nodes/<name>`), once; later calls do nothing.
+    /// Call it once the node's subscriptions are declared: it is how `slipstream top` lists
+    /// the node and how the simulator in lockstep knows the node listens. Declarations from
+    /// one session travel in order, so whoever sees the token has seen those subscriptions.
+    pub async fn announce(&self) -> Result<(), BusError> {
+        let mut token = self.token.lock().await;
+        if token.is_none() {
+            let key = self.topics.node_key(&self.node)?;
+            let declared = self.session.liveliness().declare_token(key.clone()).await;
+            *token = Some(declared.map_err(zerr(format!("declare liveliness token {key}")))?);
+        }
+        Ok(())
     }
 
     /// Injects `profile`'s faults into every subscription declared from now on (a node's
