@@ -284,7 +284,7 @@ fn random_bytes_never_panic() {
     for _ in 0..2_000 {
         let len = g.int(0, 256) as usize;
         let bytes = g.bytes(len);
-        let mut with_preamble = vec![WIRE_VERSION, g.int(1, 13) as u8];
+        let mut with_preamble = vec![WIRE_VERSION, g.int(1, 14) as u8];
         with_preamble.extend_from_slice(&bytes);
         for input in [&bytes[..], &with_preamble[..]] {
             let _ = decode::<Speed>(input);
@@ -300,6 +300,7 @@ fn random_bytes_never_panic() {
             let _ = decode::<AccStatus>(input);
             let _ = decode::<AccCommand>(input);
             let _ = decode::<RoadSpec>(input);
+            let _ = decode::<slipstream::msg::EgoInfo>(input);
         }
     }
 }
@@ -323,6 +324,7 @@ fn every_example_decodes_and_every_truncation_fails() {
                 MessageKind::AccStatus => decode::<AccStatus>(&bytes[..cut]).map(|_| ()),
                 MessageKind::AccCommand => decode::<AccCommand>(&bytes[..cut]).map(|_| ()),
                 MessageKind::RoadMap => decode::<RoadSpec>(&bytes[..cut]).map(|_| ()),
+                MessageKind::EgoInfo => decode::<slipstream::msg::EgoInfo>(&bytes[..cut]).map(|_| ()),
             };
             assert!(r.is_err(), "{kind:?}: a {cut}-byte prefix decoded");
         }

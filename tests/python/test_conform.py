@@ -86,6 +86,7 @@ def test_slipstream_sim_keeps_the_contract_in_every_clock_mode(slipstream_bin, s
         code, verdicts = conform(slipstream_bin, endpoint, ns, *(["--lockstep"] if mode == "lockstep" else []))
     assert_keeps_the_contract(code, verdicts)
     assert verdicts["optional.objects"]["outcome"] == "PASS"
+    assert verdicts["optional.sim_ego"]["outcome"] == "PASS"
     assert verdicts["optional.camera_narrow"]["outcome"] == "PASS"
     rule = "lockstep.answered" if mode == "lockstep" else "control.applied"
     assert verdicts[rule]["outcome"] == "PASS", verdicts[rule]

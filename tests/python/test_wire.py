@@ -16,7 +16,7 @@ def examples(slipstream_bin):
 
 
 def test_every_rust_example_decodes_and_reencodes_byte_for_byte(examples):
-    assert len(examples) == 12
+    assert len(examples) == 13
     for kind, payload in examples.items():
         got_kind, header, body = decode(payload)
         assert got_kind == kind
@@ -50,6 +50,9 @@ def test_decoded_values_are_the_documented_ones(examples):
     status = decode(examples["AccStatus"])[2]
     assert status["mode"] == "Follow" and status["lead"]["ttc_s"] == 11.1 and status["warnings"] == []
     assert decode(examples["AccCommand"])[2] == {"enable": True, "set_speed_mps": 25.0, "time_gap_s": None}
+    ego = decode(examples["EgoInfo"])[2]
+    assert (ego["class"], ego["size_m"], ego["rear_overhang_m"]) == ("Car", [4.6, 1.85, 1.45], 0.95)
+    assert (ego["mass_kg"], ego["set_speed_mps"], ego["time_gap_s"]) == (1500.0, 25.0, 1.8)
 
 
 def test_strict_decoding(examples):
@@ -110,6 +113,7 @@ def _edge_cases(examples):
     info = decode(examples["CameraInfo"])[2]
     road = decode(examples["RoadMap"])[2]
     command = decode(examples["AccCommand"])[2]
+    ego = decode(examples["EgoInfo"])[2]
     det = lambda **f: {**detections, "detections": [{**detections["detections"][0], **f}]}
     nan, inf = float("nan"), float("inf")
     return [
@@ -141,6 +145,11 @@ def _edge_cases(examples):
         ("lane width NaN", encode("RoadMap", h, {**road, "lane_width_m": nan}), False),
         ("curve radius 29", encode("RoadMap", h, {**road, "curves": [{**road["curves"][0], "radius_m": -29.0}]}), False),
         ("lane end past the road", encode("RoadMap", h, {**road, "lane_ends": [{**road["lane_ends"][0], "end_m": 5000.0}]}), False),
+        ("ego mass 0", encode("EgoInfo", h, {**ego, "mass_kg": 0.0}), False),
+        ("ego height NaN", encode("EgoInfo", h, {**ego, "size_m": [4.6, 1.85, nan]}), False),
+        ("ego set speed 0", encode("EgoInfo", h, {**ego, "set_speed_mps": 0.0}), True),
+        ("ego time gap negative", encode("EgoInfo", h, {**ego, "time_gap_s": -1.0}), False),
+        ("ego no time gap", encode("EgoInfo", h, {**ego, "time_gap_s": None}), True),
         ("speed NaN (no rule)", encode("Speed", h, {"speed_mps": nan}), True),
         ("option tag 2", encode("AccCommand", h, command)[:-1] + b"\x02", False),
         ("length past the end", encode("SimEvent", h, {"kind": {"variant": "ControlTimeout", "late": ["acc"]}})[:-4] + b"\x09acc", False),

@@ -41,7 +41,7 @@ _QOS = {
     "sim/events": (zenoh.Priority.DATA, False, zenoh.CongestionControl.BLOCK),
     "camera/front": (zenoh.Priority.DATA_LOW, False, zenoh.CongestionControl.DROP),
 }
-_LATCHED = ("camera/front/info", "sim/road")
+_LATCHED = ("camera/front/info", "sim/road", "sim/ego")
 
 
 class RealTimeFactor:
@@ -101,11 +101,14 @@ class SimulatorSide:
                              encoding=zenoh.Encoding.APPLICATION_OCTET_STREAM.with_schema(encoding_schema(kind)))
 
     def start(self, camera_info: Dict[str, Any], road: Optional[Dict[str, Any]] = None, scenario: str = "external",
-              seed: int = 0) -> None:
-        """Camera info and road (latched), ScenarioStart; in lockstep, the awaited controllers."""
+              seed: int = 0, ego: Optional[Dict[str, Any]] = None) -> None:
+        """Camera info, road and ego (an EgoInfo body: the vehicle and the driver's settings),
+        latched; ScenarioStart; in lockstep, the awaited controllers."""
         self.put("camera/front/info", "CameraInfo", 0, camera_info)
         if road is not None:
             self.put("sim/road", "RoadMap", 0, road)
+        if ego is not None:
+            self.put("sim/ego", "EgoInfo", 0, ego)
         self.put("sim/events", "SimEvent", 0, {"kind": {"variant": "ScenarioStart", "name": scenario, "seed": seed}})
         if self.mode == "lockstep":
             self.wait_for_controllers()

@@ -97,6 +97,12 @@ STRUCTS = {
         ("lanes", "u32"), ("lane_width_m", "f64"), ("length_m", "f64"), ("curves", ("seq", ("struct", "Curve"))),
         ("lane_ends", ("seq", ("struct", "LaneEnd"))),
     ],
+    "EgoInfo": [
+        ("class", OBJECT_CLASS), ("size_m", VEC3), ("rear_overhang_m", "f64"), ("wheelbase_m", "f64"),
+        ("mass_kg", "f64"), ("max_power_w", "f64"), ("max_drive_force_n", "f64"), ("max_brake_decel_mps2", "f64"),
+        ("drag_area_m2", "f64"), ("rolling_coeff", "f64"), ("actuator_lag_s", "f64"), ("set_speed_mps", "f64"),
+        ("time_gap_s", ("opt", "f64")),
+    ],
 }
 
 VARIANTS = {
@@ -111,6 +117,7 @@ VARIANTS = {
 KINDS = {
     1: "Speed", 2: "VehicleState", 3: "ControlCommand", 4: "CameraFrame", 5: "CameraInfo", 6: "GroundTruthObjects",
     7: "Detections", 8: "SimClock", 9: "SimEvent", 10: "AccStatus", 11: "AccCommand", 12: "RoadMap",
+    13: "EgoInfo",
 }
 KIND_IDS = {name: kid for kid, name in KINDS.items()}
 
@@ -120,7 +127,7 @@ DEFAULT_KEYS = {
     "camera/front": "CameraFrame", "camera/front/info": "CameraInfo", "objects": "GroundTruthObjects",
     "perception/objects": "Detections", "sim/clock": "SimClock", "sim/events": "SimEvent",
     "acc/status": "AccStatus", "acc/command": "AccCommand", "sim/road": "RoadMap",
-    "camera/narrow": "CameraFrame", "camera/narrow/info": "CameraInfo",
+    "camera/narrow": "CameraFrame", "camera/narrow/info": "CameraInfo", "sim/ego": "EgoInfo",
 }
 
 _VARINT_MAX = {"u32": 5, "u64": 10}
@@ -316,6 +323,24 @@ def _check(kind, body):
             raise WireError(f"time_gap_s {h} must be a finite value > 0")
     elif kind == "RoadMap":
         _check_road(body)
+    elif kind == "EgoInfo":
+        _check_ego(body)
+
+
+def _check_ego(ego):
+    length, width, height = ego["size_m"]
+    positive = {"length": length, "width": width, "height": height}
+    positive.update({k: ego[k] for k in ("wheelbase_m", "mass_kg", "max_power_w", "max_drive_force_n",
+                                         "max_brake_decel_mps2")})
+    for name, v in positive.items():
+        if not (math.isfinite(v) and v > 0):
+            raise WireError(f"{name} {v} must be a finite value > 0")
+    for name in ("rear_overhang_m", "drag_area_m2", "rolling_coeff", "actuator_lag_s", "set_speed_mps"):
+        if not (math.isfinite(ego[name]) and ego[name] >= 0):
+            raise WireError(f"{name} {ego[name]} must be a finite value >= 0")
+    h = ego["time_gap_s"]
+    if h is not None and not (math.isfinite(h) and h > 0):
+        raise WireError(f"time_gap_s {h} must be a finite value > 0")
 
 
 def _check_road(road):

@@ -25,10 +25,11 @@ pub enum Topic {
     SimRoad,
     CameraNarrow,
     CameraNarrowInfo,
+    SimEgo,
 }
 
 impl Topic {
-    pub const ALL: [Topic; 14] = [
+    pub const ALL: [Topic; 15] = [
         Topic::VehicleSpeed,
         Topic::VehicleState,
         Topic::VehicleControl,
@@ -43,6 +44,7 @@ impl Topic {
         Topic::SimRoad,
         Topic::CameraNarrow,
         Topic::CameraNarrowInfo,
+        Topic::SimEgo,
     ];
 
     /// The logical name, which is also the default key (before the namespace).
@@ -62,6 +64,7 @@ impl Topic {
             Topic::SimRoad => "sim/road",
             Topic::CameraNarrow => "camera/narrow",
             Topic::CameraNarrowInfo => "camera/narrow/info",
+            Topic::SimEgo => "sim/ego",
         }
     }
 
@@ -103,6 +106,7 @@ impl Topic {
             Topic::AccStatus => MessageKind::AccStatus,
             Topic::AccCommand => MessageKind::AccCommand,
             Topic::SimRoad => MessageKind::RoadMap,
+            Topic::SimEgo => MessageKind::EgoInfo,
         }
     }
 
@@ -128,7 +132,7 @@ impl Topic {
                 delivery: Delivery::Latest,
                 ..base
             },
-            Topic::CameraFrontInfo | Topic::CameraNarrowInfo | Topic::SimRoad => TopicQos {
+            Topic::CameraFrontInfo | Topic::CameraNarrowInfo | Topic::SimRoad | Topic::SimEgo => TopicQos {
                 congestion_control: crate::qos::Congestion::Block,
                 delivery: Delivery::Queue(64),
                 latched: true,
@@ -185,6 +189,7 @@ pub const SIM_EVENTS: TopicDef<msg::SimEvent> = TopicDef::new(Topic::SimEvents);
 pub const ACC_STATUS: TopicDef<msg::AccStatus> = TopicDef::new(Topic::AccStatus);
 pub const ACC_COMMAND: TopicDef<msg::AccCommand> = TopicDef::new(Topic::AccCommand);
 pub const SIM_ROAD: TopicDef<msg::RoadSpec> = TopicDef::new(Topic::SimRoad);
+pub const SIM_EGO: TopicDef<msg::EgoInfo> = TopicDef::new(Topic::SimEgo);
 
 /// The key prefix (under the namespace) where nodes declare liveliness tokens:
 /// `<namespace>/nodes/<node name>`.

@@ -28,8 +28,8 @@ use slipstream_contract::bus::{
     StatsSnapshot,
 };
 use slipstream_contract::msg::{
-    due, CameraFrame, CameraInfo, ControlCommand, ControlTiming, GroundTruthObjects, ImageEncoding, RoadSpec, SimClock,
-    SimEvent, SimEventKind, Speed, VehicleState,
+    due, CameraFrame, CameraInfo, ControlCommand, ControlTiming, EgoInfo, GroundTruthObjects, ImageEncoding, RoadSpec,
+    SimClock, SimEvent, SimEventKind, Speed, VehicleState,
 };
 use slipstream_contract::topics::{self, Topic, TopicDef};
 
@@ -321,6 +321,7 @@ struct Node<'a> {
     objects: Publisher<GroundTruthObjects>,
     /// The road (latched): where lanes go, for controllers.
     road_pub: Publisher<RoadSpec>,
+    ego_pub: Publisher<EgoInfo>,
     camera: SimCamera,
     /// The long-range camera, when on.
     narrow: Option<SimCamera>,
@@ -435,6 +436,7 @@ impl<'a> Node<'a> {
             events: bus.publisher(topics::SIM_EVENTS).await?,
             objects: bus.publisher(topics::OBJECTS).await?,
             road_pub: bus.publisher(topics::SIM_ROAD).await?,
+            ego_pub: bus.publisher(topics::SIM_EGO).await?,
             camera,
             narrow,
             inbox,
@@ -456,6 +458,7 @@ impl<'a> Node<'a> {
             camera.info_pub.put(0, &camera.info)?;
         }
         self.road_pub.put(0, world.road().spec())?;
+        self.ego_pub.put(0, &ego_info(world))?;
         let lockstep = &self.settings.lockstep;
         if self.settings.mode == Mode::Lockstep {
             wait_for_nodes(bus, &lockstep.wait_for, lockstep.start_timeout_ms, stop).await?;
@@ -611,6 +614,27 @@ impl<'a> Node<'a> {
             end,
             time: self.time,
         })
+    }
+}
+
+/// The ego's vehicle and its driver's settings, as the scenario gives them.
+fn ego_info(world: &World) -> EgoInfo {
+    let (ego, spec) = (world.ego(), &world.scenario().ego);
+    let p = &ego.params;
+    EgoInfo {
+        class: ego.class,
+        size_m: p.size_m,
+        rear_overhang_m: p.rear_overhang_m,
+        wheelbase_m: p.wheelbase_m,
+        mass_kg: p.mass_kg,
+        max_power_w: p.max_power_w,
+        max_drive_force_n: p.max_drive_force_n,
+        max_brake_decel_mps2: p.max_brake_decel_mps2,
+        drag_area_m2: p.drag_area_m2,
+        rolling_coeff: p.rolling_coeff,
+        actuator_lag_s: p.actuator_lag_s,
+        set_speed_mps: spec.controller_set_speed_mps(),
+        time_gap_s: spec.time_gap_s,
     }
 }
 

@@ -126,6 +126,7 @@ pub struct Observed {
     pub camera_info: KeyLog,
     pub objects: KeyLog,
     pub road: KeyLog,
+    pub ego: KeyLog,
     pub narrow: KeyLog,
     pub events: KeyLog,
     pub states: Vec<StateSeen>,

@@ -67,6 +67,7 @@ pub fn judge(o: &Observed) -> Vec<Verdict> {
     for (rule, log, enables) in [
         ("optional.objects", &o.objects, "scoring against ground truth (eval, up's report)"),
         ("optional.sim_road", &o.road, "lane-aware lead selection in bends"),
+        ("optional.sim_ego", &o.ego, "a controller of any make set from the scenario (set speed, time gap, vehicle)"),
         ("optional.camera_narrow", &o.narrow, "long-range detection"),
     ] {
         out.push(optional(rule, log, enables));

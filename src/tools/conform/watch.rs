@@ -125,6 +125,7 @@ pub async fn watch(bus: &Bus, args: &ConformSimArgs) -> Result<Observed, BusErro
         camera_info: KeyLog::new(key(Topic::CameraFrontInfo)),
         objects: KeyLog::new(key(Topic::Objects)),
         road: KeyLog::new(key(Topic::SimRoad)),
+        ego: KeyLog::new(key(Topic::SimEgo)),
         narrow: KeyLog::new(key(Topic::CameraNarrow)),
         events: KeyLog::new(key(Topic::SimEvents)),
         lockstep: args.lockstep.then(|| LockstepLog { name: bus.node().to_string(), ..LockstepLog::default() }),
@@ -173,6 +174,8 @@ async fn subscribe(bus: &Bus, tap: &Tap, answerer: Option<Arc<Mutex<Answerer>>>)
     .await?;
     let tp = tap.clone();
     on(Topic::SimRoad, true, Box::new(move |s| drop(tp.take::<msg::RoadSpec>(&s, |o| &mut o.road)))).await?;
+    let tp = tap.clone();
+    on(Topic::SimEgo, true, Box::new(move |s| drop(tp.take::<msg::EgoInfo>(&s, |o| &mut o.ego)))).await?;
     let tp = tap.clone();
     on(
         Topic::SimEvents,

@@ -56,6 +56,7 @@ pub fn decode_json(bytes: &[u8]) -> Result<(MessageKind, Header, Value), DecodeE
         MessageKind::AccStatus => as_json::<AccStatus>(bytes)?,
         MessageKind::AccCommand => as_json::<AccCommand>(bytes)?,
         MessageKind::RoadMap => as_json::<RoadSpec>(bytes)?,
+        MessageKind::EgoInfo => as_json::<super::EgoInfo>(bytes)?,
     };
     Ok((kind, header, body))
 }

@@ -68,6 +68,7 @@ fn trace_body(tracer: &mut Tracer, kind: MessageKind) -> Result<String, serde_re
         K::AccStatus => tracer.trace_simple_type::<AccStatus>()?.0,
         K::AccCommand => tracer.trace_simple_type::<AccCommand>()?.0,
         K::RoadMap => tracer.trace_simple_type::<RoadSpec>()?.0,
+        K::EgoInfo => tracer.trace_simple_type::<super::EgoInfo>()?.0,
     };
     Ok(match format {
         Format::TypeName(name) => name,

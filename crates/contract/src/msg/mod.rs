@@ -19,6 +19,7 @@ mod any;
 mod camera;
 mod codec;
 mod compressed;
+mod ego;
 mod image_encoding;
 pub mod layout;
 mod objects;
@@ -31,6 +32,7 @@ pub use acc::{AccCommand, AccMode, AccStatus, AccWarning, LeadInfo};
 pub use any::{decode_json, peek_kind};
 pub use camera::{frame_prefix, CameraFrame, CameraFrameRef, CameraInfo};
 pub use codec::{decode, decode_header, encode, encode_into, DecodeError, Stamped};
+pub use ego::EgoInfo;
 pub use image_encoding::ImageEncoding;
 pub use objects::{BoundingBox2d, Detection, Detections, GroundTruthObject, GroundTruthObjects, ObjectClass};
 pub use pixels::{check_size as check_frame_size, decode as decode_pixels, encode as encode_pixels, MAX_FRAME_PIXELS};
@@ -80,10 +82,11 @@ pub enum MessageKind {
     AccStatus = 10,
     AccCommand = 11,
     RoadMap = 12,
+    EgoInfo = 13,
 }
 
 impl MessageKind {
-    pub const ALL: [MessageKind; 12] = [
+    pub const ALL: [MessageKind; 13] = [
         MessageKind::Speed,
         MessageKind::VehicleState,
         MessageKind::ControlCommand,
@@ -96,6 +99,7 @@ impl MessageKind {
         MessageKind::AccStatus,
         MessageKind::AccCommand,
         MessageKind::RoadMap,
+        MessageKind::EgoInfo,
     ];
 
     pub fn from_u8(value: u8) -> Option<Self> {
@@ -117,6 +121,7 @@ impl MessageKind {
             MessageKind::AccStatus => "AccStatus",
             MessageKind::AccCommand => "AccCommand",
             MessageKind::RoadMap => "RoadMap",
+            MessageKind::EgoInfo => "EgoInfo",
         }
     }
 
@@ -209,5 +214,6 @@ pub fn examples() -> Vec<(MessageKind, Vec<u8>)> {
                 },
             ),
         ),
+        e(MessageKind::EgoInfo, encode(&h, &ego::example())),
     ]
 }
