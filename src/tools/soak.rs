@@ -218,6 +218,7 @@ pub fn run(args: &SoakArgs, connect: &crate::config::ConnectArgs) -> Result<Soak
         vehicle: Some(LoopSpec::vehicle_of(&scenario)),
         faults: None,
         link: Default::default(),
+        own: Default::default(),
     };
     let namespace = format!("soak-{}", std::process::id());
     let network = Network::Isolated { topics: connect.topics.clone(), namespace };

@@ -108,6 +108,8 @@ pub struct UpArgs {
     pub set_speed: Option<f64>,
     #[command(flatten)]
     pub faults: FaultArgs,
+    #[command(flatten)]
+    pub own: slipstream_orchestration::launch::OwnNodeArgs,
     /// Re-simulate: a recording (`up --record`, `slipstream record`) drives today's detector
     /// and ACC in place of the simulator, step by step, and the report compares their outputs
     /// with the recorded ones (docs/recording.md). Scenario, clock, perception and set speed
@@ -445,6 +447,7 @@ fn loop_spec(args: &UpArgs, scenario: &Scenario) -> Result<LoopSpec> {
         vehicle: Some(LoopSpec::vehicle_of(scenario)),
         faults: args.faults.profile()?,
         link: Default::default(),
+        own: args.own.nodes()?,
     })
 }
 

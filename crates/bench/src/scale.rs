@@ -76,6 +76,7 @@ async fn side_by_side(n: usize, duration_s: f64) -> Result<ScaleRow> {
         vehicle: Some(LoopSpec::vehicle_of(&scenario)),
         faults: None,
         link: LinkKind::Unix,
+        own: Default::default(),
     };
     let logs = std::env::temp_dir().join(format!("slipstream-bench-scale-{}", std::process::id()));
     let cpu_before = children_cpu_s();

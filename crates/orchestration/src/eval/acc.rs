@@ -18,7 +18,7 @@ use super::judge::judge;
 use super::metrics::{aims, Metrics};
 use super::trace::Recorder;
 use super::{fmt_opt, plot};
-use crate::launch::{ClockMode, LinkKind, LoopRun, LoopSpec, Network, NodeInput, NODE_POLL};
+use crate::launch::{ClockMode, LinkKind, LoopRun, LoopSpec, Network, NodeInput, OwnNodeArgs, OwnNodes, NODE_POLL};
 use slipstream_acc::PerceptionSource;
 use slipstream_contract::config::{FaultArgs, FaultProfile};
 use slipstream_sim::{Scenario, SimTime};
@@ -58,6 +58,8 @@ pub struct EvalAccArgs {
     pub link: LinkKind,
     #[command(flatten)]
     pub faults: FaultArgs,
+    #[command(flatten)]
+    pub own: OwnNodeArgs,
 }
 
 #[derive(Debug, Clone, Serialize, serde::Deserialize)]
@@ -149,6 +151,8 @@ pub const MAX_DEFAULT_JOBS: usize = 4;
 #[derive(Debug, Clone, Serialize)]
 pub struct AccReport {
     pub command: String,
+    /// The nodes of the user's own it judged (their command and files by content); empty: ours.
+    pub own: OwnNodes,
     pub results: Vec<ScenarioResult>,
     pub pass: bool,
     /// Scenarios run at once.
@@ -173,6 +177,7 @@ pub fn run(args: &EvalAccArgs, connect: &slipstream_contract::config::ConnectArg
     // The topic config and the fault profile are checked here, once, before any process starts.
     connect.topic_map()?;
     let faults = args.faults.profile()?;
+    let own = args.own.nodes()?;
     let names: Vec<String> = if args.scenarios.is_empty() {
         slipstream_sim::scenario::BUILT_IN.iter().map(|(n, _)| n.to_string()).collect()
     } else {
@@ -214,7 +219,7 @@ pub fn run(args: &EvalAccArgs, connect: &slipstream_contract::config::ConnectArg
     } else {
         eprintln!("node logs: {}", logs.display());
     }
-    Ok(AccReport { command: std::env::args().collect::<Vec<_>>().join(" "), results, pass, jobs, wall_s })
+    Ok(AccReport { command: std::env::args().collect::<Vec<_>>().join(" "), own, results, pass, jobs, wall_s })
 }
 
 /// Runs each of `runs` (the simulator's `--scenario` argument: a built-in name or a file, and
@@ -303,6 +308,7 @@ pub(crate) async fn run_one(
         vehicle: Some(LoopSpec::vehicle_of(&scenario)),
         faults,
         link: args.link,
+        own: args.own.nodes()?,
     };
     let faults = spec.faults.as_ref().map(|p| p.summary());
     // A namespace and ports of this run's own: nothing else on the machine is disturbed.

@@ -279,6 +279,7 @@ pub fn run(args: &EvalFaultsArgs, connect: &slipstream_contract::config::Connect
         jobs: Some(1),
         link: Default::default(),
         faults: FaultArgs::default(),
+        own: Default::default(),
     };
     let rt = tokio::runtime::Runtime::new().map_err(Error::system("start the async runtime"))?;
     let total_runs: usize = names.len() * (1 + Axis::ALL.iter().map(|a| a.values(args).len()).sum::<usize>());

@@ -568,6 +568,7 @@ pub async fn run(
         vehicle: scenario.as_ref().map(LoopSpec::vehicle_of),
         faults: None,
         link: Default::default(),
+        own: Default::default(),
     };
     let mut lp =
         LoopRun::open(spec.clone(), Network::User { connect, sim_elsewhere: false }, &dir.join("logs"), "resim")

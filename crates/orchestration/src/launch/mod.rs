@@ -9,6 +9,8 @@
 //!   slipstream-sim): [`LoopRun`] opens an observer session, starts the controllers, waits for
 //!   their liveliness tokens, starts the simulator, watches for its end or a death, stops
 //!   everything and reads the simulator's report.
+//! - [`foreign`]: a detector or controller of the user's own (`--detector CMD`,
+//!   `--controller CMD`) in the place of ours, its connection handed over in the environment.
 //! - [`external`]: a simulator started elsewhere (`up --sim external`), known by its messages:
 //!   there once vehicle/speed arrives, over when it ends the scenario, runs the time asked
 //!   for, or goes silent for [`external::SILENCE`] (5 s).
@@ -25,12 +27,14 @@ use std::time::Duration;
 
 pub mod child;
 pub(crate) mod external;
+pub mod foreign;
 pub(crate) mod hold;
 pub(crate) mod namespace;
 pub(crate) mod nodes;
 
 pub use child::{free_ports, sibling_binary, Child};
 pub use external::ExternalSim;
+pub use foreign::{ForeignNode, OwnNodeArgs, OwnNodes};
 pub use nodes::{last_error, log_of, ClockMode, LinkKind, LoopRun, LoopSpec, Network, NodeEnd, NodeInput, Progress};
 
 /// How long the controllers may take to appear on the bus.

@@ -23,6 +23,7 @@ use crate::error::{Error, Result};
 use serde::Serialize;
 
 use super::child::{free_ports, sibling_binary, Child};
+use super::foreign::{ForeignNode, OwnNodes};
 use super::{DEFAULT_RUST_LOG, NODE_POLL, NODE_START_TIMEOUT, SETTLE, STOP_GRACE};
 use slipstream_acc::node::AccStats;
 use slipstream_acc::{PerceptionSource, VehicleClass};
@@ -82,6 +83,8 @@ pub struct LoopSpec {
     pub faults: Option<FaultProfile>,
     /// The links between the loop's processes (peer mode).
     pub link: LinkKind,
+    /// Nodes of the user's own in the place of ours (`--controller`, `--detector`).
+    pub own: OwnNodes,
 }
 
 impl LoopSpec {
@@ -106,6 +109,13 @@ impl LoopSpec {
     /// frames must arrive; their faults belong on what follows them.
     fn check_faults(&self) -> Result<()> {
         let Some(p) = &self.faults else { return Ok(()) };
+        if let Some(own) = self.own.controller.as_ref().or(self.own.detector.as_ref()) {
+            return Err(Error::Refused(format!(
+                "{}: faults are injected by slipstream's own nodes as they receive, not yet into a node of your own ({}) (fix: judge it without --faults)",
+                p.name,
+                own.command_line()
+            )));
+        }
         if self.clock != ClockMode::Lockstep {
             return Ok(());
         }
@@ -418,9 +428,15 @@ impl LoopRun {
             acc_args.push("--lockstep".into());
         }
         let (acc, detect) = (self.endpoints.acc.clone(), self.endpoints.detect.clone());
-        self.spawn(ACC, acc_args, &acc, &[])?;
+        match &spec.own.controller {
+            Some(node) => self.spawn_foreign(node, &acc, &[])?,
+            None => self.spawn(ACC, acc_args, &acc, &[])?,
+        }
         if self.camera() {
-            self.spawn(DETECT, vec!["--json".into()], &detect, &[&acc])?;
+            match &spec.own.detector {
+                Some(node) => self.spawn_foreign(node, &detect, &[&acc])?,
+                None => self.spawn(DETECT, vec!["--json".into()], &detect, &[&acc])?,
+            }
         }
         self.await_controllers().await
     }
@@ -530,6 +546,22 @@ impl LoopRun {
         Ok(())
     }
 
+    /// A node of the user's own, under its role's name (`controller.log`, `controller.out`).
+    fn spawn_foreign(&mut self, node: &ForeignNode, own: &str, earlier: &[&str]) -> Result<()> {
+        let name = node.role.process();
+        let stderr = create(&log_of(&self.logs, name))?;
+        let stdout = create(&self.logs.join(format!("{name}.out")))?;
+        let run = [self.spec.clock.name(), self.spec.perception.name()];
+        let mut cmd = node.command(&self.flags(own, earlier), &self.logs, run)?;
+        cmd.stdin(Stdio::null()).stdout(stdout).stderr(stderr);
+        if std::env::var_os("RUST_LOG").is_none() {
+            cmd.env("RUST_LOG", DEFAULT_RUST_LOG);
+        }
+        cmd.env_remove("SLIPSTREAM_FAULTS");
+        self.nodes.push(Child::spawn(name, &mut cmd)?);
+        Ok(())
+    }
+
     /// Whether the simulator has ended and which nodes died (each named once, when first seen).
     pub fn check(&mut self) -> Progress {
         let mut progress = Progress::default();
@@ -599,7 +631,7 @@ impl LoopRun {
     /// The detector's statistics (its --json output), once it has been stopped; None without
     /// camera perception.
     pub fn detect_report(&self) -> Result<Option<DetectStats>> {
-        if !self.camera() {
+        if !self.camera() || self.spec.own.detector.is_some() {
             return Ok(None);
         }
         let path = self.logs.join(DETECT_REPORT);

@@ -18,7 +18,7 @@ use crate::error::{Error, Result};
 use serde::Serialize;
 
 use super::acc::{jobs, run_all, EvalAccArgs};
-use crate::launch::LinkKind;
+use crate::launch::{LinkKind, OwnNodeArgs, OwnNodes};
 use families::{nth, Family};
 use rates::{faults_of, worst, Rates, SweepRun};
 use shard::Shard;
@@ -67,6 +67,8 @@ pub struct EvalSweepArgs {
     /// an aim (a thousand runs' logs take gigabytes)
     #[arg(long)]
     pub keep_logs: bool,
+    #[command(flatten)]
+    pub own: OwnNodeArgs,
 }
 
 #[derive(Debug, Clone, Serialize, serde::Deserialize)]
@@ -83,6 +85,9 @@ pub struct SweepReport {
     #[serde(default)]
     pub shard: Option<Shard>,
     pub perception: PerceptionSource,
+    /// The nodes of the user's own it judged (their command and files by content); empty: ours.
+    #[serde(default)]
+    pub own: OwnNodes,
     pub jobs: usize,
     pub wall_s: f64,
     /// Over every run, then per family.
@@ -149,6 +154,7 @@ pub fn run(
         return Err(Error::flag("--timeout", "must be > 0"));
     }
     let jobs = jobs(args.jobs)?;
+    let own = args.own.nodes()?;
     let generated = write_scenarios(args)?;
     let logs = args.out.join("logs");
     let acc_args = EvalAccArgs {
@@ -162,6 +168,7 @@ pub fn run(
         jobs: Some(jobs),
         link: LinkKind::default(),
         faults: FaultArgs::default(),
+        own: args.own.clone(),
     };
     let (mut runs, scenarios): (Vec<SweepRun>, Vec<(String, Scenario)>) =
         generated.into_iter().map(|(run, s)| (run.clone(), (run.file, s))).unzip();
@@ -183,6 +190,7 @@ pub fn run(
         perception: args.perception,
         asked_families: args.families.clone(),
         shard: args.shard,
+        own: own.clone(),
         out: &args.out,
         worst: args.worst,
     };
@@ -197,6 +205,7 @@ pub(crate) struct ReportOf<'a> {
     pub(crate) perception: PerceptionSource,
     pub(crate) asked_families: Vec<Family>,
     pub(crate) shard: Option<Shard>,
+    pub(crate) own: OwnNodes,
     pub(crate) out: &'a Path,
     pub(crate) worst: usize,
 }
@@ -258,6 +267,7 @@ pub(crate) fn report(args: &ReportOf, runs: Vec<SweepRun>, jobs: usize, wall_s: 
         asked_families: args.asked_families.clone(),
         shard: args.shard,
         perception: args.perception,
+        own: args.own.clone(),
         jobs,
         wall_s,
         all,

@@ -87,10 +87,11 @@ pub fn merge(args: &MergeArgs) -> Result<SweepReport> {
         let same = r.seed == first.seed
             && r.count == first.count
             && r.perception == first.perception
-            && r.asked_families == first.asked_families;
+            && r.asked_families == first.asked_families
+            && r.own == first.own;
         if !same {
             let rule = format!(
-                "is of another sweep than {} (seed, --count, --perception and --families must be the same)",
+                "is of another sweep than {} (seed, --count, --perception, --families and the nodes under test, --controller and --detector with their files' content, must be the same)",
                 first_path.display()
             );
             return Err(Error::flag(path.display().to_string(), rule));
@@ -113,6 +114,7 @@ pub fn merge(args: &MergeArgs) -> Result<SweepReport> {
         perception: first.perception,
         asked_families: first.asked_families.clone(),
         shard: None,
+        own: first.own.clone(),
         out: &args.out,
         worst: args.worst,
     };

@@ -1,0 +1,77 @@
+"""A controller of the user's own, in Python on the SDK (clients/python/examples/own_acc.py),
+in the place of slipstream-acc: run by `up` and `eval`, judged like ours, the same twice in
+lockstep, named in the report by its command and its file's content; a node that cannot start
+is named with what it did."""
+
+import hashlib
+import json
+import subprocess
+import sys
+
+from conftest import ROOT
+
+OWN_ACC = "clients/python/examples/own_acc.py"
+CONTROLLER = f"{sys.executable} {OWN_ACC}"
+
+
+def slipstream(slipstream_bin, *args, timeout=300):
+    return subprocess.run([slipstream_bin, *args], cwd=ROOT, capture_output=True, text=True, timeout=timeout)
+
+
+def eval_acc(slipstream_bin, scenario, *more):
+    done = slipstream(slipstream_bin, "eval", "acc", "--scenario", scenario, "--perception", "ground-truth",
+                      "--json", "--controller", CONTROLLER, *more)
+    assert done.stdout, done.stderr[-3000:]
+    return done.returncode, json.loads(done.stdout)
+
+
+def test_a_python_controller_is_judged_like_ours_and_the_same_twice_in_lockstep(slipstream_bin):
+    (code, first), (_, second) = (eval_acc(slipstream_bin, "cut-in") for _ in range(2))
+    run = first["results"][0]
+    assert run["lockstep_timeouts"] == 0 and run["metrics"]["collisions"] == 0, run
+    assert run["metrics"]["duration_s"] > 10, run["metrics"]
+    assert code == (0 if first["pass"] else 1)
+    # Lockstep: the same answers, so the same figures, to the last digit.
+    assert first["results"][0]["metrics"] == second["results"][0]["metrics"]
+    controller = first["own"]["controller"]
+    assert controller["command"] == [sys.executable, OWN_ACC]
+    script = next(f for f in controller["files"] if f["path"] == OWN_ACC)
+    assert script["sha256"] == hashlib.sha256((ROOT / OWN_ACC).read_bytes()).hexdigest()
+    assert first["own"]["detector"] is None
+
+
+def test_a_small_sweep_runs_a_python_controller_and_names_it(slipstream_bin, tmp_path):
+    done = slipstream(slipstream_bin, "eval", "sweep", "--count", "4", "--perception", "ground-truth",
+                      "--controller", CONTROLLER, "--report", str(tmp_path / "mine"))
+    assert done.returncode in (0, 1), done.stderr[-3000:]
+    report = json.loads((tmp_path / "mine" / "sweep.json").read_text())
+    assert len(report["runs"]) == 4 and all(r["result"] for r in report["runs"]), report["runs"]
+    assert report["own"]["controller"]["command"] == [sys.executable, OWN_ACC]
+
+
+def test_up_closes_the_loop_around_a_python_controller(slipstream_bin, free_port, tmp_path):
+    done = slipstream(slipstream_bin, "-l", f"tcp/127.0.0.1:{free_port}", "up", "--scenario", "steady-follow",
+                      "--mode", "lockstep", "--perception", "ground-truth", "--duration", "5", "--plain",
+                      "--report", str(tmp_path), "--controller", CONTROLLER, timeout=120)
+    assert done.returncode == 0, done.stderr[-3000:]
+    report = json.loads((tmp_path / "report.json").read_text())
+    assert report["ended"] == "duration of 5 s reached" and report["metrics"]["duration_s"] > 4.9, report["ended"]
+    assert any(n["node"] == "controller" and n["exit_code"] == 0 for n in report["nodes"]), report["nodes"]
+    # One answer per state at 100 Hz, counted by the SDK as it stopped.
+    assert "# acc: 500 commands" in (tmp_path / "logs" / "controller.out").read_text()
+
+
+def test_a_controller_that_exits_at_start_is_named_with_its_exit(slipstream_bin):
+    done = slipstream(slipstream_bin, "eval", "acc", "--scenario", "cut-in", "--perception", "ground-truth",
+                      "--controller", f"{sys.executable} -c 'import sys; print(\"no model\", file=sys.stderr); sys.exit(3)'",
+                      timeout=120)
+    assert done.returncode != 0
+    assert "controller" in done.stderr and "exited at start" in done.stderr, done.stderr[-2000:]
+    assert "exit status: 3" in done.stderr, done.stderr[-2000:]
+
+
+def test_a_controller_command_that_cannot_run_is_refused_before_anything_starts(slipstream_bin):
+    done = slipstream(slipstream_bin, "eval", "acc", "--scenario", "cut-in", "--controller", "no-such-acc --fast",
+                      timeout=60)
+    assert done.returncode == 2 or done.returncode == 1
+    assert "--controller" in done.stderr and "neither a file nor a program on PATH" in done.stderr, done.stderr
