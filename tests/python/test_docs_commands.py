@@ -47,6 +47,8 @@ ELSEWHERE = {
         "tests/it/sweep.rs runs a 40-run sweep (and replays its worst run with eval acc)",
     "slipstream eval acc --perception ground-truth --plots plots/":
         "tests/it/acc.rs runs `eval acc --json --perception P --plots DIR` over the suite",
+    "slipstream eval sweep --count 200 --perception ground-truth --controller 'python3 clients/python/examples/own_acc.py' --report mine":
+        "tests/python/test_own_nodes.py runs the same sweep with --count 4: two hundred runs take minutes",
     "slipstream eval faults --scenario cut-in --plot envelope.png":
         "tests/it/faults.rs runs `eval faults --scenario steady-follow ... --duration 4`: the envelope takes minutes",
 }
@@ -331,6 +333,18 @@ def test_the_loop_around_an_external_simulator(host):
     up = one_shot(host, "target/release/slipstream up --sim external --mode lockstep --duration 30", work_s=60)
     assert report(host, only_report(host))["sim"] == "external", up.stdout()[-2000:]
     stopped(host, ref)
+
+
+@needs_host
+def test_a_python_controller_in_the_loop_as_own_node_md_gives_it(host):
+    judged = host.run("slipstream eval acc --scenario cut-in --perception ground-truth --controller 'python3 clients/python/examples/own_acc.py'",
+                      timeout=120)
+    # Judged like ours: a verdict either way (exit 1 on a missed aim), never an error.
+    assert judged.code in (0, 1) and "| cut-in | GroundTruth | 0 (0) |" in judged.stdout(), judged.stderr()[-2000:]
+    clean(judged)
+    one_shot(host, "slipstream up --mode lockstep --perception ground-truth --controller 'python3 clients/python/examples/own_acc.py'",
+             work_s=60)
+    assert report(host, only_report(host))["metrics"]["collisions"] == 0
 
 
 # --- Recording, playback and re-simulation (docs/recording.md) ---------------------------------
