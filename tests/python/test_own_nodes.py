@@ -7,6 +7,9 @@ import hashlib
 import json
 import subprocess
 import sys
+import time
+
+import pytest
 
 from conftest import ROOT
 
@@ -18,15 +21,16 @@ def slipstream(slipstream_bin, *args, timeout=300):
     return subprocess.run([slipstream_bin, *args], cwd=ROOT, capture_output=True, text=True, timeout=timeout)
 
 
-def eval_acc(slipstream_bin, scenario, *more):
-    done = slipstream(slipstream_bin, "eval", "acc", "--scenario", scenario, "--perception", "ground-truth",
-                      "--json", "--controller", CONTROLLER, *more)
+def eval_acc(slipstream_bin, scenario, perception):
+    done = slipstream(slipstream_bin, "eval", "acc", "--scenario", scenario, "--perception", perception,
+                      "--json", "--controller", CONTROLLER)
     assert done.stdout, done.stderr[-3000:]
     return done.returncode, json.loads(done.stdout)
 
 
-def test_a_python_controller_is_judged_like_ours_and_the_same_twice_in_lockstep(slipstream_bin):
-    (code, first), (_, second) = (eval_acc(slipstream_bin, "cut-in") for _ in range(2))
+@pytest.mark.parametrize("perception", ["ground-truth", "camera"])
+def test_a_python_controller_is_judged_like_ours_and_the_same_twice_in_lockstep(slipstream_bin, perception):
+    (code, first), (_, second) = (eval_acc(slipstream_bin, "cut-in", perception) for _ in range(2))
     run = first["results"][0]
     assert run["lockstep_timeouts"] == 0 and run["metrics"]["collisions"] == 0, run
     assert run["metrics"]["duration_s"] > 10, run["metrics"]
@@ -75,3 +79,26 @@ def test_a_controller_command_that_cannot_run_is_refused_before_anything_starts(
                       timeout=60)
     assert done.returncode == 2 or done.returncode == 1
     assert "--controller" in done.stderr and "neither a file nor a program on PATH" in done.stderr, done.stderr
+
+
+BAD = f"{sys.executable} tests/python/bad_controllers.py"
+
+
+def test_a_controller_that_never_answers_ends_its_run_at_the_first_step_left_unanswered(slipstream_bin):
+    started = time.monotonic()
+    done = slipstream(slipstream_bin, "eval", "acc", "--scenario", "cut-in", "--perception", "ground-truth",
+                      "--controller", f"{BAD} silent", timeout=120)
+    assert done.returncode == 1
+    assert "lockstep timeout at step 0 waiting for acc" in done.stderr, done.stderr[-2000:]
+    # One step's timeout (2 s), not one per step of the scenario.
+    assert time.monotonic() - started < 60
+
+
+def test_a_sweep_over_a_controller_that_crashes_finishes_with_its_runs_marked(slipstream_bin, tmp_path):
+    done = slipstream(slipstream_bin, "eval", "sweep", "--count", "2", "--perception", "ground-truth",
+                      "--controller", f"{BAD} crash", "--report", str(tmp_path / "bad"))
+    assert done.returncode == 1, done.stderr[-3000:]
+    runs = json.loads((tmp_path / "bad" / "sweep.json").read_text())["runs"]
+    assert len(runs) == 2 and all(r.get("result") is None for r in runs), runs
+    assert all("controller ended before the run was over (exit code 1): RuntimeError: the model diverged"
+               in r["error"] for r in runs), [r["error"] for r in runs]

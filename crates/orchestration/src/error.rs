@@ -85,6 +85,18 @@ pub enum Error {
 }
 
 impl Error {
+    /// The error and every cause under it, on one line: what a report keeps of a failed run.
+    pub fn chain(&self) -> String {
+        let mut out = self.to_string();
+        let mut cause = std::error::Error::source(self);
+        while let Some(c) = cause {
+            out.push_str(": ");
+            out.push_str(&c.to_string());
+            cause = c.source();
+        }
+        out
+    }
+
     /// Maps an I/O error on `path` to [`Error::File`] (`action`: "create", "read", ...).
     pub(crate) fn file<'a>(action: &'static str, path: &'a Path) -> impl FnOnce(std::io::Error) -> Error + 'a {
         move |source| Error::File { action, path: path.to_path_buf(), source }

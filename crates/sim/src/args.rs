@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use super::scenario::{Scenario, BUILT_IN};
-use super::settings::{Mode, SimSettings};
+use super::settings::{Mode, OnTimeout, SimSettings};
 use slipstream_contract::config::{ConfigError, ConnectArgs, FaultArgs};
 
 #[derive(Debug, Clone, clap::Args)]
@@ -30,6 +30,10 @@ pub struct SimArgs {
     /// Nodes lockstep waits for (comma-separated), e.g. acc
     #[arg(long, value_delimiter = ',')]
     pub wait_for: Option<Vec<String>>,
+    /// Lockstep: after a step's timeout, continue (with the control policy) or stop the run
+    /// (settings key `lockstep.on_timeout`)
+    #[arg(long, value_parser = ["continue", "stop"])]
+    pub on_timeout: Option<String>,
     /// Physics steps per simulated second
     #[arg(long)]
     pub physics_hz: Option<u32>,
@@ -70,6 +74,9 @@ impl SimArgs {
         }
         if let Some(w) = &self.wait_for {
             s.lockstep.wait_for = w.clone();
+        }
+        if let Some(t) = &self.on_timeout {
+            s.lockstep.on_timeout = if t == "stop" { OnTimeout::Stop } else { OnTimeout::Continue };
         }
         if let Some(hz) = self.physics_hz {
             s.physics_hz = hz;

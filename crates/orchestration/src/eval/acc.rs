@@ -270,13 +270,16 @@ pub(crate) fn run_all(
 
 /// Whether the run ended as a run should: the simulator finished within `timeout_s` and no
 /// node died before it.
-fn ended_in_time(progress: &crate::launch::Progress, timeout_s: f64) -> Result<()> {
+fn ended_in_time(progress: &crate::launch::Progress, ends: &[crate::launch::NodeEnd], timeout_s: f64) -> Result<()> {
     if progress.sim_ended.is_none() && progress.died.is_empty() {
         let problem = format!("did not finish within {timeout_s} s (--timeout)");
         return Err(Error::node("slipstream-sim", problem));
     }
-    if !progress.died.is_empty() {
-        return Err(Error::node(progress.died.join(", "), "ended before the run was over"));
+    if let Some(first) = progress.died.first() {
+        let end = ends.iter().find(|e| &e.node == first);
+        let code = end.and_then(|e| e.exit_code).map_or("killed by a signal".into(), |c| format!("exit code {c}"));
+        let said = end.and_then(|e| crate::launch::last_words(&e.log)).map_or(String::new(), |w| format!(": {w}"));
+        return Err(Error::node(progress.died.join(", "), format!("ended before the run was over ({code}){said}")));
     }
     Ok(())
 }
@@ -329,7 +332,7 @@ pub(crate) async fn run_one(
         tokio::time::sleep(NODE_POLL).await;
     };
     let wall = started.elapsed().as_secs_f64();
-    lp.stop().await;
+    let ends = lp.stop().await;
     let rec = recorder.take();
     drop(recorder);
     let sim = lp.sim_report();
@@ -338,7 +341,7 @@ pub(crate) async fn run_one(
         (lp.acc_report().map_or(0.0, |a| a.busy_s), lp.detect_report().ok().flatten().map_or(0.0, |d| d.busy_s));
     lp.close().await;
     let wall_s = opened.elapsed().as_secs_f64();
-    ended_in_time(&progress, args.timeout)?;
+    ended_in_time(&progress, &ends, args.timeout)?;
     let sim = sim?;
     let time = RunTime {
         simulated_s: sim.sim_time_s,
@@ -352,7 +355,12 @@ pub(crate) async fn run_one(
     let judged = judge(&rec, &scenario, Some(&sim), "stopped");
     let trace = judged.trace;
     let metrics = judged.metrics.ok_or_else(|| {
-        Error::Unjudged(format!("recorded only {} states (did the nodes connect?)", trace.samples.len()))
+        let ended = sim
+            .end
+            .as_ref()
+            .filter(|e| !e.success)
+            .map_or(String::new(), |e| format!("; the simulator ended: {}", e.reason));
+        Error::Unjudged(format!("recorded only {} states (did the nodes connect?){ended}", trace.samples.len()))
     })?;
     let plot = match &args.plots {
         Some(dir) => {

@@ -35,7 +35,9 @@ pub(crate) mod nodes;
 pub use child::{free_ports, sibling_binary, Child};
 pub use external::ExternalSim;
 pub use foreign::{ForeignNode, OwnNodeArgs, OwnNodes};
-pub use nodes::{last_error, log_of, ClockMode, LinkKind, LoopRun, LoopSpec, Network, NodeEnd, NodeInput, Progress};
+pub use nodes::{
+    last_error, last_words, log_of, ClockMode, LinkKind, LoopRun, LoopSpec, Network, NodeEnd, NodeInput, Progress,
+};
 
 /// How long the controllers may take to appear on the bus.
 pub const NODE_START_TIMEOUT: Duration = Duration::from_secs(30);

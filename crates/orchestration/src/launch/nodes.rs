@@ -461,6 +461,12 @@ impl LoopRun {
         ];
         if spec.clock == ClockMode::Lockstep {
             sim_args.extend(["--wait-for".into(), ACC_NODE.into()]);
+            // A controller of the user's own that stops answering ends its run at the first
+            // step it leaves unanswered (a failed run either way), rather than costing every
+            // step the timeout: a sweep over it finishes.
+            if spec.own.controller.is_some() {
+                sim_args.extend(["--on-timeout".into(), "stop".into()]);
+            }
         }
         self.spawn(SIM, sim_args, &sim, &controllers)
     }
@@ -688,6 +694,15 @@ pub fn last_error(log: &Path) -> Option<String> {
     let error: Vec<&str> =
         std::iter::once(first).chain(lines[at + 1..].iter().copied().take_while(|l| l.starts_with("  "))).collect();
     Some(error.join("\n"))
+}
+
+/// What a node said last about why it stopped: its error ([`last_error`]), else the last line
+/// of its log (a Python traceback ends with the exception), if any.
+pub fn last_words(log: &Path) -> Option<String> {
+    last_error(log).or_else(|| {
+        let text = std::fs::read_to_string(log).ok()?;
+        text.lines().rev().find(|l| !l.trim().is_empty()).map(|l| l.trim().to_string())
+    })
 }
 
 fn create(path: &Path) -> Result<std::fs::File> {

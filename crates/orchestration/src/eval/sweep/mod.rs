@@ -180,7 +180,7 @@ pub fn run(
     for (run, result) in runs.iter_mut().zip(results) {
         match result {
             Ok(r) => run.result = Some(r),
-            Err(e) => run.error = Some(format!("{e:#}")),
+            Err(e) => run.error = Some(e.chain()),
         }
     }
     let wall_s = started.elapsed().as_secs_f64();
@@ -238,7 +238,7 @@ fn judged(
             let failed: Vec<&str> = r.metrics.checks.iter().filter(|c| !c.pass).map(|c| c.name.as_str()).collect();
             Some(format!("FAIL: {}", failed.join(", ")))
         }
-        Err(e) => Some(format!("ERROR: {e:#}")),
+        Err(e) => Some(format!("ERROR: {}", e.chain())),
     }
 }
 
