@@ -284,6 +284,13 @@ fn ended_in_time(progress: &crate::launch::Progress, ends: &[crate::launch::Node
     Ok(())
 }
 
+/// A run too short to judge, and how the simulator ended it.
+fn unjudged(states: usize, sim: &slipstream_sim::SimReport) -> Error {
+    let ended = sim.end.as_ref().filter(|e| !e.success);
+    let ended = ended.map_or(String::new(), |e| format!("; the simulator ended: {}", e.reason));
+    Error::Unjudged(format!("recorded only {states} states (did the nodes connect?){ended}"))
+}
+
 /// One scenario through the launch layer, judged; `faults` injected by every node.
 pub(crate) async fn run_one(
     scenario_arg: &str,
@@ -354,14 +361,7 @@ pub(crate) async fn run_one(
 
     let judged = judge(&rec, &scenario, Some(&sim), "stopped");
     let trace = judged.trace;
-    let metrics = judged.metrics.ok_or_else(|| {
-        let ended = sim
-            .end
-            .as_ref()
-            .filter(|e| !e.success)
-            .map_or(String::new(), |e| format!("; the simulator ended: {}", e.reason));
-        Error::Unjudged(format!("recorded only {} states (did the nodes connect?){ended}", trace.samples.len()))
-    })?;
+    let metrics = judged.metrics.ok_or_else(|| unjudged(trace.samples.len(), &sim))?;
     let plot = match &args.plots {
         Some(dir) => {
             let path = dir.join(format!("{name}-{}.png", args.perception.name()));
