@@ -199,7 +199,8 @@ pub fn run(args: &EvalAccArgs, connect: &slipstream_contract::config::ConnectArg
     let runs: Vec<(String, Scenario)> = names.iter().cloned().zip(scenarios).collect();
     let total = runs.len();
     let perception = args.perception;
-    let results = run_all(runs, args, faults, connect.topics.clone(), &logs, jobs, |done, name, result| {
+    let under = Under { faults, own: own.clone() };
+    let results = run_all(runs, args, &under, connect.topics.clone(), &logs, jobs, |done, name, result| {
         if let Ok(r) = result {
             eprintln!(
                 "[{done}/{total}] {name} ({} perception): {} in {:.1} s ({:.0} s simulated){}",
@@ -230,7 +231,7 @@ pub fn run(args: &EvalAccArgs, connect: &slipstream_contract::config::ConnectArg
 pub(crate) fn run_all(
     runs: Vec<(String, Scenario)>,
     args: &EvalAccArgs,
-    faults: Option<FaultProfile>,
+    under: &Under,
     topics: Option<PathBuf>,
     logs: &Path,
     jobs: usize,
@@ -242,7 +243,7 @@ pub(crate) fn run_all(
         let slots = std::sync::Arc::new(tokio::sync::Semaphore::new(jobs.max(1)));
         let mut running = tokio::task::JoinSet::new();
         for (i, (arg, scenario)) in runs.into_iter().enumerate() {
-            let (args, faults, topics) = (args.clone(), faults.clone(), topics.clone());
+            let (args, under, topics) = (args.clone(), under.clone(), topics.clone());
             // Named by perception too: runs with camera and ground truth into one directory
             // keep both.
             let run_logs = logs.join(format!("{}-{}", scenario.name, args.perception.name()));
@@ -250,7 +251,7 @@ pub(crate) fn run_all(
             running.spawn(async move {
                 let _slot = slots.acquire_owned().await.expect("the semaphore is never closed");
                 let name = scenario.name.clone();
-                let result = run_one(&arg, scenario, &args, faults, topics.as_deref(), &run_logs)
+                let result = run_one(&arg, scenario, &args, under, topics.as_deref(), &run_logs)
                     .await
                     .map_err(|e| Error::Run { run: format!("scenario {name}"), logs: run_logs, source: Box::new(e) });
                 (i, name, result)
@@ -291,12 +292,20 @@ fn unjudged(states: usize, sim: &slipstream_sim::SimReport) -> Error {
     Error::Unjudged(format!("recorded only {states} states (did the nodes connect?){ended}"))
 }
 
-/// One scenario through the launch layer, judged; `faults` injected by every node.
+/// What every run of a suite puts under test besides the scenario, parsed once for the suite:
+/// the faults its nodes inject, and the nodes of the user's own in the place of ours.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct Under {
+    pub(crate) faults: Option<FaultProfile>,
+    pub(crate) own: OwnNodes,
+}
+
+/// One scenario through the launch layer, judged, `under` what it names.
 pub(crate) async fn run_one(
     scenario_arg: &str,
     mut scenario: Scenario,
     args: &EvalAccArgs,
-    faults: Option<FaultProfile>,
+    under: Under,
     topics_file: Option<&Path>,
     logs: &Path,
 ) -> Result<ScenarioResult> {
@@ -316,9 +325,9 @@ pub(crate) async fn run_one(
         set_speed_mps: set_speed,
         time_gap_s: scenario.ego.time_gap_s,
         vehicle: Some(LoopSpec::vehicle_of(&scenario)),
-        faults,
+        faults: under.faults,
         link: args.link,
-        own: args.own.nodes()?,
+        own: under.own,
     };
     let faults = spec.faults.as_ref().map(|p| p.summary());
     // A namespace and ports of this run's own: nothing else on the machine is disturbed.

@@ -17,8 +17,9 @@ use crate::error::{Error, Result};
 use crate::eval::plot::Drawn;
 use serde::Serialize;
 
-use super::acc::{run_one, EvalAccArgs, ScenarioResult};
+use super::acc::{run_one, EvalAccArgs, ScenarioResult, Under};
 use super::Metrics;
+use crate::launch::OwnNodes;
 use slipstream_acc::PerceptionSource;
 use slipstream_contract::config::{FaultArgs, FaultProfile, GilbertElliott, Loss, TopicFaults};
 use slipstream_contract::topics::{self, Topic};
@@ -292,7 +293,8 @@ pub fn run(args: &EvalFaultsArgs, connect: &slipstream_contract::config::Connect
             *done_runs += 1;
             eprint!("[{done_runs}/<={total_runs}, {:.0} s] {name}: {label} ... ", started.elapsed().as_secs_f64());
             let dir = logs.join(&name).join(label.replace([' ', '%', '/'], "_"));
-            rt.block_on(run_one(arg, scenario.clone(), &acc_args, faults, None, &dir)).map_err(|e| Error::Run {
+            let under = Under { faults, own: OwnNodes::default() };
+            rt.block_on(run_one(arg, scenario.clone(), &acc_args, under, None, &dir)).map_err(|e| Error::Run {
                 run: format!("{name}, {label}"),
                 logs: dir.clone(),
                 source: Box::new(e),

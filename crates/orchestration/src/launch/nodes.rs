@@ -533,36 +533,35 @@ impl LoopRun {
     }
 
     fn spawn(&mut self, bin: &str, args: Vec<String>, own: &str, earlier: &[&str]) -> Result<()> {
-        let stderr = create(&log_of(&self.logs, bin))?;
         let stdout_name = match bin {
             SIM => SIM_REPORT.to_string(),
             ACC => ACC_REPORT.to_string(),
             DETECT => DETECT_REPORT.to_string(),
             _ => format!("{bin}.out"),
         };
-        let stdout = create(&self.logs.join(stdout_name))?;
         let mut cmd = Command::new(sibling_binary(bin)?);
-        cmd.args(self.flags(own, earlier)).args(args).stdin(Stdio::null()).stdout(stdout).stderr(stderr);
-        if std::env::var_os("RUST_LOG").is_none() {
-            cmd.env("RUST_LOG", DEFAULT_RUST_LOG);
-        }
-        // Faults are the spec's, passed as a flag, never inherited.
-        cmd.env_remove("SLIPSTREAM_FAULTS");
-        self.nodes.push(Child::spawn(bin, &mut cmd)?);
-        Ok(())
+        cmd.args(self.flags(own, earlier)).args(args);
+        self.launch(bin, cmd, &stdout_name)
     }
 
     /// A node of the user's own, under its role's name (`controller.log`, `controller.out`).
     fn spawn_foreign(&mut self, node: &ForeignNode, own: &str, earlier: &[&str]) -> Result<()> {
         let name = node.role.process();
-        let stderr = create(&log_of(&self.logs, name))?;
-        let stdout = create(&self.logs.join(format!("{name}.out")))?;
         let run = [self.spec.clock.name(), self.spec.perception.name()];
-        let mut cmd = node.command(&self.flags(own, earlier), &self.logs, run)?;
+        let cmd = node.command(&self.flags(own, earlier), &self.logs, run)?;
+        self.launch(name, cmd, &format!("{name}.out"))
+    }
+
+    /// Starts a node process as `name`: stderr to its log, stdout to `stdout_name` in the logs
+    /// directory, the default RUST_LOG unless the user set one.
+    fn launch(&mut self, name: &str, mut cmd: Command, stdout_name: &str) -> Result<()> {
+        let stderr = create(&log_of(&self.logs, name))?;
+        let stdout = create(&self.logs.join(stdout_name))?;
         cmd.stdin(Stdio::null()).stdout(stdout).stderr(stderr);
         if std::env::var_os("RUST_LOG").is_none() {
             cmd.env("RUST_LOG", DEFAULT_RUST_LOG);
         }
+        // Faults are the spec's, passed as a flag, never inherited.
         cmd.env_remove("SLIPSTREAM_FAULTS");
         self.nodes.push(Child::spawn(name, &mut cmd)?);
         Ok(())
@@ -681,13 +680,11 @@ const ERROR_TAIL_BYTES: u64 = 16 * 1024;
 /// The error a node printed last (after "Error: ", with its "caused by" lines, as every binary
 /// prints them: `cli::error_report`), from the end of its log; None when there is none.
 pub fn last_error(log: &Path) -> Option<String> {
-    use std::io::{Read, Seek, SeekFrom};
-    let mut file = std::fs::File::open(log).ok()?;
-    let len = file.metadata().ok()?.len();
-    file.seek(SeekFrom::Start(len.saturating_sub(ERROR_TAIL_BYTES))).ok()?;
-    let mut bytes = Vec::new();
-    file.take(ERROR_TAIL_BYTES).read_to_end(&mut bytes).ok()?;
-    let tail = String::from_utf8_lossy(&bytes);
+    error_in(&log_tail(log)?)
+}
+
+/// The last error printed in `tail` (see [`last_error`]).
+fn error_in(tail: &str) -> Option<String> {
     let lines: Vec<&str> = tail.lines().collect();
     let at = lines.iter().rposition(|l| l.starts_with("Error: "))?;
     let first = lines[at].trim_start_matches("Error: ");
@@ -699,10 +696,19 @@ pub fn last_error(log: &Path) -> Option<String> {
 /// What a node said last about why it stopped: its error ([`last_error`]), else the last line
 /// of its log (a Python traceback ends with the exception), if any.
 pub fn last_words(log: &Path) -> Option<String> {
-    last_error(log).or_else(|| {
-        let text = std::fs::read_to_string(log).ok()?;
-        text.lines().rev().find(|l| !l.trim().is_empty()).map(|l| l.trim().to_string())
-    })
+    let tail = log_tail(log)?;
+    error_in(&tail).or_else(|| tail.lines().rev().find(|l| !l.trim().is_empty()).map(|l| l.trim().to_string()))
+}
+
+/// The last [`ERROR_TAIL_BYTES`] of a log.
+fn log_tail(log: &Path) -> Option<String> {
+    use std::io::{Read, Seek, SeekFrom};
+    let mut file = std::fs::File::open(log).ok()?;
+    let len = file.metadata().ok()?.len();
+    file.seek(SeekFrom::Start(len.saturating_sub(ERROR_TAIL_BYTES))).ok()?;
+    let mut bytes = Vec::new();
+    file.take(ERROR_TAIL_BYTES).read_to_end(&mut bytes).ok()?;
+    Some(String::from_utf8_lossy(&bytes).into_owned())
 }
 
 fn create(path: &Path) -> Result<std::fs::File> {

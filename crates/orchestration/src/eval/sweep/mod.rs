@@ -168,13 +168,15 @@ pub fn run(
         jobs: Some(jobs),
         link: LinkKind::default(),
         faults: FaultArgs::default(),
-        own: args.own.clone(),
+        // Parsed once above, handed to every run with `under`.
+        own: OwnNodeArgs::default(),
     };
     let (mut runs, scenarios): (Vec<SweepRun>, Vec<(String, Scenario)>) =
         generated.into_iter().map(|(run, s)| (run.clone(), (run.file, s))).unzip();
     let started = Instant::now();
     let total = runs.len();
-    let results = run_all(scenarios, &acc_args, None, connect.topics.clone(), &logs, jobs, |done, name, result| {
+    let under = super::acc::Under { faults: None, own: own.clone() };
+    let results = run_all(scenarios, &acc_args, &under, connect.topics.clone(), &logs, jobs, |done, name, result| {
         on_run(RunDone { done, total, name, failed: judged(name, result, (&logs, args.keep_logs), args.perception) })
     })?;
     for (run, result) in runs.iter_mut().zip(results) {
