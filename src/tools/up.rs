@@ -165,6 +165,9 @@ pub struct UpReport {
     /// Simulated seconds per second of the simulator's own run (`sim_wall_time_s`).
     pub real_time_factor: f64,
     pub nodes: Vec<NodeEnd>,
+    /// The nodes of the user's own in the loop (their command and files by content), and what
+    /// a loop file said of ours; empty: ours, as always.
+    pub own: slipstream_orchestration::launch::OwnNodes,
     pub latency: LatencyReport,
     pub metrics: Option<Metrics>,
     /// The simulator: builtin or external.
@@ -232,6 +235,7 @@ pub fn run_from(path: &Path, args: &UpArgs, connect: &ConnectArgs) -> Result<u8>
         path.display(),
         dir.display()
     );
+    let own = args.own.nodes()?;
     let shown = super::status::Status::lines(args.plain);
     let mut progress = |t_s: f64| shown.show(&format!("replayed {t_s:.1} s"));
     let rt = tokio::runtime::Runtime::new()?;
@@ -245,7 +249,7 @@ pub fn run_from(path: &Path, args: &UpArgs, connect: &ConnectArgs) -> Result<u8>
                 *signal2.lock() = Some(crate::cli::stop_requested().await);
                 stop2.store(true, std::sync::atomic::Ordering::Relaxed);
             });
-            let report = crate::eval::resim::run(path, connect, &dir, &mut progress, &stop).await;
+            let report = crate::eval::resim::run(path, connect, &dir, own, &mut progress, &stop).await;
             watcher.abort();
             report
         })
@@ -570,8 +574,8 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
     let stopped_by = watch_until_over(&mut lp, &watch, args, shown, external.as_ref()).await?;
     let sim_ran_s = sim_started.elapsed().as_secs_f64();
     for node in lp.check().died {
-        let log = crate::launch::log_of(lp.logs(), &node);
-        let why = crate::launch::last_error(&log).map_or(String::new(), |e| format!(": {e}"));
+        let log = lp.log(&node);
+        let why = crate::launch::last_words(&log).map_or(String::new(), |e| format!(": {e}"));
         eprintln!("{node} ended before the run was over{why}\n(its log: {})", log.display());
     }
     if let Some(signal) = stopped_by {
@@ -615,6 +619,7 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
         sim_wall_time_s,
         real_time_factor: sim_time_s / sim_wall_time_s.max(1e-9),
         nodes,
+        own: lp.spec().own.clone(),
         latency: latency_report(&latency, args, rec.statuses.last().map(|s| s.msg.time_gap_s), lag_s),
         metrics: judged.metrics,
         sim: args.sim,

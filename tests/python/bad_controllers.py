@@ -2,6 +2,8 @@
 
     python3 bad_controllers.py silent     # declares its token, never answers
     python3 bad_controllers.py crash      # answers for a simulated second, then raises
+    python3 bad_controllers.py crash-once MARK  # as crash, the first time only (MARK: a file
+                                                # it leaves); then the example's time gap law
 """
 
 import os
@@ -31,9 +33,23 @@ def crash(ego, ahead, settings):
     return 0.0
 
 
+def crash_once(mark):
+    sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "clients", "python", "examples"))
+    import own_acc
+
+    if os.path.exists(mark):
+        run_controller(own_acc.control)
+    else:
+        with open(mark, "w") as f:
+            f.write("crashed once\n")
+        run_controller(crash)
+
+
 if __name__ == "__main__":
     mode = sys.argv.pop(1)
     if mode == "silent":
         silent()
+    elif mode == "crash-once":
+        crash_once(sys.argv.pop(1))
     else:
         run_controller(crash)

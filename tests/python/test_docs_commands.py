@@ -49,6 +49,8 @@ ELSEWHERE = {
         "tests/it/acc.rs runs `eval acc --json --perception P --plots DIR` over the suite",
     "slipstream eval sweep --count 200 --perception ground-truth --controller 'python3 clients/python/examples/own_acc.py' --report mine":
         "tests/python/test_own_nodes.py runs the same sweep with --count 4: two hundred runs take minutes",
+    "slipstream eval sweep --loop clients/python/examples/own_loop.json5 --count 1000 --perception ground-truth --report mine":
+        "tests/python/test_loop_file.py runs a sweep over the same loop file with --count 2: a thousand runs take an hour",
     "slipstream eval faults --scenario cut-in --plot envelope.png":
         "tests/it/faults.rs runs `eval faults --scenario steady-follow ... --duration 4`: the envelope takes minutes",
 }
@@ -345,6 +347,15 @@ def test_a_python_controller_in_the_loop_as_own_node_md_gives_it(host):
     one_shot(host, "slipstream up --mode lockstep --perception ground-truth --controller 'python3 clients/python/examples/own_acc.py'",
              work_s=60)
     assert report(host, only_report(host))["metrics"]["collisions"] == 0
+
+
+@needs_host
+def test_a_loop_file_as_own_node_md_gives_it(host):
+    one_shot(host, "slipstream up --loop clients/python/examples/own_loop.json5 --mode lockstep --perception ground-truth",
+             work_s=60)
+    done = report(host, only_report(host))
+    assert done["own"]["loop_file"]["path"] == "clients/python/examples/own_loop.json5", done["own"]
+    assert any(n["node"] == "controller" and n["exit_code"] == 0 for n in done["nodes"]), done["nodes"]
 
 
 # --- Recording, playback and re-simulation (docs/recording.md) ---------------------------------

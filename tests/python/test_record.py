@@ -6,6 +6,7 @@ import json
 import os
 import socket
 import subprocess
+import sys
 from collections import defaultdict
 
 import pytest
@@ -182,10 +183,10 @@ def test_a_cut_recording_reads_up_to_its_last_chunk(slipstream_bin, sim_bin, fre
     assert got > 0, "messages before the cut are readable"
 
 
-def resim(slipstream_bin, free_port, recording, report, env=None):
+def resim(slipstream_bin, free_port, recording, report, env=None, more=()):
     run = subprocess.run(
         [slipstream_bin, "-l", f"tcp/127.0.0.1:{free_port}", "up", "--from", str(recording), "--plain",
-         "--report", str(report)],
+         "--report", str(report), *more],
         capture_output=True, text=True, timeout=300, cwd=ROOT, env=env)
     assert (report / "report.json").is_file(), (run.returncode, run.stdout, run.stderr[-3000:])
     return run, json.loads((report / "report.json").read_text())
@@ -213,6 +214,35 @@ def test_a_lockstep_recording_replays_into_the_same_nodes_byte_for_byte(slipstre
     assert (d["differing"], d["missing"], d["extra"], c["differing"], c["missing"]) == (0, 0, 0, 0, 0)
     assert r["replay"]["steps_timed_out"] == 0
     assert "answer exactly as recorded" in run.stdout, run.stdout
+
+
+def test_the_documented_loop_file_answers_a_recording_as_todays_loop_byte_for_byte(slipstream_bin, free_port,
+                                                                                  lockstep_run, tmp_path):
+    """config/loop.json5 spells out today's loop (our node in every role): replayed into it,
+    the recording of a run without a loop file is answered with the same bytes."""
+    run, r = resim(slipstream_bin, free_port, lockstep_run[0] / "run.mcap", tmp_path / "resim",
+                   more=("--loop", "config/loop.json5"))
+    assert run.returncode == 0, (run.stdout, run.stderr[-3000:])
+    d, c = r["detections"], r["commands"]
+    assert d["identical"] == d["recorded"] > 50 and c["identical"] == c["recorded"] > 500, (d, c)
+    assert (d["differing"], d["missing"], c["differing"], c["missing"]) == (0, 0, 0, 0)
+    assert r["own"]["loop_file"]["path"] == "config/loop.json5", r["own"]
+    assert set(r["own"]["builtin"]) == {"simulator", "detector", "controller"}, r["own"]
+
+
+def test_a_python_controller_answers_a_recording_in_the_place_of_ours(slipstream_bin, free_port, lockstep_run,
+                                                                      tmp_path):
+    """`up --from` replays into a controller of the user's own: every step answered, the
+    differences from slipstream-acc's answers counted."""
+    controller = f"{sys.executable} clients/python/examples/own_acc.py"
+    run, r = resim(slipstream_bin, free_port, lockstep_run[0] / "run.mcap", tmp_path / "resim",
+                   more=("--controller", controller))
+    assert run.returncode == 0, (run.stdout, run.stderr[-3000:])
+    c = r["commands"]
+    assert c["replayed"] == c["recorded"] > 500 and c["missing"] == 0 and c["differing"] > 0, c
+    assert r["replay"]["steps_timed_out"] == 0, r["replay"]
+    assert r["own"]["controller"]["command"][1] == "clients/python/examples/own_acc.py"
+    assert r["detections"]["identical"] == r["detections"]["recorded"], "the detector is ours, unchanged"
 
 
 def test_a_changed_controller_is_shown_where_it_first_answers_differently(slipstream_bin, free_port, lockstep_run,

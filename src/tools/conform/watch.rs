@@ -175,7 +175,14 @@ async fn subscribe(bus: &Bus, tap: &Tap, answerer: Option<Arc<Mutex<Answerer>>>)
     let tp = tap.clone();
     on(Topic::SimRoad, true, Box::new(move |s| drop(tp.take::<msg::RoadSpec>(&s, |o| &mut o.road)))).await?;
     let tp = tap.clone();
-    on(Topic::SimEgo, true, Box::new(move |s| drop(tp.take::<msg::EgoInfo>(&s, |o| &mut o.ego)))).await?;
+    on(
+        Topic::SimEgo,
+        true,
+        Box::new(move |s| {
+            tp.take::<msg::EgoInfo>(&s, |o| &mut o.ego);
+        }),
+    )
+    .await?;
     let tp = tap.clone();
     on(
         Topic::SimEvents,

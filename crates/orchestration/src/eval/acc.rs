@@ -79,9 +79,17 @@ pub struct ScenarioResult {
     pub inputs: Vec<NodeInput>,
     /// Where the run's wall time went.
     pub time: RunTime,
+    /// Nodes their restart policy started again, and how often (a loop file's `restart`).
+    #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    pub restarts: std::collections::BTreeMap<String, u32>,
 }
 
 impl ScenarioResult {
+    /// Passed: every check, and every step answered in time.
+    pub fn passed(&self) -> bool {
+        self.metrics.pass && self.lockstep_timeouts == 0
+    }
+
     /// A result with these metrics and nothing else to say (the sweep's unit tests).
     #[cfg(test)]
     pub(crate) fn for_tests(name: &str, metrics: Metrics) -> ScenarioResult {
@@ -97,6 +105,7 @@ impl ScenarioResult {
             faults: None,
             inputs: Vec::new(),
             time: RunTime::default(),
+            restarts: Default::default(),
         }
     }
 }
@@ -205,7 +214,7 @@ pub fn run(args: &EvalAccArgs, connect: &slipstream_contract::config::ConnectArg
             eprintln!(
                 "[{done}/{total}] {name} ({} perception): {} in {:.1} s ({:.0} s simulated){}",
                 perception.name(),
-                if r.metrics.pass { "pass" } else { "FAIL" },
+                if r.passed() { "pass" } else { "FAIL" },
                 r.time.wall_s,
                 r.time.simulated_s,
                 r.plot.as_ref().map_or(String::new(), |p| format!(", plot {}", p.display()))
@@ -214,7 +223,7 @@ pub fn run(args: &EvalAccArgs, connect: &slipstream_contract::config::ConnectArg
     })?;
     let results = results.into_iter().collect::<Result<Vec<_>>>()?;
     let wall_s = suite_started.elapsed().as_secs_f64();
-    let pass = results.iter().all(|r| r.metrics.pass && r.lockstep_timeouts == 0);
+    let pass = results.iter().all(ScenarioResult::passed);
     if pass && args.logs.is_none() {
         let _ = std::fs::remove_dir_all(&logs);
     } else {
@@ -393,6 +402,7 @@ pub(crate) async fn run_one(
         faults,
         inputs,
         time,
+        restarts: ends.iter().filter(|e| e.restarts > 0).map(|e| (e.node.clone(), e.restarts)).collect(),
     })
 }
 
@@ -404,12 +414,17 @@ pub fn markdown(report: &AccReport) -> String {
     for r in &report.results {
         let m = &r.metrics;
         let failed: Vec<&str> = m.checks.iter().filter(|c| !c.pass).map(|c| c.name.as_str()).collect();
-        let verdict = if m.pass && r.lockstep_timeouts == 0 {
+        let verdict = if r.passed() {
             "pass".to_string()
         } else if r.lockstep_timeouts > 0 {
             format!("FAIL: {} lockstep timeouts {}", r.lockstep_timeouts, failed.join(", "))
         } else {
             format!("FAIL: {}", failed.join(", "))
+        };
+        let restarted: Vec<String> = r.restarts.iter().map(|(n, k)| format!("{n} restarted {k}x")).collect();
+        let verdict = match restarted.is_empty() {
+            true => verdict,
+            false => format!("{verdict} ({})", restarted.join(", ")),
         };
         let [gap, ttc, time_gap, speed, accel, decel, jerk] = m.headline();
         out.push_str(&format!(
@@ -463,15 +478,24 @@ pub fn time_table(report: &AccReport) -> String {
         rtf(t.sim_wall_s),
         t.wall_s,
     );
+    // A node of the user's own reports no busy time: its computing is in the waiting row.
+    let (detect, acc, waiting) = match (&report.own.detector, &report.own.controller) {
+        (None, None) => ("(slipstream-detect)", "(slipstream-acc)", "(the simulator waiting, no node computing)"),
+        _ => (
+            "(slipstream-detect; yours: in the row below)",
+            "(slipstream-acc; yours: in the row below)",
+            "(the simulator waiting: yours computing, or no node)",
+        ),
+    };
     let rows = [
-        ("starting and stopping the processes (and joining the bus)", t.start_stop_s()),
-        ("physics (drivers, vehicle model, rapier)", t.sim.physics_s),
-        ("rendering the cameras, with the ground truth", t.sim.render_s),
-        ("publishing speed, state, clock, objects", t.sim.publish_s),
-        ("detecting, fusing, tracking (slipstream-detect)", t.detect_busy_s),
-        ("the ACC computing (slipstream-acc)", t.acc_busy_s),
-        ("transport and wake-ups (the simulator waiting, no node computing)", t.transport_s()),
-        ("pacing (the simulator yielding)", t.sim.pacing_s),
+        ("starting and stopping the processes (and joining the bus)".to_string(), t.start_stop_s()),
+        ("physics (drivers, vehicle model, rapier)".into(), t.sim.physics_s),
+        ("rendering the cameras, with the ground truth".into(), t.sim.render_s),
+        ("publishing speed, state, clock, objects".into(), t.sim.publish_s),
+        (format!("detecting, fusing, tracking {detect}"), t.detect_busy_s),
+        (format!("the ACC computing {acc}"), t.acc_busy_s),
+        (format!("transport and wake-ups {waiting}"), t.transport_s()),
+        ("pacing (the simulator yielding)".into(), t.sim.pacing_s),
     ];
     for (what, s) in rows {
         out.push_str(&format!("| {what} | {s:.2} | {:.1} |\n", share(s)));

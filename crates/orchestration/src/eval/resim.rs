@@ -24,7 +24,7 @@ use crate::error::{Error, Result};
 use parking_lot::{Condvar, Mutex};
 use serde::Serialize;
 
-use crate::launch::{ClockMode, LoopRun, LoopSpec, Network, NodeEnd};
+use crate::launch::{ClockMode, LoopRun, LoopSpec, Network, NodeEnd, OwnNodes};
 use crate::record::play::{each_message, output_for, Output};
 use slipstream_acc::PerceptionSource;
 use slipstream_contract::bus::{Bus, Declared};
@@ -526,6 +526,8 @@ pub struct ResimReport {
     pub detections: Comparison,
     pub commands: Comparison,
     pub nodes: Vec<NodeEnd>,
+    /// The nodes of the user's own that answered (`--controller`, `--detector`, `--loop`).
+    pub own: OwnNodes,
     pub report_dir: PathBuf,
     /// What stopped the replay before the recording's end (a signal's name), if anything.
     pub stopped_by: Option<String>,
@@ -539,14 +541,15 @@ impl ResimReport {
     }
 }
 
-/// Replays `path` into today's detector and ACC (started with `connect`'s flags, logs in
-/// `dir`) and compares their outputs with the recorded ones.
+/// Replays `path` into today's detector and ACC, or `own` nodes in their place (started with
+/// `connect`'s flags, logs in `dir`) and compares their outputs with the recorded ones.
 /// `stop`, once set (a signal), ends the replay early: the nodes are stopped and the report
 /// covers what was replayed (`replay.interrupted`).
 pub async fn run(
     path: &Path,
     connect: &ConnectArgs,
     dir: &Path,
+    own: OwnNodes,
     progress: &mut dyn FnMut(f64),
     stop: &AtomicBool,
 ) -> Result<ResimReport> {
@@ -568,7 +571,7 @@ pub async fn run(
         vehicle: scenario.as_ref().map(LoopSpec::vehicle_of),
         faults: None,
         link: Default::default(),
-        own: Default::default(),
+        own,
     };
     let mut lp =
         LoopRun::open(spec.clone(), Network::User { connect, sim_elsewhere: false }, &dir.join("logs"), "resim")
@@ -578,7 +581,7 @@ pub async fn run(
     let replayed = tokio::task::block_in_place(|| replay(lp.bus(), path, &recorded.outputs, &inbox, progress, stop));
     tokio::time::sleep(crate::launch::SETTLE).await;
     for node in lp.check().died {
-        tracing::warn!("{node} ended during the replay; see {}", crate::launch::log_of(lp.logs(), &node).display());
+        tracing::warn!("{node} ended during the replay; see {}", lp.log(&node).display());
     }
     let nodes = lp.stop().await;
     drop(subs);
@@ -601,6 +604,7 @@ pub async fn run(
             Some(command_difference),
         ),
         nodes,
+        own: spec.own.clone(),
         report_dir: dir.to_path_buf(),
         stopped_by: None,
     })

@@ -25,46 +25,170 @@ use slipstream_contract::config::ConnectArgs;
 /// The environment variable that names the node to itself.
 pub const NODE_ENV: &str = "SLIPSTREAM_NODE";
 
-/// `--controller` and `--detector`: nodes of your own in the place of ours.
-#[derive(clap::Args, Debug, Clone, Default)]
-pub struct OwnNodeArgs {
-    /// Your own controller in the place of slipstream-acc: a command line, split as a shell
-    /// would (no shell runs it), e.g. "python3 my_acc.py --gain 0.4". It gets its connection
-    /// in SLIPSTREAM_ZENOH_CONFIG, SLIPSTREAM_NAMESPACE and SLIPSTREAM_NODE (docs/own-node.md)
-    #[arg(long, value_name = "CMD")]
-    pub controller: Option<String>,
-
-    /// Your own detector in the place of slipstream-detect (camera perception), as --controller
-    #[arg(long, value_name = "CMD")]
-    pub detector: Option<String>,
-}
-
-impl OwnNodeArgs {
-    /// The nodes the flags name, checked: each command split and its program found.
-    pub fn nodes(&self) -> Result<OwnNodes> {
-        let node = |flag: &str, cmd: &Option<String>, role: Role| {
-            cmd.as_deref().map(|c| ForeignNode::parse(flag, c, role)).transpose()
-        };
-        Ok(OwnNodes {
-            controller: node("--controller", &self.controller, Role::Controller)?,
-            detector: node("--detector", &self.detector, Role::Detector)?,
-        })
-    }
-}
-
-/// The loop's nodes of the user's own; None: ours.
+/// The loop's nodes of the user's own; None: ours. With a loop file, also what it says of
+/// ours (arguments, restart) and the file itself by content.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct OwnNodes {
     pub controller: Option<ForeignNode>,
     pub detector: Option<ForeignNode>,
+    /// Nodes in no role of ours (a logger, a monitor, a second controller), started first.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub others: Vec<ForeignNode>,
+    /// Our own nodes as the loop file runs them; empty: as always.
+    #[serde(default, skip_serializing_if = "Builtins::is_empty")]
+    pub builtin: Builtins,
+    /// The loop file the nodes came from.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub loop_file: Option<HashedFile>,
 }
 
-/// Which of our nodes a foreign one stands in for.
+impl OwnNodes {
+    /// Whether a node of the user's own or a built-in one from the loop file takes `role`.
+    pub(crate) fn has(&self, role: Role) -> bool {
+        match role {
+            Role::Controller => self.controller.is_some() || self.builtin.controller.is_some(),
+            Role::Detector => self.detector.is_some() || self.builtin.detector.is_some(),
+            _ => false,
+        }
+    }
+
+    /// Every node of the user's own.
+    pub fn foreign(&self) -> impl Iterator<Item = &ForeignNode> {
+        self.others.iter().chain(&self.controller).chain(&self.detector)
+    }
+
+    /// How a node of the loop runs, by its process name (`controller`, `slipstream-acc`,
+    /// `logger`): the loop file's settings, or the defaults.
+    pub fn run_of(&self, process: &str) -> NodeRun {
+        let ours = |b: &Option<BuiltinNode>| b.as_ref().map(|b| b.run.clone());
+        let found = match process {
+            "slipstream-acc" => ours(&self.builtin.controller),
+            "slipstream-detect" => ours(&self.builtin.detector),
+            "slipstream-sim" => ours(&self.builtin.simulator),
+            name => self.foreign().find(|n| n.process() == name).map(|n| n.run.clone()),
+        };
+        found.unwrap_or_default()
+    }
+}
+
+/// Our own nodes as a loop file runs them (`builtin: true`); None: as always.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct Builtins {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub simulator: Option<BuiltinNode>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub detector: Option<BuiltinNode>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub controller: Option<BuiltinNode>,
+}
+
+impl Builtins {
+    fn is_empty(&self) -> bool {
+        self.simulator.is_none() && self.detector.is_none() && self.controller.is_none()
+    }
+}
+
+/// One of our nodes in a loop file: arguments after the ones the loop gives it, and how it runs.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct BuiltinNode {
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub args: Vec<String>,
+    #[serde(default)]
+    pub run: NodeRun,
+}
+
+/// How a node runs besides its command: what a loop file says of it (the flags say nothing:
+/// the defaults).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
+pub struct NodeRun {
+    /// Variables set for it (over the inherited environment).
+    #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
+    pub env: std::collections::BTreeMap<String, String>,
+    /// Its working directory; None: the launcher's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cwd: Option<PathBuf>,
+    #[serde(default)]
+    pub ready: Ready,
+    #[serde(default)]
+    pub restart: Restart,
+    /// Its stderr log (stdout beside it, `.out`); relative: in the run's log directory.
+    /// None: `<process>.log` there.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub log: Option<PathBuf>,
+    /// In lockstep, the simulator's steps also wait for this node's vehicle/control answers
+    /// (a node in no role of ours; the controller's are always awaited).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub lockstep: bool,
+}
+
+/// When a node counts as ready: its liveliness token is seen, or, with `sample`, a first
+/// sample arrives on that topic (a topic name of the loop's, or a key expression), within
+/// `timeout_s`. The simulator starts once every node is ready.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Ready {
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sample: Option<String>,
+    #[serde(default = "Ready::default_timeout")]
+    pub timeout_s: f64,
+}
+
+impl Ready {
+    fn default_timeout() -> f64 {
+        super::NODE_START_TIMEOUT.as_secs_f64()
+    }
+}
+
+impl Default for Ready {
+    fn default() -> Ready {
+        Ready { sample: None, timeout_s: Ready::default_timeout() }
+    }
+}
+
+/// What happens when a node ends before the run is over: `never` restarted (the run ends,
+/// the node named), or `on-failure` (a non-zero exit or a signal) at most `limit` times,
+/// `backoff_s` after it ended.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Restart {
+    #[serde(default)]
+    pub policy: RestartPolicy,
+    #[serde(default = "Restart::default_limit")]
+    pub limit: u32,
+    #[serde(default = "Restart::default_backoff")]
+    pub backoff_s: f64,
+}
+
+impl Restart {
+    fn default_limit() -> u32 {
+        3
+    }
+    fn default_backoff() -> f64 {
+        1.0
+    }
+}
+
+impl Default for Restart {
+    fn default() -> Restart {
+        Restart { policy: RestartPolicy::Never, limit: Restart::default_limit(), backoff_s: Restart::default_backoff() }
+    }
+}
+
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum RestartPolicy {
+    #[default]
+    Never,
+    OnFailure,
+}
+
+/// Which of our nodes a foreign one stands in for; `Other`: none (a node of its own name).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Role {
     Controller,
     Detector,
+    Other,
 }
 
 impl Role {
@@ -73,6 +197,7 @@ impl Role {
         match self {
             Role::Controller => "controller",
             Role::Detector => "detector",
+            Role::Other => "other",
         }
     }
 
@@ -81,6 +206,7 @@ impl Role {
         match self {
             Role::Controller => "acc",
             Role::Detector => "detect",
+            Role::Other => "other",
         }
     }
 }
@@ -89,10 +215,16 @@ impl Role {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct ForeignNode {
     pub role: Role,
+    /// A node in no role of ours: its name, on the bus and in the logs.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub name: Option<String>,
     /// The command line, split.
     pub command: Vec<String>,
     /// What it runs, by content: the program and every argument that names a file.
     pub files: Vec<HashedFile>,
+    /// How it runs (a loop file's settings; the defaults for a flag's command).
+    #[serde(default, skip_serializing_if = "NodeRun::is_default")]
+    pub run: NodeRun,
 }
 
 /// A file a node runs, and the SHA-256 of its content: a report says which code it judged.
@@ -102,26 +234,52 @@ pub struct HashedFile {
     pub sha256: String,
 }
 
+impl NodeRun {
+    fn is_default(&self) -> bool {
+        *self == NodeRun::default()
+    }
+}
+
 impl ForeignNode {
-    fn parse(flag: &str, cmd: &str, role: Role) -> Result<ForeignNode> {
-        let command = shlex::split(cmd)
+    /// A command line split as a shell would (no shell runs it); the problem otherwise.
+    pub(crate) fn split(cmd: &str) -> std::result::Result<Vec<String>, String> {
+        shlex::split(cmd)
             .filter(|v| !v.is_empty())
-            .ok_or_else(|| Error::flag(flag, format!("`{cmd}` is no command line (empty, or a quote left open)")))?;
-        let program = find_program(&command[0])
-            .ok_or_else(|| Error::flag(flag, format!("`{}` is neither a file nor a program on PATH", command[0])))?;
-        let mut files = vec![hashed(&program).map_err(Error::file("read", &program))?];
+            .ok_or_else(|| format!("`{cmd}` is no command line (empty, or a quote left open)"))
+    }
+
+    /// The node running `command` (its program found, its files hashed; relative paths from
+    /// `base`, the loop file's directory or the current one, or from its `cwd`); the problem
+    /// otherwise.
+    pub(crate) fn new(
+        role: Role,
+        name: Option<String>,
+        command: Vec<String>,
+        run: NodeRun,
+        base: &Path,
+    ) -> std::result::Result<ForeignNode, String> {
+        let dir = run.cwd.clone().unwrap_or_else(|| base.to_path_buf());
+        let program = find_program(&command[0], &dir)
+            .ok_or_else(|| format!("`{}` is neither a file nor a program on PATH", command[0]))?;
+        let read = |p: &Path| hashed(p).map_err(|e| format!("cannot read {}: {e}", p.display()));
+        let mut files = vec![read(&program)?];
         for arg in &command[1..] {
-            let path = Path::new(arg);
+            let path = dir.join(arg);
             if path.is_file() {
-                files.push(hashed(path).map_err(Error::file("read", path))?);
+                files.push(read(&path)?);
             }
         }
-        Ok(ForeignNode { role, command, files })
+        Ok(ForeignNode { role, name, command, files, run })
     }
 
     /// The name on the bus.
-    pub fn node(&self) -> &'static str {
-        self.role.node()
+    pub fn node(&self) -> &str {
+        self.name.as_deref().unwrap_or(self.role.node())
+    }
+
+    /// The process's name in the loop's logs and reports.
+    pub fn process(&self) -> &str {
+        self.name.as_deref().unwrap_or(self.role.process())
     }
 
     /// The command as a shell would take it back.
@@ -142,71 +300,56 @@ impl ForeignNode {
             <Flags as clap::Parser>::try_parse_from(std::iter::once("node").chain(flags.iter().map(String::as_str)))
                 .map_err(|e| Error::Bug(format!("the loop's own node flags do not parse: {e}")))?;
         let config = parsed.connect.zenoh_config()?;
-        let path = logs.join(format!("{}.zenoh.json5", self.node()));
+        // Absolute: the node may run in a directory of its own.
+        let path = absolute(&logs.join(format!("{}.zenoh.json5", self.node())));
         std::fs::write(&path, config.to_string()).map_err(Error::file("write", &path))?;
-        let mut cmd = std::process::Command::new(&self.command[0]);
+        let program = match self.command[0].contains('/') {
+            true => absolute(&self.files[0].path),
+            false => PathBuf::from(&self.command[0]),
+        };
+        let mut cmd = std::process::Command::new(program);
         cmd.args(&self.command[1..]).env("SLIPSTREAM_ZENOH_CONFIG", &path).env(NODE_ENV, self.node());
+        self.run.apply(&mut cmd);
         cmd.env("SLIPSTREAM_CLOCK", run[0]).env("SLIPSTREAM_PERCEPTION", run[1]);
         match &parsed.connect.namespace {
             Some(ns) => cmd.env("SLIPSTREAM_NAMESPACE", ns),
             None => cmd.env_remove("SLIPSTREAM_NAMESPACE"),
         };
         if let Some(t) = &parsed.connect.topics {
-            cmd.env("SLIPSTREAM_CONFIG", t);
+            cmd.env("SLIPSTREAM_CONFIG", absolute(t));
         }
         Ok(cmd)
     }
 }
 
-/// `name` as a path when it is a file, else the first match on PATH.
-fn find_program(name: &str) -> Option<PathBuf> {
-    let direct = Path::new(name);
+/// `path` from the root (as it is when that cannot be known).
+pub(crate) fn absolute(path: &Path) -> PathBuf {
+    std::path::absolute(path).unwrap_or_else(|_| path.to_path_buf())
+}
+
+impl NodeRun {
+    /// Sets the node's environment and working directory on its command.
+    pub(crate) fn apply(&self, cmd: &mut std::process::Command) {
+        cmd.envs(&self.env);
+        if let Some(dir) = &self.cwd {
+            cmd.current_dir(dir);
+        }
+    }
+}
+
+/// `name` as a path (from `dir`) when it has a slash, else the first match on PATH.
+fn find_program(name: &str, dir: &Path) -> Option<PathBuf> {
     if name.contains('/') {
-        return direct.is_file().then(|| direct.to_path_buf());
+        let direct = dir.join(name);
+        return direct.is_file().then_some(direct);
     }
     let path = std::env::var_os("PATH")?;
     std::env::split_paths(&path).map(|d| d.join(name)).find(|p| p.is_file())
 }
 
-fn hashed(path: &Path) -> std::io::Result<HashedFile> {
+pub(crate) fn hashed(path: &Path) -> std::io::Result<HashedFile> {
     let bytes = std::fs::read(path)?;
     let digest = Sha256::digest(&bytes);
     let sha256 = digest.iter().map(|b| format!("{b:02x}")).collect();
     Ok(HashedFile { path: path.to_path_buf(), sha256 })
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn a_command_line_is_split_as_a_shell_would_and_its_files_hashed() {
-        let dir = std::env::temp_dir().join(format!("slipstream-foreign-{}", std::process::id()));
-        std::fs::create_dir_all(&dir).unwrap();
-        let script = dir.join("my acc.py");
-        std::fs::write(&script, b"print('hi')\n").unwrap();
-        let args = OwnNodeArgs { controller: Some(format!("sh '{}' --gain 0.4", script.display())), detector: None };
-        let nodes = args.nodes().unwrap();
-        let c = nodes.controller.unwrap();
-        assert_eq!(c.command[1], script.display().to_string());
-        assert_eq!(c.command[2..], ["--gain", "0.4"]);
-        assert_eq!(c.node(), "acc");
-        // The program found on PATH, and the script by its content.
-        assert_eq!(c.files.len(), 2);
-        assert!(c.files[0].path.ends_with("sh"));
-        assert_eq!(c.files[1].sha256, "caf026f25d7140209f98072605307a438914b9ce6f3c14b23d15d9667241de52");
-        assert!(nodes.detector.is_none());
-        std::fs::remove_dir_all(&dir).unwrap();
-    }
-
-    #[test]
-    fn a_command_that_cannot_run_is_refused_naming_the_flag() {
-        let refused = |c: &str| {
-            let args = OwnNodeArgs { controller: None, detector: Some(c.into()) };
-            args.nodes().unwrap_err().to_string()
-        };
-        assert!(refused("python3 'my acc.py").contains("--detector"), "{}", refused("python3 'my acc.py"));
-        assert!(refused("").contains("no command line"));
-        assert!(refused("no-such-program-here --x").contains("neither a file nor a program on PATH"));
-    }
 }

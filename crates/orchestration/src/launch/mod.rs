@@ -11,6 +11,10 @@
 //!   everything and reads the simulator's report.
 //! - [`foreign`]: a detector or controller of the user's own (`--detector CMD`,
 //!   `--controller CMD`) in the place of ours, its connection handed over in the environment.
+//! - [`own_args`]: `--loop`, `--controller`, `--detector`, merged into the loop's own nodes.
+//! - [`loop_file`]: `--loop FILE`, every role's node (ours or any command) and how it runs.
+//! - [`ready`]: when a node counts as ready (its token, or a first sample).
+//! - [`supervise`]: a node process under its restart policy.
 //! - [`external`]: a simulator started elsewhere (`up --sim external`), known by its messages:
 //!   there once vehicle/speed arrives, over when it ends the scenario, runs the time asked
 //!   for, or goes silent for [`external::SILENCE`] (5 s).
@@ -29,15 +33,20 @@ pub mod child;
 pub(crate) mod external;
 pub mod foreign;
 pub(crate) mod hold;
+pub mod loop_file;
 pub(crate) mod namespace;
 pub(crate) mod nodes;
+pub mod own_args;
+pub(crate) mod ready;
+pub(crate) mod supervise;
 
 pub use child::{free_ports, sibling_binary, Child};
 pub use external::ExternalSim;
-pub use foreign::{ForeignNode, OwnNodeArgs, OwnNodes};
+pub use foreign::{ForeignNode, OwnNodes};
 pub use nodes::{
     last_error, last_words, log_of, ClockMode, LinkKind, LoopRun, LoopSpec, Network, NodeEnd, NodeInput, Progress,
 };
+pub use own_args::OwnNodeArgs;
 
 /// How long the controllers may take to appear on the bus.
 pub const NODE_START_TIMEOUT: Duration = Duration::from_secs(30);

@@ -16,15 +16,16 @@
 //! or disturbed (the suites).
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, ExitStatus, Stdio};
+use std::process::{Command, ExitStatus};
 use std::time::Instant;
 
 use crate::error::{Error, Result};
 use serde::Serialize;
 
-use super::child::{free_ports, sibling_binary, Child};
-use super::foreign::{ForeignNode, OwnNodes};
-use super::{DEFAULT_RUST_LOG, NODE_POLL, NODE_START_TIMEOUT, SETTLE, STOP_GRACE};
+use super::child::{free_ports, sibling_binary};
+use super::foreign::{ForeignNode, OwnNodes, RestartPolicy};
+use super::supervise::{State, Supervised};
+use super::{NODE_POLL, SETTLE, STOP_GRACE};
 use slipstream_acc::node::AccStats;
 use slipstream_acc::{PerceptionSource, VehicleClass};
 use slipstream_contract::config::{ConnectArgs, FaultProfile, DEFAULT_ZENOH_CONFIG};
@@ -96,11 +97,12 @@ impl LoopSpec {
     /// The nodes a run of this loop brings onto the bus: its observer, the ACC, the detector
     /// with camera perception, and the simulator (which `up --sim external` does not start,
     /// and a re-simulation replaces with its observer).
-    fn nodes<'a>(&self, observer: &'a str) -> Vec<&'a str> {
+    fn nodes<'a>(&'a self, observer: &'a str) -> Vec<&'a str> {
         let mut v = vec![observer, ACC_NODE, SIM_NODE];
         if self.perception == PerceptionSource::Camera {
             v.push(DETECT_NODE);
         }
+        v.extend(self.own.others.iter().map(|o| o.node()));
         v
     }
 
@@ -154,6 +156,9 @@ pub struct NodeEnd {
     pub exit_code: Option<i32>,
     /// Ended on its own before the run was over.
     pub died: bool,
+    /// How often its restart policy started it again.
+    #[serde(skip_serializing_if = "is_zero")]
+    pub restarts: u32,
     pub log: PathBuf,
 }
 
@@ -229,6 +234,7 @@ struct Endpoints {
     sim: String,
     /// Each node's low-latency session's endpoint, by its main endpoint.
     low_latency: Vec<(String, String)>,
+    link: LinkKind,
     /// The unix sockets' directory (removed when the run ends).
     dir: Option<PathBuf>,
 }
@@ -240,7 +246,7 @@ impl Endpoints {
                 let [observer, acc, detect, sim, acc_ll, detect_ll, sim_ll] =
                     free_ports::<7>()?.map(|p| format!("tcp/127.0.0.1:{p}"));
                 let low_latency = vec![(acc.clone(), acc_ll), (detect.clone(), detect_ll), (sim.clone(), sim_ll)];
-                Ok(Endpoints { observer, acc, detect, sim, low_latency, dir: None })
+                Ok(Endpoints { observer, acc, detect, sim, low_latency, link, dir: None })
             }
             LinkKind::Unix => {
                 // Short: a socket's path has at most 107 bytes.
@@ -256,9 +262,20 @@ impl Endpoints {
                     detect: sock(DETECT),
                     sim: sock(SIM),
                     low_latency,
+                    link,
                     dir: Some(dir),
                 })
             }
+        }
+    }
+
+    /// An endpoint for a node in no role of ours (`name`: letters, digits, - and _).
+    fn extra(&self, name: &str) -> Result<String> {
+        match (self.link, &self.dir) {
+            (LinkKind::Unix, Some(dir)) => {
+                Ok(format!("unixsock-stream/{}", dir.join(format!("other-{name}.sock")).display()))
+            }
+            _ => Ok(format!("tcp/127.0.0.1:{}", free_ports::<1>()?[0])),
         }
     }
 }
@@ -283,7 +300,9 @@ pub struct LoopRun {
     /// Peer mode: each node listens on its own port and dials the ones before it.
     peer: bool,
     endpoints: Endpoints,
-    nodes: Vec<Child>,
+    nodes: Vec<Supervised>,
+    /// The endpoints of the nodes started so far: each new one dials them.
+    started: Vec<String>,
     died: Vec<String>,
     /// See [`LoopRun::moved`].
     moved: Option<(String, String)>,
@@ -364,6 +383,7 @@ impl LoopRun {
             peer,
             endpoints,
             nodes: Vec::new(),
+            started: Vec::new(),
             died: Vec::new(),
             moved,
             _hold: hold,
@@ -395,14 +415,16 @@ impl LoopRun {
     }
 
     /// Starts the controllers, waits until they are alive on the bus (at most
-    /// [`NODE_START_TIMEOUT`]), then starts the simulator.
+    /// [`super::NODE_START_TIMEOUT`] unless the loop file says otherwise), then starts the
+    /// simulator.
     pub async fn start(&mut self) -> Result<()> {
         self.start_controllers().await?;
         self.start_sim()
     }
 
-    /// Starts the ACC (and the detector with camera perception) and waits until they are alive:
-    /// what a replay drives in place of the simulator ([`crate::eval::resim`]).
+    /// Starts the nodes in no role of ours (a loop file's `others`), the ACC (and the
+    /// detector with camera perception) and waits until they are ready: what a replay drives
+    /// in place of the simulator ([`crate::eval::resim`]).
     pub async fn start_controllers(&mut self) -> Result<()> {
         let spec = self.spec.clone();
         spec.check_faults()?;
@@ -411,6 +433,41 @@ impl LoopRun {
             std::fs::write(&path, p.to_json5()).map_err(Error::file("write", &path))?;
             self.base_flags.extend(["--faults".into(), path.display().to_string()]);
         }
+        let mut waits = Vec::new();
+        for node in &spec.own.others {
+            let own = self.endpoints.extra(node.node())?;
+            waits.push(self.watch(node.node(), node.process()).await?);
+            self.spawn_foreign(node, &own)?;
+        }
+        let (acc, detect) = (self.endpoints.acc.clone(), self.endpoints.detect.clone());
+        match &spec.own.controller {
+            Some(node) => {
+                waits.push(self.watch(ACC_NODE, node.process()).await?);
+                self.spawn_foreign(node, &acc)?
+            }
+            None => {
+                waits.push(self.watch(ACC_NODE, ACC).await?);
+                self.spawn(ACC, self.acc_args(), &acc)?
+            }
+        }
+        if self.camera() {
+            match &spec.own.detector {
+                Some(node) => {
+                    waits.push(self.watch(DETECT_NODE, node.process()).await?);
+                    self.spawn_foreign(node, &detect)?
+                }
+                None => {
+                    waits.push(self.watch(DETECT_NODE, DETECT).await?);
+                    self.spawn(DETECT, vec!["--json".into()], &detect)?
+                }
+            }
+        }
+        self.await_ready(waits).await
+    }
+
+    /// slipstream-acc's flags for the spec.
+    fn acc_args(&self) -> Vec<String> {
+        let spec = &self.spec;
         let mut acc_args = vec![
             "--json".to_string(),
             "--set-speed".into(),
@@ -427,29 +484,13 @@ impl LoopRun {
         if spec.clock == ClockMode::Lockstep {
             acc_args.push("--lockstep".into());
         }
-        let (acc, detect) = (self.endpoints.acc.clone(), self.endpoints.detect.clone());
-        match &spec.own.controller {
-            Some(node) => self.spawn_foreign(node, &acc, &[])?,
-            None => self.spawn(ACC, acc_args, &acc, &[])?,
-        }
-        if self.camera() {
-            match &spec.own.detector {
-                Some(node) => self.spawn_foreign(node, &detect, &[&acc])?,
-                None => self.spawn(DETECT, vec!["--json".into()], &detect, &[&acc])?,
-            }
-        }
-        self.await_controllers().await
+        acc_args
     }
 
     /// Starts the simulator, after [`LoopRun::start_controllers`].
     fn start_sim(&mut self) -> Result<()> {
         let spec = self.spec.clone();
-        let (acc, detect, sim) =
-            (self.endpoints.acc.clone(), self.endpoints.detect.clone(), self.endpoints.sim.clone());
-        let mut controllers = vec![acc.as_str()];
-        if self.camera() {
-            controllers.push(&detect);
-        }
+        let sim = self.endpoints.sim.clone();
         let mut sim_args = vec![
             "--scenario".to_string(),
             spec.scenario.clone(),
@@ -460,57 +501,66 @@ impl LoopRun {
             "--json".into(),
         ];
         if spec.clock == ClockMode::Lockstep {
-            sim_args.extend(["--wait-for".into(), ACC_NODE.into()]);
+            let others = spec.own.others.iter().filter(|o| o.run.lockstep).map(|o| o.node());
+            let wait_for: Vec<&str> = std::iter::once(ACC_NODE).chain(others).collect();
+            sim_args.extend(["--wait-for".into(), wait_for.join(",")]);
             // A controller of the user's own that stops answering ends its run at the first
             // step it leaves unanswered (a failed run either way), rather than costing every
-            // step the timeout: a sweep over it finishes.
-            if spec.own.controller.is_some() {
+            // step the timeout: a sweep over it finishes. One that is restarted on failure is
+            // waited for: the steps it misses take the timeout policy and are counted.
+            let restarts = |n: &ForeignNode| n.run.restart.policy == RestartPolicy::OnFailure;
+            if spec.own.controller.as_ref().is_some_and(|n| !restarts(n)) {
                 sim_args.extend(["--on-timeout".into(), "stop".into()]);
             }
         }
-        self.spawn(SIM, sim_args, &sim, &controllers)
+        self.spawn(SIM, sim_args, &sim)
     }
 
-    /// The simulator's first frame must find the detector and the ACC listening.
-    async fn await_controllers(&mut self) -> Result<()> {
-        let wanted: Vec<&str> = if self.camera() { vec![ACC_NODE, DETECT_NODE] } else { vec![ACC_NODE] };
+    /// Watches for a node about to start to become ready, as its loop file entry says.
+    async fn watch(&self, node: &str, process: &str) -> Result<super::ready::Watch> {
+        super::ready::Watch::new(&self.bus, node, process, &self.spec.own.run_of(process).ready).await
+    }
+
+    /// The simulator's first frame must find every node ready (listening).
+    async fn await_ready(&mut self, waits: Vec<super::ready::Watch>) -> Result<()> {
         let seen = self.bus.watch_nodes().await?;
-        let deadline = Instant::now() + NODE_START_TIMEOUT;
+        let start = Instant::now();
         loop {
             let alive = seen.names();
-            if wanted.iter().all(|w| alive.iter().any(|a| a == w)) {
+            let pending: Vec<&super::ready::Watch> = waits.iter().filter(|w| !w.ready(&alive)).collect();
+            if pending.is_empty() {
                 return Ok(());
             }
             for n in &mut self.nodes {
-                if let Some(status) = n.exited() {
-                    let log = log_of(&self.logs, &n.name);
-                    let why = last_error(&log).map_or(String::new(), |e| format!(": {e}"));
-                    return Err(Error::node(
-                        &n.name,
-                        format!("exited at start ({status}){why}\n(its log: {})", log.display()),
-                    ));
+                if let State::Ended(status) = n.poll() {
+                    let why = last_words(&n.log).map_or(String::new(), |e| format!(": {e}"));
+                    let problem = format!("exited at start ({status}){why}\n(its log: {})", n.log.display());
+                    return Err(Error::node(n.name(), problem));
                 }
             }
-            if Instant::now() >= deadline {
+            if let Some(w) = pending.iter().find(|w| start.elapsed() >= w.timeout()) {
                 let problem = format!(
-                    "not all up after {NODE_START_TIMEOUT:?} (alive: {alive:?}); see the logs in {}",
+                    "not ready after {:?}: {} (seen on the bus: {alive:?}); see the logs in {}",
+                    w.timeout(),
+                    w.awaited(),
                     self.logs.display()
                 );
-                return Err(Error::node(format!("{wanted:?}"), problem));
+                return Err(Error::node(&w.process, problem));
             }
             tokio::time::sleep(NODE_POLL).await;
         }
     }
 
-    /// The flags of one node: the shared ones, then its own port and whom it dials. Its
-    /// low-latency session listens on an endpoint of its own and dials the observer's (main)
-    /// session and the earlier nodes' low-latency sessions, so the loop's real-time topics
-    /// cross low-latency links and the observer still receives them.
-    fn flags(&self, own: &str, earlier: &[&str]) -> Vec<String> {
+    /// The flags of one node: the shared ones, then its own endpoint and the ones it dials
+    /// (the observer's and every node's started before it). Its low-latency session listens
+    /// on an endpoint of its own and dials the observer's (main) session and the earlier
+    /// nodes' low-latency sessions, so the loop's real-time topics cross low-latency links
+    /// and the observer still receives them.
+    fn flags(&self, own: &str) -> Vec<String> {
         let mut f = self.base_flags.clone();
         if self.peer {
             f.extend(["-l".into(), own.to_string()]);
-            for e in std::iter::once(self.endpoints.observer.as_str()).chain(earlier.iter().copied()) {
+            for e in std::iter::once(&self.endpoints.observer).chain(&self.started) {
                 f.extend(["-e".into(), e.to_string()]);
             }
             let ll = |main: &str| self.endpoints.low_latency.iter().find(|(m, _)| m == main).map(|(_, l)| l.clone());
@@ -518,7 +568,7 @@ impl LoopRun {
             if let Some(own_ll) = ll(own).filter(|_| two_sessions) {
                 f.extend(["--low-latency-listen".into(), own_ll]);
                 f.extend(["--low-latency-connect".into(), self.endpoints.observer.clone()]);
-                for e in earlier.iter().filter_map(|e| ll(e)) {
+                for e in self.started.iter().filter_map(|e| ll(e)) {
                     f.extend(["--low-latency-connect".into(), e]);
                 }
                 for e in &self.user_connect {
@@ -532,64 +582,80 @@ impl LoopRun {
         f
     }
 
-    fn spawn(&mut self, bin: &str, args: Vec<String>, own: &str, earlier: &[&str]) -> Result<()> {
+    /// One of our nodes, with what the loop file adds (arguments after the loop's, its
+    /// environment).
+    fn spawn(&mut self, bin: &str, args: Vec<String>, own: &str) -> Result<()> {
         let stdout_name = match bin {
             SIM => SIM_REPORT.to_string(),
             ACC => ACC_REPORT.to_string(),
             DETECT => DETECT_REPORT.to_string(),
             _ => format!("{bin}.out"),
         };
-        let mut cmd = Command::new(sibling_binary(bin)?);
-        cmd.args(self.flags(own, earlier)).args(args);
-        self.launch(bin, cmd, &stdout_name)
-    }
-
-    /// A node of the user's own, under its role's name (`controller.log`, `controller.out`).
-    fn spawn_foreign(&mut self, node: &ForeignNode, own: &str, earlier: &[&str]) -> Result<()> {
-        let name = node.role.process();
-        let run = [self.spec.clock.name(), self.spec.perception.name()];
-        let cmd = node.command(&self.flags(own, earlier), &self.logs, run)?;
-        self.launch(name, cmd, &format!("{name}.out"))
-    }
-
-    /// Starts a node process as `name`: stderr to its log, stdout to `stdout_name` in the logs
-    /// directory, the default RUST_LOG unless the user set one.
-    fn launch(&mut self, name: &str, mut cmd: Command, stdout_name: &str) -> Result<()> {
-        let stderr = create(&log_of(&self.logs, name))?;
-        let stdout = create(&self.logs.join(stdout_name))?;
-        cmd.stdin(Stdio::null()).stdout(stdout).stderr(stderr);
-        if std::env::var_os("RUST_LOG").is_none() {
-            cmd.env("RUST_LOG", DEFAULT_RUST_LOG);
+        let b = &self.spec.own.builtin;
+        let file_args = match bin {
+            SIM => b.simulator.as_ref(),
+            ACC => b.controller.as_ref(),
+            _ => b.detector.as_ref(),
         }
-        // Faults are the spec's, passed as a flag, never inherited.
-        cmd.env_remove("SLIPSTREAM_FAULTS");
-        self.nodes.push(Child::spawn(name, &mut cmd)?);
+        .map(|n| n.args.clone())
+        .unwrap_or_default();
+        let mut cmd = Command::new(sibling_binary(bin)?);
+        cmd.args(self.flags(own)).args(args).args(file_args);
+        self.launch(bin, cmd, &stdout_name, own)
+    }
+
+    /// A node of the user's own, under its process name (`controller.log`, `controller.out`).
+    fn spawn_foreign(&mut self, node: &ForeignNode, own: &str) -> Result<()> {
+        let name = node.process().to_string();
+        let run = [self.spec.clock.name(), self.spec.perception.name()];
+        let cmd = node.command(&self.flags(own), &self.logs, run)?;
+        self.launch(&name, cmd, &format!("{name}.out"), own)
+    }
+
+    /// Starts a node process as `name` ([`Supervised`]): stderr to its log (the loop file's
+    /// `log`, else `<name>.log` in the logs directory), stdout to `stdout_name` there; `own` is
+    /// its endpoint, which the nodes started after it dial.
+    fn launch(&mut self, name: &str, mut cmd: Command, stdout_name: &str, own: &str) -> Result<()> {
+        let run = self.spec.own.run_of(name);
+        run.apply(&mut cmd);
+        let log = run.log.as_ref().map_or_else(|| log_of(&self.logs, name), |l| self.logs.join(l));
+        if let Some(dir) = log.parent() {
+            std::fs::create_dir_all(dir).map_err(Error::file("create", dir))?;
+        }
+        self.nodes.push(Supervised::start(name, cmd, run, log, self.logs.join(stdout_name))?);
+        self.started.push(own.to_string());
         Ok(())
     }
 
-    /// Whether the simulator has ended and which nodes died (each named once, when first seen).
+    /// Whether the simulator has ended and which nodes died (each named once, when first
+    /// seen; a node restarted by its policy has not died).
     pub fn check(&mut self) -> Progress {
         let mut progress = Progress::default();
         for n in &mut self.nodes {
-            let Some(status) = n.exited() else { continue };
-            if n.name == SIM {
+            let State::Ended(status) = n.poll() else { continue };
+            if n.name() == SIM {
                 progress.sim_ended = Some(status);
                 if status.success() {
                     continue;
                 }
             }
-            if !self.died.contains(&n.name) {
-                self.died.push(n.name.clone());
+            if !self.died.iter().any(|d| d == n.name()) {
+                self.died.push(n.name().to_string());
             }
         }
         progress.died = self.died.clone();
         progress
     }
 
+    /// A node's stderr log, by its process name.
+    pub fn log(&self, name: &str) -> PathBuf {
+        self.nodes.iter().find(|n| n.name() == name).map_or_else(|| log_of(&self.logs, name), |n| n.log.clone())
+    }
+
     /// Stops the simulator first (it publishes the scenario's end), then the others, and waits
     /// [`SETTLE`] for the last messages. Returns how each node ended.
     pub async fn stop(&mut self) -> Vec<NodeEnd> {
-        if let Some(sim) = self.nodes.iter_mut().find(|n| n.name == SIM) {
+        if let Some(sim) = self.nodes.iter_mut().find(|n| n.name() == SIM) {
             sim.stop(STOP_GRACE);
         }
         // What the controllers say after the simulator's end is not judged: they stop while
@@ -601,22 +667,23 @@ impl LoopRun {
         for n in &mut self.nodes {
             n.stop(STOP_GRACE);
         }
-        let logs = self.logs.clone();
+        let died = self.died.clone();
         self.nodes
             .iter_mut()
             .map(|n| NodeEnd {
-                node: n.name.clone(),
+                node: n.name().to_string(),
                 pid: n.pid(),
                 exit_code: n.exited().and_then(|s| s.code()),
-                died: self.died.contains(&n.name),
-                log: log_of(&logs, &n.name),
+                died: died.iter().any(|d| d == n.name()),
+                restarts: n.restarts,
+                log: n.log.clone(),
             })
             .collect()
     }
 
     /// The node processes started so far: (binary name, pid).
     pub fn node_pids(&self) -> Vec<(String, u32)> {
-        self.nodes.iter().map(|n| (n.name.clone(), n.pid())).collect()
+        self.nodes.iter().map(|n| (n.name().to_string(), n.pid())).collect()
     }
 
     /// The simulator's report (its --json output), once it has ended.
@@ -711,8 +778,8 @@ fn log_tail(log: &Path) -> Option<String> {
     Some(String::from_utf8_lossy(&bytes).into_owned())
 }
 
-fn create(path: &Path) -> Result<std::fs::File> {
-    std::fs::File::create(path).map_err(Error::file("create", path))
+fn is_zero(n: &u32) -> bool {
+    *n == 0
 }
 
 /// The user's flags as the nodes take them (endpoints are added per node).

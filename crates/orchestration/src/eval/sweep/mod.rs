@@ -230,7 +230,7 @@ fn judged(
     perception: PerceptionSource,
 ) -> Option<String> {
     match result {
-        Ok(r) if r.metrics.pass && r.lockstep_timeouts == 0 => {
+        Ok(r) if r.passed() => {
             if !keep {
                 let _ = std::fs::remove_dir_all(logs.join(format!("{name}-{}", perception.name())));
             }

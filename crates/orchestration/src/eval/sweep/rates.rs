@@ -72,7 +72,7 @@ impl Rates {
                 r.errors += 1;
                 continue;
             };
-            r.passed += usize::from(run.result.as_ref().is_some_and(|x| m.pass && x.lockstep_timeouts == 0));
+            r.passed += usize::from(run.result.as_ref().is_some_and(ScenarioResult::passed));
             r.km += m.distance_m / 1000.0;
             r.collisions += m.collisions;
             r.unwarranted_emergencies += m.unwarranted_emergencies;
