@@ -64,6 +64,18 @@ pub enum EvalCommand {
     ///   slipstream eval sweep-merge shard-1 shard-2 --report sweep
     #[command(verbatim_doc_comment)]
     SweepMerge(crate::eval::sweep::shard::MergeArgs),
+    /// Two sweeps of the same scenarios (the same --seed, --count, --families and
+    /// --perception) side by side, family by family: runs passed and the rates per 1,000 km
+    /// as BASE -> OTHER, with the runs whose verdict changed named. Yours against
+    /// slipstream-acc, or one build against the last:
+    ///
+    ///   slipstream eval sweep --count 4 --perception ground-truth --report ours
+    ///
+    ///   slipstream eval sweep --count 4 --perception ground-truth --loop clients/python/examples/own_loop.json5 --report mine
+    ///
+    ///   slipstream eval sweep-compare ours mine
+    #[command(verbatim_doc_comment)]
+    SweepCompare(crate::eval::sweep::compare::CompareArgs),
 }
 
 /// `eval detect`'s command line.
@@ -124,6 +136,11 @@ pub fn command(command: &EvalCommand, connect: &ConnectArgs) -> Result<ExitCode>
         }
         EvalCommand::Sweep(args) => sweep(args, connect),
         EvalCommand::SweepMerge(args) => sweep_merge(args),
+        EvalCommand::SweepCompare(args) => {
+            let compared = crate::eval::sweep::compare::compare(args)?;
+            print_report(args.json, &compared, crate::eval::sweep::compare::markdown)?;
+            Ok(ExitCode::SUCCESS)
+        }
         EvalCommand::Faults(args) => {
             use crate::eval::faults;
             let report = faults::run(args, connect)?;

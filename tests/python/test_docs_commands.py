@@ -358,6 +358,24 @@ def test_a_loop_file_as_own_node_md_gives_it(host):
     assert any(n["node"] == "controller" and n["exit_code"] == 0 for n in done["nodes"]), done["nodes"]
 
 
+@needs_host
+def test_two_sweeps_side_by_side_as_eval_help_gives_them(host):
+    sweeps = [host.start(c) for c in (
+        "slipstream eval sweep --count 4 --perception ground-truth --report ours",
+        "slipstream eval sweep --count 4 --perception ground-truth --loop clients/python/examples/own_loop.json5 --report mine",
+        "slipstream eval sweep --count 4 --perception ground-truth --seed 2 --report other")]
+    for s in sweeps:
+        assert host.finish(s, 300) in (0, 1), s.stderr()[-3000:]
+    compared = one_shot(host, "slipstream eval sweep-compare ours mine")
+    said = compared.stdout()
+    assert "BASE slipstream-acc" in said and "OTHER python3 own_acc.py (loop file" in said, said
+    ours, mine = (json.loads((host.dir / d / "sweep.json").read_text()) for d in ("ours", "mine"))
+    row = next(line for line in said.splitlines() if line.startswith("| all |"))
+    assert row.startswith(f"| all | {ours['all']['passed']} -> {mine['all']['passed']} of 4 |"), row
+    refused = one_shot(host, "slipstream eval sweep-compare ours other", expect=1)
+    assert "a sweep of other scenarios" in refused.stderr() and "fix: " in refused.stderr(), refused.stderr()
+
+
 # --- Recording, playback and re-simulation (docs/recording.md) ---------------------------------
 
 RESIM_EXAMPLE = re.compile(r"```\n(replayed reports/base/run.mcap .*?)```", re.S)

@@ -3,8 +3,10 @@
 //! ([`warrant`]), runs each through the same lockstep loop as `eval acc`
 //! ([`crate::eval::acc::run_all`]), and reports rates per 1,000 km per family ([`rates`]), not
 //! anecdotes, with the worst runs named and their scenario files kept for `eval acc
-//! --scenario FILE`.
+//! --scenario FILE`. [`shard`] splits a sweep across machines and merges it again; [`compare`]
+//! sets two sweeps of the same scenarios side by side.
 
+pub mod compare;
 pub mod families;
 pub mod plot;
 pub mod rates;

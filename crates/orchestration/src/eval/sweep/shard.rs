@@ -66,7 +66,7 @@ pub struct MergeArgs {
 }
 
 /// A shard's report as its `eval sweep --shard` wrote it.
-fn read(path: &Path) -> Result<SweepReport> {
+pub(crate) fn read(path: &Path) -> Result<SweepReport> {
     let file = if path.is_dir() { path.join("sweep.json") } else { path.to_path_buf() };
     let bytes = std::fs::read(&file).map_err(Error::file("read", &file))?;
     serde_json::from_slice(&bytes).map_err(|source| Error::Json { path: file, what: "is no sweep report", source })
