@@ -42,11 +42,11 @@ fi
 echo "ok"
 
 step "python venv (.venv) with eclipse-zenoh 1.10"
-if ! .venv/bin/python -c 'import zenoh, numpy, pytest, mypy, mcap, mcap_ros2, websockets, rosbags, zenoh_ros2_sdk, carla, coppeliasim_zmqremoteapi_client' >/dev/null 2>&1; then
+if ! .venv/bin/python -c 'import zenoh, numpy, cv2, pytest, mypy, mcap, mcap_ros2, websockets, rosbags, zenoh_ros2_sdk, carla, coppeliasim_zmqremoteapi_client' >/dev/null 2>&1; then
   python3 -m venv .venv
   .venv/bin/pip install --quiet --disable-pip-version-check 'eclipse-zenoh==1.10.*' numpy pytest mypy mcap \
     mcap-ros2-support websockets 'rosbags==0.11.*' 'zenoh-ros2-sdk==0.1.*' 'carla==0.9.16' \
-    'coppeliasim-zmqremoteapi-client==2.0.*'
+    'coppeliasim-zmqremoteapi-client==2.0.*' 'opencv-python-headless<5'
 fi
 # The Python client as its users install it (editable: the tests run against this checkout's
 # code, imported as an installed package, not from a path the tests add).

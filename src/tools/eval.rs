@@ -117,6 +117,11 @@ pub struct DetectArgs {
     /// The sweep seed the --family scenarios come from
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
+    /// Your own detector in slipstream-detect's place: a command line (split as a shell
+    /// would), started for each scenario and fed every frame over the bus, scored on the same
+    /// frames and ground truth (docs/own-node.md), e.g. "python3 my_detector.py"
+    #[arg(long, value_name = "CMD", conflicts_with_all = ["frames", "detect_settings"])]
+    pub detector: Option<String>,
 }
 
 /// `slipstream eval ...`: the report (or JSON); exit 1 (an error saying so) when `acc` or
@@ -165,7 +170,8 @@ fn detect(args: &DetectArgs) -> Result<ExitCode> {
             Some(LinkCodec::new(e, args.jpeg_quality))
         }
     };
-    let report = detect::evaluate(scenarios, args.seconds, (&settings, &detector), codec);
+    let own = crate::launch::OwnNodeArgs { detector: args.detector.clone(), ..Default::default() }.nodes()?;
+    let report = detect::evaluate(scenarios, args.seconds, (&settings, &detector), codec, own.detector.as_ref())?;
     print_report(args.json, &report, detect::markdown)?;
     Ok(ExitCode::SUCCESS)
 }

@@ -350,6 +350,18 @@ def test_a_python_controller_in_the_loop_as_own_node_md_gives_it(host):
 
 
 @needs_host
+def test_a_python_detector_as_own_node_md_gives_it(host):
+    scored = host.run("slipstream eval detect --detector 'python3 clients/python/examples/own_detect.py'", timeout=300)
+    assert scored.code == 0 and "Detector: python3 clients/python/examples/own_detect.py" in scored.stdout(), \
+        scored.stderr()[-2000:]
+    clean(scored)
+    one_shot(host, "slipstream up --mode lockstep --detector 'python3 clients/python/examples/own_detect.py'", work_s=60)
+    done = report(host, only_report(host))
+    assert done["own"]["detector"]["command"][1] == "clients/python/examples/own_detect.py", done["own"]
+    assert any(n["node"] == "detector" and n["exit_code"] == 0 for n in done["nodes"]), done["nodes"]
+
+
+@needs_host
 def test_a_loop_file_as_own_node_md_gives_it(host):
     one_shot(host, "slipstream up --loop clients/python/examples/own_loop.json5 --mode lockstep --perception ground-truth",
              work_s=60)

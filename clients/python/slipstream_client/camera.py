@@ -38,6 +38,23 @@ class Pinhole:
         up = px * math.sin(self.pitch) + pz * math.cos(self.pitch)
         return self.cx - self.fx * py / depth, self.cy - self.fy * up / depth
 
+    def ground(self, u: float, v: float) -> Optional[Tuple[float, float]]:
+        """The point (x, y) of the flat road (z = 0) in the ego body frame that pixel (u, v)
+        sees, or None at or above the horizon: project()'s inverse on the ground."""
+        a = (self.cy - v) / self.fy
+        s, c = math.sin(self.pitch), math.cos(self.pitch)
+        if s - a * c <= 1e-9:
+            return None
+        pz = -self.mount[2]
+        px = -pz * (c + a * s) / (s - a * c)
+        depth = px * c - pz * s
+        py = -(u - self.cx) * depth / self.fx
+        return px + self.mount[0], py + self.mount[1]
+
+    def horizon_v(self) -> float:
+        """The image row of the horizon (points far ahead at any height)."""
+        return self.cy - self.fy * math.tan(self.pitch)
+
     def rear_box(self, x: float, y: float, width_m: float, height_m: float) -> Tuple[Optional[Dict[str, float]], float]:
         """The image box of a vehicle's rear face centred at (x, y) on the ground, clipped to the
         image, and the share of it inside: (BoundingBox2d body or None, visible fraction)."""

@@ -12,9 +12,11 @@
 use serde::Serialize;
 
 use super::bend_lateral::{self, LateralCell, RoadView};
+use super::frame_detector::{FrameDetector, Ours};
 use super::link_codec::{LinkCodec, LinkCost};
+use crate::launch::ForeignNode;
 use slipstream_contract::msg::{Detection, GroundTruthObject};
-use slipstream_perception::{CameraRig, DetectSettings};
+use slipstream_perception::DetectSettings;
 use slipstream_sim::cameras::Cameras;
 use slipstream_sim::ground_truth::ground_truth;
 use slipstream_sim::settings::SimSettings;
@@ -106,6 +108,8 @@ impl BrakeLightCounts {
 #[derive(Debug, Clone, Default, Serialize)]
 pub struct Tally {
     pub frames: u64,
+    /// Frames the detector left unanswered.
+    pub unanswered_frames: u64,
     pub detections: u64,
     pub true_positives: u64,
     pub eligible: u64,
@@ -245,41 +249,34 @@ fn percentiles(values: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
     Some((at(0.5), at(0.9)))
 }
 
-/// Runs one scenario (for at most `max_seconds` simulated) and scores every frame; with
-/// `codec`, every frame goes through its encoding and back first.
-pub fn evaluate_scenario(
+/// Runs one scenario (for at most `max_seconds` simulated) and scores every frame of the
+/// detector `make` builds for its cameras.
+pub fn evaluate_scenario<'a>(
     scenario: Scenario,
     seed: u64,
-    (settings, detect): (&SimSettings, &DetectSettings),
+    settings: &SimSettings,
     max_seconds: f64,
     tally: &mut Tally,
-    mut codec: Option<&mut LinkCodec>,
-) {
+    make: &mut dyn FnMut(&Cameras) -> crate::error::Result<Box<dyn FrameDetector + 'a>>,
+) -> crate::error::Result<()> {
     let mut world = World::new(scenario, seed, settings.physics_hz);
     let mut cameras = Cameras::new(settings, &world);
-    let mut rig = CameraRig::new(cameras.front.info(), cameras.narrow_info(), detect);
+    let mut detector = make(&cameras)?;
     let every = (settings.physics_hz as f64 / settings.rates_hz.camera).round().max(1.0) as u64;
     let last_step = (max_seconds * settings.physics_hz as f64) as u64;
     while world.ended().is_none() && world.step_count() <= last_step {
         if world.step_count().is_multiple_of(every) {
             let vis = cameras.draw(&world);
             let truth = ground_truth(&world, &vis);
-            let t_s = world.time_ns() as f64 / 1e9;
-            let dets = match codec.as_deref_mut() {
-                None => rig.update(&cameras.front.rgb, cameras.narrow_rgb(), t_s),
-                Some(c) => {
-                    let (f, n) = (cameras.front.info(), cameras.narrow_info());
-                    let front = c.pass(&cameras.front.rgb, f.width, f.height);
-                    let narrow = n.zip(cameras.narrow_rgb()).map(|(i, rgb)| c.pass(rgb, i.width, i.height));
-                    rig.update(&front, narrow.as_deref(), t_s)
-                }
-            };
+            let dets = detector.frame(&cameras, world.time_ns())?;
             let ego = world.ego_state();
             let view = RoadView::new(world.road(), ego.position_in_world_m, ego.yaw_in_world_rad);
             tally.add_frame(&dets, &truth.objects, (60.0, 0.5), &view);
         }
         world.step(EgoInput::Follow);
     }
+    tally.unanswered_frames += detector.unanswered();
+    Ok(())
 }
 
 /// The scenarios to score: `names` (built-in or files), then `count` generated ones of
@@ -311,6 +308,10 @@ pub fn standard() -> Vec<String> {
 #[derive(Debug, Clone, Serialize)]
 pub struct DetectReport {
     pub command: String,
+    /// A detector of the user's own under test (`--detector`); None: slipstream-detect's.
+    pub own: Option<ForeignNode>,
+    /// Frames the detector did not answer in time (scored as frames without detections).
+    pub unanswered_frames: u64,
     /// With `--frames`: the encoding the frames went through and its cost.
     pub frames_through: Option<LinkCost>,
     pub scenarios: Vec<ScenarioScore>,
@@ -382,7 +383,9 @@ pub fn evaluate(
     seconds: f64,
     (settings, detect): (&SimSettings, &DetectSettings),
     mut codec: Option<LinkCodec>,
-) -> DetectReport {
+    own: Option<&ForeignNode>,
+) -> crate::error::Result<DetectReport> {
+    let logs = std::env::temp_dir().join(format!("slipstream-eval-detect-{}", std::process::id()));
     let mut overall = Tally::default();
     let mut scores = Vec::new();
     let total = scenarios.len();
@@ -391,7 +394,14 @@ pub fn evaluate(
         let mut t = Tally::default();
         let started = std::time::Instant::now();
         let name = scenario.name.clone();
-        evaluate_scenario(scenario, seed, (settings, detect), seconds, &mut t, codec.as_mut());
+        let mut codec = codec.as_mut();
+        let mut make = |cameras: &Cameras| -> crate::error::Result<Box<dyn FrameDetector + '_>> {
+            match own {
+                None => Ok(Box::new(Ours::new(cameras, detect, codec.take()))),
+                Some(node) => Ok(Box::new(super::detect_remote::Yours::start(node, cameras, &logs.join(&name))?)),
+            }
+        };
+        evaluate_scenario(scenario, seed, settings, seconds, &mut t, &mut make)?;
         eprintln!("[{}/{total}] {name}: {} frames in {:.1} s", i + 1, t.frames, started.elapsed().as_secs_f64());
         scores.push(ScenarioScore::from_tally(&name, &t));
         overall.merge(t);
@@ -402,19 +412,22 @@ pub fn evaluate(
         bend_lateral::table(overall.errors.iter().map(|e| (e.true_distance_m, e.bend_radius_m, e.lateral_signed_m)));
     let across_in_bends =
         bend_lateral::table(overall.errors.iter().map(|e| (e.true_distance_m, e.bend_radius_m, e.across_signed_m)));
-    DetectReport {
+    Ok(DetectReport {
         command,
+        own: own.cloned(),
+        unanswered_frames: overall.unanswered_frames,
         frames_through,
         scenarios: scores,
         overall: ScenarioScore::from_tally("all", &overall),
         lateral_in_bends,
         across_in_bends,
-    }
+    })
 }
 
 impl Tally {
     pub fn merge(&mut self, other: Tally) {
         self.frames += other.frames;
+        self.unanswered_frames += other.unanswered_frames;
         self.detections += other.detections;
         self.true_positives += other.true_positives;
         self.eligible += other.eligible;
@@ -431,7 +444,15 @@ impl Tally {
 pub fn markdown(report: &DetectReport) -> String {
     let pct =
         |e: Option<(f64, f64)>| e.map_or("-".to_string(), |(m, p)| format!("{:.1}% / {:.1}%", m * 100.0, p * 100.0));
-    let mut s = String::from(
+    let mut s = match &report.own {
+        Some(node) => format!(
+            "Detector: {} (frames over the bus; {} left unanswered)\n\n",
+            node.command_line(),
+            report.unanswered_frames
+        ),
+        None => "Detector: slipstream-detect (in process)\n\n".to_string(),
+    };
+    s.push_str(
         "| scenario | frames | precision | recall to 60 m (found/eligible) | recall 60-150/200 m, full view | dist. err. 0-20 m | 20-40 m | 40-60 m | 60-150 m | 150+ m | lateral err. m | rel. speed err. m/s | id switches | brake lights: lit seen lit, unlit seen lit |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in report.scenarios.iter().chain(std::iter::once(&report.overall)) {

@@ -30,7 +30,9 @@
 pub mod acc;
 pub(crate) mod bend_lateral;
 pub mod detect;
+pub mod detect_remote;
 pub mod faults;
+pub mod frame_detector;
 pub mod judge;
 pub mod latency;
 pub mod link_codec;
