@@ -4,6 +4,9 @@
     python3 bad_controllers.py crash      # answers for a simulated second, then raises
     python3 bad_controllers.py crash-once MARK  # as crash, the first time only (MARK: a file
                                                 # it leaves); then the example's time gap law
+    python3 bad_controllers.py wrong-step # the example, each answer naming the next step
+    python3 bad_controllers.py wall-stamp # the example, each answer stamped with the wall clock
+    python3 bad_controllers.py no-token   # the example, its liveliness token withdrawn
 """
 
 import os
@@ -13,7 +16,7 @@ import time
 import zenoh
 
 from slipstream_client import Topics
-from slipstream_client.controller import run_controller
+from slipstream_client.controller import ControllerNode, run_controller
 
 
 def silent():
@@ -33,12 +36,38 @@ def crash(ego, ahead, settings):
     return 0.0
 
 
-def crash_once(mark):
+def example():
     sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "clients", "python", "examples"))
     import own_acc
 
+    return own_acc.control
+
+
+def broken(mode):
+    """The example controller with one rule of the contract broken."""
+    put, start = ControllerNode._put, ControllerNode.start
+
+    def bad_put(self, key, kind, t_ns, body):
+        if key == "vehicle/control" and mode == "wrong-step":
+            body = dict(body, answers_step=body["answers_step"] + 1)
+        if key == "vehicle/control" and mode == "wall-stamp":
+            t_ns = time.time_ns()
+        put(self, key, kind, t_ns, body)
+
+    def bad_start(self):
+        start(self)
+        if mode == "no-token":
+            self.token.undeclare()
+            self.token = None
+
+    ControllerNode._put, ControllerNode.start = bad_put, bad_start
+    run_controller(example())
+
+
+def crash_once(mark):
+    control = example()
     if os.path.exists(mark):
-        run_controller(own_acc.control)
+        run_controller(control)
     else:
         with open(mark, "w") as f:
             f.write("crashed once\n")
@@ -51,5 +80,7 @@ if __name__ == "__main__":
         silent()
     elif mode == "crash-once":
         crash_once(sys.argv.pop(1))
+    elif mode in ("wrong-step", "wall-stamp", "no-token"):
+        broken(mode)
     else:
         run_controller(crash)

@@ -350,6 +350,15 @@ def test_a_python_controller_in_the_loop_as_own_node_md_gives_it(host):
 
 
 @needs_host
+def test_the_examples_keep_the_node_contract_as_own_node_md_checks_it(host):
+    for role, command in (
+            ("controller", "slipstream conform controller --command 'python3 clients/python/examples/own_acc.py'"),
+            ("detector", "slipstream conform detector --command 'python3 clients/python/examples/own_detect.py'")):
+        done = one_shot(host, command, work_s=15)
+        assert f"the {role} keeps the contract" in done.stdout(), done.stdout()
+
+
+@needs_host
 def test_a_python_detector_as_own_node_md_gives_it(host):
     scored = host.run("slipstream eval detect --detector 'python3 clients/python/examples/own_detect.py'", timeout=300)
     assert scored.code == 0 and "Detector: python3 clients/python/examples/own_detect.py" in scored.stdout(), \

@@ -6,8 +6,11 @@
 //! - observed.rs: what was seen, as plain data;
 //! - watch.rs: the bus side (subscriptions, the late subscriber, the control probe, lockstep
 //!   answers), every wait bounded;
-//! - rules.rs: the contract's rules judged from what was seen.
+//! - rules.rs: the contract's rules judged from what was seen;
+//! - node.rs: `conform controller` and `conform detector`, a node of the user's own in its
+//!   role of a short lockstep loop, its answers judged against the node contract.
 
+pub mod node;
 pub mod observed;
 pub mod rules;
 pub mod watch;
@@ -34,6 +37,27 @@ pub enum ConformCommand {
     ///   slipstream -n car1 -e tcp/ROUTER:7447 conform sim --json
     #[command(verbatim_doc_comment)]
     Sim(ConformSimArgs),
+    /// Check a controller of your own against the controller contract (docs/node-contract.md)
+    ///
+    /// Starts the command as the controller of a short lockstep loop beside slipstream-sim
+    /// (ground truth; loopback ports and a namespace of its own) and judges every answer: its
+    /// token before the first step, one answer per state naming its step, the state's stamp
+    /// copied, the node's name attached, pedals within 0..1, acc/status published. Prints one
+    /// line per rule and exits with 1 on any FAIL. Example:
+    ///
+    ///   slipstream conform controller --command 'python3 clients/python/examples/own_acc.py'
+    #[command(verbatim_doc_comment)]
+    Controller(node::ConformNodeArgs),
+    /// Check a detector of your own against the detector contract (docs/node-contract.md)
+    ///
+    /// Starts the command as the detector of a short lockstep loop beside slipstream-sim and
+    /// slipstream-acc (camera perception) and judges every answer: its token before the first
+    /// step, one perception/objects per frame, the frame's stamp copied, frame_seq rising,
+    /// the node's name attached. Example:
+    ///
+    ///   slipstream conform detector --command 'python3 clients/python/examples/own_detect.py'
+    #[command(verbatim_doc_comment)]
+    Detector(node::ConformNodeArgs),
 }
 
 #[derive(clap::Args, Debug, Clone)]
@@ -69,6 +93,8 @@ fn up_to_an_hour(s: &str) -> Result<f64, String> {
 /// The result of one `conform sim`.
 #[derive(Debug, Clone, Serialize)]
 pub struct ConformReport {
+    /// What was checked: the simulator, a controller or a detector.
+    pub subject: &'static str,
     pub namespace: String,
     pub lockstep: bool,
     pub window_s: f64,
@@ -81,6 +107,7 @@ pub async fn run_sim(bus: &crate::Bus, args: &ConformSimArgs) -> Result<ConformR
     let observed = watch::watch(bus, args).await?;
     let verdicts = judge(&observed);
     Ok(ConformReport {
+        subject: "simulator",
         namespace: bus.topics().namespace().to_string(),
         lockstep: args.lockstep,
         window_s: observed.window_s,
@@ -108,11 +135,12 @@ pub fn render(report: &ConformReport) -> String {
         format!("namespace '{}'", report.namespace)
     };
     out += &format!(
-        "{} passed, {} failed, {} skipped ({ns}, {:.1} s watched): the simulator {} the contract\n",
+        "{} passed, {} failed, {} skipped ({ns}, {:.1} s watched): the {} {} the contract\n",
         count(Outcome::Pass),
         count(Outcome::Fail),
         count(Outcome::Skip),
         report.window_s,
+        report.subject,
         if report.pass { "keeps" } else { "breaks" }
     );
     out
@@ -121,7 +149,11 @@ pub fn render(report: &ConformReport) -> String {
 /// `slipstream conform sim`: as the lockstep node it answers for, or as a watcher of its own
 /// name; the verdicts (or JSON), and exit 1 when a rule failed.
 pub fn command(command: &ConformCommand, connect: &crate::ConnectArgs) -> anyhow::Result<std::process::ExitCode> {
-    let ConformCommand::Sim(args) = command;
+    let args = match command {
+        ConformCommand::Sim(args) => args,
+        ConformCommand::Controller(a) => return node_command(node::Role::Controller, a),
+        ConformCommand::Detector(a) => return node_command(node::Role::Detector, a),
+    };
     let node = if args.lockstep { args.name.clone() } else { crate::cli::own_name("conform") };
     // The verdict is printed while still on the bus: leaving it can neither delay nor lose it.
     let pass = crate::cli::on_bus(connect, &node, |bus| async move {
@@ -130,4 +162,11 @@ pub fn command(command: &ConformCommand, connect: &crate::ConnectArgs) -> anyhow
         Ok(report.pass)
     })?;
     Ok(crate::cli::exit_when(pass))
+}
+
+/// `conform controller` / `conform detector`: the verdicts (or JSON), exit 1 when a rule failed.
+fn node_command(role: node::Role, args: &node::ConformNodeArgs) -> anyhow::Result<std::process::ExitCode> {
+    let report = tokio::runtime::Runtime::new()?.block_on(node::run_node(role, args))?;
+    crate::cli::print_report(args.json, &report, render)?;
+    Ok(crate::cli::exit_when(report.pass))
 }

@@ -1,0 +1,258 @@
+//! `slipstream conform controller` and `conform detector`: a node of the user's own checked
+//! against its contract (docs/node-contract.md) beside the reference simulator. The command
+//! runs in its role of a short lockstep loop on loopback ports and a namespace of its own
+//! (slipstream-sim, and slipstream-acc beside a detector), with a 10 s readiness timeout and
+//! the simulator stopping at the first unanswered step, so a broken node costs seconds; every
+//! answer it publishes is kept with its header and attachment and judged rule by rule against
+//! the states and frames it answers.
+
+use std::collections::BTreeMap;
+use std::time::{Duration, Instant};
+
+use parking_lot::Mutex;
+use std::sync::Arc;
+
+use super::rules::{Outcome, Verdict};
+use super::ConformReport;
+use crate::bus::{CallbackSubscriber, Received};
+use crate::launch::{ClockMode, LoopRun, LoopSpec, Network, OwnNodeArgs, NODE_POLL};
+use crate::msg::{ControlCommand, Detections, GroundTruthObjects, VehicleState};
+use crate::topics;
+
+/// How long a node may take to declare its token here.
+const READY_S: f64 = 10.0;
+
+/// `conform controller` / `conform detector`'s command line.
+#[derive(clap::Args, Debug, Clone)]
+pub struct ConformNodeArgs {
+    /// The node's command line, split as a shell would (no shell runs it), started as the
+    /// loop starts a node of your own (docs/own-node.md)
+    #[arg(long = "command", value_name = "CMD")]
+    pub command: String,
+    /// The scenario it runs in (a built-in name or a .json5 file)
+    #[arg(long, default_value = "cut-in")]
+    pub scenario: String,
+    /// Simulated seconds to run
+    #[arg(long, default_value_t = 5.0, value_parser = crate::tools::top::positive)]
+    pub duration: f64,
+    /// Print the verdicts as JSON
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// Which contract is checked.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Role {
+    Controller,
+    Detector,
+}
+
+/// What the loop's observer kept of the run.
+#[derive(Default)]
+struct Seen {
+    states: Vec<Received<VehicleState>>,
+    answers: Vec<Received<ControlCommand>>,
+    frames: Vec<Received<GroundTruthObjects>>,
+    detections: Vec<Received<Detections>>,
+    statuses: usize,
+}
+
+/// Runs the node in its role and judges what it did.
+pub async fn run_node(role: Role, args: &ConformNodeArgs) -> anyhow::Result<ConformReport> {
+    let flags = match role {
+        Role::Controller => OwnNodeArgs { controller: Some(args.command.clone()), ..Default::default() },
+        Role::Detector => OwnNodeArgs { detector: Some(args.command.clone()), ..Default::default() },
+    };
+    let mut own = flags.nodes()?;
+    for n in own.controller.iter_mut().chain(own.detector.iter_mut()) {
+        n.run.ready.timeout_s = READY_S;
+    }
+    let scenario = crate::sim::Scenario::find(&args.scenario)?;
+    let spec = LoopSpec {
+        scenario: args.scenario.clone(),
+        duration_s: args.duration,
+        clock: ClockMode::Lockstep,
+        perception: match role {
+            Role::Controller => crate::acc::PerceptionSource::GroundTruth,
+            Role::Detector => crate::acc::PerceptionSource::Camera,
+        },
+        set_speed_mps: scenario.ego.controller_set_speed_mps(),
+        time_gap_s: scenario.ego.time_gap_s,
+        vehicle: Some(LoopSpec::vehicle_of(&scenario)),
+        faults: None,
+        link: Default::default(),
+        own,
+    };
+    let namespace = format!("conform-{}", std::process::id());
+    let logs = std::env::temp_dir().join(format!("slipstream-conform-{}", std::process::id()));
+    let mut lp =
+        LoopRun::open(spec, Network::Isolated { topics: None, namespace: namespace.clone() }, &logs, "conform").await?;
+    let (seen, _subs) = watch(&lp).await?;
+    let started = lp.start().await;
+    let (timeouts, ended) = match &started {
+        Ok(()) => run_to_end(&mut lp, args.duration).await,
+        Err(_) => (0, None),
+    };
+    let seen = std::mem::take(&mut *seen.lock());
+    lp.stop().await;
+    lp.close().await;
+    let mut verdicts = vec![token(role, &started)];
+    if started.is_ok() {
+        verdicts.extend(match role {
+            Role::Controller => judge_controller(&seen, timeouts, ended.as_deref()),
+            Role::Detector => judge_detector(&seen),
+        });
+    }
+    let pass = !super::failed(&verdicts);
+    let subject = match role {
+        Role::Controller => "controller",
+        Role::Detector => "detector",
+    };
+    Ok(ConformReport { subject, namespace, lockstep: true, window_s: args.duration, pass, verdicts })
+}
+
+/// Subscribes the observer to everything the rules read.
+async fn watch(lp: &LoopRun) -> anyhow::Result<(Arc<Mutex<Seen>>, Vec<CallbackSubscriber>)> {
+    let seen = Arc::new(Mutex::new(Seen::default()));
+    let bus = lp.bus();
+    let s = seen.clone();
+    let a = bus.subscribe_with(topics::VEHICLE_STATE, move |m| s.lock().states.push(m)).await?;
+    let s = seen.clone();
+    let b = bus.subscribe_with(topics::VEHICLE_CONTROL, move |m| s.lock().answers.push(m)).await?;
+    let s = seen.clone();
+    let c = bus.subscribe_with(topics::OBJECTS, move |m| s.lock().frames.push(m)).await?;
+    let s = seen.clone();
+    let d = bus.subscribe_with(topics::PERCEPTION_OBJECTS, move |m| s.lock().detections.push(m)).await?;
+    let s = seen.clone();
+    let e = bus.subscribe_with(topics::ACC_STATUS, move |_| s.lock().statuses += 1).await?;
+    Ok((seen, vec![a, b, c, d, e]))
+}
+
+/// Waits for the simulator's end (bounded); its lockstep timeouts and how it ended.
+async fn run_to_end(lp: &mut LoopRun, duration_s: f64) -> (u64, Option<String>) {
+    let deadline = Instant::now() + Duration::from_secs_f64(duration_s * 20.0 + 60.0);
+    while !lp.check().over() && Instant::now() < deadline {
+        tokio::time::sleep(NODE_POLL).await;
+    }
+    tokio::time::sleep(crate::launch::SETTLE).await;
+    match lp.sim_report() {
+        Ok(r) => (r.lockstep_timeouts, r.end.map(|e| e.reason)),
+        Err(_) => (0, Some("the simulator left no report".into())),
+    }
+}
+
+fn verdict(rule: &'static str, ok: bool, detail: String) -> Verdict {
+    Verdict { rule, outcome: if ok { Outcome::Pass } else { Outcome::Fail }, detail }
+}
+
+/// The node became ready: its liveliness token was seen before the first step.
+fn token(role: Role, started: &Result<(), slipstream_orchestration::Error>) -> Verdict {
+    let name = match role {
+        Role::Controller => "acc",
+        Role::Detector => "detect",
+    };
+    match started {
+        Ok(()) => verdict("token", true, format!("nodes/{name} declared before the first step")),
+        Err(e) => verdict("token", false, e.chain()),
+    }
+}
+
+/// The controller's rules: one answer per state, naming its step, stamped with its stamp,
+/// under the node's name, pedals in range, acc/status published.
+fn judge_controller(seen: &Seen, timeouts: u64, ended: Option<&str>) -> Vec<Verdict> {
+    let steps: BTreeMap<u64, u64> = seen.states.iter().map(|s| (s.msg.step, s.header.stamp_sim_ns)).collect();
+    let mut answered: BTreeMap<u64, usize> = BTreeMap::new();
+    let (mut wrong_step, mut wrong_stamp, mut strangers, mut out_of_range) = (None, None, None, None);
+    for a in &seen.answers {
+        let step = a.msg.answers_step.unwrap_or(u64::MAX);
+        match steps.get(&step) {
+            None => {
+                let named = a.msg.answers_step.map_or("no step".into(), |s| format!("step {s}"));
+                let _ = wrong_step.get_or_insert(format!("an answer names {named}, which no state had"));
+            }
+            Some(&stamp) if stamp != a.header.stamp_sim_ns => {
+                let _ = wrong_stamp.get_or_insert(format!(
+                    "the answer to step {step} is stamped {} ns; its state's stamp_sim_ns is {stamp} ns (copy it: the simulated time, not the wall clock)",
+                    a.header.stamp_sim_ns
+                ));
+            }
+            Some(_) => *answered.entry(step).or_default() += 1,
+        }
+        if a.source.as_deref() != Some("acc") {
+            let _ = strangers.get_or_insert(format!("an answer attached {:?}, not \"acc\"", a.source));
+        }
+        let pedal = |p: f32| p.is_finite() && (0.0..=1.0).contains(&p);
+        if !pedal(a.msg.throttle) || !pedal(a.msg.brake) {
+            let _ = out_of_range.get_or_insert(format!("throttle {}, brake {}", a.msg.throttle, a.msg.brake));
+        }
+    }
+    let all = steps.len();
+    let once = steps.keys().filter(|k| answered.get(k) == Some(&1)).count();
+    let ended = ended.unwrap_or("not at all");
+    vec![
+        verdict(
+            "every_step_answered",
+            once == all && all > 0 && timeouts == 0,
+            format!("{once} of {all} steps answered once; {timeouts} lockstep timeouts; the run ended: {ended}"),
+        ),
+        verdict(
+            "answers_step",
+            wrong_step.is_none(),
+            wrong_step.unwrap_or_else(|| "every answer names a step answered".into()),
+        ),
+        verdict(
+            "stamp_copied",
+            wrong_stamp.is_none(),
+            wrong_stamp.unwrap_or_else(|| "every answer carries its state's stamp".into()),
+        ),
+        verdict("attachment", strangers.is_none(), strangers.unwrap_or_else(|| "every answer attached \"acc\"".into())),
+        verdict(
+            "pedals",
+            out_of_range.is_none(),
+            out_of_range.unwrap_or_else(|| "throttle and brake within 0..1".into()),
+        ),
+        verdict("status", seen.statuses > 0, format!("{} acc/status messages (what the judge reads)", seen.statuses)),
+    ]
+}
+
+/// The detector's rules: one answer per frame, stamped with it, in order, under its name.
+fn judge_detector(seen: &Seen) -> Vec<Verdict> {
+    let frames: std::collections::BTreeSet<u64> = seen.frames.iter().map(|f| f.header.stamp_sim_ns).collect();
+    let mut per_frame: BTreeMap<u64, usize> = BTreeMap::new();
+    let mut stray = None;
+    for d in &seen.detections {
+        match frames.contains(&d.header.stamp_sim_ns) {
+            true => *per_frame.entry(d.header.stamp_sim_ns).or_default() += 1,
+            false => {
+                let _ = stray.get_or_insert(format!(
+                    "detections stamped {} ns, the stamp of no frame (copy the frame's stamp_sim_ns)",
+                    d.header.stamp_sim_ns
+                ));
+            }
+        }
+    }
+    let once = frames.iter().filter(|f| per_frame.get(f) == Some(&1)).count();
+    let mut by_stamp: Vec<&Received<Detections>> = seen.detections.iter().collect();
+    by_stamp.sort_by_key(|d| d.header.stamp_sim_ns);
+    let in_order = by_stamp.windows(2).all(|w| w[0].msg.frame_seq < w[1].msg.frame_seq);
+    let strangers = seen.detections.iter().find(|d| d.source.as_deref() != Some("detect"));
+    vec![
+        verdict(
+            "every_frame_answered",
+            once == frames.len() && !frames.is_empty(),
+            format!("{once} of {} frames answered once", frames.len()),
+        ),
+        verdict(
+            "stamp_copied",
+            stray.is_none(),
+            stray.unwrap_or_else(|| "every answer carries its frame's stamp".into()),
+        ),
+        verdict("frame_seq", in_order, format!("frame_seq rises with the frames: {in_order}")),
+        verdict(
+            "attachment",
+            strangers.is_none(),
+            strangers
+                .map_or("every answer attached \"detect\"".into(), |d| format!("an answer attached {:?}", d.source)),
+        ),
+    ]
+}
