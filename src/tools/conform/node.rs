@@ -88,15 +88,17 @@ pub async fn run_node(role: Role, args: &ConformNodeArgs) -> anyhow::Result<Conf
     let mut lp =
         LoopRun::open(spec, Network::Isolated { topics: None, namespace: namespace.clone() }, &logs, "conform").await?;
     let (seen, _subs) = watch(&lp).await?;
+    let tokens = lp.bus().watch_nodes().await?;
     let started = lp.start().await;
     let (timeouts, ended) = match &started {
         Ok(()) => run_to_end(&mut lp, args.duration).await,
         Err(_) => (0, None),
     };
+    let kept = tokens.names().iter().any(|n| n == role.node());
     let seen = std::mem::take(&mut *seen.lock());
     lp.stop().await;
     lp.close().await;
-    let mut verdicts = vec![token(role, &started)];
+    let mut verdicts = vec![token(role, &started, kept)];
     if started.is_ok() {
         verdicts.extend(match role {
             Role::Controller => judge_controller(&seen, timeouts, ended.as_deref()),
@@ -145,14 +147,29 @@ fn verdict(rule: &'static str, ok: bool, detail: String) -> Verdict {
     Verdict { rule, outcome: if ok { Outcome::Pass } else { Outcome::Fail }, detail }
 }
 
-/// The node became ready: its liveliness token was seen before the first step.
-fn token(role: Role, started: &Result<(), slipstream_orchestration::Error>) -> Verdict {
-    let name = match role {
-        Role::Controller => "acc",
-        Role::Detector => "detect",
-    };
+impl Role {
+    /// The node's name on the bus.
+    fn node(self) -> &'static str {
+        match self {
+            Role::Controller => "acc",
+            Role::Detector => "detect",
+        }
+    }
+}
+
+/// The node became ready, its liveliness token seen before the first step, and `kept` it to
+/// the end of the run.
+fn token(role: Role, started: &Result<(), slipstream_orchestration::Error>, kept: bool) -> Verdict {
+    let name = role.node();
     match started {
-        Ok(()) => verdict("token", true, format!("nodes/{name} declared before the first step")),
+        Ok(()) if kept => {
+            verdict("token", true, format!("nodes/{name} declared before the first step, kept to the end"))
+        }
+        Ok(()) => verdict(
+            "token",
+            false,
+            format!("nodes/{name} was withdrawn during the run (keep it for as long as the node answers)"),
+        ),
         Err(e) => verdict("token", false, e.chain()),
     }
 }

@@ -259,12 +259,14 @@ impl ForeignNode {
         base: &Path,
     ) -> std::result::Result<ForeignNode, String> {
         let dir = run.cwd.clone().unwrap_or_else(|| base.to_path_buf());
-        let program = find_program(&command[0], &dir)
+        // From the current directory a path stays as the user typed it (the report shows it).
+        let from = |p: &str| if dir == Path::new(".") { PathBuf::from(p) } else { dir.join(p) };
+        let program = find_program(&command[0], &from)
             .ok_or_else(|| format!("`{}` is neither a file nor a program on PATH", command[0]))?;
         let read = |p: &Path| hashed(p).map_err(|e| format!("cannot read {}: {e}", p.display()));
         let mut files = vec![read(&program)?];
         for arg in &command[1..] {
-            let path = dir.join(arg);
+            let path = from(arg);
             if path.is_file() {
                 files.push(read(&path)?);
             }
@@ -337,10 +339,11 @@ impl NodeRun {
     }
 }
 
-/// `name` as a path (from `dir`) when it has a slash, else the first match on PATH.
-fn find_program(name: &str, dir: &Path) -> Option<PathBuf> {
+/// `name` as a path (`from` the node's directory) when it has a slash, else the first match
+/// on PATH.
+fn find_program(name: &str, from: &dyn Fn(&str) -> PathBuf) -> Option<PathBuf> {
     if name.contains('/') {
-        let direct = dir.join(name);
+        let direct = from(name);
         return direct.is_file().then_some(direct);
     }
     let path = std::env::var_os("PATH")?;
