@@ -43,6 +43,21 @@ def open_session(args: argparse.Namespace) -> Tuple[zenoh.Session, Topics]:
         raise SystemExit(str(e)) from None
 
 
+def serve(node, session: zenoh.Session, summary: Callable[[], str]) -> None:
+    """Runs a loop node (`start()`, `run(stop_event)`, `close()`: a controller or a detector of
+    the SDK) until Ctrl-C or SIGTERM, then closes it and the session and prints `summary()`."""
+    stop = threading.Event()
+    try:
+        node.start()
+        node.run(stop)
+    except KeyboardInterrupt:
+        stop.set()
+    finally:
+        node.close()
+        session.close()
+        print(summary(), flush=True)
+
+
 def run_world(side, session: zenoh.Session, make: Callable, failures: Optional[Dict[Type[BaseException], Callable]] = None) -> int:
     """Runs a simulator on `side` to its end, Ctrl-C or SIGTERM, then closes it (when it ended
     cleanly), the side and the session; returns the process's exit code. `make(side)` builds the

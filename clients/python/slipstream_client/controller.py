@@ -308,14 +308,6 @@ def run_controller(control: Control, description: Optional[str] = None,
     args = parser.parse_args()
     session, topics = cli.open_session(args)
     node = ControllerNode(session, topics, control, args.name, args.clock, args.perception)
-    stop = threading.Event()
-    try:
-        node.start()
-        node.run(stop)
-    except KeyboardInterrupt:
-        stop.set()
-    finally:
-        node.close()
-        session.close()
-        print(f"# {args.name}: {node.answered} commands, {node.bad.count} undecodable or missing inputs", flush=True)
+    cli.serve(node, session, lambda: f"# {args.name}: {node.answered} commands, "
+                                     f"{node.bad.count} undecodable or missing inputs")
     return args

@@ -143,14 +143,5 @@ def run_detector(detect: Detect, description: Optional[str] = None,
     args = parser.parse_args()
     session, topics = cli.open_session(args)
     node = DetectorNode(session, topics, detect, args.name)
-    stop = threading.Event()
-    try:
-        node.start()
-        node.run(stop)
-    except KeyboardInterrupt:
-        stop.set()
-    finally:
-        node.close()
-        session.close()
-        print(f"# {args.name}: {node.answered} frames answered, {node.bad.count} undecodable inputs", flush=True)
+    cli.serve(node, session, lambda: f"# {args.name}: {node.answered} frames answered, {node.bad.count} undecodable inputs")
     return args

@@ -51,10 +51,7 @@ impl Yours {
         static RUNS: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
         let run = RUNS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let namespace = format!("eval-detect-{}-{run}", std::process::id());
-        let isolated = [
-            ("scouting/gossip/enabled", "false"),
-            ("connect/retry", "{period_init_ms: 20, period_max_ms: 2000, period_increase_factor: 2}"),
-        ];
+        let isolated = crate::launch::nodes::ISOLATED_CFG;
         let (bus, info, frames, answers) = rt.block_on(async {
             let mut config =
                 zenoh::Config::from_json5(DEFAULT_ZENOH_CONFIG).map_err(Error::zenoh("the built-in Zenoh config"))?;

@@ -311,7 +311,6 @@ impl ForeignNode {
         };
         let mut cmd = std::process::Command::new(program);
         cmd.args(&self.command[1..]).env("SLIPSTREAM_ZENOH_CONFIG", &path).env(NODE_ENV, self.node());
-        self.run.apply(&mut cmd);
         cmd.env("SLIPSTREAM_CLOCK", run[0]).env("SLIPSTREAM_PERCEPTION", run[1]);
         match &parsed.connect.namespace {
             Some(ns) => cmd.env("SLIPSTREAM_NAMESPACE", ns),

@@ -220,7 +220,7 @@ const FAULTS_FILE: &str = "faults.json5";
 /// without gossip; with gossip on, a session's open waited out Zenoh's scouting delay (500 ms)
 /// about every other time, for a peer connection gossip had made in parallel. A node whose
 /// peer is not listening yet (they start together) dials again after 20 ms, not 250.
-const ISOLATED_CFG: [(&str, &str); 2] = [
+pub(crate) const ISOLATED_CFG: [(&str, &str); 2] = [
     ("scouting/gossip/enabled", "false"),
     ("connect/retry", "{period_init_ms: 20, period_max_ms: 2000, period_increase_factor: 2}"),
 ];
@@ -615,9 +615,8 @@ impl LoopRun {
     /// Starts a node process as `name` ([`Supervised`]): stderr to its log (the loop file's
     /// `log`, else `<name>.log` in the logs directory), stdout to `stdout_name` there; `own` is
     /// its endpoint, which the nodes started after it dial.
-    fn launch(&mut self, name: &str, mut cmd: Command, stdout_name: &str, own: &str) -> Result<()> {
+    fn launch(&mut self, name: &str, cmd: Command, stdout_name: &str, own: &str) -> Result<()> {
         let run = self.spec.own.run_of(name);
-        run.apply(&mut cmd);
         let log = run.log.as_ref().map_or_else(|| log_of(&self.logs, name), |l| self.logs.join(l));
         if let Some(dir) = log.parent() {
             std::fs::create_dir_all(dir).map_err(Error::file("create", dir))?;

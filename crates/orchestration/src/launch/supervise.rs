@@ -39,9 +39,11 @@ pub(crate) enum State {
 }
 
 impl Supervised {
-    /// Starts `command` as `name`: stderr to `log`, stdout to `out` (both created afresh), the
-    /// default RUST_LOG unless the user set one, faults never inherited (a loop's come as a flag).
+    /// Starts `command` as `name` with its run's environment and directory: stderr to `log`,
+    /// stdout to `out` (both created afresh), the default RUST_LOG unless the user set one,
+    /// faults never inherited (a loop's come as a flag).
     pub fn start(name: &str, mut command: Command, run: NodeRun, log: PathBuf, out: PathBuf) -> Result<Supervised> {
+        run.apply(&mut command);
         if std::env::var_os("RUST_LOG").is_none() {
             command.env("RUST_LOG", DEFAULT_RUST_LOG);
         }

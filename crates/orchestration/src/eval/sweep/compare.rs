@@ -73,11 +73,7 @@ pub fn compare(args: &CompareArgs) -> Result<Comparison> {
             return Err(Error::flag(path.display().to_string(), rule));
         }
     }
-    let same = base.seed == other.seed
-        && base.count == other.count
-        && base.perception == other.perception
-        && base.asked_families == other.asked_families;
-    if !same {
+    if !super::shard::same_scenarios(&base, &other) {
         let rule = format!(
             "is a sweep of other scenarios than {} (seed {} against {}, --count {} against {}, --perception and --families the same) (fix: run both with the same --seed, --count, --families and --perception)",
             args.base.display(),

@@ -72,6 +72,11 @@ pub(crate) fn read(path: &Path) -> Result<SweepReport> {
     serde_json::from_slice(&bytes).map_err(|source| Error::Json { path: file, what: "is no sweep report", source })
 }
 
+/// Whether two sweeps ran the same scenarios: seed, --count, --perception and --families.
+pub(crate) fn same_scenarios(a: &SweepReport, b: &SweepReport) -> bool {
+    a.seed == b.seed && a.count == b.count && a.perception == b.perception && a.asked_families == b.asked_families
+}
+
 /// The shards' reports joined into one (see the module doc); refuses shards of different
 /// sweeps, a shard twice or a shard missing.
 pub fn merge(args: &MergeArgs) -> Result<SweepReport> {
@@ -84,11 +89,7 @@ pub fn merge(args: &MergeArgs) -> Result<SweepReport> {
     let n = shard_of(first_path, first)?.n;
     let mut seen = vec![false; n];
     for (path, r) in &reports {
-        let same = r.seed == first.seed
-            && r.count == first.count
-            && r.perception == first.perception
-            && r.asked_families == first.asked_families
-            && r.own == first.own;
+        let same = same_scenarios(r, first) && r.own == first.own;
         if !same {
             let rule = format!(
                 "is of another sweep than {} (seed, --count, --perception, --families and the nodes under test, --controller and --detector with their files' content, must be the same)",
