@@ -105,6 +105,24 @@ async fn configured_qos_reaches_the_wire() {
     assert_eq!((p, e, cc), (zenoh::qos::Priority::InteractiveLow, false, zenoh::qos::CongestionControl::Block));
 }
 
+/// Lockstep's publishers: from `keep_every_message` on, every topic the config leaves at
+/// "drop" blocks instead, frames included; a publisher declared before keeps its QoS.
+#[tokio::test(flavor = "multi_thread")]
+async fn a_lockstep_bus_blocks_where_the_config_says_drop() {
+    let (a, _b) = bus_pair(TopicMap::default(), TopicMap::default()).await;
+    let before = a.publisher(VEHICLE_SPEED).await.unwrap();
+    assert_eq!(before.congestion_control(), zenoh::qos::CongestionControl::Drop, "the default QoS drops");
+    a.keep_every_message();
+    let speed = a.publisher(VEHICLE_SPEED).await.unwrap();
+    let control = a.publisher(VEHICLE_CONTROL).await.unwrap();
+    let frames = a.frame_publisher(slipstream::topics::CAMERA_FRONT).await.unwrap();
+    for cc in [speed.congestion_control(), control.congestion_control(), frames.publisher().congestion_control()] {
+        assert_eq!(cc, zenoh::qos::CongestionControl::Block);
+    }
+    assert_eq!(before.congestion_control(), zenoh::qos::CongestionControl::Drop, "declared before: unchanged");
+    assert_eq!(speed.priority(), zenoh::qos::Priority::RealTime, "only the congestion control changes");
+}
+
 async fn send_frames(bus: &slipstream::Bus, n: u64) -> slipstream::bus::FramePublisher {
     let publisher = bus.frame_publisher(slipstream::topics::CAMERA_FRONT).await.unwrap();
     assert!(publisher.publisher().wait_for_subscriber(TIMEOUT).await);

@@ -226,6 +226,9 @@ pub async fn run(bus: &Bus, settings: AccSettings, shutdown: impl Future<Output 
         }
     }
     let inputs = Inputs::open(bus, &settings).await?;
+    if settings.lockstep {
+        bus.keep_every_message();
+    }
     let control_pub = bus.publisher(topics::VEHICLE_CONTROL).await?;
     let status_pub = bus.publisher(topics::ACC_STATUS).await?;
     // Seen once it listens: the simulator in lockstep steps on when it sees us, and the

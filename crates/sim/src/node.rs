@@ -644,6 +644,9 @@ async fn run_loop(
     settings: &SimSettings,
     stop: &AtomicBool,
 ) -> Result<SimReport, SimError> {
+    if settings.mode == Mode::Lockstep {
+        bus.keep_every_message();
+    }
     let mut node = Node::open(bus, world, settings).await?;
     bus.announce().await?;
     node.start(bus, world, stop).await?;

@@ -51,6 +51,8 @@ pub struct Bus {
     inputs: Arc<parking_lot::Mutex<Vec<std::sync::Weak<TopicStats>>>>,
     /// The node's liveliness token once announced ([`Bus::announce`]).
     token: tokio::sync::Mutex<Option<zenoh::liveliness::LivelinessToken>>,
+    /// Publishers declared from now on block rather than drop ([`Bus::keep_every_message`]).
+    lossless: std::sync::atomic::AtomicBool,
 }
 
 impl Bus {
@@ -147,6 +149,7 @@ impl Bus {
             clock: Arc::new(NodeClock::default()),
             inputs: Arc::default(),
             token: tokio::sync::Mutex::new(None),
+            lossless: std::sync::atomic::AtomicBool::new(false),
         })
     }
 
@@ -251,15 +254,33 @@ impl Bus {
         &self.node
     }
 
+    /// Publishers declared from now on block where their topic's QoS says drop. A node in
+    /// lockstep calls this: the loop waits for its slowest participant anyway, while a message
+    /// dropped on a link whose transmit task ran late (a loaded machine) changes the run: a
+    /// controller answers without its step's state, an observer judges a trace with a gap,
+    /// and the same scenario no longer repeats to the last digit. In realtime the QoS stands:
+    /// a slow subscriber must not hold up the loop.
+    pub fn keep_every_message(&self) {
+        self.lossless.store(true, std::sync::atomic::Ordering::SeqCst);
+    }
+
+    /// The topic map publishers are declared with: the configured one, or its lossless form.
+    fn publishing_map(&self) -> std::borrow::Cow<'_, TopicMap> {
+        match self.lossless.load(std::sync::atomic::Ordering::SeqCst) {
+            true => std::borrow::Cow::Owned(self.topics.lossless()),
+            false => std::borrow::Cow::Borrowed(&*self.topics),
+        }
+    }
+
     /// A typed publisher on `def`'s key with its configured QoS.
     pub async fn publisher<M: Message>(&self, def: TopicDef<M>) -> Result<Publisher<M>, BusError> {
-        Publisher::declare(self.session_for(def.topic), &self.topics, def.topic, &self.node).await
+        Publisher::declare(self.session_for(def.topic), &self.publishing_map(), def.topic, &self.node).await
     }
 
     /// A camera-frame publisher (`def`: camera/front or camera/narrow): renders straight into
     /// shared memory when it can.
     pub async fn frame_publisher(&self, def: TopicDef<CameraFrame>) -> Result<FramePublisher, BusError> {
-        FramePublisher::declare(&self.session, &self.topics, def.topic, &self.node).await
+        FramePublisher::declare(&self.session, &self.publishing_map(), def.topic, &self.node).await
     }
 
     /// A typed subscriber with the topic's configured delivery (latest-only or a queue).

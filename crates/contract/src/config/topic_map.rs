@@ -334,6 +334,16 @@ impl TopicMap {
         Ok(())
     }
 
+    /// This map with every topic blocking rather than dropping under congestion: what a node
+    /// publishes with in lockstep ([`crate::Bus::keep_every_message`]).
+    pub fn lossless(&self) -> TopicMap {
+        let mut map = self.clone();
+        for entry in map.entries.values_mut() {
+            entry.qos.congestion_control = Congestion::Block;
+        }
+        map
+    }
+
     /// Replaces the namespace (the `--namespace` flag does this after loading).
     pub fn with_namespace(mut self, namespace: &str) -> Result<TopicMap, ConfigError> {
         self.set_namespace(namespace).map_err(|(p, f)| ConfigError::new("--namespace", "namespace", p, f))?;

@@ -75,7 +75,8 @@ pub struct ScenarioResult {
     pub plot: Option<PathBuf>,
     /// The fault profile the nodes injected, if any.
     pub faults: Option<String>,
-    /// The ACC's and the simulator's inputs: lost on the way vs dropped by injected faults.
+    /// The ACC's and the simulator's inputs (lost on the way vs dropped by injected faults),
+    /// and the observer's: what the run is judged by.
     pub inputs: Vec<NodeInput>,
     /// Where the run's wall time went.
     pub time: RunTime,
@@ -359,9 +360,10 @@ pub(crate) async fn run_one(
     let wall = started.elapsed().as_secs_f64();
     let ends = lp.stop().await;
     let rec = recorder.take();
-    drop(recorder);
     let sim = lp.sim_report();
-    let inputs = lp.inputs();
+    let mut inputs = lp.inputs();
+    inputs.extend(recorder.inputs().into_iter().map(|stats| NodeInput { node: "observer".into(), stats }));
+    drop(recorder);
     let (acc_busy_s, detect_busy_s) =
         (lp.acc_report().map_or(0.0, |a| a.busy_s), lp.detect_report().ok().flatten().map_or(0.0, |d| d.busy_s));
     lp.close().await;

@@ -127,7 +127,7 @@ pub struct Recorded {
 /// judged by.
 pub struct Recorder {
     pub rec: Arc<Mutex<Recorded>>,
-    _subs: [CallbackSubscriber; 4],
+    subs: [CallbackSubscriber; 4],
 }
 
 impl Recorder {
@@ -147,7 +147,13 @@ impl Recorder {
                 }
             })
             .await?;
-        Ok(Recorder { rec, _subs: [s1, s2, s3, s4] })
+        Ok(Recorder { rec, subs: [s1, s2, s3, s4] })
+    }
+
+    /// What the recorder received, topic by topic: a message lost on the way leaves a gap in
+    /// the trace the run is judged by, so the run's report lists these beside the nodes' inputs.
+    pub fn inputs(&self) -> Vec<slipstream_contract::bus::StatsSnapshot> {
+        self.subs.iter().map(|s| s.stats().snapshot()).collect()
     }
 
     /// Everything recorded so far, leaving the recorder empty.
