@@ -644,7 +644,9 @@ async fn run_loop(
     settings: &SimSettings,
     stop: &AtomicBool,
 ) -> Result<SimReport, SimError> {
-    if settings.mode == Mode::Lockstep {
+    // Realtime keeps the configured QoS; fast and lockstep runs publish every message (the
+    // step waits rather than a subscriber missing one).
+    if settings.mode != Mode::Realtime {
         bus.keep_every_message();
     }
     let mut node = Node::open(bus, world, settings).await?;

@@ -255,7 +255,8 @@ impl Bus {
     }
 
     /// Publishers declared from now on block where their topic's QoS says drop. A node in
-    /// lockstep calls this: the loop waits for its slowest participant anyway, while a message
+    /// lockstep (and the simulator in fast mode, which promises every message a realtime run
+    /// publishes) calls this: the loop waits for its slowest participant anyway, while a message
     /// dropped on a link whose transmit task ran late (a loaded machine) changes the run: a
     /// controller answers without its step's state, an observer judges a trace with a gap,
     /// and the same scenario no longer repeats to the last digit. In realtime the QoS stands:
