@@ -351,6 +351,27 @@ def test_a_python_controller_in_the_loop_as_own_node_md_gives_it(host):
 
 
 @needs_host
+def test_faults_land_only_in_our_nodes_as_own_node_md_gives_it(host):
+    # Your controller under eval faults: control loss (at the simulator) is tried, the
+    # perception axes would land in your controller and are marked, not run.
+    done = one_shot(host, "slipstream eval faults --scenario steady-follow --perception ground-truth --controller 'python3 clients/python/examples/own_acc.py'",
+                    work_s=90)
+    out = done.stdout()
+    assert "Safety envelope with python3 clients/python/examples/own_acc.py" in out, out
+    row = next(line for line in out.splitlines() if line.startswith("| steady-follow |"))
+    cells = [c.strip() for c in row.strip("|").split("|")]
+    assert cells[2:5] == ["not injected (objects at your controller)"] * 3, cells
+    assert "not injected" not in cells[5] and "%" in cells[5], cells
+    # A profile whose faults would land in your controller is refused before anything starts.
+    refused = host.run("slipstream eval acc --scenario cut-in --perception ground-truth --faults lossy-camera "
+                       "--controller 'python3 clients/python/examples/own_acc.py'", timeout=60)
+    assert refused.code != 0, refused.stdout()
+    err = refused.stderr()
+    assert "key `topics.objects`" in err and "node of your own" in err and "fix: " in err, err[-2000:]
+    clean(refused)
+
+
+@needs_host
 def test_the_examples_keep_the_node_contract_as_own_node_md_checks_it(host):
     for role, command in (
             ("controller", "slipstream conform controller --command 'python3 clients/python/examples/own_acc.py'"),

@@ -81,6 +81,12 @@ pub struct EvalFaultsArgs {
     /// removed at the end]
     #[arg(long, value_name = "DIR")]
     pub logs: Option<PathBuf>,
+    /// Nodes of your own in the place of ours. Faults are injected by our nodes as they
+    /// receive: with your detector every axis runs (perception faults at slipstream-acc); with
+    /// your controller only control loss (at the simulator), the perception axes are marked
+    /// not injected
+    #[command(flatten)]
+    pub own: crate::launch::OwnNodeArgs,
 }
 
 /// One direction of the sweep.
@@ -188,6 +194,9 @@ pub struct AxisResult {
     pub envelope: f64,
     /// Every value tried held: the envelope is at least `envelope`.
     pub held_throughout: bool,
+    /// Why the axis was not tried: its faults would land in a node of the user's own.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub not_injected: Option<String>,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -207,6 +216,8 @@ pub struct FaultsReport {
     pub burst_len: f64,
     pub scenarios: Vec<ScenarioEnvelope>,
     pub plot: Option<PathBuf>,
+    /// The nodes of the user's own it judged (their command and files by content); empty: ours.
+    pub own: OwnNodes,
 }
 
 /// Why `run` does not hold against `baseline`; None when it holds.
@@ -282,51 +293,35 @@ pub fn run(args: &EvalFaultsArgs, connect: &slipstream_contract::config::Connect
         faults: FaultArgs::default(),
         own: Default::default(),
     };
+    let own = args.own.nodes()?;
     let rt = tokio::runtime::Runtime::new().map_err(Error::system("start the async runtime"))?;
-    let total_runs: usize = names.len() * (1 + Axis::ALL.iter().map(|a| a.values(args).len()).sum::<usize>());
+    let tried = Axis::ALL.iter().filter(|a| not_injected(**a, args, &own).is_none());
+    let total_runs: usize = names.len() * (1 + tried.map(|a| a.values(args).len()).sum::<usize>());
     let mut done_runs = 0usize;
     let started = Instant::now();
     let mut out = Vec::new();
     for (arg, scenario) in names.iter().zip(scenarios) {
         let name = scenario.name.clone();
-        let one = |label: &str, faults: Option<FaultProfile>, done_runs: &mut usize| -> Result<ScenarioResult> {
-            *done_runs += 1;
+        let mut one = |label: &str, faults: Option<FaultProfile>| -> Result<ScenarioResult> {
+            done_runs += 1;
             eprint!("[{done_runs}/<={total_runs}, {:.0} s] {name}: {label} ... ", started.elapsed().as_secs_f64());
             let dir = logs.join(&name).join(label.replace([' ', '%', '/'], "_"));
-            let under = Under { faults, own: OwnNodes::default() };
+            let under = Under { faults, own: own.clone() };
             rt.block_on(run_one(arg, scenario.clone(), &acc_args, under, None, &dir)).map_err(|e| Error::Run {
                 run: format!("{name}, {label}"),
                 logs: dir.clone(),
                 source: Box::new(e),
             })
         };
-        let base = one("fault-free", None, &mut done_runs)?;
+        let base = one("fault-free", None)?;
         eprintln!(
             "{} collisions, emergency {:.1} s, max jerk {:.2}",
             base.metrics.collisions, base.metrics.emergency_s, base.metrics.max_jerk_mps3
         );
         let baseline_misses: Vec<String> =
             base.metrics.checks.iter().filter(|c| !c.pass).map(|c| c.name.clone()).collect();
-        let mut axes = Vec::new();
-        for axis in Axis::ALL {
-            let mut trials = Vec::new();
-            let mut envelope = 0.0;
-            let mut held_throughout = true;
-            for &value in axis.values(args) {
-                let label = format!("{} {}", axis.title(args.burst_len), axis.show(value));
-                let r = one(&label, Some(axis.profile(value, args)), &mut done_runs)?;
-                let failure = judge(&base.metrics, &r.metrics, r.lockstep_timeouts);
-                eprintln!("{}", failure.as_deref().unwrap_or("holds"));
-                let failed = failure.is_some();
-                trials.push(Trial { value, failure, figures: RunFigures::of(&r) });
-                if failed {
-                    held_throughout = false;
-                    break;
-                }
-                envelope = value;
-            }
-            axes.push(AxisResult { axis, trials, envelope, held_throughout });
-        }
+        let axes =
+            Axis::ALL.iter().map(|a| try_axis(*a, args, &own, &base.metrics, &mut one)).collect::<Result<_>>()?;
         out.push(ScenarioEnvelope { scenario: name, baseline: RunFigures::of(&base), baseline_misses, axes });
     }
     if args.logs.is_none() {
@@ -339,6 +334,7 @@ pub fn run(args: &EvalFaultsArgs, connect: &slipstream_contract::config::Connect
         burst_len: args.burst_len,
         scenarios: out,
         plot: None,
+        own,
     };
     if let Some(path) = &args.plot {
         plot(&report, path)?;
@@ -347,8 +343,50 @@ pub fn run(args: &EvalFaultsArgs, connect: &slipstream_contract::config::Connect
     Ok(report)
 }
 
+/// One axis of one scenario: its values, rising, until the first that fails, each judged
+/// against the fault-free run's `base`; marked and not run when its faults would land in a
+/// node of the user's own.
+fn try_axis(
+    axis: Axis,
+    args: &EvalFaultsArgs,
+    own: &OwnNodes,
+    base: &Metrics,
+    one: &mut impl FnMut(&str, Option<FaultProfile>) -> Result<ScenarioResult>,
+) -> Result<AxisResult> {
+    if let Some(why) = not_injected(axis, args, own) {
+        eprintln!("{}: not injected ({why})", axis.title(args.burst_len));
+        let not_injected = Some(why);
+        return Ok(AxisResult { axis, trials: Vec::new(), envelope: 0.0, held_throughout: false, not_injected });
+    }
+    let mut trials = Vec::new();
+    let mut envelope = 0.0;
+    for &value in axis.values(args) {
+        let label = format!("{} {}", axis.title(args.burst_len), axis.show(value));
+        let r = one(&label, Some(axis.profile(value, args)))?;
+        let failure = judge(base, &r.metrics, r.lockstep_timeouts);
+        eprintln!("{}", failure.as_deref().unwrap_or("holds"));
+        let failed = failure.is_some();
+        trials.push(Trial { value, failure, figures: RunFigures::of(&r) });
+        if failed {
+            return Ok(AxisResult { axis, trials, envelope, held_throughout: false, not_injected: None });
+        }
+        envelope = value;
+    }
+    Ok(AxisResult { axis, trials, envelope, held_throughout: true, not_injected: None })
+}
+
+/// Why `axis` cannot be tried with the user's nodes `own`: the node its faults would land in.
+fn not_injected(axis: Axis, args: &EvalFaultsArgs, own: &OwnNodes) -> Option<String> {
+    let value = axis.values(args).first().copied()?;
+    let profile = axis.profile(value, args);
+    own.fault_into_foreign(&profile).map(|(topic, node)| format!("{topic} at your {}", node.role.process()))
+}
+
 /// One cell of the table: "300 ms (500 ms: collision)", ">= 500 ms", "< 50 ms (50 ms: ...)".
 fn cell(a: &AxisResult) -> String {
+    if let Some(why) = &a.not_injected {
+        return format!("not injected ({why})");
+    }
     let first_value = a.trials.first().map_or(0.0, |t| t.value);
     let failure = a.trials.iter().find(|t| t.failure.is_some());
     match failure {
@@ -367,7 +405,8 @@ fn cell(a: &AxisResult) -> String {
 /// The envelope as a markdown table.
 pub fn markdown(r: &FaultsReport) -> String {
     let mut out = format!(
-        "Safety envelope, {} perception, seed {}: per axis the largest fault that held (no collision, no emergency braking beyond the fault-free run's + {EMERGENCY_SLACK_S} s, every comfort aim the fault-free run meets), and what failed first.\n\n",
+        "Safety envelope with {}, {} perception, seed {}: per axis the largest fault that held (no collision, no emergency braking beyond the fault-free run's + {EMERGENCY_SLACK_S} s, every comfort aim the fault-free run meets), and what failed first.\n\n",
+        r.own.described("slipstream-acc"),
         r.perception.name(),
         r.seed
     );

@@ -20,7 +20,8 @@ use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
 
 use crate::error::{Error, Result};
-use slipstream_contract::config::ConnectArgs;
+use slipstream_contract::config::{ConnectArgs, FaultProfile};
+use slipstream_contract::topics::Topic;
 
 /// The environment variable that names the node to itself.
 pub const NODE_ENV: &str = "SLIPSTREAM_NODE";
@@ -52,9 +53,33 @@ impl OwnNodes {
         }
     }
 
+    /// The nodes under test for a person: the commands of the user's own (`ours` with none),
+    /// and the loop file they came from.
+    pub fn described(&self, ours: &str) -> String {
+        let mut said: Vec<String> = self.foreign().map(|n| n.command_line()).collect();
+        if said.is_empty() {
+            said.push(ours.into());
+        }
+        match &self.loop_file {
+            Some(f) => format!("{} (loop file {})", said.join(" + "), f.path.display()),
+            None => said.join(" + "),
+        }
+    }
+
     /// Every node of the user's own.
     pub fn foreign(&self) -> impl Iterator<Item = &ForeignNode> {
         self.others.iter().chain(&self.controller).chain(&self.detector)
+    }
+
+    /// The first fault of `profile` that would have to be injected into a node of the user's
+    /// own: one on a topic the node reads, at it (its `at` names it, or names no node). Faults
+    /// are injected by our nodes' bus as a message arrives; a process of someone else's has no
+    /// such layer. None: every fault lands at one of our nodes (the simulator, slipstream-acc
+    /// or slipstream-detect), whatever else the loop runs.
+    pub fn fault_into_foreign(&self, profile: &FaultProfile) -> Option<(Topic, &ForeignNode)> {
+        profile.topics.iter().find_map(|(topic, f)| {
+            self.foreign().find(|n| n.role.reads(*topic) && f.applies_at(n.node())).map(|n| (*topic, n))
+        })
     }
 
     /// How a node of the loop runs, by its process name (`controller`, `slipstream-acc`,
@@ -201,6 +226,30 @@ impl Role {
         }
     }
 
+    /// Whether a node in this role reads `topic` (docs/node-contract.md); a node in no role
+    /// of ours may read anything.
+    pub fn reads(self, topic: Topic) -> bool {
+        match self {
+            Role::Controller => matches!(
+                topic,
+                Topic::VehicleSpeed
+                    | Topic::VehicleState
+                    | Topic::PerceptionObjects
+                    | Topic::Objects
+                    | Topic::CameraFrontInfo
+                    | Topic::SimRoad
+                    | Topic::SimEgo
+                    | Topic::AccCommand
+                    | Topic::SimClock
+            ),
+            Role::Detector => matches!(
+                topic,
+                Topic::CameraFront | Topic::CameraFrontInfo | Topic::CameraNarrow | Topic::CameraNarrowInfo
+            ),
+            Role::Other => true,
+        }
+    }
+
     /// The name on the bus: our node's.
     pub fn node(self) -> &'static str {
         match self {
@@ -297,6 +346,9 @@ impl ForeignNode {
         struct Flags {
             #[command(flatten)]
             connect: ConnectArgs,
+            /// Not handed on: the faults land at our nodes only ([`OwnNodes::fault_into_foreign`]).
+            #[command(flatten)]
+            _faults: slipstream_contract::config::FaultArgs,
         }
         let parsed =
             <Flags as clap::Parser>::try_parse_from(std::iter::once("node").chain(flags.iter().map(String::as_str)))

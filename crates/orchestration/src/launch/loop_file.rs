@@ -334,6 +334,39 @@ mod tests {
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
+    /// Faults land where our nodes receive: into a node of the user's own only when it reads
+    /// the topic and the entry's `at` names it (or no node).
+    #[test]
+    fn a_fault_is_refused_only_where_it_would_land_in_a_node_of_your_own() {
+        use slipstream_contract::config::{FaultProfile, Loss, TopicFaults};
+        use slipstream_contract::topics::Topic;
+        let dir = dir_with("faults", &[("loop.json5", r#"{ controller: { command: "sh acc.py" } }"#), ("acc.py", "")]);
+        let own = read(&dir.join("loop.json5")).unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+        let lost = |topic, at: &[&str]| {
+            let f = TopicFaults {
+                loss: Some(Loss::Independent(0.1)),
+                at: at.iter().map(|s| s.to_string()).collect(),
+                ..TopicFaults::default()
+            };
+            FaultProfile::single("t", 1, topic, f)
+        };
+        let landed = |p: &FaultProfile| own.fault_into_foreign(p).map(|(t, n)| (t, n.node().to_string()));
+        assert_eq!(landed(&lost(Topic::Objects, &["acc"])), Some((Topic::Objects, "acc".into())));
+        assert_eq!(
+            landed(&lost(Topic::PerceptionObjects, &[])),
+            Some((Topic::PerceptionObjects, "acc".into())),
+            "no `at`: every node that reads it"
+        );
+        assert_eq!(
+            landed(&lost(Topic::VehicleControl, &[])),
+            None,
+            "the simulator reads control, the controller does not"
+        );
+        assert_eq!(landed(&lost(Topic::Objects, &["sim", "detect"])), None, "an `at` naming only our nodes");
+        assert_eq!(landed(&lost(Topic::CameraFront, &[])), None, "a controller reads no frames");
+    }
+
     #[test]
     fn the_documented_loop_file_is_todays_loop() {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../config/loop.json5");

@@ -106,15 +106,17 @@ impl LoopSpec {
         v
     }
 
-    /// Faults a node of this loop cannot take: in lockstep, every step waits for the ACC's
-    /// answer to its speed message and for the detections of its frame, so speed and camera
-    /// frames must arrive; their faults belong on what follows them.
+    /// Faults a node of this loop cannot take: none can land in a node of the user's own (our
+    /// nodes inject them as they receive); in lockstep, every step waits for the ACC's answer
+    /// to its speed message and for the detections of its frame, so speed and camera frames
+    /// must arrive; their faults belong on what follows them.
     fn check_faults(&self) -> Result<()> {
         let Some(p) = &self.faults else { return Ok(()) };
-        if let Some(own) = self.own.controller.as_ref().or(self.own.detector.as_ref()) {
+        if let Some((topic, own)) = self.own.fault_into_foreign(p) {
             return Err(Error::Refused(format!(
-                "{}: faults are injected by slipstream's own nodes as they receive, not yet into a node of your own ({}) (fix: judge it without --faults)",
+                "{}: key `topics.{topic}`: its faults would land in a node of your own ({}, `{}`), which reads {topic}; faults are injected by slipstream's own nodes as they receive (fix: name only slipstream's nodes in the entry's `at` (sim, acc, detect: those this loop runs itself), or judge it without --faults)",
                 p.name,
+                own.node(),
                 own.command_line()
             )));
         }

@@ -103,14 +103,7 @@ pub fn compare(args: &CompareArgs) -> Result<Comparison> {
 
 /// The nodes a sweep judged, for a person.
 fn nodes(own: &OwnNodes) -> String {
-    let mut said: Vec<String> = own.foreign().map(|n| n.command_line()).collect();
-    if said.is_empty() {
-        said.push("slipstream-acc".into());
-    }
-    match &own.loop_file {
-        Some(f) => format!("{} (loop file {})", said.join(" + "), f.path.display()),
-        None => said.join(" + "),
-    }
+    own.described("slipstream-acc")
 }
 
 /// The runs whose verdict differs, in the sweep's order.
