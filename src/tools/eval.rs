@@ -122,6 +122,11 @@ pub struct DetectArgs {
     /// frames and ground truth (docs/own-node.md), e.g. "python3 my_detector.py"
     #[arg(long, value_name = "CMD", conflicts_with_all = ["frames", "detect_settings"])]
     pub detector: Option<String>,
+    /// A loop file (docs/own-node.md) whose detector is scored, with its environment,
+    /// working directory, readiness and log; the file may name no other node (eval detect
+    /// renders the frames itself and runs no controller)
+    #[arg(long = "loop", value_name = "FILE", conflicts_with_all = ["frames", "detect_settings"])]
+    pub loop_file: Option<std::path::PathBuf>,
 }
 
 /// `slipstream eval ...`: the report (or JSON); exit 1 (an error saying so) when `acc` or
@@ -170,10 +175,43 @@ fn detect(args: &DetectArgs) -> Result<ExitCode> {
             Some(LinkCodec::new(e, args.jpeg_quality))
         }
     };
-    let own = crate::launch::OwnNodeArgs { detector: args.detector.clone(), ..Default::default() }.nodes()?;
+    let own = crate::launch::OwnNodeArgs {
+        detector: args.detector.clone(),
+        loop_file: args.loop_file.clone(),
+        ..Default::default()
+    }
+    .nodes()?;
+    refuse_beyond_a_detector(&own)?;
     let report = detect::evaluate(scenarios, args.seconds, (&settings, &detector), codec, own.detector.as_ref())?;
     print_report(args.json, &report, detect::markdown)?;
     Ok(ExitCode::SUCCESS)
+}
+
+/// What a loop file may give `eval detect`: a detector of the user's own, nothing else (the
+/// frames are rendered in process, no controller runs, slipstream-detect's settings come
+/// with --detect-settings).
+fn refuse_beyond_a_detector(own: &crate::launch::OwnNodes) -> Result<()> {
+    let Some(file) = &own.loop_file else { return Ok(()) };
+    let b = &own.builtin;
+    let extra = [
+        (own.controller.is_some() || b.controller.is_some(), "controller"),
+        (!own.others.is_empty(), "others"),
+        (b.simulator.is_some(), "simulator"),
+        (b.detector.is_some(), "detector"),
+    ];
+    if let Some((_, key)) = extra.iter().find(|(given, _)| *given) {
+        anyhow::bail!(
+            "{}: key `{key}`: eval detect scores a detector of your own alone (it renders the frames itself and runs no controller; slipstream-detect's settings come with --detect-settings) (fix: give eval detect a loop file with only `detector: {{ command: ... }}`, or --detector CMD)",
+            file.path.display()
+        );
+    }
+    if own.detector.is_none() {
+        anyhow::bail!(
+            "{}: no `detector` command: eval detect has nothing of yours to score (fix: add `detector: {{ command: ... }}`)",
+            file.path.display()
+        );
+    }
+    Ok(())
 }
 
 /// `eval sweep-merge`: the shards' reports as one, written and shown as `eval sweep`'s.

@@ -52,3 +52,19 @@ def test_a_detector_that_dies_is_named_with_its_last_words(slipstream_bin):
     assert done.returncode == 1, done.stderr[-2000:]
     assert "detector exited at frame" in done.stderr, done.stderr[-2000:]
     assert "RuntimeError: the network's weights did not load" in done.stderr, done.stderr[-2000:]
+
+
+def test_eval_detect_takes_the_detector_of_a_loop_file_and_nothing_else(slipstream_bin, tmp_path):
+    detector = f'detector: {{ command: ["{sys.executable}", "{ROOT / OWN_DETECT}"], env: {{ OMP_NUM_THREADS: "1" }} }}'
+    (tmp_path / "mine.json5").write_text(f"{{ {detector} }}")
+    done = slipstream(slipstream_bin, "eval", "detect", "--scenario", "cut-in", "--duration", "4", "--json",
+                      "--loop", str(tmp_path / "mine.json5"))
+    assert done.returncode == 0, done.stderr[-2000:]
+    mine = json.loads(done.stdout)
+    assert mine["own"]["command"][1] == str(ROOT / OWN_DETECT) and mine["own"]["run"]["env"] == {"OMP_NUM_THREADS": "1"}
+    assert mine["overall"]["frames"] > 50 and mine["unanswered_frames"] == 0, mine["overall"]
+    # A controller in the file is no part of eval detect: refused naming the file, key and fix.
+    (tmp_path / "loop.json5").write_text(f'{{ {detector}, controller: {{ builtin: true }} }}')
+    refused = slipstream(slipstream_bin, "eval", "detect", "--scenario", "cut-in", "--loop", str(tmp_path / "loop.json5"))
+    assert refused.returncode != 0 and f"{tmp_path / 'loop.json5'}: key `controller`" in refused.stderr, refused.stderr
+    assert "fix: " in refused.stderr
