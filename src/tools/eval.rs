@@ -205,6 +205,12 @@ fn refuse_beyond_a_detector(own: &crate::launch::OwnNodes) -> Result<()> {
             file.path.display()
         );
     }
+    if own.detector.as_ref().is_some_and(|d| d.run.ready.sample.is_some()) {
+        anyhow::bail!(
+            "{}: key `detector.ready.sample`: eval detect sends the first frame once the detector's token is seen, so no sample can come before (fix: leave `ready.sample` out: the token is awaited)",
+            file.path.display()
+        );
+    }
     if own.detector.is_none() {
         anyhow::bail!(
             "{}: no `detector` command: eval detect has nothing of yours to score (fix: add `detector: {{ command: ... }}`)",
