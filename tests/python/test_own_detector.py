@@ -69,6 +69,6 @@ def test_eval_detect_takes_the_detector_of_a_loop_file_and_nothing_else(slipstre
     assert refused.returncode != 0 and f"{tmp_path / 'loop.json5'}: key `controller`" in refused.stderr, refused.stderr
     assert "fix: " in refused.stderr
     # Readiness by a first sample cannot come before the first frame, which waits for the token.
-    (tmp_path / "sample.json5").write_text(detector.replace("env:", 'ready: { sample: "perception/objects" }, env:'))
+    (tmp_path / "sample.json5").write_text("{ " + detector.replace("env:", 'ready: { sample: "perception/objects" }, env:') + " }")
     refused = slipstream(slipstream_bin, "eval", "detect", "--scenario", "cut-in", "--loop", str(tmp_path / "sample.json5"))
     assert refused.returncode != 0 and "key `detector.ready.sample`" in refused.stderr, refused.stderr
