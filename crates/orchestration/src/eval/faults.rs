@@ -295,8 +295,10 @@ pub fn run(args: &EvalFaultsArgs, connect: &slipstream_contract::config::Connect
     };
     let own = args.own.nodes()?;
     let rt = tokio::runtime::Runtime::new().map_err(Error::system("start the async runtime"))?;
-    let tried = Axis::ALL.iter().filter(|a| not_injected(**a, args, &own).is_none());
-    let total_runs: usize = names.len() * (1 + tried.map(|a| a.values(args).len()).sum::<usize>());
+    // Which axes cannot be tried with the user's nodes: the same for every scenario.
+    let skipped = Axis::ALL.map(|a| not_injected(a, args, &own));
+    let tried = Axis::ALL.iter().zip(&skipped).filter(|(_, why)| why.is_none());
+    let total_runs: usize = names.len() * (1 + tried.map(|(a, _)| a.values(args).len()).sum::<usize>());
     let mut done_runs = 0usize;
     let started = Instant::now();
     let mut out = Vec::new();
@@ -320,8 +322,11 @@ pub fn run(args: &EvalFaultsArgs, connect: &slipstream_contract::config::Connect
         );
         let baseline_misses: Vec<String> =
             base.metrics.checks.iter().filter(|c| !c.pass).map(|c| c.name.clone()).collect();
-        let axes =
-            Axis::ALL.iter().map(|a| try_axis(*a, args, &own, &base.metrics, &mut one)).collect::<Result<_>>()?;
+        let axes = Axis::ALL
+            .iter()
+            .zip(&skipped)
+            .map(|(a, why)| try_axis(*a, args, why.clone(), &base.metrics, &mut one))
+            .collect::<Result<_>>()?;
         out.push(ScenarioEnvelope { scenario: name, baseline: RunFigures::of(&base), baseline_misses, axes });
     }
     if args.logs.is_none() {
@@ -344,16 +349,16 @@ pub fn run(args: &EvalFaultsArgs, connect: &slipstream_contract::config::Connect
 }
 
 /// One axis of one scenario: its values, rising, until the first that fails, each judged
-/// against the fault-free run's `base`; marked and not run when its faults would land in a
-/// node of the user's own.
+/// against the fault-free run's `base`; marked and not run when `skipped` says why (its
+/// faults would land in a node of the user's own).
 fn try_axis(
     axis: Axis,
     args: &EvalFaultsArgs,
-    own: &OwnNodes,
+    skipped: Option<String>,
     base: &Metrics,
     one: &mut impl FnMut(&str, Option<FaultProfile>) -> Result<ScenarioResult>,
 ) -> Result<AxisResult> {
-    if let Some(why) = not_injected(axis, args, own) {
+    if let Some(why) = skipped {
         eprintln!("{}: not injected ({why})", axis.title(args.burst_len));
         let not_injected = Some(why);
         return Ok(AxisResult { axis, trials: Vec::new(), envelope: 0.0, held_throughout: false, not_injected });

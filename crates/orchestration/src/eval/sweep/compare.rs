@@ -11,7 +11,6 @@ use serde::Serialize;
 use super::rates::{Rates, SweepRun};
 use super::SweepReport;
 use crate::error::{Error, Result};
-use crate::launch::OwnNodes;
 
 /// `eval sweep-compare`'s command line.
 #[derive(Debug, Clone, clap::Args)]
@@ -89,8 +88,11 @@ pub fn compare(args: &CompareArgs) -> Result<Comparison> {
         let o = other.families.iter().find(|o| o.family == b.family).cloned().unwrap_or_default();
         families.push(FamilyPair { family: b.family.clone(), base: b.clone(), other: o });
     }
-    let side =
-        |path: &Path, r: &SweepReport| Side { report: path.to_path_buf(), nodes: nodes(&r.own), wall_s: r.wall_s };
+    let side = |path: &Path, r: &SweepReport| Side {
+        report: path.to_path_buf(),
+        nodes: r.own.described("slipstream-acc"),
+        wall_s: r.wall_s,
+    };
     Ok(Comparison {
         seed: base.seed,
         runs: base.runs.len(),
@@ -99,11 +101,6 @@ pub fn compare(args: &CompareArgs) -> Result<Comparison> {
         families,
         changed: changed(&base.runs, &other.runs),
     })
-}
-
-/// The nodes a sweep judged, for a person.
-fn nodes(own: &OwnNodes) -> String {
-    own.described("slipstream-acc")
 }
 
 /// The runs whose verdict differs, in the sweep's order.
