@@ -17,7 +17,7 @@
 // The layers below the tools are crates of their own, re-exported under their module names.
 pub use slipstream_acc as acc;
 pub use slipstream_bench as bench;
-pub use slipstream_contract::{bus, config, msg, process, qos, topics};
+pub use slipstream_contract::{bus, config, msg, node, process, qos, topics};
 pub use slipstream_model::{road, vehicle};
 pub use slipstream_orchestration::{eval, launch, record, ros2, view};
 pub use slipstream_perception as perception;

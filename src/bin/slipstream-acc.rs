@@ -10,19 +10,11 @@ fn main() -> std::process::ExitCode {
 }
 
 fn run() -> Result<()> {
-    slipstream::cli::apply_zenoh_runtime_default();
     let cli = AccCli::parse();
     slipstream::cli::init_tracing(slipstream::cli::LogLevel::Node);
     let settings = cli.acc.settings()?;
-    let rt = tokio::runtime::Runtime::new()?;
-    rt.block_on(async {
-        let bus = slipstream::Bus::open_node(&cli.connect, &cli.faults, &cli.acc.name)
-            .await
-            .context("acc: join the bus")?;
-        let shutdown = async {
-            slipstream::cli::stop_requested().await;
-        };
-        let stats = slipstream::acc::node::run(&bus, settings, shutdown).await.context("acc: run")?;
+    slipstream::node::serve(&cli.connect, &cli.faults, &cli.acc.name, async |bus, shutdown| {
+        let stats = slipstream::acc::node::run(bus, settings, shutdown).await.context("acc: run")?;
         tracing::info!(
             "{} commands ({} from the watchdog), {} perception frames, {} stale episodes, {} emergencies, {} lockstep waits timed out, {} answers without their step's state",
             stats.commands,
@@ -33,7 +25,8 @@ fn run() -> Result<()> {
             stats.lockstep_waits_timed_out,
             stats.state_waits_timed_out
         );
-        for input in stats.inputs.iter().filter(|i| i.injected_dropped + i.injected_delayed + i.injected_duplicated > 0) {
+        for input in stats.inputs.iter().filter(|i| i.injected_dropped + i.injected_delayed + i.injected_duplicated > 0)
+        {
             tracing::info!(
                 "{}: {} arrived, {} lost on the way; injected: {} dropped, {} delayed, {} duplicated",
                 input.topic,
@@ -47,7 +40,6 @@ fn run() -> Result<()> {
         if cli.json {
             println!("{}", serde_json::to_string_pretty(&stats)?);
         }
-        bus.leave().await;
         anyhow::Ok(())
     })
 }

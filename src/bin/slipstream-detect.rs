@@ -11,20 +11,11 @@ fn main() -> std::process::ExitCode {
 }
 
 fn run() -> Result<()> {
-    slipstream::cli::apply_zenoh_runtime_default();
     let cli = DetectCli::parse();
     slipstream::cli::init_tracing(slipstream::cli::LogLevel::Node);
     let settings = DetectSettings::resolve(cli.settings.as_deref())?;
-    let rt = tokio::runtime::Runtime::new()?;
-    rt.block_on(async {
-        let bus =
-            slipstream::Bus::open_node(&cli.connect, &cli.faults, &cli.name).await.context("detect: join the bus")?;
-        let shutdown = async {
-            slipstream::cli::stop_requested().await;
-        };
-        let stats = slipstream::perception::node::run(&bus, settings, shutdown)
-            .await
-            .context("detect: run")?;
+    slipstream::node::serve(&cli.connect, &cli.faults, &cli.name, async |bus, shutdown| {
+        let stats = slipstream::perception::node::run(bus, settings, shutdown).await.context("detect: run")?;
         tracing::info!(
             "{} frames, {} skipped, {} unusable, {} before camera info, {} detections; {} with the narrow camera, {} without its frame",
             stats.frames,
@@ -38,7 +29,6 @@ fn run() -> Result<()> {
         if cli.json {
             println!("{}", serde_json::to_string_pretty(&stats)?);
         }
-        bus.leave().await;
         anyhow::Ok(())
     })
 }

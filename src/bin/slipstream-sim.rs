@@ -10,7 +10,6 @@ fn main() -> std::process::ExitCode {
 }
 
 fn run() -> Result<()> {
-    slipstream::cli::apply_zenoh_runtime_default();
     let cli = SimCli::parse();
     slipstream::cli::init_tracing(slipstream::cli::LogLevel::Node);
     if cli.sim.list_scenarios {
@@ -30,21 +29,14 @@ fn run() -> Result<()> {
         println!("{}: step {}, {} vehicles, {in_view} in view", path.display(), truth.step, truth.objects.len());
         return Ok(());
     }
-    let rt = tokio::runtime::Runtime::new()?;
-    rt.block_on(async {
-        let bus =
-            slipstream::Bus::open_node(&cli.connect, &cli.faults, &cli.sim.name).await.context("sim: join the bus")?;
-        let shutdown = async {
-            slipstream::cli::stop_requested().await;
-        };
-        let report = slipstream::sim::run(&bus, world, &settings, shutdown).await.context("sim: run")?;
+    slipstream::node::serve(&cli.connect, &cli.faults, &cli.sim.name, async |bus, shutdown| {
+        let report = slipstream::sim::run(bus, world, &settings, shutdown).await.context("sim: run")?;
         // The summary first: nothing on the way out can lose it.
         if cli.sim.json {
             println!("{}", serde_json::to_string_pretty(&report)?);
         } else {
             println!("{}", report.summary());
         }
-        bus.leave().await;
         anyhow::Ok(())
     })
 }

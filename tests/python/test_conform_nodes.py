@@ -32,6 +32,7 @@ def failed(report):
 @pytest.mark.parametrize("role,command", [
     ("controller", f"{PY} clients/python/examples/own_acc.py"),
     ("controller", "BIN/slipstream-acc --lockstep --perception ground-truth"),
+    ("controller", "BIN/own-controller"),
     ("detector", f"{PY} clients/python/examples/own_detect.py"),
     ("detector", "BIN/slipstream-detect"),
 ])

@@ -302,6 +302,13 @@ def test_a_controller_of_your_own_beside_a_simulator(host):
     assert re.fullmatch(r"own-controller: \d+ commands sent\n", sent) and not sent.startswith("own-controller: 0 "), sent
     summary = summary_of(stopped(host, sim))
     assert "collisions: 0 ego" in summary and "bad control messages 0" in summary, summary
+    # On the contract's controller SDK it answers lockstep: checked, then judged like ours.
+    checked = one_shot(host, "slipstream conform controller --command target/release/own-controller", work_s=15)
+    assert "the controller keeps the contract" in checked.stdout(), checked.stdout()
+    judged = one_shot(host, "slipstream eval acc --scenario steady-follow --controller target/release/own-controller",
+                      work_s=30)
+    row = next(line for line in judged.stdout().splitlines() if line.startswith("| steady-follow |"))
+    assert row.rstrip().endswith("| pass |"), judged.stdout()
 
 
 @needs_host

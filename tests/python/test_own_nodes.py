@@ -8,6 +8,7 @@ import json
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
@@ -42,6 +43,20 @@ def test_a_python_controller_is_judged_like_ours_and_the_same_twice_in_lockstep(
     script = next(f for f in controller["files"] if f["path"] == OWN_ACC)
     assert script["sha256"] == hashlib.sha256((ROOT / OWN_ACC).read_bytes()).hexdigest()
     assert first["own"]["detector"] is None
+
+
+def test_a_rust_controller_on_the_contract_sdk_is_judged_and_the_same_twice_in_lockstep(slipstream_bin):
+    # examples/own-controller: one function on slipstream_contract::node::controller, which
+    # answers lockstep, copies stamps and awaits the frame's objects for it.
+    binary = str(Path(slipstream_bin).parent / "own-controller")
+    runs = [slipstream(slipstream_bin, "eval", "acc", "--scenario", "cut-in", "--perception", "camera", "--json",
+                       "--controller", binary) for _ in range(2)]
+    first, second = (json.loads(r.stdout) for r in runs)
+    run = first["results"][0]
+    assert run["lockstep_timeouts"] == 0 and run["metrics"]["collisions"] == 0, run
+    assert run["metrics"]["duration_s"] > 30 and run["metrics"]["min_gap_m"] > 2, run["metrics"]
+    assert first["results"][0]["metrics"] == second["results"][0]["metrics"]
+    assert first["own"]["controller"]["files"][0]["sha256"] == hashlib.sha256(Path(binary).read_bytes()).hexdigest()
 
 
 def test_a_small_sweep_runs_a_python_controller_and_names_it(slipstream_bin, tmp_path):

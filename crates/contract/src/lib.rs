@@ -11,6 +11,9 @@
 //!   flags every binary shares.
 //! - [`bus`]: typed publishers and subscribers over a Zenoh session, latest-only delivery,
 //!   per-subscription statistics, liveliness.
+//! - [`longitudinal`]: the vehicle model sim/ego declares (pedals for an acceleration).
+//! - [`node`]: a node of the user's own as one function (a controller, a detector) and the
+//!   shell every node's `main` shares (runtime, bus, stop signals).
 //!
 //! JPEG and PNG camera frames need the `images` feature (the `image` codec); raw and LZ4
 //! frames do not.
@@ -21,6 +24,8 @@ pub mod topics;
 
 pub mod bus;
 pub mod config;
+pub mod longitudinal;
+pub mod node;
 pub mod process;
 
 pub use bus::{Bus, BusError};

@@ -4,7 +4,8 @@
 //! It sits below both: the simulator's forces (crates/sim/src/dynamics.rs) and the ACC's low-level
 //! loop (crates/acc/src/low_level.rs) read the same numbers, and the ACC links none of the simulator.
 //!
-//! Longitudinally, per vehicle:
+//! Longitudinally, per vehicle, the contract's model (slipstream_contract::longitudinal: what
+//! sim/ego declares to a controller of any make, so its formulas live there):
 //! - drive force = throttle * min(max_drive_force, max_power / speed), along the heading;
 //! - resisting force = brake * mass * max_brake_decel + rolling_coeff * mass * g
 //!   + 0.5 * air_density * drag_area * v^2, against the motion;
@@ -14,10 +15,11 @@
 
 use serde::{Deserialize, Serialize};
 
+use slipstream_contract::longitudinal::Longitudinal;
 use slipstream_contract::msg::ObjectClass;
 
-pub const GRAVITY_MPS2: f64 = 9.81;
-pub const AIR_DENSITY_KGPM3: f64 = 1.2;
+/// The longitudinal formulas are the contract's (what sim/ego declares to any controller).
+pub use slipstream_contract::longitudinal::{AIR_DENSITY_KGPM3, GRAVITY_MPS2};
 
 /// The parameters of one vehicle type.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -121,15 +123,26 @@ impl VehicleParams {
         self.size_m[0] / 2.0 - self.rear_overhang_m
     }
 
+    /// This vehicle's longitudinal model (the contract's formulas, these numbers).
+    pub fn longitudinal(&self) -> Longitudinal {
+        Longitudinal {
+            mass_kg: self.mass_kg,
+            max_power_w: self.max_power_w,
+            max_drive_force_n: self.max_drive_force_n,
+            max_brake_decel_mps2: self.max_brake_decel_mps2,
+            drag_area_m2: self.drag_area_m2,
+            rolling_coeff: self.rolling_coeff,
+        }
+    }
+
     /// Largest drive force at a forward speed.
     pub fn drive_force_limit_n(&self, forward_speed_mps: f64) -> f64 {
-        self.max_drive_force_n.min(self.max_power_w / forward_speed_mps.max(1.0))
+        self.longitudinal().drive_force_limit_n(forward_speed_mps)
     }
 
     /// Rolling and air resistance at a speed (brakes off).
     pub fn resistance_n(&self, speed_mps: f64) -> f64 {
-        self.rolling_coeff * self.mass_kg * GRAVITY_MPS2
-            + 0.5 * AIR_DENSITY_KGPM3 * self.drag_area_m2 * speed_mps * speed_mps
+        self.longitudinal().resistance_n(speed_mps)
     }
 }
 
@@ -144,31 +157,5 @@ pub fn lag_toward(applied: f64, commanded: f64, lag_s: f64, dt_s: f64) -> f64 {
 /// The inverse longitudinal model: throttle and brake (each 0..1, one of them 0) that give
 /// `accel_mps2` at `speed_mps`, with the vehicle's own resistance, power and brake limits.
 pub fn actuate_acceleration(params: &VehicleParams, speed_mps: f64, accel_mps2: f64) -> (f64, f64) {
-    let needed = params.mass_kg * accel_mps2 + params.resistance_n(speed_mps);
-    if needed >= 0.0 {
-        ((needed / params.drive_force_limit_n(speed_mps)).min(1.0), 0.0)
-    } else {
-        (0.0, (-needed / (params.mass_kg * params.max_brake_decel_mps2)).min(1.0))
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn throttle_is_power_limited_at_speed() {
-        let p = VehicleParams::CAR;
-        assert_eq!(p.drive_force_limit_n(5.0), p.max_drive_force_n);
-        assert!((p.drive_force_limit_n(40.0) - p.max_power_w / 40.0).abs() < 1e-9);
-    }
-
-    #[test]
-    fn inverse_model_brakes_for_deceleration_and_drives_against_drag() {
-        let car = VehicleParams::CAR;
-        let (t, b) = actuate_acceleration(&car, 30.0, 0.0);
-        assert!(t > 0.0 && b == 0.0, "cruising needs throttle against drag");
-        let (t, b) = actuate_acceleration(&car, 30.0, -6.0);
-        assert!(t == 0.0 && b > 0.5 && b < 0.7, "6 m/s2 needs about 2/3 brake: {b}");
-    }
+    params.longitudinal().pedals_for(speed_mps, accel_mps2)
 }

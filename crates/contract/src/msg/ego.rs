@@ -5,6 +5,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::{Message, MessageKind, ObjectClass};
+use crate::longitudinal::Longitudinal;
 
 /// The ego vehicle (the simulator's model of it) and its driver's starting settings.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -37,6 +38,18 @@ impl EgoInfo {
     /// From the rear axle to the front bumper.
     pub fn front_m(&self) -> f64 {
         self.size_m[0] - self.rear_overhang_m
+    }
+
+    /// The longitudinal model this vehicle declares: a controller's pedals for an acceleration.
+    pub fn longitudinal(&self) -> Longitudinal {
+        Longitudinal {
+            mass_kg: self.mass_kg,
+            max_power_w: self.max_power_w,
+            max_drive_force_n: self.max_drive_force_n,
+            max_brake_decel_mps2: self.max_brake_decel_mps2,
+            drag_area_m2: self.drag_area_m2,
+            rolling_coeff: self.rolling_coeff,
+        }
     }
 }
 
