@@ -5,6 +5,7 @@ is named with what it did."""
 
 import hashlib
 import json
+import os
 import subprocess
 import sys
 import time
@@ -57,6 +58,24 @@ def test_a_rust_controller_on_the_contract_sdk_is_judged_and_the_same_twice_in_l
     assert run["metrics"]["duration_s"] > 30 and run["metrics"]["min_gap_m"] > 2, run["metrics"]
     assert first["results"][0]["metrics"] == second["results"][0]["metrics"]
     assert first["own"]["controller"]["files"][0]["sha256"] == hashlib.sha256(Path(binary).read_bytes()).hexdigest()
+
+
+def test_bench_nodes_runs_the_same_sweep_with_ours_and_both_sdk_examples(slipstream_bin):
+    # The bench's python3 must be the one that imports zenoh: this interpreter's.
+    env = dict(os.environ, PATH=f"{Path(sys.executable).parent}{os.pathsep}{os.environ['PATH']}")
+    done = subprocess.run([slipstream_bin, "bench", "nodes", "--quick", "--json"], cwd=ROOT, capture_output=True,
+                          text=True, timeout=600, env=env)
+    assert done.returncode == 0, done.stderr[-3000:]
+    rows = json.loads(done.stdout)["nodes"]
+    assert [r["controller"] for r in rows] == ["slipstream-acc", "Python SDK (own_acc.py)", "Rust SDK (own-controller)"]
+    # The same seed: each drove the same scenarios, step for step (none ended a run early).
+    assert len({r["steps"] for r in rows}) == 1 and rows[0]["steps"] > 1000, rows
+    ours = rows[0]
+    for r in rows:
+        assert r["sweep_wall_s"] > 0 and r["awaited_per_step_us"] > 0, r
+        assert abs(r["wall_vs_ours"] - r["sweep_wall_s"] / ours["sweep_wall_s"]) < 1e-9, r
+        assert abs(r["added_per_step_us"] - (r["awaited_per_step_us"] - ours["awaited_per_step_us"])) < 1e-6, r
+    assert rows[1]["command"].endswith("clients/python/examples/own_acc.py") and ours["command"] is None
 
 
 def test_a_small_sweep_runs_a_python_controller_and_names_it(slipstream_bin, tmp_path):

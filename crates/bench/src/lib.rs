@@ -8,7 +8,7 @@
 //!
 //! By concern: command.rs (the command lines), cases.rs (the point-to-point cases under typed ids), child.rs (the processes),
 //! figures.rs (runs to rows), ratios.rs, report.rs (JSON and markdown); the suites with
-//! tables of their own in sim.rs, scale.rs, growth.rs and fleet.rs.
+//! tables of their own in sim.rs, scale.rs, growth.rs, fleet.rs and nodes.rs.
 
 mod cases;
 mod child;
@@ -18,6 +18,7 @@ pub mod fleet;
 pub mod fleet_watch;
 pub mod growth;
 mod netns;
+pub mod nodes;
 mod peer;
 mod plot;
 mod ratios;
@@ -61,6 +62,10 @@ pub enum Suite {
     /// another, a router between, every link capped (network namespaces, tc tbf; root);
     /// frames delivered, speed and control lost, loop latency, router CPU; only when named
     Fleet,
+    /// i. a controller of your own against slipstream-acc: the same 10-run `eval sweep`
+    /// (ground truth, one run at a time) with slipstream-acc, the Python SDK's example and the
+    /// Rust SDK's: sweep wall time and the per-step cost each adds in lockstep; only when named
+    Nodes,
 }
 
 #[derive(Debug, Clone, clap::Args)]
@@ -171,8 +176,12 @@ pub fn run(args: &BenchArgs) -> Result<BenchReport> {
         true => run_fleet(args)?,
         false => Vec::new(),
     };
+    let nodes = match suites.contains(&Suite::Nodes) {
+        true => nodes::run(args.quick, repeat)?,
+        false => Vec::new(),
+    };
     let command = std::env::args().collect::<Vec<_>>().join(" ");
-    let report = BenchReport { command, rows, ratios, sim, scale, fanout, router, fleet };
+    let report = BenchReport { command, rows, ratios, sim, scale, fanout, router, fleet, nodes };
     if let Some(path) = &args.plot {
         plot::growth(&report, path)?;
         eprintln!("plot: {}", path.display());

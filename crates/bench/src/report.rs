@@ -4,7 +4,7 @@ use serde::Serialize;
 
 use super::figures::Row;
 use super::ratios::Ratio;
-use super::{fleet, growth, scale, sim};
+use super::{fleet, growth, nodes, scale, sim};
 use slipstream_orchestration::eval::fmt_opt;
 
 #[derive(Debug, Clone, Serialize)]
@@ -22,6 +22,8 @@ pub struct BenchReport {
     pub router: Vec<growth::RouterRow>,
     /// A fleet through capped links (h), when asked for.
     pub fleet: Vec<fleet::FleetRow>,
+    /// A controller of your own against slipstream-acc (i), when asked for.
+    pub nodes: Vec<nodes::NodesRow>,
 }
 
 /// The report as markdown tables: one per suite, then the ratios.
@@ -61,6 +63,9 @@ pub fn markdown(report: &BenchReport) -> String {
     s.push_str(&growth::markdown(&report.fanout, &report.router));
     if !report.fleet.is_empty() {
         s.push_str(&fleet::markdown(&report.fleet));
+    }
+    if !report.nodes.is_empty() {
+        s.push_str(&nodes::markdown(&report.nodes));
     }
     if !report.ratios.is_empty() {
         s.push_str("\n### Ratios (same run)\n\n| ratio | value | aim |\n|---|---|---|\n");
