@@ -17,8 +17,9 @@ const LAYER_OF: &[(&str, u8)] = &[
     ("slipstream-zenoh-orchestration", 3),
     ("slipstream-zenoh-bench", 4),
     ("slipstream-zenoh", 5),
-    // A user's own node: the contract alone (docs/own-node.md).
+    // A user's own nodes: the contract alone (docs/own-node.md).
     ("slipstream-example-own-controller", 5),
+    ("slipstream-example-own-detector", 5),
 ];
 
 /// The layer whose crates may not depend on one another (a dev-dependency may: the perception
@@ -100,6 +101,17 @@ fn the_acc_and_the_detector_build_without_the_simulator() {
     }
     let contract = &edges["slipstream-zenoh-contract"];
     assert!(contract.is_empty(), "the contract depends on nothing of ours: {contract:?}");
+}
+
+#[test]
+fn the_examples_of_a_users_own_nodes_depend_on_the_contract_alone() {
+    let edges = workspace_edges();
+    let examples: Vec<&String> = edges.keys().filter(|n| n.starts_with("slipstream-example-")).collect();
+    assert!(examples.len() >= 2, "{examples:?}");
+    for example in examples {
+        let ours: Vec<&str> = edges[example].iter().map(|(n, _)| n.as_str()).collect();
+        assert_eq!(ours, ["slipstream-zenoh-contract"], "{example}");
+    }
 }
 
 #[test]

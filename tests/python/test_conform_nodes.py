@@ -35,6 +35,7 @@ def failed(report):
     ("controller", "BIN/own-controller"),
     ("detector", f"{PY} clients/python/examples/own_detect.py"),
     ("detector", "BIN/slipstream-detect"),
+    ("detector", "BIN/own-detector"),
 ])
 def test_ours_and_the_examples_keep_the_node_contract(slipstream_bin, role, command):
     report = conform(slipstream_bin, role, command.replace("BIN", str(Path(slipstream_bin).parent)))

@@ -56,7 +56,7 @@ ELSEWHERE = {
         "tests/it/faults.rs runs `eval faults --scenario steady-follow ... --duration 4`: the envelope takes minutes",
 }
 
-BINS = ("slipstream", "slipstream-sim", "slipstream-detect", "slipstream-acc", "own-controller")
+BINS = ("slipstream", "slipstream-sim", "slipstream-detect", "slipstream-acc", "own-controller", "own-detector")
 DOCS = ("README.md", "docs/tools.md", "docs/recording.md", "docs/own-node.md")
 
 
@@ -388,6 +388,18 @@ def test_the_examples_keep_the_node_contract_as_own_node_md_checks_it(host):
 
 
 @needs_host
+def test_a_rust_detector_of_your_own_as_own_node_md_gives_it(host):
+    checked = one_shot(host, "slipstream conform detector --command target/release/own-detector", work_s=15)
+    assert "the detector keeps the contract" in checked.stdout(), checked.stdout()
+    scored = one_shot(host, "slipstream eval detect --scenario cut-in --detector target/release/own-detector", work_s=20)
+    out = scored.stdout()
+    assert "Detector: target/release/own-detector" in out and "0 left unanswered" in out, out
+    row = next(line for line in out.splitlines() if line.startswith("| cut-in |"))
+    precision = float(row.split("|")[3])
+    assert precision > 0.5, row
+
+
+@needs_host
 def test_a_python_detector_as_own_node_md_gives_it(host):
     scored = host.run("slipstream eval detect --detector 'python3 clients/python/examples/own_detect.py'", timeout=300)
     assert scored.code == 0 and "Detector: python3 clients/python/examples/own_detect.py" in scored.stdout(), \
@@ -650,7 +662,7 @@ def is_argument(words):
 def typed_here():
     """The command literals of this file, placeholders as written."""
     source = pathlib.Path(__file__).read_text()
-    literals = re.findall(r'"((?:target/release/)?(?:slipstream|own-controller)[^"]*)"', source)
+    literals = re.findall(r'"((?:target/release/)?(?:slipstream|own-controller|own-detector)[^"]*)"', source)
     typed_parts = set()
     for literal in literals:
         for p in parts(literal):

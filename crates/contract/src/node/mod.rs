@@ -2,14 +2,17 @@
 //! (the ego, what is ahead, the driver's settings -> an acceleration) and the [`controller`]
 //! module keeps the rest of docs/node-contract.md around it: lockstep answers naming their
 //! step, stamps copied, objects read newest-first, the frame's objects awaited, acc/status for
-//! the judge, the liveliness token once it listens. [`serve`] is the shell every node's `main`
+//! the judge, the liveliness token once it listens; a detector is one function (a frame ->
+//! detections) and [`detector`] keeps its side. [`serve`] is the shell every node's `main`
 //! shares, slipstream-sim, slipstream-detect and slipstream-acc included: Zenoh's thread
 //! layout, a runtime, the bus opened under the node's name, the stop signals, the bus left.
-//! The Python package's `slipstream_client.controller` is the same design in Python.
+//! The Python package's `slipstream_client.controller` and `.detector` are the same design in
+//! Python.
 
 mod args;
 pub mod controller;
 mod controller_inputs;
+pub mod detector;
 mod law;
 mod shell;
 
