@@ -180,7 +180,7 @@ fn detect(args: &DetectArgs) -> Result<ExitCode> {
         loop_file: args.loop_file.clone(),
         ..Default::default()
     }
-    .nodes()?;
+    .nodes_started_here()?;
     refuse_beyond_a_detector(&own)?;
     let report = detect::evaluate(scenarios, args.seconds, (&settings, &detector), codec, own.detector.as_ref())?;
     print_report(args.json, &report, detect::markdown)?;

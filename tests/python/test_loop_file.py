@@ -1,7 +1,8 @@
 """The loop file (`--loop FILE`, config/loop.json5): a Python controller and a node in no role
 of ours started, awaited (one by its token, one by its first sample) and named in `up`'s report;
 a controller that crashes started again per its restart policy, the run finished and the
-restart and the missed steps counted; a sweep over a loop file names it by content; a bad file
+restart and the missed steps counted; a controller started elsewhere awaited and driving in
+lockstep, and refused by eval; a sweep over a loop file names it by content; a bad file
 refused naming the file, the key and the fix, before anything starts."""
 
 import hashlib
@@ -51,6 +52,35 @@ def test_up_runs_a_python_controller_and_a_monitor_of_the_loop_file(slipstream_b
     own = report["own"]
     assert own["others"][0]["name"] == "monitor" and own["controller"]["role"] == "controller", own
     assert own["loop_file"]["sha256"] == hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def test_a_controller_started_elsewhere_is_awaited_and_closes_the_loop_in_lockstep(slipstream_bin, free_port,
+                                                                                   tmp_path):
+    path = loop_file(tmp_path, "{ controller: { elsewhere: true, ready: { timeout_s: 60 } } }")
+    endpoint, ns = f"tcp/127.0.0.1:{free_port}", "faraway"
+    up = subprocess.Popen([slipstream_bin, "-l", endpoint, "-n", ns, "up", "--loop", str(path), "--scenario",
+                           "steady-follow", "--mode", "lockstep", "--perception", "ground-truth", "--duration", "5",
+                           "--plain", "--report", str(tmp_path / "run")], cwd=ROOT, stdout=subprocess.PIPE,
+                          stderr=subprocess.PIPE, text=True, env=ENV)
+    # The user's node, started by hand after `up` (as on another PC): the role's name, the namespace.
+    own = subprocess.Popen([str(Path(slipstream_bin).parent / "own-controller"), "-e", endpoint, "-n", ns,
+                            "--name", "acc", "--clock", "lockstep", "--perception", "ground-truth"],
+                           stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        out, err = up.communicate(timeout=120)
+    finally:
+        own.terminate()
+        sent, _ = own.communicate(timeout=30)
+    assert up.returncode == 0, err[-3000:]
+    assert "waiting up to 60 s for the controller started elsewhere: its token nodes/acc in namespace `faraway`" in err
+    report = json.loads((tmp_path / "run" / "report.json").read_text())
+    assert report["own"]["controller"]["elsewhere"] and report["own"]["controller"]["command"] == [], report["own"]
+    assert report["ended"].startswith("duration") and report["collisions"] == 0, report["ended"]
+    answered = int(sent.split(": ")[1].split()[0])
+    assert answered >= 499, sent
+    # eval runs every loop in a namespace of its own: nobody can be waiting there.
+    refused = slipstream(slipstream_bin, "eval", "acc", "--scenario", "cut-in", "--loop", str(path), timeout=60)
+    assert refused.returncode != 0 and "key `controller.elsewhere`" in refused.stderr, refused.stderr[-2000:]
 
 
 def test_a_controller_that_crashes_is_started_again_per_its_policy_and_counted(slipstream_bin, tmp_path):

@@ -187,7 +187,7 @@ pub fn run(args: &EvalAccArgs, connect: &slipstream_contract::config::ConnectArg
     // The topic config and the fault profile are checked here, once, before any process starts.
     connect.topic_map()?;
     let faults = args.faults.profile()?;
-    let own = args.own.nodes()?;
+    let own = args.own.nodes_started_here()?;
     let names: Vec<String> = if args.scenarios.is_empty() {
         slipstream_sim::scenario::BUILT_IN.iter().map(|(n, _)| n.to_string()).collect()
     } else {

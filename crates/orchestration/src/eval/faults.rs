@@ -293,7 +293,7 @@ pub fn run(args: &EvalFaultsArgs, connect: &slipstream_contract::config::Connect
         faults: FaultArgs::default(),
         own: Default::default(),
     };
-    let own = args.own.nodes()?;
+    let own = args.own.nodes_started_here()?;
     let rt = tokio::runtime::Runtime::new().map_err(Error::system("start the async runtime"))?;
     // Which axes cannot be tried with the user's nodes: the same for every scenario.
     let skipped = Axis::ALL.map(|a| not_injected(a, args, &own));

@@ -66,6 +66,12 @@ impl OwnNodes {
         }
     }
 
+    /// The first node the user starts elsewhere, if any: a loop that makes its own network
+    /// (eval's, conform's) cannot have one.
+    pub fn elsewhere(&self) -> Option<&ForeignNode> {
+        self.foreign().find(|n| n.elsewhere)
+    }
+
     /// Every node of the user's own.
     pub fn foreign(&self) -> impl Iterator<Item = &ForeignNode> {
         self.others.iter().chain(&self.controller).chain(&self.detector)
@@ -274,6 +280,11 @@ pub struct ForeignNode {
     /// How it runs (a loop file's settings; the defaults for a flag's command).
     #[serde(default, skip_serializing_if = "NodeRun::is_default")]
     pub run: NodeRun,
+    /// Started by the user elsewhere (another PC, a container, a terminal): the loop starts
+    /// and supervises nothing, it waits for the node to be ready as `run.ready` says. No
+    /// command, no files.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub elsewhere: bool,
 }
 
 /// A file a node runs, and the SHA-256 of its content: a report says which code it judged.
@@ -320,7 +331,12 @@ impl ForeignNode {
                 files.push(read(&path)?);
             }
         }
-        Ok(ForeignNode { role, name, command, files, run })
+        Ok(ForeignNode { role, name, command, files, run, elsewhere: false })
+    }
+
+    /// A node the user starts elsewhere, in `role` (`name`: in no role of ours).
+    pub(crate) fn started_elsewhere(role: Role, name: Option<String>, run: NodeRun) -> ForeignNode {
+        ForeignNode { role, name, command: Vec::new(), files: Vec::new(), run, elsewhere: true }
     }
 
     /// The name on the bus.
@@ -333,8 +349,11 @@ impl ForeignNode {
         self.name.as_deref().unwrap_or(self.role.process())
     }
 
-    /// The command as a shell would take it back.
+    /// The command as a shell would take it back (a node started elsewhere: its name, said so).
     pub fn command_line(&self) -> String {
+        if self.elsewhere {
+            return format!("{} (started elsewhere)", self.node());
+        }
         shlex::try_join(self.command.iter().map(String::as_str)).unwrap_or_else(|_| self.command.join(" "))
     }
 

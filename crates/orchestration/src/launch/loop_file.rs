@@ -82,6 +82,8 @@ struct RawNode {
     log: Option<PathBuf>,
     #[serde(default)]
     lockstep: Option<bool>,
+    #[serde(default)]
+    elsewhere: bool,
 }
 
 /// A command as one line (split as a shell would) or as its words.
@@ -178,9 +180,12 @@ fn builtin(key: &str, raw: RawNode, base: &Path) -> std::result::Result<BuiltinN
     Ok(BuiltinNode { args, run: run(key, &raw, None)? })
 }
 
-/// A node started from a command.
+/// A node started from a command, or by the user elsewhere.
 fn command(key: &str, role: Role, raw: RawNode, base: &Path) -> std::result::Result<ForeignNode, Invalid> {
     let name = name(key, role, &raw)?;
+    if raw.elsewhere {
+        return elsewhere(key, role, name, &raw);
+    }
     let mut words = match &raw.command {
         None if raw.builtin && role == Role::Other => {
             return Invalid::err(
@@ -218,6 +223,31 @@ fn command(key: &str, role: Role, raw: RawNode, base: &Path) -> std::result::Res
         return Invalid::err(format!("{key}.lockstep"), problem, "drop it; it is for nodes in `others`");
     }
     ForeignNode::new(role, name, words, run, base).map_err(|p| Invalid::new(format!("{key}.command"), p, FIX))
+}
+
+/// A node the user starts elsewhere (`elsewhere: true`): nothing of how to start it applies.
+fn elsewhere(key: &str, role: Role, name: Option<String>, raw: &RawNode) -> std::result::Result<ForeignNode, Invalid> {
+    let given = [
+        ("builtin", raw.builtin),
+        ("command", raw.command.is_some()),
+        ("args", !raw.args.is_empty()),
+        ("env", !raw.env.is_empty()),
+        ("cwd", raw.cwd.is_some()),
+        ("log", raw.log.is_some()),
+        ("restart", raw.restart != Restart::default()),
+    ];
+    if let Some((what, _)) = given.iter().find(|(_, given)| *given) {
+        let problem = "a node started elsewhere is not started, restarted or logged by the loop";
+        let fix =
+            "drop it (start the node yourself with the loop's namespace and its role's name), or drop `elsewhere`";
+        return Invalid::err(format!("{key}.{what}"), problem, fix);
+    }
+    let run = run(key, raw, None)?;
+    if run.lockstep && role != Role::Other {
+        let problem = "lockstep always waits for the controller (and for the detector through it)";
+        return Invalid::err(format!("{key}.lockstep"), problem, "drop it; it is for nodes in `others`");
+    }
+    Ok(ForeignNode::started_elsewhere(role, name, run))
 }
 
 /// A node's name: only, and always, for one in no role of ours.
@@ -378,6 +408,20 @@ mod tests {
     }
 
     #[test]
+    fn a_node_started_elsewhere_is_awaited_not_started() {
+        let text = "{ controller: { elsewhere: true, ready: { timeout_s: 120 } },
+                      others: [{ name: 'monitor', elsewhere: true, lockstep: true }] }";
+        let dir = dir_with("elsewhere", &[("loop.json5", text)]);
+        let own = read(&dir.join("loop.json5")).unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+        let acc = own.controller.as_ref().unwrap();
+        assert!(acc.elsewhere && acc.command.is_empty() && acc.files.is_empty());
+        assert_eq!((acc.run.ready.timeout_s, acc.command_line().as_str()), (120.0, "acc (started elsewhere)"));
+        assert!(own.others[0].elsewhere && own.others[0].run.lockstep);
+        assert_eq!(own.elsewhere().map(|n| n.node()), Some("monitor"));
+    }
+
+    #[test]
     fn a_bad_loop_file_names_the_key_and_the_fix() {
         let cases = [
             ("{ controller: { comand: 'sh' } }", "unknown field `comand`"),
@@ -397,6 +441,12 @@ mod tests {
             ("{ others: [{ command: 'sh' }] }", "key `others[0].name`: missing"),
             ("{ others: [{ name: 'm', command: 'sh' }, { name: 'm', command: 'sh' }] }", "names a node twice"),
             ("{ simulator: { command: 'carla' } }", "up --sim external"),
+            (
+                "{ controller: { elsewhere: true, command: 'sh' } }",
+                "key `controller.command`: a node started elsewhere",
+            ),
+            ("{ detector: { elsewhere: true, restart: { policy: 'on-failure' } } }", "key `detector.restart`"),
+            ("{ others: [{ name: 'm', elsewhere: true, env: { A: '1' } }] }", "key `others[0].env`"),
         ];
         for (i, (text, said)) in cases.iter().enumerate() {
             let e = refused(&format!("bad{i}"), text);

@@ -47,8 +47,9 @@ pub struct Claimed {
 }
 
 /// Claims `map`'s namespace for a run that brings the nodes `ours`, or moves (see the module
-/// doc). `sim_elsewhere`: the simulator is not ours and is expected in the namespace.
-pub async fn claim(session: &zenoh::Session, map: TopicMap, ours: &[&str], sim_elsewhere: bool) -> Result<Claimed> {
+/// doc). `expected_here`: a node not ours (the simulator with `--sim external`, a node of a
+/// loop file started elsewhere) waits in the namespace, so the run cannot move.
+pub async fn claim(session: &zenoh::Session, map: TopicMap, ours: &[&str], expected_here: bool) -> Result<Claimed> {
     settle(session).await;
     let alive = nodes_by_namespace(session).await?;
     let taken_by = |ns: &str| -> Result<Attempt> {
@@ -66,7 +67,7 @@ pub async fn claim(session: &zenoh::Session, map: TopicMap, ours: &[&str], sim_e
         Attempt::Held(hold) => return Ok(Claimed { map, moved_to: None, beside: String::new(), hold: Some(hold) }),
         Attempt::TakenBy(why) => why,
     };
-    if !map.namespace().is_empty() || sim_elsewhere {
+    if !map.namespace().is_empty() || expected_here {
         let shown = if map.namespace().is_empty() {
             "the default namespace".to_string()
         } else {

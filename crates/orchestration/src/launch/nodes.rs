@@ -319,7 +319,15 @@ impl LoopRun {
         std::fs::create_dir_all(logs).map_err(Error::file("create the log directory", logs))?;
         let endpoints = Endpoints::new(spec.link)?;
         let isolated = matches!(network, Network::Isolated { .. });
+        if let Some(node) = spec.own.elsewhere().filter(|_| isolated) {
+            return Err(Error::Refused(format!(
+                "the {} is started elsewhere: only `slipstream up` joins a node started elsewhere (eval and conform run each loop in a namespace and on ports of their own, where no node of yours can be waiting); fix: give its command in the loop file, or use `up`",
+                node.process()
+            )));
+        }
         let sim_elsewhere = matches!(network, Network::User { sim_elsewhere: true, .. });
+        // Nodes of the user's started elsewhere wait in the namespace given: it cannot move.
+        let expected_here = sim_elsewhere || spec.own.elsewhere().is_some();
         let (config, topic_map, mut base_flags, user_connect, peer) = match network {
             Network::User { connect, .. } => {
                 let mut config = connect.zenoh_config()?;
@@ -365,9 +373,13 @@ impl LoopRun {
         let claimed = match isolated {
             true => super::namespace::Claimed { map: topic_map, moved_to: None, beside: String::new(), hold: None },
             false => {
-                let ours: Vec<&str> =
-                    spec.nodes(observer).into_iter().filter(|n| !(sim_elsewhere && *n == SIM_NODE)).collect();
-                super::namespace::claim(&session, topic_map, &ours, sim_elsewhere).await?
+                let theirs: Vec<&str> = spec.own.foreign().filter(|n| n.elsewhere).map(|n| n.node()).collect();
+                let ours: Vec<&str> = spec
+                    .nodes(observer)
+                    .into_iter()
+                    .filter(|n| !(theirs.contains(n) || sim_elsewhere && *n == SIM_NODE))
+                    .collect();
+                super::namespace::claim(&session, topic_map, &ours, expected_here).await?
             }
         };
         if let Some(ns) = &claimed.moved_to {
@@ -609,6 +621,16 @@ impl LoopRun {
     /// A node of the user's own, under its process name (`controller.log`, `controller.out`).
     fn spawn_foreign(&mut self, node: &ForeignNode, own: &str) -> Result<()> {
         let name = node.process().to_string();
+        if node.elsewhere {
+            let ns = self.bus.topics().namespace();
+            let ns = if ns.is_empty() { "the default namespace".to_string() } else { format!("namespace `{ns}`") };
+            eprintln!(
+                "waiting up to {} s for the {name} started elsewhere: its token nodes/{} in {ns}",
+                node.run.ready.timeout_s,
+                node.node()
+            );
+            return Ok(());
+        }
         let run = [self.spec.clock.name(), self.spec.perception.name()];
         let cmd = node.command(&self.flags(own), &self.logs, run)?;
         self.launch(&name, cmd, &format!("{name}.out"), own)

@@ -61,6 +61,26 @@ impl OwnNodeArgs {
         }
         Ok(own)
     }
+
+    /// [`OwnNodeArgs::nodes`] for a tool that runs each loop on a network of its own (`eval`):
+    /// a node started elsewhere could not be waiting there, so the file is refused by its key.
+    pub fn nodes_started_here(&self) -> Result<OwnNodes> {
+        let own = self.nodes()?;
+        if let (Some(node), Some(file)) = (own.elsewhere(), &own.loop_file) {
+            let key = match node.role {
+                Role::Other => format!("others ({}).elsewhere", node.process()),
+                role => format!("{}.elsewhere", role.process()),
+            };
+            return Err(slipstream_contract::config::ConfigError::new(
+                file.path.display().to_string(),
+                &key,
+                "a node started elsewhere joins `slipstream up` only: eval runs each loop in a namespace and on ports of its own",
+                "give the node's `command` in the loop file, so that eval starts it in every run",
+            )
+            .into());
+        }
+        Ok(own)
+    }
 }
 
 #[cfg(test)]

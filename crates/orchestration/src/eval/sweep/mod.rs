@@ -156,7 +156,7 @@ pub fn run(
         return Err(Error::flag("--timeout", "must be > 0"));
     }
     let jobs = jobs(args.jobs)?;
-    let own = args.own.nodes()?;
+    let own = args.own.nodes_started_here()?;
     let generated = write_scenarios(args)?;
     let logs = args.out.join("logs");
     let acc_args = EvalAccArgs {
