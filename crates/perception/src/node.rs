@@ -6,7 +6,6 @@
 
 use std::future::Future;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use serde::Serialize;
@@ -15,6 +14,7 @@ use super::rig::CameraRig;
 use super::settings::DetectSettings;
 use slipstream_contract::bus::{Bus, BusError, Following, FrameSample, FrameSubscriber, Publisher, Subscriber};
 use slipstream_contract::msg::{CameraFrameRef, CameraInfo, Detections};
+use slipstream_contract::node::reader_thread::{self, STOP_POLL};
 use slipstream_contract::topics;
 
 /// What a run did.
@@ -67,13 +67,8 @@ impl InfoInput {
     }
 }
 
-/// How often the reader thread looks up from an empty inbox to see whether the node stops.
-const STOP_POLL: Duration = Duration::from_millis(100);
-
-/// Runs until `shutdown` completes. Frames are read and detected on a thread of its own,
-/// woken by Zenoh's receive thread directly: waking an async task instead costs a trip
-/// through the runtime's scheduler on every frame (docs/performance.md, the frame hop table),
-/// and detection is CPU work that must not hold an async worker.
+/// Runs until `shutdown` completes, frames read and detected on a thread of its own
+/// (`slipstream_contract::node::reader_thread`: why).
 pub async fn run(
     bus: &Bus,
     settings: DetectSettings,
@@ -88,20 +83,7 @@ pub async fn run(
     };
     // Seen once it listens: the simulator in lockstep sends the first frame when it sees us.
     bus.announce().await?;
-    let stop = Arc::new(AtomicBool::new(false));
-    let flag = stop.clone();
-    let mut reader = tokio::task::spawn_blocking(move || inputs.run(settings, &flag));
-    let joined = |done: Result<Result<DetectStats, BusError>, tokio::task::JoinError>| match done {
-        Ok(done) => done,
-        Err(e) => std::panic::resume_unwind(e.into_panic()),
-    };
-    tokio::select! {
-        _ = shutdown => {}
-        // It ends on its own only on an error (a publish that failed).
-        done = &mut reader => return joined(done),
-    }
-    stop.store(true, Ordering::Relaxed);
-    joined(reader.await)
+    reader_thread::until_stopped(move |stop| inputs.run(settings, stop), shutdown).await
 }
 
 /// The detector's subscriptions and its publisher.

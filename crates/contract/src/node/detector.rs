@@ -11,17 +11,15 @@
 
 use std::future::Future;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::Arc;
 use std::time::Duration;
 
 use serde::Serialize;
 
+use super::reader_thread::STOP_POLL;
 use crate::bus::{Bus, BusError, FrameSample, FrameSubscriber, Publisher, Subscriber};
 use crate::msg::{CameraInfo, Detection, Detections};
 use crate::topics;
 
-/// How often the reader looks up from an empty inbox to see whether the node stops.
-const STOP_POLL: Duration = Duration::from_millis(100);
 /// How long a frame waits for the first camera/front/info (latched: it comes soon after start).
 const INFO_WAIT: Duration = Duration::from_millis(500);
 
@@ -63,20 +61,7 @@ pub async fn run(
     };
     // Listening now: the simulator in lockstep sends the first frame when it sees the token.
     bus.announce().await?;
-    let stop = Arc::new(AtomicBool::new(false));
-    let flag = stop.clone();
-    let mut thread = tokio::task::spawn_blocking(move || reader.run(detect, &flag));
-    let joined = |done: Result<Result<DetectorStats, BusError>, tokio::task::JoinError>| match done {
-        Ok(done) => done,
-        Err(e) => std::panic::resume_unwind(e.into_panic()),
-    };
-    tokio::select! {
-        _ = shutdown => {}
-        // It ends on its own only on an error (a publish that failed).
-        done = &mut thread => return joined(done),
-    }
-    stop.store(true, Ordering::Relaxed);
-    joined(thread.await)
+    super::reader_thread::until_stopped(move |stop| reader.run(detect, stop), shutdown).await
 }
 
 /// The detector's subscriptions, its publisher and what it knows.

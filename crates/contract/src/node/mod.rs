@@ -14,6 +14,7 @@ pub mod controller;
 mod controller_inputs;
 pub mod detector;
 mod law;
+pub mod reader_thread;
 mod shell;
 
 pub use args::{ClockArg, NodeArgs, PerceptionArg};
