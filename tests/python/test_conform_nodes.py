@@ -52,3 +52,25 @@ def test_ours_and_the_examples_keep_the_node_contract(slipstream_bin, role, comm
 def test_a_broken_controller_fails_naming_the_rule(slipstream_bin, mode, rule):
     report = conform(slipstream_bin, "controller", f"{PY} tests/python/bad_controllers.py {mode}")
     assert not report["pass"] and rule in failed(report), report["verdicts"]
+
+
+@pytest.mark.parametrize("mode,rule", [("example", None), ("wall-stamp", "stamp_copied")])
+def test_a_controller_already_running_is_checked_where_it_runs(slipstream_bin, free_port, mode, rule):
+    """No --command: the node started by hand (as on another PC) is awaited by its token in the
+    namespace given and judged on the same rules; it keeps running after the check."""
+    endpoint, ns = f"tcp/127.0.0.1:{free_port}", f"byhand-{mode}"
+    node = [PY, "tests/python/bad_controllers.py", mode] if rule else [PY, "clients/python/examples/own_acc.py"]
+    running = subprocess.Popen([*node, "-n", ns, "-l", endpoint, "--perception", "ground-truth", "--clock", "lockstep"],
+                               cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, env=ENV)
+    try:
+        done = subprocess.run([slipstream_bin, "-n", ns, "-e", endpoint, "conform", "controller", "--json"], cwd=ROOT,
+                              capture_output=True, text=True, timeout=120, env=ENV)
+        assert running.poll() is None, "the check stopped the user's node"
+    finally:
+        running.terminate()
+        running.communicate(timeout=30)
+    assert done.stdout, done.stderr[-3000:]
+    report = json.loads(done.stdout)
+    assert report["namespace"] == ns and done.returncode == (1 if rule else 0), report
+    assert (rule in failed(report)) if rule else failed(report) == [], report["verdicts"]
+    assert f"its token nodes/acc in namespace `{ns}`" in done.stderr

@@ -305,6 +305,11 @@ def test_a_controller_of_your_own_beside_a_simulator(host):
     # On the contract's controller SDK it answers lockstep: checked, then judged like ours.
     checked = one_shot(host, "slipstream conform controller --command target/release/own-controller", work_s=15)
     assert "the controller keeps the contract" in checked.stdout(), checked.stdout()
+    # Or checked where it already runs (conform controller --help): awaited by its token, left running.
+    mine = host.start("own-controller -n mine --name acc -l tcp/127.0.0.1:7450")
+    checked = one_shot(host, "slipstream -n mine -e tcp/127.0.0.1:7450 conform controller", work_s=15)
+    assert "the controller keeps the contract" in checked.stdout() and "namespace 'mine'" in checked.stdout()
+    assert re.fullmatch(r"acc: \d+ commands sent\n", stopped(host, mine).stdout())
     judged = one_shot(host, "slipstream eval acc --scenario steady-follow --controller target/release/own-controller",
                       work_s=30)
     row = next(line for line in judged.stdout().splitlines() if line.startswith("| steady-follow |"))

@@ -42,10 +42,13 @@ pub enum ConformCommand {
     /// Starts the command as the controller of a short lockstep loop beside slipstream-sim
     /// (ground truth; loopback ports and a namespace of its own) and judges every answer: its
     /// token before the first step, one answer per state naming its step, the state's stamp
-    /// copied, the node's name attached, pedals within 0..1, acc/status published. Prints one
-    /// line per rule and exits with 1 on any FAIL. Example:
+    /// copied, the node's name attached, pedals within 0..1, acc/status published. Without
+    /// --command it checks the controller already running (its token nodes/acc) in the
+    /// namespace (-n) on the connection (-e/-l), the simulator started here. Prints one
+    /// line per rule and exits with 1 on any FAIL. Examples:
     ///
     ///   slipstream conform controller --command 'python3 clients/python/examples/own_acc.py'
+    ///   own-controller -n mine --name acc -l tcp/127.0.0.1:7450 &   slipstream -n mine -e tcp/127.0.0.1:7450 conform controller
     #[command(verbatim_doc_comment)]
     Controller(node::ConformNodeArgs),
     /// Check a detector of your own against the detector contract (docs/node-contract.md)
@@ -53,7 +56,8 @@ pub enum ConformCommand {
     /// Starts the command as the detector of a short lockstep loop beside slipstream-sim and
     /// slipstream-acc (camera perception) and judges every answer: its token before the first
     /// step, one perception/objects per frame, the frame's stamp copied, frame_seq rising,
-    /// the node's name attached. Example:
+    /// the node's name attached. Without --command it checks the detector already running
+    /// (its token nodes/detect) in the namespace (-n) on the connection (-e/-l). Example:
     ///
     ///   slipstream conform detector --command 'python3 clients/python/examples/own_detect.py'
     #[command(verbatim_doc_comment)]
@@ -151,8 +155,8 @@ pub fn render(report: &ConformReport) -> String {
 pub fn command(command: &ConformCommand, connect: &crate::ConnectArgs) -> anyhow::Result<std::process::ExitCode> {
     let args = match command {
         ConformCommand::Sim(args) => args,
-        ConformCommand::Controller(a) => return node_command(node::Role::Controller, a),
-        ConformCommand::Detector(a) => return node_command(node::Role::Detector, a),
+        ConformCommand::Controller(a) => return node_command(node::Role::Controller, a, connect),
+        ConformCommand::Detector(a) => return node_command(node::Role::Detector, a, connect),
     };
     let node = if args.lockstep { args.name.clone() } else { crate::cli::own_name("conform") };
     // The verdict is printed while still on the bus: leaving it can neither delay nor lose it.
@@ -165,8 +169,12 @@ pub fn command(command: &ConformCommand, connect: &crate::ConnectArgs) -> anyhow
 }
 
 /// `conform controller` / `conform detector`: the verdicts (or JSON), exit 1 when a rule failed.
-fn node_command(role: node::Role, args: &node::ConformNodeArgs) -> anyhow::Result<std::process::ExitCode> {
-    let report = tokio::runtime::Runtime::new()?.block_on(node::run_node(role, args))?;
+fn node_command(
+    role: node::Role,
+    args: &node::ConformNodeArgs,
+    connect: &crate::ConnectArgs,
+) -> anyhow::Result<std::process::ExitCode> {
+    let report = tokio::runtime::Runtime::new()?.block_on(node::run_node(role, args, connect))?;
     crate::cli::print_report(args.json, &report, render)?;
     Ok(crate::cli::exit_when(report.pass))
 }

@@ -1,10 +1,13 @@
 //! `slipstream conform controller` and `conform detector`: a node of the user's own checked
-//! against its contract (docs/node-contract.md) beside the reference simulator. The command
-//! runs in its role of a short lockstep loop on loopback ports and a namespace of its own
-//! (slipstream-sim, and slipstream-acc beside a detector), with a 10 s readiness timeout and
-//! the simulator stopping at the first unanswered step, so a broken node costs seconds; every
-//! answer it publishes is kept with its header and attachment and judged rule by rule against
-//! the states and frames it answers.
+//! against its contract (docs/node-contract.md) beside the reference simulator. With a
+//! command, the node runs in its role of a short lockstep loop on loopback ports and a
+//! namespace of its own; without one, the node already running is awaited on the user's
+//! connection and namespace, as a loop awaits a node started elsewhere, so a node on another
+//! PC, in a container or under a debugger is checked where it runs. Either way
+//! slipstream-sim (and slipstream-acc beside a detector) runs with a 10 s readiness timeout
+//! and stops at the first unanswered step, so a broken node costs seconds; every answer it
+//! publishes is kept with its header and attachment and judged rule by rule against the
+//! states and frames it answers.
 
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
@@ -14,8 +17,10 @@ use std::sync::Arc;
 
 use super::rules::{Outcome, Verdict};
 use super::ConformReport;
+use crate::acc::PerceptionSource;
 use crate::bus::{CallbackSubscriber, Received};
-use crate::launch::{ClockMode, LoopRun, LoopSpec, Network, OwnNodeArgs, NODE_POLL};
+use crate::launch::foreign::{NodeRun, Role as LoopRole};
+use crate::launch::{ClockMode, ForeignNode, LoopRun, LoopSpec, Network, OwnNodeArgs, OwnNodes, NODE_POLL};
 use crate::msg::{ControlCommand, Detections, GroundTruthObjects, VehicleState};
 use crate::topics;
 
@@ -26,9 +31,15 @@ const READY_S: f64 = 10.0;
 #[derive(clap::Args, Debug, Clone)]
 pub struct ConformNodeArgs {
     /// The node's command line, split as a shell would (no shell runs it), started as the
-    /// loop starts a node of your own (docs/own-node.md)
+    /// loop starts a node of your own (docs/own-node.md) [default: the node already running
+    /// in the namespace (-n) on the connection (-e/-l), awaited up to 10 s]
     #[arg(long = "command", value_name = "CMD")]
-    pub command: String,
+    pub command: Option<String>,
+    /// Where the controller's objects come from: ground truth (the simulator's `objects`) or
+    /// the camera (slipstream-detect's `perception/objects`); a running controller must read
+    /// the same (SLIPSTREAM_PERCEPTION) [default: ground-truth; camera for a detector]
+    #[arg(long, value_enum)]
+    pub perception: Option<PerceptionSource>,
     /// The scenario it runs in (a built-in name or a .json5 file)
     #[arg(long, default_value = "cut-in")]
     pub scenario: String,
@@ -57,36 +68,34 @@ struct Seen {
     statuses: usize,
 }
 
-/// Runs the node in its role and judges what it did.
-pub async fn run_node(role: Role, args: &ConformNodeArgs) -> anyhow::Result<ConformReport> {
-    let flags = match role {
-        Role::Controller => OwnNodeArgs { controller: Some(args.command.clone()), ..Default::default() },
-        Role::Detector => OwnNodeArgs { detector: Some(args.command.clone()), ..Default::default() },
-    };
-    let mut own = flags.nodes()?;
-    for n in own.controller.iter_mut().chain(own.detector.iter_mut()) {
-        n.run.ready.timeout_s = READY_S;
-    }
+/// Runs the node in its role (started from its command, or the one already running on
+/// `connect`) and judges what it did.
+pub async fn run_node(
+    role: Role,
+    args: &ConformNodeArgs,
+    connect: &crate::ConnectArgs,
+) -> anyhow::Result<ConformReport> {
     let scenario = crate::sim::Scenario::find(&args.scenario)?;
     let spec = LoopSpec {
         scenario: args.scenario.clone(),
         duration_s: args.duration,
         clock: ClockMode::Lockstep,
-        perception: match role {
-            Role::Controller => crate::acc::PerceptionSource::GroundTruth,
-            Role::Detector => crate::acc::PerceptionSource::Camera,
-        },
+        perception: perception(role, args)?,
         set_speed_mps: scenario.ego.controller_set_speed_mps(),
         time_gap_s: scenario.ego.time_gap_s,
         vehicle: Some(LoopSpec::vehicle_of(&scenario)),
         faults: None,
         link: Default::default(),
-        own,
+        own: nodes(role, args)?,
     };
-    let namespace = format!("conform-{}", std::process::id());
-    let logs = std::env::temp_dir().join(format!("slipstream-conform-{}", std::process::id()));
-    let mut lp =
-        LoopRun::open(spec, Network::Isolated { topics: None, namespace: namespace.clone() }, &logs, "conform").await?;
+    let pid = std::process::id();
+    let logs = std::env::temp_dir().join(format!("slipstream-conform-{pid}"));
+    let network = match args.command {
+        Some(_) => Network::Isolated { topics: None, namespace: format!("conform-{pid}") },
+        None => Network::User { connect, sim_elsewhere: false },
+    };
+    let mut lp = LoopRun::open(spec, network, &logs, "conform").await?;
+    let namespace = lp.bus().topics().namespace().to_string();
     let (seen, _subs) = watch(&lp).await?;
     let tokens = lp.bus().watch_nodes().await?;
     let started = lp.start().await;
@@ -111,6 +120,42 @@ pub async fn run_node(role: Role, args: &ConformNodeArgs) -> anyhow::Result<Conf
         Role::Detector => "detector",
     };
     Ok(ConformReport { subject, namespace, lockstep: true, window_s: args.duration, pass, verdicts })
+}
+
+/// The node under test in its role: started from its command, or awaited where it runs.
+fn nodes(role: Role, args: &ConformNodeArgs) -> anyhow::Result<OwnNodes> {
+    let Some(command) = &args.command else {
+        let mut run = NodeRun::default();
+        run.ready.timeout_s = READY_S;
+        let node = match role {
+            Role::Controller => ForeignNode::started_elsewhere(LoopRole::Controller, None, run),
+            Role::Detector => ForeignNode::started_elsewhere(LoopRole::Detector, None, run),
+        };
+        return Ok(match role {
+            Role::Controller => OwnNodes { controller: Some(node), ..Default::default() },
+            Role::Detector => OwnNodes { detector: Some(node), ..Default::default() },
+        });
+    };
+    let flags = match role {
+        Role::Controller => OwnNodeArgs { controller: Some(command.clone()), ..Default::default() },
+        Role::Detector => OwnNodeArgs { detector: Some(command.clone()), ..Default::default() },
+    };
+    let mut own = flags.nodes()?;
+    for n in own.controller.iter_mut().chain(own.detector.iter_mut()) {
+        n.run.ready.timeout_s = READY_S;
+    }
+    Ok(own)
+}
+
+/// The run's perception: a detector is judged on camera frames; a controller on what it reads.
+fn perception(role: Role, args: &ConformNodeArgs) -> anyhow::Result<PerceptionSource> {
+    match (role, args.perception) {
+        (Role::Controller, p) => Ok(p.unwrap_or(PerceptionSource::GroundTruth)),
+        (Role::Detector, None | Some(PerceptionSource::Camera)) => Ok(PerceptionSource::Camera),
+        (Role::Detector, Some(_)) => anyhow::bail!(
+            "a detector answers camera frames: `--perception ground-truth` gives it none (fix: drop --perception)"
+        ),
+    }
 }
 
 /// Subscribes the observer to everything the rules read.

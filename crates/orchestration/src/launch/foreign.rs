@@ -335,7 +335,7 @@ impl ForeignNode {
     }
 
     /// A node the user starts elsewhere, in `role` (`name`: in no role of ours).
-    pub(crate) fn started_elsewhere(role: Role, name: Option<String>, run: NodeRun) -> ForeignNode {
+    pub fn started_elsewhere(role: Role, name: Option<String>, run: NodeRun) -> ForeignNode {
         ForeignNode { role, name, command: Vec::new(), files: Vec::new(), run, elsewhere: true }
     }
 

@@ -321,7 +321,7 @@ impl LoopRun {
         let isolated = matches!(network, Network::Isolated { .. });
         if let Some(node) = spec.own.elsewhere().filter(|_| isolated) {
             return Err(Error::Refused(format!(
-                "the {} is started elsewhere: only `slipstream up` joins a node started elsewhere (eval and conform run each loop in a namespace and on ports of their own, where no node of yours can be waiting); fix: give its command in the loop file, or use `up`",
+                "the {} is started elsewhere: only `slipstream up` and `conform` without --command join a node started elsewhere (eval and `conform --command` run each loop in a namespace and on ports of their own, where no node of yours can be waiting); fix: give its command in the loop file, or use `up`",
                 node.process()
             )));
         }
