@@ -273,6 +273,7 @@ pub fn run_from(path: &Path, args: &UpArgs, connect: &ConnectArgs) -> Result<u8>
 
 /// Runs the loop to the end of the scenario (or Ctrl-C), prints the summary, writes the report.
 pub fn run(args: &UpArgs, connect: &ConnectArgs) -> Result<Outcome> {
+    let args = &UpArgs { sim: sim_source(args)?, ..args.clone() };
     let mut scenario = match args.sim {
         SimSource::Builtin => Scenario::find(&args.scenario)?,
         SimSource::External => external_scenario(args)?,
@@ -308,6 +309,20 @@ fn remove_if_empty(dir: &Path) {
     }
     if empty(dir) {
         let _ = std::fs::remove_dir_all(dir);
+    }
+}
+
+/// A loop file's simulator of the user's own (`simulator.command`, or `elsewhere`) makes the
+/// run's simulator external: the loop knows it by its messages and its end, as with `--sim
+/// external`, and starts it when it has a command.
+fn sim_source(args: &UpArgs) -> Result<SimSource> {
+    let own_sim = args.own.loop_file.is_some() && args.own.nodes()?.simulator.is_some();
+    match (own_sim, args.sim) {
+        (false, source) => Ok(source),
+        (true, SimSource::Builtin) => Ok(SimSource::External),
+        (true, SimSource::External) => anyhow::bail!(
+            "--sim external: the loop file names the simulator already (fix: drop --sim external, or `simulator` from the file)"
+        ),
     }
 }
 
@@ -549,13 +564,31 @@ async fn start_nodes(lp: &mut LoopRun, args: &UpArgs) -> Result<Option<crate::la
     }
     let ext = crate::launch::ExternalSim::watch(lp.bus()).await?;
     lp.start_controllers().await?;
+    lp.start_own_sim()?;
     let key = lp.bus().topics().key(topics::VEHICLE_SPEED.topic);
     eprintln!("waiting for the simulator on {key} (at most {:.0} s)", args.sim_wait);
-    tokio::select! {
-        started = ext.wait_started(Duration::from_secs_f64(args.sim_wait)) => started?,
-        signal = crate::cli::stop_requested() => anyhow::bail!("{signal} while waiting for the simulator"),
+    let deadline = Instant::now() + Duration::from_secs_f64(args.sim_wait);
+    let mut signal = std::pin::pin!(crate::cli::stop_requested());
+    loop {
+        tokio::select! {
+            started = ext.wait_started(NODE_POLL) => match started {
+                Ok(()) => return Ok(Some(ext)),
+                Err(e) if Instant::now() >= deadline => return Err(e.into()),
+                Err(_) => {}
+            },
+            signal = &mut signal => anyhow::bail!("{signal} while waiting for the simulator"),
+        }
+        // A simulator the loop started (a loop file's command) that ended is not waited for.
+        let progress = lp.check();
+        if let (Some(status), true) = (progress.sim_ended, progress.died.is_empty()) {
+            anyhow::bail!("the simulator ended ({status}) before its first message on {key}");
+        }
+        if let Some(node) = progress.died.first() {
+            let why = crate::launch::last_words(&lp.log(node)).map_or(String::new(), |e| format!(": {e}"));
+            let whose = if node == "simulator" { "its" } else { "the simulator's" };
+            anyhow::bail!("{node} ended before {whose} first message{why}\n(its log: {})", lp.log(node).display());
+        }
     }
-    Ok(Some(ext))
 }
 
 async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir: &Path) -> Result<UpReport> {
@@ -563,7 +596,9 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
     let t0_ns = crate::msg::wall_clock_ns();
     let spec = loop_spec(args, &scenario)?;
     let faults = spec.faults.as_ref().map(|p| p.summary());
-    let network = Network::User { connect, sim_elsewhere: args.sim == SimSource::External };
+    // A simulator the loop starts from a loop file's command is in the run like ours.
+    let started_here = spec.own.simulator.as_ref().is_some_and(|s| !s.elsewhere);
+    let network = Network::User { connect, sim_elsewhere: args.sim == SimSource::External && !started_here };
     let mut lp = LoopRun::open(spec, network, &dir.join("logs"), "up").await.context("up")?;
     let watch = Watch::start(lp.bus(), args.perception == PerceptionSource::Camera).await?;
     let extras = Extras::start(lp.bus(), args, &scenario, dir).await?;

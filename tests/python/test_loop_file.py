@@ -118,3 +118,34 @@ def test_a_bad_loop_file_is_refused_naming_file_key_and_fix(slipstream_bin, tmp_
     assert done.returncode == 1 and not (tmp_path / "up").exists(), (done.returncode, done.stderr)
     said = done.stderr
     assert f"{path}: key `others[0].name`" in said and "(fix: " in said and "under `controller`" in said, said
+
+
+def test_a_simulator_of_your_own_is_started_from_the_loop_file_and_the_loop_closes_around_it(slipstream_bin,
+                                                                                               free_port, tmp_path):
+    sim = f"{PYTHON} {ROOT}/clients/python/examples/reference_sim.py --duration 6"
+    path = loop_file(tmp_path, f'{{ simulator: {{ command: "{sim}" }} }}')
+    done = slipstream(slipstream_bin, "-l", f"tcp/127.0.0.1:{free_port}", "up", "--loop", str(path), "--mode",
+                      "lockstep", "--perception", "ground-truth", "--plain", "--report", str(tmp_path / "run"),
+                      timeout=120)
+    assert done.returncode == 0, done.stderr[-3000:]
+    report = json.loads((tmp_path / "run" / "report.json").read_text())
+    assert report["sim"] == "external" and report["own"]["simulator"]["role"] == "simulator", report["own"]
+    ends = {n["node"]: n for n in report["nodes"]}
+    # It ran the loop's clock (SLIPSTREAM_CLOCK) to its own end and closed by itself.
+    assert ends["simulator"]["exit_code"] == 0 and not ends["simulator"]["died"], ends
+    said = (tmp_path / "run" / "logs" / "simulator.out").read_text()
+    assert "# reference simulator: lockstep, 6 s" in said and "# 600 steps" in said, said
+    assert report["ended"].startswith("duration") and report["metrics"]["collisions"] == 0, report["ended"]
+    # eval judges on slipstream's scenarios: the file is refused by its key.
+    refused = slipstream(slipstream_bin, "eval", "acc", "--scenario", "cut-in", "--loop", str(path), timeout=60)
+    assert refused.returncode != 0 and "key `simulator.command`" in refused.stderr, refused.stderr[-2000:]
+
+
+def test_a_simulator_of_your_own_that_fails_at_start_is_named_at_once(slipstream_bin, free_port, tmp_path):
+    sim = f"{PYTHON} {ROOT}/clients/python/examples/reference_sim.py --physics-hz 7"
+    path = loop_file(tmp_path, f'{{ simulator: {{ command: "{sim}" }} }}')
+    done = slipstream(slipstream_bin, "-l", f"tcp/127.0.0.1:{free_port}", "up", "--loop", str(path), "--plain",
+                      "--report", str(tmp_path / "run"), timeout=60)
+    assert done.returncode == 1, done.stderr[-3000:]
+    assert "simulator ended before its first message: --camera-hz must divide --physics-hz" in done.stderr, \
+        done.stderr[-2000:]

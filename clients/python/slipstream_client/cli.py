@@ -16,11 +16,16 @@ from .keys import ConfigError, Topics
 
 def add_clock_args(parser: argparse.ArgumentParser, mode: str, duration_s: float) -> None:
     """The flags every simulator on the client takes for its clock and lockstep: --mode,
-    --duration, --camera-hz, --wait-for, --step-timeout (defaults: `mode`, `duration_s`)."""
+    --duration, --camera-hz, --wait-for, --step-timeout (defaults: `mode`, `duration_s`). The
+    clock defaults to SLIPSTREAM_CLOCK when set: what a loop hands the simulator it starts."""
+    import os
+
     from .simulator import MODES
 
     p = parser
-    p.add_argument("--mode", choices=MODES, default=mode, help=f"[default: {mode}]")
+    given = os.environ.get("SLIPSTREAM_CLOCK")
+    p.add_argument("--mode", choices=MODES, default=given if given in MODES else mode,
+                   help=f"[env: SLIPSTREAM_CLOCK; default: {mode}]")
     p.add_argument("--duration", type=float, default=duration_s, help=f"simulated seconds [default: {duration_s:g}]")
     p.add_argument("--camera-hz", type=float, default=20.0, help="frames per simulated second [default: 20]")
     p.add_argument("--wait-for", action="append", metavar="NODE",

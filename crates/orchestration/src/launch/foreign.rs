@@ -30,6 +30,9 @@ pub const NODE_ENV: &str = "SLIPSTREAM_NODE";
 /// ours (arguments, restart) and the file itself by content.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct OwnNodes {
+    /// A simulator of the user's own (`up` only): started from its command, or elsewhere.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub simulator: Option<ForeignNode>,
     pub controller: Option<ForeignNode>,
     pub detector: Option<ForeignNode>,
     /// Nodes in no role of ours (a logger, a monitor, a second controller), started first.
@@ -49,7 +52,8 @@ impl OwnNodes {
         match role {
             Role::Controller => self.controller.is_some() || self.builtin.controller.is_some(),
             Role::Detector => self.detector.is_some() || self.builtin.detector.is_some(),
-            _ => false,
+            Role::Simulator => self.simulator.is_some() || self.builtin.simulator.is_some(),
+            Role::Other => false,
         }
     }
 
@@ -74,7 +78,7 @@ impl OwnNodes {
 
     /// Every node of the user's own.
     pub fn foreign(&self) -> impl Iterator<Item = &ForeignNode> {
-        self.others.iter().chain(&self.controller).chain(&self.detector)
+        self.others.iter().chain(&self.controller).chain(&self.detector).chain(&self.simulator)
     }
 
     /// The first fault of `profile` that would have to be injected into a node of the user's
@@ -219,6 +223,7 @@ pub enum RestartPolicy {
 pub enum Role {
     Controller,
     Detector,
+    Simulator,
     Other,
 }
 
@@ -228,6 +233,7 @@ impl Role {
         match self {
             Role::Controller => "controller",
             Role::Detector => "detector",
+            Role::Simulator => "simulator",
             Role::Other => "other",
         }
     }
@@ -252,6 +258,7 @@ impl Role {
                 topic,
                 Topic::CameraFront | Topic::CameraFrontInfo | Topic::CameraNarrow | Topic::CameraNarrowInfo
             ),
+            Role::Simulator => matches!(topic, Topic::VehicleControl),
             Role::Other => true,
         }
     }
@@ -261,6 +268,7 @@ impl Role {
         match self {
             Role::Controller => "acc",
             Role::Detector => "detect",
+            Role::Simulator => "sim",
             Role::Other => "other",
         }
     }

@@ -115,18 +115,15 @@ pub fn read(path: &Path) -> Result<OwnNodes> {
 fn nodes(raw: RawLoop, base: &Path) -> std::result::Result<OwnNodes, Invalid> {
     let mut own = OwnNodes::default();
     if let Some(sim) = raw.simulator {
-        if sim.command.is_some() {
-            return Invalid::err(
-                "simulator.command",
-                "a simulator of your own is not started by the loop",
-                "start it yourself, keeping docs/simulator-contract.md, and run `slipstream up --sim external`",
-            );
-        }
         if sim.restart != Restart::default() || sim.ready != Ready::default() {
-            let fix = "drop them: the simulator's end is the run's end, and it starts once the others are ready";
+            let fix = "drop them: the simulator's end is the run's end, and it starts once the others are ready \
+                       (`up --sim-wait` bounds the wait for its first message)";
             return Invalid::err("simulator", "`restart` and `ready` are not the simulator's", fix);
         }
-        own.builtin.simulator = Some(builtin("simulator", sim, base)?);
+        match sim.builtin {
+            true => own.builtin.simulator = Some(builtin("simulator", sim, base)?),
+            false => own.simulator = Some(command("simulator", Role::Simulator, sim, base)?),
+        }
     }
     for (role, raw) in [(Role::Detector, raw.detector), (Role::Controller, raw.controller)] {
         let Some(raw) = raw else { continue };
@@ -254,7 +251,7 @@ fn elsewhere(key: &str, role: Role, name: Option<String>, raw: &RawNode) -> std:
 fn name(key: &str, role: Role, raw: &RawNode) -> std::result::Result<Option<String>, Invalid> {
     match (&raw.name, role) {
         (None, Role::Other) => Invalid::err(format!("{key}.name"), "missing", "name it (on the bus and in the logs)"),
-        (Some(_), Role::Controller | Role::Detector) => {
+        (Some(_), Role::Controller | Role::Detector | Role::Simulator) => {
             Invalid::err(format!("{key}.name"), "a role's node has the role's name on the bus", "drop `name`")
         }
         (Some(n), _) if RESERVED_NAMES.contains(&n.as_str()) => Invalid::err(
@@ -408,6 +405,20 @@ mod tests {
     }
 
     #[test]
+    fn a_simulator_of_your_own_is_a_command_or_started_elsewhere() {
+        let dir = dir_with("own-sim", &[("loop.json5", "{ simulator: { command: 'sh my_sim.sh --mode lockstep' } }")]);
+        std::fs::write(dir.join("my_sim.sh"), "exit 0\n").unwrap();
+        let own = read(&dir.join("loop.json5")).unwrap();
+        let sim = own.simulator.as_ref().unwrap();
+        assert_eq!((sim.role, sim.node(), sim.process()), (Role::Simulator, "sim", "simulator"));
+        assert!(sim.command[1].ends_with("my_sim.sh") && sim.files.len() == 2, "{sim:?}");
+        assert!(own.has(Role::Simulator) && own.builtin.simulator.is_none());
+        let dir = dir_with("far-sim", &[("loop.json5", "{ simulator: { elsewhere: true } }")]);
+        let own = read(&dir.join("loop.json5")).unwrap();
+        assert_eq!(own.elsewhere().map(|n| n.process()), Some("simulator"));
+    }
+
+    #[test]
     fn a_node_started_elsewhere_is_awaited_not_started() {
         let text = "{ controller: { elsewhere: true, ready: { timeout_s: 120 } },
                       others: [{ name: 'monitor', elsewhere: true, lockstep: true }] }";
@@ -440,7 +451,9 @@ mod tests {
             ("{ others: [{ name: 'acc', command: 'sh' }] }", "under `controller`"),
             ("{ others: [{ command: 'sh' }] }", "key `others[0].name`: missing"),
             ("{ others: [{ name: 'm', command: 'sh' }, { name: 'm', command: 'sh' }] }", "names a node twice"),
-            ("{ simulator: { command: 'carla' } }", "up --sim external"),
+            ("{ simulator: { command: 'sh', restart: { policy: 'on-failure' } } }", "not the simulator's"),
+            ("{ simulator: { command: 'sh', name: 'carla' } }", "key `simulator.name`"),
+            ("{ simulator: { command: 'sh', lockstep: true } }", "key `simulator.lockstep`"),
             (
                 "{ controller: { elsewhere: true, command: 'sh' } }",
                 "key `controller.command`: a node started elsewhere",

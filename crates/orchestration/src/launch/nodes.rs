@@ -23,7 +23,7 @@ use crate::error::{Error, Result};
 use serde::Serialize;
 
 use super::child::{free_ports, sibling_binary};
-use super::foreign::{ForeignNode, OwnNodes, RestartPolicy};
+use super::foreign::{ForeignNode, OwnNodes, RestartPolicy, Role};
 use super::supervise::{State, Supervised};
 use super::{NODE_POLL, SETTLE, STOP_GRACE};
 use slipstream_acc::node::AccStats;
@@ -208,6 +208,14 @@ const SIM: &str = "slipstream-sim";
 const ACC_NODE: &str = "acc";
 const DETECT_NODE: &str = "detect";
 const SIM_NODE: &str = "sim";
+/// How long a simulator of the user's own may take to close by itself once its run is over.
+const OWN_SIM_CLOSE: std::time::Duration = std::time::Duration::from_secs(2);
+
+/// Whether a node process is the loop's simulator: ours, or the user's (its role's name).
+fn is_sim(process: &str) -> bool {
+    process == SIM || process == Role::Simulator.process()
+}
+
 /// The file slipstream-sim --json writes its report to, in the logs directory.
 const SIM_REPORT: &str = "slipstream-sim.json";
 /// The file slipstream-acc --json writes its statistics to, in the logs directory.
@@ -503,6 +511,9 @@ impl LoopRun {
 
     /// Starts the simulator, after [`LoopRun::start_controllers`].
     fn start_sim(&mut self) -> Result<()> {
+        if self.spec.own.simulator.is_some() {
+            return self.start_own_sim();
+        }
         let spec = self.spec.clone();
         let sim = self.endpoints.sim.clone();
         let mut sim_args = vec![
@@ -528,6 +539,19 @@ impl LoopRun {
             }
         }
         self.spawn(SIM, sim_args, &sim)
+    }
+
+    /// Starts the simulator of the user's own a loop file names (its `simulator.command`);
+    /// none, or one started elsewhere: nothing. The loop knows it by its messages
+    /// ([`super::ExternalSim`]), as with `up --sim external`.
+    pub fn start_own_sim(&mut self) -> Result<()> {
+        match self.spec.own.simulator.clone() {
+            Some(node) if !node.elsewhere => {
+                let sim = self.endpoints.sim.clone();
+                self.spawn_foreign(&node, &sim)
+            }
+            _ => Ok(()),
+        }
     }
 
     /// Watches for a node about to start to become ready, as its loop file entry says.
@@ -656,7 +680,7 @@ impl LoopRun {
         let mut progress = Progress::default();
         for n in &mut self.nodes {
             let State::Ended(status) = n.poll() else { continue };
-            if n.name() == SIM {
+            if is_sim(n.name()) {
                 progress.sim_ended = Some(status);
                 if status.success() {
                     continue;
@@ -678,7 +702,13 @@ impl LoopRun {
     /// Stops the simulator first (it publishes the scenario's end), then the others, and waits
     /// [`SETTLE`] for the last messages. Returns how each node ended.
     pub async fn stop(&mut self) -> Vec<NodeEnd> {
-        if let Some(sim) = self.nodes.iter_mut().find(|n| n.name() == SIM) {
+        if let Some(sim) = self.nodes.iter_mut().find(|n| is_sim(n.name())) {
+            // A simulator of the user's own ends its run by itself after publishing its end
+            // (the loop stops on that message, the process is still closing): a signal then
+            // would cut its close short. Ours has written its report before its end.
+            if sim.name() != SIM {
+                sim.wait_for(OWN_SIM_CLOSE);
+            }
             sim.stop(STOP_GRACE);
         }
         // What the controllers say after the simulator's end is not judged: they stop while

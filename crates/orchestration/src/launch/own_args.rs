@@ -66,6 +66,16 @@ impl OwnNodeArgs {
     /// a node started elsewhere could not be waiting there, so the file is refused by its key.
     pub fn nodes_started_here(&self) -> Result<OwnNodes> {
         let own = self.nodes()?;
+        if let (Some(sim), Some(file)) = (&own.simulator, &own.loop_file) {
+            let key = if sim.elsewhere { "simulator.elsewhere" } else { "simulator.command" };
+            return Err(slipstream_contract::config::ConfigError::new(
+                file.path.display().to_string(),
+                key,
+                "a simulator of your own runs in `slipstream up` only: eval judges on slipstream's scenarios, which run in slipstream-sim",
+                "drop `simulator` from the file for eval (or give it `builtin: true`)",
+            )
+            .into());
+        }
         if let (Some(node), Some(file)) = (own.elsewhere(), &own.loop_file) {
             let key = match node.role {
                 Role::Other => format!("others ({}).elsewhere", node.process()),

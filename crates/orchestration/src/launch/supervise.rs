@@ -100,6 +100,11 @@ impl Supervised {
         }
     }
 
+    /// Waits up to `timeout` for it to end by itself (no restart is waited for).
+    pub fn wait_for(&mut self, timeout: Duration) -> Option<ExitStatus> {
+        self.child.wait_for(timeout)
+    }
+
     /// Asks it to stop (SIGINT); no restart follows.
     pub fn interrupt(&mut self) {
         self.stopping = true;
