@@ -12,8 +12,10 @@ use serde::Serialize;
 use crate::acc::VehicleClass;
 use crate::bus::Bus;
 use crate::config::{ConfigError, TopicMap};
+use crate::ros2::graph::{endpoint_of, EndpointKind};
 use crate::ros2::mapping::{Direction, Ros2Config, Route};
 use crate::ros2::{schema, Distro, FaceStats, RosFace};
+use slipstream_contract::node::ClockArg;
 
 /// How often the status line is refreshed.
 const STATUS_EVERY: Duration = Duration::from_secs(2);
@@ -53,6 +55,19 @@ pub struct Ros2Args {
     /// Stop after this many seconds [default: until Ctrl-C]
     #[arg(long, value_parser = super::top::positive)]
     pub duration: Option<f64>,
+    /// The name on the bus (liveliness token, vehicle/control's attachment): a loop runs the
+    /// bridge of a ROS 2 controller as `acc` [env: SLIPSTREAM_NODE; default: ros2-<pid>]
+    #[arg(long, env = "SLIPSTREAM_NODE", hide_env = true)]
+    pub name: Option<String>,
+    /// The simulator's clock, for --control: in lockstep each ROS command answers the step
+    /// whose odometry stamp it carries, and the bridge joins the loop (its token) only once a
+    /// ROS 2 node publishes the commands and subscribes to the odometry [env: SLIPSTREAM_CLOCK]
+    #[arg(long, value_enum, env = "SLIPSTREAM_CLOCK", hide_env = true, default_value = "realtime")]
+    pub clock: ClockArg,
+    /// The ROS node's namespace, `/` or `/name` [default: the config's ros2.namespace, else the
+    /// bus's namespace (-n) as `/name`]
+    #[arg(long, value_name = "NS")]
+    pub ros_namespace: Option<String>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -75,6 +90,10 @@ pub fn config(topics: &TopicMap, args: &Ros2Args) -> Result<Ros2Config, ConfigEr
     }
     if args.control {
         c.routes.get_mut(&Route::Command).expect("every route has an entry").enabled = true;
+    }
+    if let Some(ns) = &args.ros_namespace {
+        c.set_namespace(ns)
+            .map_err(|p| ConfigError::new("--ros-namespace", "", p.to_string(), "use `/` or `/name`"))?;
     }
     Ok(c)
 }
@@ -175,15 +194,27 @@ pub fn status_line(s: &FaceStats) -> String {
     line
 }
 
-/// Runs the bridge until Ctrl-C or --duration, with a status line on stderr.
+/// Runs the bridge until Ctrl-C or --duration, with a status line on stderr; its token is
+/// declared once it listens (in lockstep with --control, once a ROS 2 controller is there).
 pub async fn run(bus: &Bus, args: &Ros2Args) -> Result<FaceStats> {
     let c = config(bus.topics(), args)?;
-    let face = RosFace::start(bus, &c, args.vehicle.params()).await?;
+    let lockstep = args.control && args.clock == ClockArg::Lockstep;
+    let face = RosFace::start(bus, &c, args.vehicle.params(), lockstep).await?;
     let n = face.node();
     eprintln!(
         "ROS 2 node {} in namespace {} on domain {} ({:?} keys): `ros2 topic list -t` with rmw_zenoh shows its topics",
         n.name, n.namespace, n.domain, n.distro
     );
+    if lockstep {
+        tokio::select! {
+            found = ros_controller(bus, &c) => found?,
+            signal = crate::cli::stop_requested() => {
+                eprintln!("{signal} while waiting for the ROS 2 controller");
+                return Ok(face.stop().await);
+            }
+        }
+    }
+    bus.announce().await?;
     super::until_stopped(args.duration, STATUS_EVERY, || status_line(&face.stats())).await;
     let stats = face.stop().await;
     if args.json {
@@ -194,12 +225,52 @@ pub async fn run(bus: &Bus, args: &Ros2Args) -> Result<FaceStats> {
     Ok(stats)
 }
 
+/// How often the ROS graph is asked for the controller's endpoints.
+const GRAPH_POLL: Duration = Duration::from_millis(100);
+
+/// Waits until the ROS graph has a publisher of the command route and a subscription to the
+/// odometry: a lockstep simulator's first step must find the controller listening.
+async fn ros_controller(bus: &Bus, c: &crate::ros2::Ros2Config) -> Result<()> {
+    let node = c.node_id(String::new());
+    let topic = |r: Route| node.resolve(&c.routes[&r].name);
+    let (command, odometry) = (topic(Route::Command), topic(Route::Odometry));
+    eprintln!(
+        "lockstep: waiting for a ROS 2 controller on domain {}: a publisher of {command} and a subscription to {odometry} \
+         (it answers each odometry with one command stamped with the odometry's header.stamp)",
+        c.domain_id
+    );
+    let key = format!("@ros2_lv/{}/**", c.domain_id);
+    loop {
+        let replies =
+            bus.session().liveliness().get(&key).await.map_err(|e| anyhow::anyhow!("ask the ROS graph: {e}"))?;
+        let (mut publishes, mut listens) = (false, false);
+        while let Ok(reply) = replies.recv_async().await {
+            let Ok(sample) = reply.result() else { continue };
+            match endpoint_of(sample.key_expr().as_str(), c.domain_id) {
+                Some((EndpointKind::Publisher, t)) if t == command => publishes = true,
+                Some((EndpointKind::Subscription, t)) if t == odometry => listens = true,
+                _ => {}
+            }
+        }
+        if publishes && listens {
+            return Ok(());
+        }
+        tokio::time::sleep(GRAPH_POLL).await;
+    }
+}
+
 /// `slipstream ros2`: the mapping with --list, else the bridge until Ctrl-C (or --duration).
 pub fn command(args: &Ros2Args, connect: &crate::ConnectArgs) -> Result<std::process::ExitCode> {
     if args.list {
         list(&connect.topic_map()?, args)?;
-    } else {
-        crate::cli::on_bus(connect, &crate::cli::own_name("ros2"), |bus| async move { run(&bus, args).await })?;
+        return Ok(std::process::ExitCode::SUCCESS);
     }
+    let name = args.name.clone().unwrap_or_else(|| crate::cli::own_name("ros2"));
+    tokio::runtime::Runtime::new()?.block_on(async {
+        let bus = Bus::open_node(connect, &crate::config::FaultArgs::default(), &name).await?;
+        let out = run(&bus, args).await;
+        bus.leave().await;
+        out
+    })?;
     Ok(std::process::ExitCode::SUCCESS)
 }

@@ -509,7 +509,7 @@ impl Extras {
             true => {
                 let config = crate::ros2::Ros2Config::from_topic_map(bus.topics())?;
                 let vehicle = VehicleParams::of_class(scenario.ego.class.into());
-                let face = crate::ros2::RosFace::start(bus, &config, vehicle).await?;
+                let face = crate::ros2::RosFace::start(bus, &config, vehicle, false).await?;
                 let n = face.node();
                 eprintln!(
                     "ROS 2: node {} in namespace {} on domain {} ({:?} keys)",

@@ -25,6 +25,10 @@ use slipstream_contract::topics::Topic;
 
 /// The environment variable that names the node to itself.
 pub const NODE_ENV: &str = "SLIPSTREAM_NODE";
+/// Where rmw_zenoh (and zenoh-ros2-sdk) read a ROS 2 node's Zenoh session config.
+pub const RMW_ZENOH_CONFIG_ENV: &str = "ZENOH_SESSION_CONFIG_URI";
+/// slipstream's binaries: a loop file's command naming one runs the one beside this slipstream.
+const OUR_BINARIES: [&str; 4] = ["slipstream", "slipstream-sim", "slipstream-acc", "slipstream-detect"];
 
 /// The loop's nodes of the user's own; None: ours. With a loop file, also what it says of
 /// ours (arguments, restart) and the file itself by content.
@@ -293,6 +297,10 @@ pub struct ForeignNode {
     /// command, no files.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub elsewhere: bool,
+    /// A ROS 2 controller (a loop file's `ros2: true`): it speaks rmw_zenoh, and the loop runs
+    /// `slipstream ros2 --control` beside it as the node `acc` the simulator waits for.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub ros2: bool,
 }
 
 /// A file a node runs, and the SHA-256 of its content: a report says which code it judged.
@@ -339,12 +347,12 @@ impl ForeignNode {
                 files.push(read(&path)?);
             }
         }
-        Ok(ForeignNode { role, name, command, files, run, elsewhere: false })
+        Ok(ForeignNode { role, name, command, files, run, elsewhere: false, ros2: false })
     }
 
     /// A node the user starts elsewhere, in `role` (`name`: in no role of ours).
     pub fn started_elsewhere(role: Role, name: Option<String>, run: NodeRun) -> ForeignNode {
-        ForeignNode { role, name, command: Vec::new(), files: Vec::new(), run, elsewhere: true }
+        ForeignNode { role, name, command: Vec::new(), files: Vec::new(), run, elsewhere: true, ros2: false }
     }
 
     /// The name on the bus.
@@ -384,12 +392,14 @@ impl ForeignNode {
         // Absolute: the node may run in a directory of its own.
         let path = absolute(&logs.join(format!("{}.zenoh.json5", self.node())));
         std::fs::write(&path, config.to_string()).map_err(Error::file("write", &path))?;
-        let program = match self.command[0].contains('/') {
+        let program = match self.command[0].contains('/') || OUR_BINARIES.contains(&self.command[0].as_str()) {
             true => absolute(&self.files[0].path),
             false => PathBuf::from(&self.command[0]),
         };
         let mut cmd = std::process::Command::new(program);
         cmd.args(&self.command[1..]).env("SLIPSTREAM_ZENOH_CONFIG", &path).env(NODE_ENV, self.node());
+        // rmw_zenoh's session config: a ROS 2 node joins the loop's network as our nodes do.
+        cmd.env(RMW_ZENOH_CONFIG_ENV, &path);
         cmd.env("SLIPSTREAM_CLOCK", run[0]).env("SLIPSTREAM_PERCEPTION", run[1]);
         match &parsed.connect.namespace {
             Some(ns) => cmd.env("SLIPSTREAM_NAMESPACE", ns),
@@ -417,12 +427,18 @@ impl NodeRun {
     }
 }
 
-/// `name` as a path (`from` the node's directory) when it has a slash, else the first match
+/// `name` as a path (`from` the node's directory) when it has a slash; one of slipstream's binaries is the one beside the
+/// running slipstream (the build that runs the loop, installed or not); else the first match
 /// on PATH.
 fn find_program(name: &str, from: &dyn Fn(&str) -> PathBuf) -> Option<PathBuf> {
     if name.contains('/') {
         let direct = from(name);
         return direct.is_file().then_some(direct);
+    }
+    if OUR_BINARIES.contains(&name) {
+        if let Ok(ours) = super::sibling_binary(name) {
+            return Some(ours);
+        }
     }
     let path = std::env::var_os("PATH")?;
     std::env::split_paths(&path).map(|d| d.join(name)).find(|p| p.is_file())

@@ -84,6 +84,8 @@ struct RawNode {
     lockstep: Option<bool>,
     #[serde(default)]
     elsewhere: bool,
+    #[serde(default)]
+    ros2: bool,
 }
 
 /// A command as one line (split as a shell would) or as its words.
@@ -219,7 +221,14 @@ fn command(key: &str, role: Role, raw: RawNode, base: &Path) -> std::result::Res
         let problem = "lockstep always waits for the controller (and for the detector through it)";
         return Invalid::err(format!("{key}.lockstep"), problem, "drop it; it is for nodes in `others`");
     }
-    ForeignNode::new(role, name, words, run, base).map_err(|p| Invalid::new(format!("{key}.command"), p, FIX))
+    let mut node =
+        ForeignNode::new(role, name, words, run, base).map_err(|p| Invalid::new(format!("{key}.command"), p, FIX))?;
+    if raw.ros2 && role != Role::Controller {
+        let problem = "only a controller speaks ROS 2 to the loop (its commands through `slipstream ros2 --control`)";
+        return Invalid::err(format!("{key}.ros2"), problem, "drop it, or give the node as the `controller`");
+    }
+    node.ros2 = raw.ros2;
+    Ok(node)
 }
 
 /// A node the user starts elsewhere (`elsewhere: true`): nothing of how to start it applies.
@@ -232,6 +241,7 @@ fn elsewhere(key: &str, role: Role, name: Option<String>, raw: &RawNode) -> std:
         ("cwd", raw.cwd.is_some()),
         ("log", raw.log.is_some()),
         ("restart", raw.restart != Restart::default()),
+        ("ros2", raw.ros2),
     ];
     if let Some((what, _)) = given.iter().find(|(_, given)| *given) {
         let problem = "a node started elsewhere is not started, restarted or logged by the loop";

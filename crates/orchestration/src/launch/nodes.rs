@@ -204,6 +204,8 @@ impl Progress {
 const ACC: &str = "slipstream-acc";
 const DETECT: &str = "slipstream-detect";
 const SIM: &str = "slipstream-sim";
+/// The process of the bridge beside a ROS 2 controller.
+const ROS2_BRIDGE: &str = "ros2-bridge";
 /// The nodes' names on the bus (their liveliness tokens).
 const ACC_NODE: &str = "acc";
 const DETECT_NODE: &str = "detect";
@@ -309,6 +311,8 @@ pub struct LoopRun {
     user_connect: Vec<String>,
     /// Peer mode: each node listens on its own port and dials the ones before it.
     peer: bool,
+    /// The run's network is its own ([`Network::Isolated`]): nobody else is on it.
+    isolated: bool,
     endpoints: Endpoints,
     nodes: Vec<Supervised>,
     /// The endpoints of the nodes started so far: each new one dials them.
@@ -403,6 +407,7 @@ impl LoopRun {
             base_flags,
             user_connect,
             peer,
+            isolated,
             endpoints,
             nodes: Vec::new(),
             started: Vec::new(),
@@ -465,7 +470,10 @@ impl LoopRun {
         match &spec.own.controller {
             Some(node) => {
                 waits.push(self.watch(ACC_NODE, node.process()).await?);
-                self.spawn_foreign(node, &acc)?
+                self.spawn_foreign(node, &acc)?;
+                if node.ros2 {
+                    self.spawn_ros2_bridge()?
+                }
             }
             None => {
                 waits.push(self.watch(ACC_NODE, ACC).await?);
@@ -485,6 +493,35 @@ impl LoopRun {
             }
         }
         self.await_ready(waits).await
+    }
+
+    /// The bridge that puts a ROS 2 controller in the loop (a loop file's `controller.ros2`):
+    /// `slipstream ros2 --control` as the node `acc`, answering lockstep steps by the stamps of
+    /// the controller's commands and declaring its token once the controller's endpoints are
+    /// in the ROS graph, so the loop's readiness and the simulator's lockstep need no change.
+    fn spawn_ros2_bridge(&mut self) -> Result<()> {
+        let own = self.endpoints.extra(ROS2_BRIDGE)?;
+        // Faults land at our nodes as they receive; the bridge stands in for the controller.
+        let flags = self.flags(&own);
+        let mut flags = flags.into_iter();
+        let mut kept = Vec::new();
+        while let Some(f) = flags.next() {
+            match f.as_str() {
+                "--faults" => drop(flags.next()),
+                _ => kept.push(f),
+            }
+        }
+        let mut cmd = Command::new(sibling_binary("slipstream")?);
+        cmd.args(kept).args(["ros2", "--control", "--json", "--name", ACC_NODE, "--clock", self.spec.clock.name()]);
+        if let Some(v) = self.spec.vehicle {
+            cmd.args(["--vehicle", v.name()]);
+        }
+        // A run on a network of its own (eval, conform) is apart already, under a namespace
+        // made for it that the ROS node cannot know: the ROS names stay at the root there.
+        if self.isolated {
+            cmd.args(["--ros-namespace", "/"]);
+        }
+        self.launch(ROS2_BRIDGE, cmd, &format!("{ROS2_BRIDGE}.json"), &own)
     }
 
     /// slipstream-acc's flags for the spec.

@@ -142,6 +142,11 @@ impl CommandGate {
         Ok(())
     }
 
+    /// The newest command taken, fresh or not.
+    pub fn latest(&self) -> Option<AckermannDrive> {
+        self.latest.map(|(d, _)| d)
+    }
+
     /// The command to apply at `now_ns` at the ego's `speed_mps`, or None when there is no
     /// fresh command.
     pub fn control(&self, now_ns: u64, speed_mps: f64, params: &VehicleParams) -> Option<ControlCommand> {
@@ -153,11 +158,17 @@ impl CommandGate {
     }
 }
 
-/// Throttle, brake and steer that take the ego from `speed_mps` toward the command's speed.
-pub fn control(d: &AckermannDrive, speed_mps: f64, params: &VehicleParams) -> ControlCommand {
+/// The acceleration a command asks for at `speed_mps`: toward its speed, within its own limit
+/// (or the comfort limits when it gives none).
+pub fn acceleration(d: &AckermannDrive, speed_mps: f64) -> f64 {
     let limit = f64::from(d.acceleration.abs());
     let (up, down) = if limit > 0.0 { (limit, limit) } else { (DEFAULT_ACCEL_MPS2, DEFAULT_DECEL_MPS2) };
-    let accel = (SPEED_GAIN_PER_S * (f64::from(d.speed) - speed_mps)).clamp(-down, up);
+    (SPEED_GAIN_PER_S * (f64::from(d.speed) - speed_mps)).clamp(-down, up)
+}
+
+/// Throttle, brake and steer that take the ego from `speed_mps` toward the command's speed.
+pub fn control(d: &AckermannDrive, speed_mps: f64, params: &VehicleParams) -> ControlCommand {
+    let accel = acceleration(d, speed_mps);
     let (throttle, brake) = if d.speed == 0.0 && speed_mps < 0.5 {
         (0.0, 0.3) // hold still
     } else {

@@ -34,13 +34,14 @@ pub struct RosFace {
 
 impl RosFace {
     /// Declares the ROS node and its endpoints on `bus`'s session and starts republishing.
-    /// `vehicle` is the ego's model, for turning ROS commands into throttle and brake.
-    pub async fn start(bus: &Bus, config: &Ros2Config, vehicle: VehicleParams) -> Result<RosFace> {
+    /// `vehicle` is the ego's model, for turning ROS commands into throttle and brake; with
+    /// `lockstep` a command answers the state its stamp names ([`super::lockstep`]).
+    pub async fn start(bus: &Bus, config: &Ros2Config, vehicle: VehicleParams, lockstep: bool) -> Result<RosFace> {
         let node = Arc::new(RosNode::declare(bus.session(), config).await?);
         let outlet = Arc::new(RosOutlet::declare(&node, config).await?);
         let bridge = Bridge::start(bus, outlet).await?;
         let commands = match config.routes.get(&Route::Command).filter(|e| e.enabled) {
-            Some(entry) => Some(CommandPath::start(bus, &node, entry, vehicle).await?),
+            Some(entry) => Some(CommandPath::start(bus, &node, entry, vehicle, lockstep).await?),
             None => None,
         };
         Ok(RosFace { node, bridge, commands })

@@ -166,6 +166,21 @@ impl NodeId {
     }
 }
 
+/// The endpoint a liveliness token declares, read back: its kind and its topic (resolved,
+/// `/` restored), on `domain`; None for a node's token, another domain or no rmw_zenoh token.
+pub fn endpoint_of(token: &str, domain: u32) -> Option<(EndpointKind, String)> {
+    let parts: Vec<&str> = token.split('/').collect();
+    if parts.len() < 10 || parts[0] != "@ros2_lv" || parts[1] != domain.to_string() {
+        return None;
+    }
+    let kind = match parts[5] {
+        "MP" => EndpointKind::Publisher,
+        "MS" => EndpointKind::Subscription,
+        _ => return None,
+    };
+    Some((kind, parts[9].replace('%', "/")))
+}
+
 fn mangle(name: &str) -> String {
     name.replace('/', "%")
 }
@@ -242,6 +257,20 @@ mod tests {
         assert_eq!(n.resolve("/clock"), "/clock");
         let humble = node(Distro::Humble).data_key("/clock", "rosgraph_msgs/msg/Clock").unwrap();
         assert_eq!(humble, "7/clock/rosgraph_msgs::msg::dds_::Clock_/TypeHashNotSupported");
+    }
+
+    #[test]
+    fn an_endpoint_token_reads_back_as_its_kind_and_topic() {
+        let n = node(Distro::Jazzy);
+        let qos = RosQos::DEFAULT;
+        let token = n.endpoint_token(7, EndpointKind::Subscription, "/vehicle/odometry", "nav_msgs/msg/Odometry", &qos);
+        let read = endpoint_of(&token.unwrap(), n.domain);
+        assert_eq!(read, Some((EndpointKind::Subscription, "/vehicle/odometry".to_string())));
+        assert_eq!(endpoint_of(&n.node_token(), n.domain), None, "a node's token is no endpoint");
+        let other =
+            n.endpoint_token(7, EndpointKind::Publisher, "/cmd", "ackermann_msgs/msg/AckermannDriveStamped", &qos);
+        assert_eq!(endpoint_of(&other.unwrap(), n.domain + 1), None, "another domain");
+        assert_eq!(endpoint_of("slipstream/nodes/acc", 0), None);
     }
 
     #[test]

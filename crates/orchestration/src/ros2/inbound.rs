@@ -1,6 +1,8 @@
 //! The command route's I/O: a ROS 2 subscription (token and data key) whose samples go
-//! through the [`CommandGate`], and a vehicle/speed subscription that sends the gate's
-//! control on the bus once per speed message while a command is fresh.
+//! through the [`CommandGate`]. In realtime and fast runs a vehicle/speed subscription sends
+//! the gate's control on the bus once per speed message while a command is fresh; in
+//! lockstep each accepted command answers the vehicle/state its stamp names
+//! ([`super::lockstep`]) at once, so the simulator's step waits for the ROS controller itself.
 
 use std::sync::Arc;
 
@@ -9,68 +11,125 @@ use parking_lot::Mutex;
 use zenoh::liveliness::LivelinessToken;
 use zenoh::sample::Sample;
 
-use super::command::{CommandGate, CommandStats};
+use super::command::{acceleration, control, CommandGate, CommandStats};
 use super::error::Ros2Error;
 use super::graph::Attachment;
+use super::lockstep::{Awaited, StepAnswers};
 use super::mapping::Entry;
 use super::messages::{from_cdr, AckermannDriveStamped};
 use super::node::RosNode;
+use super::status::StatusOut;
 use slipstream_contract::bus::{Bus, CallbackSubscriber, Publisher, Received};
-use slipstream_contract::msg::{ControlCommand, Speed};
+use slipstream_contract::msg::{wall_clock_ns, ControlCommand, Speed, VehicleState};
 use slipstream_contract::topics;
+use slipstream_model::vehicle::VehicleParams;
 
 /// ROS commands in, vehicle/control out.
 pub struct CommandPath {
     gate: Arc<Mutex<CommandGate>>,
     _subscriber: zenoh::pubsub::Subscriber<()>,
     _token: LivelinessToken,
-    _speed: CallbackSubscriber,
+    _loop_side: CallbackSubscriber,
 }
 
 impl CommandPath {
+    /// Subscribes to the ROS commands of `entry` and sends them on as vehicle/control: per
+    /// speed message, or, with `lockstep`, as the answer to the state each one names.
     pub async fn start(
         bus: &Bus,
         node: &RosNode,
         entry: &Entry,
-        vehicle: slipstream_model::vehicle::VehicleParams,
+        vehicle: VehicleParams,
+        lockstep: bool,
     ) -> Result<CommandPath> {
         let (key, token) = node.subscription(&entry.name, &entry.type_name, entry.qos).await?;
         let gate: Arc<Mutex<CommandGate>> = Arc::default();
-        let g = gate.clone();
+        let control: Arc<Publisher<ControlCommand>> = Arc::new(bus.publisher(topics::VEHICLE_CONTROL).await?);
+        let answers: Arc<Mutex<StepAnswers>> = Arc::default();
+        let status = Arc::new(StatusOut::start(bus).await?);
+        let (g, a, c, st) = (gate.clone(), answers.clone(), control.clone(), status.clone());
         let subscriber = node
             .session()
             .declare_subscriber(key.clone())
             .callback(move |sample: Sample| {
-                let now = slipstream_contract::msg::wall_clock_ns();
-                match read(&sample) {
-                    Ok((gid, cmd)) => {
-                        let _ = g.lock().offer(gid, now, &cmd.drive, &vehicle);
-                    }
-                    Err(why) => g.lock().refuse(now, &why),
+                let now = wall_clock_ns();
+                let cmd = match read(&sample) {
+                    Ok((gid, cmd)) if g.lock().offer(gid, now, &cmd.drive, &vehicle).is_ok() => cmd,
+                    Ok(_) => return,
+                    Err(why) => return g.lock().refuse(now, &why),
+                };
+                if lockstep {
+                    answer(&g, &a, (&c, &st), &cmd, &vehicle, now);
                 }
             })
             .await
             .map_err(Error::zenoh(format!("subscribe to ROS 2 commands on {key}")))?;
-        let control: Publisher<ControlCommand> = bus.publisher(topics::VEHICLE_CONTROL).await?;
-        let g = gate.clone();
-        let speed = bus
-            .subscribe_with(topics::VEHICLE_SPEED, move |s: Received<Speed>| {
-                let command = g.lock().control(slipstream_contract::msg::wall_clock_ns(), s.msg.speed_mps, &vehicle);
-                if let Some(c) = command {
-                    match control.put(s.header.stamp_sim_ns, &c) {
-                        Ok(_) => g.lock().stats.applied += 1,
-                        Err(e) => tracing::warn!("vehicle/control: {e}"),
-                    }
-                }
-            })
-            .await?;
-        tracing::info!(topic = %node.id.resolve(&entry.name), %key, "ROS 2 commands drive the ego");
-        Ok(CommandPath { gate, _subscriber: subscriber, _token: token, _speed: speed })
+        let loop_side = match lockstep {
+            true => await_states(bus, answers).await?,
+            false => per_speed(bus, gate.clone(), (control, status), vehicle).await?,
+        };
+        tracing::info!(topic = %node.id.resolve(&entry.name), %key, lockstep, "ROS 2 commands drive the ego");
+        Ok(CommandPath { gate, _subscriber: subscriber, _token: token, _loop_side: loop_side })
     }
 
     pub fn stats(&self) -> CommandStats {
         self.gate.lock().stats.clone()
     }
+}
+
+/// Realtime and fast: the latest fresh command, applied at each vehicle/speed.
+async fn per_speed(
+    bus: &Bus,
+    gate: Arc<Mutex<CommandGate>>,
+    (control, status): (Arc<Publisher<ControlCommand>>, Arc<StatusOut>),
+    vehicle: VehicleParams,
+) -> Result<CallbackSubscriber> {
+    Ok(bus
+        .subscribe_with(topics::VEHICLE_SPEED, move |s: Received<Speed>| {
+            let (now, speed) = (wall_clock_ns(), s.msg.speed_mps);
+            let Some(c) = gate.lock().control(now, speed, &vehicle) else { return };
+            match control.put(s.header.stamp_sim_ns, &c) {
+                Ok(_) => gate.lock().stats.applied += 1,
+                Err(e) => tracing::warn!("vehicle/control: {e}"),
+            }
+            if let Some(d) = gate.lock().latest() {
+                status.sent(s.header.stamp_sim_ns, acceleration(&d, speed));
+            }
+        })
+        .await?)
+}
+
+/// Lockstep: every vehicle/state awaits the command stamped with its time.
+async fn await_states(bus: &Bus, answers: Arc<Mutex<StepAnswers>>) -> Result<CallbackSubscriber> {
+    Ok(bus
+        .subscribe_with(topics::VEHICLE_STATE, move |s: Received<VehicleState>| {
+            let (step, stamp_sim_ns, speed_mps) = (s.msg.step, s.header.stamp_sim_ns, s.msg.speed_mps);
+            answers.lock().state(Awaited { step, stamp_sim_ns, speed_mps });
+        })
+        .await?)
+}
+
+/// Lockstep: an accepted command sent on as the answer to the state its stamp names, or
+/// refused when it names none.
+fn answer(
+    gate: &Mutex<CommandGate>,
+    answers: &Mutex<StepAnswers>,
+    (control_out, status): (&Publisher<ControlCommand>, &StatusOut),
+    cmd: &AckermannDriveStamped,
+    vehicle: &VehicleParams,
+    now: u64,
+) {
+    let state = match answers.lock().answer(cmd.header.stamp) {
+        Ok(state) => state,
+        Err(none) => return gate.lock().refuse(now, &none),
+    };
+    let mut c = control(&cmd.drive, state.speed_mps, vehicle);
+    c.answers_step = Some(state.step);
+    match control_out.put(state.stamp_sim_ns, &c) {
+        Ok(_) => gate.lock().stats.applied += 1,
+        Err(e) => tracing::warn!("vehicle/control: {e}"),
+    }
+    status.sent(state.stamp_sim_ns, acceleration(&cmd.drive, state.speed_mps));
 }
 
 /// The publisher's gid and the command of one sample.

@@ -334,6 +334,14 @@ fn valid_topic(name: &str) -> bool {
     !body.is_empty() && body.split('/').all(valid_name_part)
 }
 
+impl Ros2Config {
+    /// The node in ROS namespace `ns` (`/` or `/name`) instead of the config's.
+    pub fn set_namespace(&mut self, ns: &str) -> Result<(), Ros2Error> {
+        self.namespace = ros_namespace(ns)?;
+        Ok(())
+    }
+}
+
 fn ros_namespace(ns: &str) -> Result<String, Ros2Error> {
     if ns == "/" || ns.is_empty() {
         return Ok("/".into());

@@ -13,7 +13,9 @@
 //! - [`node`], [`outlet`], [`bag`]: where CDR goes: a ROS node's publishers, or a `ros2`-profile
 //!   MCAP file.
 //! - [`outbox`], [`bridge`]: the bus to an outlet, never holding up the bus.
-//! - [`command`], [`inbound`]: ROS 2 commands into vehicle/control, checked and watched.
+//! - [`command`], [`inbound`]: ROS 2 commands into vehicle/control, checked and watched;
+//!   [`lockstep`]: which step a command answers in a lockstep run; [`status`]: acc/status on
+//!   the ROS controller's behalf, for the judge.
 //! - [`face`]: the node, its publishers and its commands together (`slipstream ros2`).
 
 pub mod bag;
@@ -25,12 +27,14 @@ pub mod error;
 pub(crate) mod face;
 pub mod graph;
 pub(crate) mod inbound;
+pub(crate) mod lockstep;
 pub mod mapping;
 pub(crate) mod messages;
 pub(crate) mod node;
 pub(crate) mod outbox;
 pub(crate) mod outlet;
 pub mod schema;
+pub(crate) mod status;
 pub mod translate;
 
 pub use bag::Bag;
