@@ -52,7 +52,14 @@ def test_garbage_on_every_key_neither_crashes_nor_stalls_the_loop(slipstream_bin
         rng = random.Random(7)
         session = zenoh.open(peer_config(endpoint))
         try:
-            time.sleep(3)  # the nodes are up and the loop runs
+            # The loop runs (its states arrive): on a loaded machine `up` takes seconds to start.
+            states = []
+            watch = session.declare_subscriber("vehicle/state", lambda _: states.append(1))
+            started = time.monotonic() + 60
+            while not states and time.monotonic() < started:
+                time.sleep(0.05)
+            watch.undeclare()
+            assert states, "the loop never ran"
             deadline = time.monotonic() + 5
             while time.monotonic() < deadline and sent < 20_000:
                 for key, kind in DEFAULT_KEYS.items():
