@@ -59,6 +59,12 @@ def test_examples_and_every_published_type_decode_during_up(slipstream_bin, free
                     session, key, on_sample, history=zenoh.ext.HistoryConfig(detect_late_publishers=True))
                 for key in ("camera/front/info", "sim/road")
             ]
+            # The loop runs before the examples join (on a loaded machine `up` takes seconds to
+            # start, and an example that dials before anyone listens waits out its timeout).
+            started = time.monotonic() + 60
+            while time.monotonic() < started and not kinds.get("Speed"):
+                time.sleep(0.05)
+            assert kinds.get("Speed"), f"the loop never ran: {kinds}"
             speed = example("print_speed.py", "-e", endpoint, "--count", "50")
             camera = example("camera_numpy.py", "-e", endpoint, "--count", "5")
             # An operator command from Python: the Rust ACC takes the new set speed.
