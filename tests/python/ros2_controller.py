@@ -2,8 +2,9 @@
 zenoh-ros2-sdk (an rmw_zenoh implementation in Python we did not write: its keys, liveliness
 tokens, attachments and CDR), since no ROS 2 install or rmw_zenoh is here. As an rclpy node on
 rmw_zenoh would, it reads its Zenoh session config from ZENOH_SESSION_CONFIG_URI (which the
-loop sets), subscribes to /vehicle/odometry and answers each odometry message with one
-ackermann_msgs/msg/AckermannDriveStamped on /vehicle/ackermann_cmd stamped with the
+loop sets), subscribes to vehicle/odometry and answers each odometry message with one
+ackermann_msgs/msg/AckermannDriveStamped on vehicle/ackermann_cmd (both in the ROS namespace
+SLIPSTREAM_ROS_NAMESPACE names, as `__ns:=` would put them) stamped with the
 odometry's header.stamp: a cruise control toward --speed m/s. Prints how many it answered.
 
     python3 ros2_controller.py --msgs DIR [--speed 20] [--stamp odometry|zero]
@@ -36,7 +37,10 @@ def main():
     answered, done = [0], threading.Event()
     signal.signal(signal.SIGINT, lambda *_: done.set())
     signal.signal(signal.SIGTERM, lambda *_: done.set())
-    cmd = ROS2Publisher("/vehicle/ackermann_cmd", "ackermann_msgs/msg/AckermannDriveStamped", node_name="my_acc")
+    # In the ROS namespace the loop names, as a node launched with `--ros-args -r __ns:=...`.
+    under = os.environ.get("SLIPSTREAM_ROS_NAMESPACE", "/").rstrip("/")
+    cmd = ROS2Publisher(f"{under}/vehicle/ackermann_cmd", "ackermann_msgs/msg/AckermannDriveStamped",
+                        node_name="my_acc")
     Header = cmd.session_mgr.store.types["std_msgs/msg/Header"]
     Time = cmd.session_mgr.store.types["builtin_interfaces/msg/Time"]
     Drive = cmd.session_mgr.store.types["ackermann_msgs/msg/AckermannDrive"]
@@ -48,7 +52,7 @@ def main():
         answered[0] += 1
 
     # Listening last: the bridge joins the loop once both endpoints are in the ROS graph.
-    odom = ROS2Subscriber("/vehicle/odometry", "nav_msgs/msg/Odometry", on_odometry, node_name="my_acc")
+    odom = ROS2Subscriber(f"{under}/vehicle/odometry", "nav_msgs/msg/Odometry", on_odometry, node_name="my_acc")
     print(f"my_acc: listening on {dial}", file=sys.stderr, flush=True)
     done.wait()
     odom.close()

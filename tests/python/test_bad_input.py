@@ -37,13 +37,17 @@ def bad_payloads(examples, kind, rng):
     return out
 
 
+# A namespace of the test's own: a loop in the default one (another test's) moves `up` away.
+NS = "fuzzed"
+
+
 def test_garbage_on_every_key_neither_crashes_nor_stalls_the_loop(slipstream_bin, free_port, tmp_path):
     out = subprocess.run([slipstream_bin, "wire-examples"], check=True, capture_output=True, text=True, timeout=60)
     examples = {e["kind"]: bytes.fromhex(e["hex"].replace(" ", "")) for e in json.loads(out.stdout)}
     endpoint = f"tcp/127.0.0.1:{free_port}"
     report_dir = tmp_path / "report"
     up = subprocess.Popen(
-        [slipstream_bin, "-l", endpoint, "up", "--duration", "12", "--plain", "--report", str(report_dir)],
+        [slipstream_bin, "-l", endpoint, "-n", NS, "up", "--duration", "12", "--plain", "--report", str(report_dir)],
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
     )
@@ -54,7 +58,7 @@ def test_garbage_on_every_key_neither_crashes_nor_stalls_the_loop(slipstream_bin
         try:
             # The loop runs (its states arrive): on a loaded machine `up` takes seconds to start.
             states = []
-            watch = session.declare_subscriber("vehicle/state", lambda _: states.append(1))
+            watch = session.declare_subscriber(f"{NS}/vehicle/state", lambda _: states.append(1))
             started = time.monotonic() + 60
             while not states and time.monotonic() < started:
                 time.sleep(0.05)
@@ -64,7 +68,7 @@ def test_garbage_on_every_key_neither_crashes_nor_stalls_the_loop(slipstream_bin
             while time.monotonic() < deadline and sent < 20_000:
                 for key, kind in DEFAULT_KEYS.items():
                     for p in bad_payloads(examples, kind, rng):
-                        session.put(key, p, attachment=b"fuzz")
+                        session.put(f"{NS}/{key}", p, attachment=b"fuzz")
                         sent += 1
                 time.sleep(0.02)
         finally:
@@ -83,7 +87,7 @@ def test_garbage_on_every_key_neither_crashes_nor_stalls_the_loop(slipstream_bin
     # The loop kept closing under the garbage (how often is a figure of the machine's load).
     assert hops["frame -> applied"]["count"] > 0, hops
     # Per sender: every key got bad payloads from "fuzz", counted, and none decoded.
-    fuzz = {r["key"]: r for r in report["topics"] if r["from"] == "fuzz"}
+    fuzz = {r["key"].removeprefix(f"{NS}/"): r for r in report["topics"] if r["from"] == "fuzz"}
     assert set(fuzz) == set(DEFAULT_KEYS), sorted(fuzz)
     for key, row in fuzz.items():
         assert row["decode_errors"] > 0 and row["received"] == 0, (key, row)

@@ -57,7 +57,7 @@ def test_examples_and_every_published_type_decode_during_up(slipstream_bin, free
             latched = [
                 zenoh.ext.declare_advanced_subscriber(
                     session, key, on_sample, history=zenoh.ext.HistoryConfig(detect_late_publishers=True))
-                for key in ("camera/front/info", "sim/road")
+                for key in ("camera/front/info", "sim/road", "sim/ego")
             ]
             # The loop runs before the examples join (on a loaded machine `up` takes seconds to
             # start, and an example that dials before anyone listens waits out its timeout).

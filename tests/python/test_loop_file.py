@@ -124,9 +124,9 @@ def test_a_simulator_of_your_own_is_started_from_the_loop_file_and_the_loop_clos
                                                                                                free_port, tmp_path):
     sim = f"{PYTHON} {ROOT}/clients/python/examples/reference_sim.py --duration 6"
     path = loop_file(tmp_path, f'{{ simulator: {{ command: "{sim}" }} }}')
-    done = slipstream(slipstream_bin, "-l", f"tcp/127.0.0.1:{free_port}", "up", "--loop", str(path), "--mode",
-                      "lockstep", "--perception", "ground-truth", "--plain", "--report", str(tmp_path / "run"),
-                      timeout=120)
+    done = slipstream(slipstream_bin, "-l", f"tcp/127.0.0.1:{free_port}", "-n", "own-sim", "up", "--loop", str(path),
+                      "--mode", "lockstep", "--perception", "ground-truth", "--plain", "--report",
+                      str(tmp_path / "run"), timeout=120)
     assert done.returncode == 0, done.stderr[-3000:]
     report = json.loads((tmp_path / "run" / "report.json").read_text())
     assert report["sim"] == "external" and report["own"]["simulator"]["role"] == "simulator", report["own"]
@@ -144,8 +144,8 @@ def test_a_simulator_of_your_own_is_started_from_the_loop_file_and_the_loop_clos
 def test_a_simulator_of_your_own_that_fails_at_start_is_named_at_once(slipstream_bin, free_port, tmp_path):
     sim = f"{PYTHON} {ROOT}/clients/python/examples/reference_sim.py --physics-hz 7"
     path = loop_file(tmp_path, f'{{ simulator: {{ command: "{sim}" }} }}')
-    done = slipstream(slipstream_bin, "-l", f"tcp/127.0.0.1:{free_port}", "up", "--loop", str(path), "--plain",
-                      "--report", str(tmp_path / "run"), timeout=60)
+    done = slipstream(slipstream_bin, "-l", f"tcp/127.0.0.1:{free_port}", "-n", "own-sim-fails", "up", "--loop",
+                      str(path), "--plain", "--report", str(tmp_path / "run"), timeout=60)
     assert done.returncode == 1, done.stderr[-3000:]
     assert "simulator ended before its first message: --camera-hz must divide --physics-hz" in done.stderr, \
         done.stderr[-2000:]

@@ -48,7 +48,8 @@ def slipstream(slipstream_bin, *args, timeout=300):
 
 def test_a_ros2_controller_of_a_loop_file_drives_up_in_lockstep(slipstream_bin, free_port, tmp_path):
     path = loop_file(slipstream_bin, tmp_path, "--speed", "20")
-    done = slipstream(slipstream_bin, "-l", f"tcp/127.0.0.1:{free_port}", "up", "--loop", str(path), "--scenario",
+    done = slipstream(slipstream_bin, "-l", f"tcp/127.0.0.1:{free_port}", "-n", "rosloop", "up", "--loop", str(path),
+                      "--scenario",
                       "open-road", "--mode", "lockstep", "--perception", "ground-truth", "--duration", "8", "--plain",
                       "--report", str(tmp_path / "run"), timeout=120)
     assert done.returncode in (0, 1), done.stderr[-3000:]

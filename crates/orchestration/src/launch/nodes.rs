@@ -204,6 +204,8 @@ impl Progress {
 const ACC: &str = "slipstream-acc";
 const DETECT: &str = "slipstream-detect";
 const SIM: &str = "slipstream-sim";
+/// Where a ROS 2 controller finds the ROS namespace its bridge uses.
+const ROS_NAMESPACE_ENV: &str = "SLIPSTREAM_ROS_NAMESPACE";
 /// The process of the bridge beside a ROS 2 controller.
 const ROS2_BRIDGE: &str = "ros2-bridge";
 /// The nodes' names on the bus (their liveliness tokens).
@@ -516,12 +518,18 @@ impl LoopRun {
         if let Some(v) = self.spec.vehicle {
             cmd.args(["--vehicle", v.name()]);
         }
-        // A run on a network of its own (eval, conform) is apart already, under a namespace
-        // made for it that the ROS node cannot know: the ROS names stay at the root there.
-        if self.isolated {
-            cmd.args(["--ros-namespace", "/"]);
-        }
+        cmd.args(["--ros-namespace", &self.ros_namespace()]);
         self.launch(ROS2_BRIDGE, cmd, &format!("{ROS2_BRIDGE}.json"), &own)
+    }
+
+    /// The ROS namespace of a ROS 2 controller and its bridge (SLIPSTREAM_ROS_NAMESPACE): the
+    /// bus's namespace as `/name` in `up`; the root in a run on a network of its own (eval,
+    /// conform), which is apart already, under a namespace made for it.
+    fn ros_namespace(&self) -> String {
+        match self.bus.topics().namespace() {
+            ns if self.isolated || ns.is_empty() => "/".into(),
+            ns => format!("/{ns}"),
+        }
     }
 
     /// slipstream-acc's flags for the spec.
@@ -693,7 +701,10 @@ impl LoopRun {
             return Ok(());
         }
         let run = [self.spec.clock.name(), self.spec.perception.name()];
-        let cmd = node.command(&self.flags(own), &self.logs, run)?;
+        let mut cmd = node.command(&self.flags(own), &self.logs, run)?;
+        if node.ros2 {
+            cmd.env(ROS_NAMESPACE_ENV, self.ros_namespace());
+        }
         self.launch(&name, cmd, &format!("{name}.out"), own)
     }
 
