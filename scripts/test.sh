@@ -31,6 +31,9 @@ command -v openssl >/dev/null 2>&1 || missing+=(openssl)
 command -v tc >/dev/null 2>&1 || missing+=(iproute2)
 command -v iptables >/dev/null 2>&1 || missing+=(iptables)
 python3 -c 'import venv, ensurepip' >/dev/null 2>&1 || missing+=(python3-venv)
+# A real browser for the view's page (tests/python/test_view_page.py).
+command -v chromium >/dev/null 2>&1 || missing+=(chromium)
+command -v chromedriver >/dev/null 2>&1 || missing+=(chromium-driver)
 if ((${#missing[@]})); then
   if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
     apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq "${missing[@]}"
@@ -42,11 +45,11 @@ fi
 echo "ok"
 
 step "python venv (.venv) with eclipse-zenoh 1.10"
-if ! .venv/bin/python -c 'import zenoh, numpy, cv2, pytest, xdist, mypy, mcap, mcap_ros2, websockets, rosbags, zenoh_ros2_sdk, carla, coppeliasim_zmqremoteapi_client' >/dev/null 2>&1; then
+if ! .venv/bin/python -c 'import zenoh, numpy, cv2, pytest, xdist, mypy, mcap, mcap_ros2, websockets, rosbags, zenoh_ros2_sdk, carla, coppeliasim_zmqremoteapi_client, selenium' >/dev/null 2>&1; then
   python3 -m venv .venv
   .venv/bin/pip install --quiet --disable-pip-version-check 'eclipse-zenoh==1.10.*' numpy pytest pytest-xdist mypy mcap \
     mcap-ros2-support websockets 'rosbags==0.11.*' 'zenoh-ros2-sdk==0.1.*' 'carla==0.9.16' \
-    'coppeliasim-zmqremoteapi-client==2.0.*' 'opencv-python-headless<5'
+    'coppeliasim-zmqremoteapi-client==2.0.*' 'opencv-python-headless<5' 'selenium==4.*'
 fi
 # The Python client as its users install it (editable: the tests run against this checkout's
 # code, imported as an installed package, not from a path the tests add).

@@ -19,7 +19,7 @@ pub use slipstream_acc as acc;
 pub use slipstream_bench as bench;
 pub use slipstream_contract::{bus, config, msg, node, process, qos, topics};
 pub use slipstream_model::{road, vehicle};
-pub use slipstream_orchestration::{eval, launch, record, ros2, view};
+pub use slipstream_orchestration::{eval, launch, record, ros2, view, watch};
 pub use slipstream_perception as perception;
 pub use slipstream_sim as sim;
 

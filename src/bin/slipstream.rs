@@ -59,12 +59,12 @@ enum Command {
     /// with the recorded timing (--rate for faster), or as fast as the subscribers take it
     /// without dropping anything (--max)
     Play(slipstream::tools::play::PlayArgs),
-    /// Serve a live view of the running loop for Foxglove: the camera with detections and
-    /// ground-truth boxes, a 3D scene of the road and vehicles, the ACC's speed, gap and mode
+    /// Serve a live view of the running loop: a page for any browser and the Foxglove
+    /// WebSocket, on one port (camera with boxes, bird's-eye scene, plots, topics, latency)
     ///
-    /// A Foxglove WebSocket server on ws://localhost:8765 (loopback) until Ctrl-C; `up --view`
-    /// runs the same view inside `up`. Viewers never slow the loop: each gets the latest
-    /// updates, at most --rate a second.
+    /// http://localhost:8765 (loopback) until Ctrl-C, the Foxglove WebSocket on the same port;
+    /// `up --view` runs the same view inside `up`. Viewers never slow the loop: a page pulls
+    /// the latest when it is ready, a Foxglove viewer gets the latest at most --rate a second.
     View(slipstream::tools::view::ViewArgs),
     /// Show the loop to ROS 2: a ROS 2 node on rmw_zenoh's keys (camera, camera info,
     /// odometry, /tf, boxes, /clock, ACC status), found by `ros2 topic list` with no bridge to

@@ -81,13 +81,18 @@ pub struct UpArgs {
     /// the ACC's series)
     #[arg(long, requires = "record")]
     pub viewable: bool,
-    /// Serve a live view for Foxglove (camera with boxes, 3D scene, ACC series) on
-    /// ws://localhost:8765 while the loop runs (docs/viewing.md)
+    /// Serve a live view while the loop runs: a page for any browser at http://localhost:8765
+    /// (camera with boxes, bird's-eye scene, plots, topics, latency per hop, nodes) and the
+    /// Foxglove WebSocket on the same port (docs/viewing.md)
     #[arg(long)]
     pub view: bool,
     /// The live view's port (0: any free port, printed)
     #[arg(long, default_value_t = crate::view::DEFAULT_PORT, requires = "view")]
     pub view_port: u16,
+    /// The live view's address: this machine only by default; 0.0.0.0 serves the LAN (anyone
+    /// who reaches the port sees the camera: docs/viewing.md)
+    #[arg(long, default_value = crate::view::DEFAULT_HOST, requires = "view")]
+    pub view_host: String,
     /// Show the loop to ROS 2 while it runs (`slipstream ros2` inside `up`): camera, camera
     /// info, odometry, /tf, boxes, /clock and the ACC's status on rmw_zenoh's keys, with the
     /// mapping of config/slipstream.json5's `ros2` block (docs/ros2.md)
@@ -498,9 +503,9 @@ impl Extras {
         };
         let view = match args.view {
             true => {
-                let opts = ViewOptions::new(crate::view::DEFAULT_HOST, args.view_port).with_scenario(scenario);
+                let opts = ViewOptions::new(&args.view_host, args.view_port).with_scenario(scenario);
                 let view = LiveView::start(bus, opts).await?;
-                eprintln!("{}", super::view::how_to_open(crate::view::DEFAULT_HOST, view.port()));
+                eprintln!("{}", super::view::how_to_open(&args.view_host, view.port()));
                 Some(view)
             }
             false => None,
@@ -621,7 +626,7 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
     let done = extras.stop().await?;
     let sim = lp.sim_report().ok();
     let inputs = lp.inputs();
-    let topics_seen = watch.keys.view(lp.bus()).keys;
+    let topics_seen = watch.keys.view().keys;
     let rec = watch.recorder.take();
     let latency = std::mem::take(&mut *watch.latency.lock());
     let end_event = watch.end_event.lock().clone();

@@ -475,6 +475,14 @@ def test_recording_playback_and_re_simulation(host):
                        env={"SLIPSTREAM_ACC_CONFIG": str(host.dir / "gap.json5")})
     assert comparable(changed.stdout()) == resim_example(), changed.stdout()
 
+    # The same recording in the view's page, with its replay bar (docs/viewing.md).
+    shown = host.start(typed("slipstream view reports/RUN/run.mcap", RUN="eight"))
+    host.wait_for(shown, "live view on http://localhost:8765", 30)
+    page = host.run("python3 -c \"import urllib.request as u; print(u.urlopen('http://localhost:8765/state').read().decode())\"",
+                    30)
+    assert page.code == 0 and '"replay":{"t_s":' in page.stdout(), page.stdout()[-2000:]
+    stopped(host, shown)
+
     # A signal during the replay: the nodes stop, the report is written, exit 130.
     replay = host.start(typed("slipstream up --from reports/RUN/run.mcap", RUN="base"))
     host.wait_for(replay, "today's detector and ACC answer the recording", 30)
@@ -564,7 +572,7 @@ def test_a_sweep_in_shards_merges_to_the_whole_sweeps_report(host):
 @needs_host
 def test_loops_with_a_view_a_ros2_face_and_other_settings_side_by_side(host):
     viewed = host.start("slipstream up --record --view")
-    host.wait_for(viewed, "live view on ws://localhost:8765", 60)
+    host.wait_for(viewed, "live view on http://localhost:8765", 60)
     ros = host.start("slipstream up --ros2")
     host.wait_for(ros, "in namespace loop-2", 60)
     gt = host.start("target/release/slipstream up --perception ground-truth --duration 20 --report reports/gt")

@@ -6,7 +6,9 @@
 //! Inside, one order holds: recordings may hold the view's Foxglove copies and ROS 2 messages,
 //! evaluation runs the loop through launch and reads recordings; never the other way.
 //! - [`launch`]: the nodes as child processes: start, await on the bus, stop, logs.
-//! - [`view`]: the live view, a Foxglove WebSocket server of camera, boxes, scene and series.
+//! - [`view`]: the live view: a page of its own for any browser and a Foxglove WebSocket
+//!   server, on one port (camera, boxes, bird's-eye scene, series, the bus's figures).
+//! - [`watch`]: every key's figures as they arrive (what `top`, `up` and the page show).
 //! - [`ros2`]: the loop as ROS 2 sees it over rmw_zenoh's keys (CDR messages, graph tokens),
 //!   and ROS 2 commands into the loop.
 //! - [`record`]: the bus into MCAP files, lossless and with every loss counted.
@@ -19,5 +21,6 @@ pub mod launch;
 pub mod record;
 pub mod ros2;
 pub mod view;
+pub mod watch;
 
 pub use error::{Error, Result};

@@ -5,6 +5,7 @@
 use std::collections::HashMap;
 use std::fs::File;
 use std::io::BufReader;
+use std::ops::ControlFlow;
 use std::path::Path;
 use std::time::{Duration, Instant};
 
@@ -68,16 +69,26 @@ impl Output {
 }
 
 /// Calls `f` with every message of the recording at `path`, in file order: the one reader of
-/// recordings (`play`, re-simulation). A file cut by a crash is read up to the cut and
-/// `true` returned; a file that is no MCAP at all is an error.
+/// recordings (`play`, re-simulation, the view's replay). A file cut by a crash is read up to
+/// the cut and `true` returned; a file that is no MCAP at all is an error.
 pub fn each_message(path: &Path, mut f: impl FnMut(mcap::Message<'static>) -> Result<()>) -> Result<bool> {
+    each_message_until(path, |m| f(m).map(|()| ControlFlow::Continue(())))
+}
+
+/// [`each_message`] that `f` may stop early (`ControlFlow::Break`): the rest is not read.
+pub fn each_message_until(
+    path: &Path,
+    mut f: impl FnMut(mcap::Message<'static>) -> Result<ControlFlow<()>>,
+) -> Result<bool> {
     let file = File::open(path).map_err(Error::file("open", path))?;
     let mut seen = false;
     for message in mcap::io::MessageReader::new(BufReader::new(file)) {
         match message {
             Ok(m) => {
                 seen = true;
-                f(m)?;
+                if f(m)?.is_break() {
+                    return Ok(false);
+                }
             }
             Err(e) if seen => {
                 tracing::warn!("{}: {e}; read up to there", path.display());

@@ -156,9 +156,9 @@ impl Copies {
         out.extend(copy(TOPIC_VEHICLES, &scene::vehicles(stamp, ego, &params, truth), stamp));
         out.extend(copy(TOPIC_TF, &scene::ego_frame(stamp, ego), stamp));
         let due = self.road_drawn_ns.is_none_or(|t| s.header.stamp_sim_ns >= t + ROAD_EVERY_NS);
-        if let Some(road) = due.then(|| self.context.road_around(stamp, ego)).flatten() {
+        if let Some(lines) = due.then(|| self.context.road_around(ego)).flatten() {
             self.road_drawn_ns = Some(s.header.stamp_sim_ns);
-            out.extend(copy(TOPIC_ROAD, &road, stamp));
+            out.extend(copy(TOPIC_ROAD, &scene::road_update(stamp, &lines), stamp));
         }
         let series = scene::acc_series(ego, s.header.stamp_sim_ns, &params, self.status.as_ref(), truth);
         if let Ok(data) = serde_json::to_vec(&series) {

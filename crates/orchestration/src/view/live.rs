@@ -1,4 +1,5 @@
-//! The live view: a Foxglove WebSocket server fed from the bus.
+//! The live view: a page for any browser and a Foxglove WebSocket server, on one port
+//! ([`super::front`]), fed from the bus.
 //!
 //! The bus side only keeps the latest message of each kind (Zenoh's receive thread stores a
 //! handle, nothing is decoded twice or encoded there); a task of its own turns the latest into
@@ -16,7 +17,12 @@ use foxglove::{Channel, Context, Encode, PartialMetadata, RawChannel, WebSocketS
 use parking_lot::Mutex;
 use serde::Serialize;
 
+use super::birdseye::birdseye;
+use super::board::{Board, Camera};
+use super::page::{Page, PageStats};
 use super::scene::{self, Image, SceneContext};
+use crate::eval::latency::LatencyWatch;
+use crate::watch::Watcher;
 use slipstream_contract::bus::{Bus, CallbackSubscriber, FrameSample, Received};
 use slipstream_contract::msg::{
     AccStatus, CameraInfo, Detections, GroundTruthObjects, SimEvent, SimEventKind, VehicleState,
@@ -44,7 +50,7 @@ pub const TOPIC_TF: &str = "/tf";
 pub const TOPIC_ACC: &str = "/acc";
 
 /// What the server serves and where.
-#[derive(Debug, Clone)]
+#[derive(Clone)]
 pub struct ViewOptions {
     pub host: String,
     pub port: u16,
@@ -52,11 +58,19 @@ pub struct ViewOptions {
     /// The road and ego to draw; without a scenario the view takes the one the simulator
     /// announces (a built-in one) and draws no road for others.
     pub context: SceneContext,
+    /// A recording replayed onto the view's bus, which the page moves through.
+    pub timeline: Option<Arc<dyn super::Timeline>>,
 }
 
 impl ViewOptions {
     pub fn new(host: &str, port: u16) -> ViewOptions {
-        ViewOptions { host: host.into(), port, rate_hz: DEFAULT_RATE_HZ, context: SceneContext::default() }
+        ViewOptions {
+            host: host.into(),
+            port,
+            rate_hz: DEFAULT_RATE_HZ,
+            context: SceneContext::default(),
+            timeline: None,
+        }
     }
 
     /// The road and ego of `scenario`.
@@ -74,6 +88,8 @@ pub struct ViewStats {
     pub annotations: u64,
     pub scenes: u64,
     pub series: u64,
+    /// What the page's side served.
+    pub page: PageStats,
 }
 
 /// The latest of everything the view draws; `fresh_*` says whether it changed since the
@@ -164,6 +180,7 @@ struct Painter {
     channels: Channels,
     context: SceneContext,
     counters: Arc<Counters>,
+    board: Arc<Mutex<Board>>,
 }
 
 impl Painter {
@@ -197,6 +214,8 @@ impl Painter {
         }
     }
 
+    /// The vehicles, road and series of a new state: to the Foxglove channels that have a
+    /// viewer, and always to the page's board (a page opened later gets the last minute).
     fn scene(
         &mut self,
         stamp: u64,
@@ -210,18 +229,21 @@ impl Painter {
         let vehicles = scene::vehicles(stamp, ego, &params, truth);
         count(&self.counters.scenes, Channels::log(&c.vehicles, &vehicles, stamp));
         Channels::log(&c.tf, &scene::ego_frame(stamp, ego), stamp);
-        if c.road.has_sinks() {
-            if let Some(road) = self.context.road_around(stamp, ego) {
-                Channels::log(&c.road, &road, stamp);
-            }
+        let road = self.context.road_around(ego);
+        if let Some(lines) = road.as_deref().filter(|_| c.road.has_sinks()) {
+            Channels::log(&c.road, &scene::road_update(stamp, lines), stamp);
         }
+        let series = scene::acc_series(ego, stamp_sim, &params, status, truth);
         if c.acc.has_sinks() {
-            let series = scene::acc_series(ego, stamp_sim, &params, status, truth);
             if let Ok(json) = serde_json::to_vec(&series) {
                 c.acc.log_with_meta(&json, PartialMetadata { log_time: Some(stamp) });
                 self.counters.series.fetch_add(1, Ordering::Relaxed);
             }
         }
+        let view = birdseye(ego, &params, truth, road.as_deref());
+        let mut board = self.board.lock();
+        board.on_series(series);
+        board.on_scene(view);
     }
 }
 
@@ -235,37 +257,51 @@ fn count(counter: &AtomicU64, sent: bool) {
 pub struct LiveView {
     server: Option<WebSocketServerHandle>,
     task: tokio::task::JoinHandle<()>,
+    front: tokio::task::JoinHandle<()>,
+    port: u16,
+    page: Arc<Page>,
     counters: Arc<Counters>,
     _subs: Vec<CallbackSubscriber>,
 }
 
 impl LiveView {
-    /// Subscribes to the loop on `bus` and starts the server. Fails with the address when the
-    /// port is taken.
+    /// Subscribes to the loop on `bus`, takes the view's port and starts the page and the
+    /// Foxglove server behind it. Fails with the address when the port is taken.
     pub async fn start(bus: &Bus, opts: ViewOptions) -> Result<LiveView> {
         if !(opts.rate_hz.is_finite() && opts.rate_hz > 0.0) {
             return Err(Error::flag("the view's rate", "must be a number of updates per second > 0"));
         }
-        let latest: Arc<Mutex<Latest>> = Arc::default();
-        let subs = subscribe(bus, &latest).await?;
-        let ctx = Context::new();
-        let channels = Channels::new(&ctx)?;
-        let server = ctx
-            .websocket_server()
-            .name(format!("slipstream {}", env!("CARGO_PKG_VERSION")))
-            .bind(opts.host.clone(), opts.port)
-            .message_backlog_size(BACKLOG)
-            .start()
-            .await
-            .map_err(|source| Error::View {
+        let listener = tokio::net::TcpListener::bind((opts.host.as_str(), opts.port)).await.map_err(|source| {
+            Error::System {
                 what: format!(
                     "cannot serve the live view on {}:{} (another `slipstream view` or `up --view`? pick another with --view-port)",
                     opts.host, opts.port
                 ),
                 source,
-            })?;
+            }
+        })?;
+        let port = listener.local_addr().map(|a| a.port()).unwrap_or(opts.port);
+        let latest: Arc<Mutex<Latest>> = Arc::default();
+        let board: Arc<Mutex<Board>> = Arc::default();
+        let subs = subscribe(bus, &latest, &board).await?;
+        let ctx = Context::new();
+        let channels = Channels::new(&ctx)?;
+        // The Foxglove server on loopback at a port of its own: viewers reach it through the
+        // view's port (front.rs).
+        let server = ctx
+            .websocket_server()
+            .name(format!("slipstream {}", env!("CARGO_PKG_VERSION")))
+            .bind("127.0.0.1", 0)
+            .message_backlog_size(BACKLOG)
+            .start()
+            .await
+            .map_err(|source| Error::View { what: "cannot start the Foxglove server on loopback".into(), source })?;
+        let watcher = Watcher::start(bus, &bus.topics().every_key()).await?;
+        let latency = LatencyWatch::start(bus, false).await?;
+        let page = Arc::new(Page::new(board.clone(), watcher, latency, opts.timeline.clone()));
+        let front = super::front::serve(listener, server.port(), page.clone());
         let counters = Arc::new(Counters::default());
-        let mut painter = Painter { channels, context: opts.context.clone(), counters: counters.clone() };
+        let mut painter = Painter { channels, context: opts.context.clone(), counters: counters.clone(), board };
         let period = Duration::from_secs_f64(1.0 / opts.rate_hz);
         let task = tokio::spawn(async move {
             let mut every = tokio::time::interval(period);
@@ -275,12 +311,12 @@ impl LiveView {
                 painter.tick(&latest);
             }
         });
-        Ok(LiveView { server: Some(server), task, counters, _subs: subs })
+        Ok(LiveView { server: Some(server), task, front, port, page, counters, _subs: subs })
     }
 
-    /// The port the server listens on (the one asked for, or the one chosen for port 0).
+    /// The port the view listens on (the one asked for, or the one chosen for port 0).
     pub fn port(&self) -> u16 {
-        self.server.as_ref().map_or(0, |s| s.port())
+        self.port
     }
 
     pub fn stats(&self) -> ViewStats {
@@ -291,13 +327,15 @@ impl LiveView {
             annotations: c.annotations.load(Ordering::Relaxed),
             scenes: c.scenes.load(Ordering::Relaxed),
             series: c.series.load(Ordering::Relaxed),
+            page: self.page.stats(),
         }
     }
 
-    /// Stops the updates and the server, closing the viewers' connections.
+    /// Stops the updates, the page and the server, closing the viewers' connections.
     pub async fn stop(mut self) -> ViewStats {
         let stats = self.stats();
         self.task.abort();
+        self.front.abort();
         if let Some(server) = self.server.take() {
             server.stop().wait().await;
         }
@@ -308,32 +346,61 @@ impl LiveView {
 impl Drop for LiveView {
     fn drop(&mut self) {
         self.task.abort();
+        self.front.abort();
         if let Some(server) = self.server.take() {
             server.stop().detach_all();
         }
     }
 }
 
-/// The subscriptions that keep `latest` current: short handlers on Zenoh's receive thread.
-async fn subscribe(bus: &Bus, latest: &Arc<Mutex<Latest>>) -> Result<Vec<CallbackSubscriber>> {
-    let l = latest.clone();
-    let frames = bus.subscribe_frames_with(topics::CAMERA_FRONT, move |f| l.lock().frame = Some(f)).await?;
+/// The subscriptions that keep `latest` and the page's board current: short handlers on
+/// Zenoh's receive thread.
+async fn subscribe(
+    bus: &Bus,
+    latest: &Arc<Mutex<Latest>>,
+    board: &Arc<Mutex<Board>>,
+) -> Result<Vec<CallbackSubscriber>> {
+    let (l, b) = (latest.clone(), board.clone());
+    let frames = bus
+        .subscribe_frames_with(topics::CAMERA_FRONT, move |f| {
+            b.lock().on_frame(Camera::Front, f.clone());
+            l.lock().frame = Some(f);
+        })
+        .await?;
+    let b = board.clone();
+    let narrow =
+        bus.subscribe_frames_with(topics::CAMERA_NARROW, move |f| b.lock().on_frame(Camera::Narrow, f)).await?;
     let l = latest.clone();
     let info = bus
         .subscribe_with(topics::CAMERA_FRONT_INFO, move |i: Received<CameraInfo>| l.lock().camera_info = Some(i.msg))
         .await?;
-    let l = latest.clone();
+    let (l, b) = (latest.clone(), board.clone());
     let detections = bus
         .subscribe_with(topics::PERCEPTION_OBJECTS, move |d: Received<Detections>| {
+            b.lock().on_detections(&d.msg);
             let mut l = l.lock();
             l.detections = Some(d.msg);
             l.fresh_detections = true;
         })
         .await?;
-    let l = latest.clone();
+    let (l, b) = (latest.clone(), board.clone());
     let truth = bus
-        .subscribe_with(topics::OBJECTS, move |o: Received<GroundTruthObjects>| l.lock().truth = Some(o.msg))
+        .subscribe_with(topics::OBJECTS, move |o: Received<GroundTruthObjects>| {
+            b.lock().on_truth(&o.msg);
+            l.lock().truth = Some(o.msg);
+        })
         .await?;
+    let mut subs = vec![frames, narrow, info, detections, truth];
+    subs.extend(subscribe_state(bus, latest, board).await?);
+    Ok(subs)
+}
+
+/// The ego's state, the ACC's status and the simulator's events.
+async fn subscribe_state(
+    bus: &Bus,
+    latest: &Arc<Mutex<Latest>>,
+    board: &Arc<Mutex<Board>>,
+) -> Result<Vec<CallbackSubscriber>> {
     let l = latest.clone();
     let state = bus
         .subscribe_with(topics::VEHICLE_STATE, move |s: Received<VehicleState>| {
@@ -342,9 +409,13 @@ async fn subscribe(bus: &Bus, latest: &Arc<Mutex<Latest>>) -> Result<Vec<Callbac
             l.fresh_state = true;
         })
         .await?;
-    let l = latest.clone();
-    let status =
-        bus.subscribe_with(topics::ACC_STATUS, move |s: Received<AccStatus>| l.lock().status = Some(s.msg)).await?;
+    let (l, b) = (latest.clone(), board.clone());
+    let status = bus
+        .subscribe_with(topics::ACC_STATUS, move |s: Received<AccStatus>| {
+            b.lock().on_lead(s.msg.lead.as_ref().map(|l| l.id));
+            l.lock().status = Some(s.msg);
+        })
+        .await?;
     let l = latest.clone();
     let events = bus
         .subscribe_with(topics::SIM_EVENTS, move |e: Received<SimEvent>| {
@@ -353,5 +424,5 @@ async fn subscribe(bus: &Bus, latest: &Arc<Mutex<Latest>>) -> Result<Vec<Callbac
             }
         })
         .await?;
-    Ok(vec![frames, info, detections, truth, state, status, events])
+    Ok(vec![state, status, events])
 }

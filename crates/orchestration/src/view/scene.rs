@@ -236,16 +236,22 @@ pub fn vehicles(
     }
 }
 
+/// One line painted on the road, in world coordinates.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RoadLine {
+    /// The road's edge (solid white), or a lane divider (grey).
+    pub edge: bool,
+    pub points: Vec<Vector2<f64>>,
+}
+
 /// The road around `s_m` (the ego's distance along it): the lane boundaries as lines, the
-/// road's edges solid white (moving in over a lane's taper where it ends), the lane dividers
-/// grey.
-pub fn road_update(stamp_ns: u64, road: &Road, s_m: f64) -> SceneUpdate {
+/// road's edges moving in over a lane's taper where it ends.
+pub fn road_lines(road: &Road, s_m: f64) -> Vec<RoadLine> {
     let n = ((ROAD_BEHIND_M + ROAD_AHEAD_M) / ROAD_STEP_M) as usize + 1;
     let lanes = road.lanes();
-    let lines = (0..=lanes)
+    (0..=lanes)
         .map(|i| {
             let d = i as f64 * road.lane_width_m() - road.half_width_m();
-            let edge = i == 0 || i == lanes;
             let points = (0..n)
                 .map(|k| {
                     let s = s_m - ROAD_BEHIND_M + k as f64 * ROAD_STEP_M;
@@ -257,18 +263,25 @@ pub fn road_update(stamp_ns: u64, road: &Road, s_m: f64) -> SceneUpdate {
                     } else {
                         d
                     };
-                    let p: Vector2<f64> = road.to_world(s, d);
-                    Point3 { x: p.x, y: p.y, z: 0.02 }
+                    road.to_world(s, d)
                 })
                 .collect();
-            LinePrimitive {
-                r#type: line_primitive::Type::LineStrip as i32,
-                pose: Some(Pose { position: Some(Vector3::default()), orientation: Some(yaw_quaternion(0.0)) }),
-                thickness: if edge { 0.3 } else { 0.15 },
-                points,
-                color: Some(if edge { WHITE } else { GREY }),
-                ..Default::default()
-            }
+            RoadLine { edge: i == 0 || i == lanes, points }
+        })
+        .collect()
+}
+
+/// The road's lines for the 3D panel: edges solid white, lane dividers grey.
+pub fn road_update(stamp_ns: u64, lines: &[RoadLine]) -> SceneUpdate {
+    let lines = lines
+        .iter()
+        .map(|line| LinePrimitive {
+            r#type: line_primitive::Type::LineStrip as i32,
+            pose: Some(Pose { position: Some(Vector3::default()), orientation: Some(yaw_quaternion(0.0)) }),
+            thickness: if line.edge { 0.3 } else { 0.15 },
+            points: line.points.iter().map(|p| Point3 { x: p.x, y: p.y, z: 0.02 }).collect(),
+            color: Some(if line.edge { WHITE } else { GREY }),
+            ..Default::default()
         })
         .collect();
     SceneUpdate {
@@ -318,9 +331,9 @@ impl SceneContext {
         self.ego.unwrap_or(VehicleParams::CAR)
     }
 
-    /// The road around the ego (none without a scenario); the ego's place along it is searched
-    /// near the last one.
-    pub fn road_around(&mut self, stamp_ns: u64, ego: &VehicleState) -> Option<SceneUpdate> {
+    /// The road's lines around the ego (none without a scenario); the ego's place along it is
+    /// searched near the last one.
+    pub fn road_around(&mut self, ego: &VehicleState) -> Option<Vec<RoadLine>> {
         let road = self.road.as_ref()?;
         let p = Vector2::new(ego.position_in_world_m[0], ego.position_in_world_m[1]);
         let s_m = match self.road_s {
@@ -328,7 +341,7 @@ impl SceneContext {
             None => road.project_anywhere(p).0,
         };
         self.road_s = Some(s_m);
-        Some(road_update(stamp_ns, road, s_m))
+        Some(road_lines(road, s_m))
     }
 }
 
@@ -392,11 +405,32 @@ pub fn acc_series(
 }
 
 /// The JSON schema of [`AccSeries`], for the channel's advertisement: derived from the type
-/// (draft 7, definitions inline: Foxglove resolves no references).
+/// (draft 7, definitions inline: Foxglove resolves no references), with an optional field's
+/// type the value's own (`"number"`, not `["number", "null"]`): Foxglove's and Lichtblick's
+/// schema readers take one type per field, and an absent sample is null either way.
 pub fn acc_series_schema() -> Schema {
     let settings = schemars::generate::SchemaSettings::draft07().with(|s| s.inline_subschemas = true);
     let schema = settings.into_generator().into_root_schema_for::<AccSeries>();
-    Schema::new(ACC_SERIES_SCHEMA, "jsonschema", serde_json::to_vec(&schema).unwrap_or_default())
+    let mut json = serde_json::to_value(&schema).unwrap_or_default();
+    single_types(&mut json);
+    Schema::new(ACC_SERIES_SCHEMA, "jsonschema", serde_json::to_vec(&json).unwrap_or_default())
+}
+
+/// `"type": [T, "null"]` -> `"type": T`, everywhere in a schema.
+fn single_types(v: &mut serde_json::Value) {
+    match v {
+        serde_json::Value::Object(map) => {
+            if let Some(serde_json::Value::Array(types)) = map.get("type") {
+                let named: Vec<_> = types.iter().filter(|t| t.as_str() != Some("null")).cloned().collect();
+                if let [only] = named.as_slice() {
+                    map.insert("type".into(), only.clone());
+                }
+            }
+            map.values_mut().for_each(single_types);
+        }
+        serde_json::Value::Array(items) => items.iter_mut().for_each(single_types),
+        _ => {}
+    }
 }
 
 /// The name of [`acc_series_schema`].
@@ -497,7 +531,7 @@ mod tests {
     fn the_road_has_one_line_per_lane_boundary_around_the_ego() {
         let spec = slipstream_model::road::RoadSpec::default();
         let r = Road::new(spec.clone());
-        let update = road_update(1, &r, 100.0);
+        let update = road_update(1, &road_lines(&r, 100.0));
         let lines = &update.entities[0].lines;
         assert_eq!(lines.len(), spec.lanes as usize + 1);
         let first = &lines[0].points;
@@ -536,6 +570,10 @@ mod tests {
         for key in json.as_object().unwrap().keys() {
             assert!(schema["properties"].get(key).is_some(), "{key} missing from the schema");
         }
+        // One type per field: Foxglove's and Lichtblick's readers refuse a type list.
+        assert_eq!(schema["properties"]["gap_m"]["type"], "number");
+        assert_eq!(schema["properties"]["mode"]["type"], "string");
+        assert!(!schema.to_string().contains("\"null\""), "{schema}");
         let bare = acc_series(&ego, 0, &VehicleParams::CAR, None, None);
         assert_eq!((bare.mode, bare.gap_m, bare.truth_gap_m), (None, None, None));
     }
