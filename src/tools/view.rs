@@ -21,7 +21,7 @@ const STATUS_EVERY: Duration = Duration::from_secs(2);
     (docs/viewing.md).\n\n\
     Examples:\n  slipstream up --view                 (the loop and its view in one command)\n  \
     slipstream view                      (a loop that is already running)\n  \
-    slipstream view reports/RUN/run.mcap (a recording: the same page with a time slider)\n  \
+    slipstream view reports/RUN/run.mcap  (a recording: the same page with a time slider)\n  \
     slipstream view --view-port 9000 --scenario scenarios/curve-follow.json5   (the road of a scenario file)")]
 pub struct ViewArgs {
     /// A recording to show instead of the live bus: replayed at its pace on a bus of this
