@@ -6,7 +6,9 @@ frame it names (downscaled: compared with OpenCV's resize of the frame read from
 boxes drawn are where perception/objects says for that frame; the plots hold the run's samples
 (the same speeds as vehicle/state at the same simulated times). A screenshot of the whole page
 goes to target/test-reports/view-page.png (docs/viewing.md shows one). Then the port's bad
-input: a path that is not there, bytes that are not HTTP, a client gone mid-request."""
+input (a path that is not there, bytes that are not HTTP, a client gone mid-request), a
+recording in the same page (`view FILE.mcap`: play, pause, the slider), and the page from
+another PC (`--view-host 0.0.0.0`, network namespaces)."""
 
 import base64
 import os
@@ -14,6 +16,7 @@ import pathlib
 import signal
 import socket
 import subprocess
+import sys
 import threading
 import time
 import urllib.error
@@ -244,6 +247,17 @@ def test_bad_requests_are_answered_counted_and_the_page_still_serves(slipstream_
         for _ in range(20):  # clients gone mid-request and mid-answer
             with socket.create_connection(("127.0.0.1", port), timeout=5) as s:
                 s.sendall(b"GET /state HTTP/1.1\r\nHo")
+        # More WebSocket clients than the port serves at once, each sending what is not the
+        # protocol and leaving without the closing handshake: none keeps its place.
+        upgrade = (b"GET / HTTP/1.1\r\nHost: x\r\nUpgrade: websocket\r\nConnection: Upgrade\r\n"
+                   b"Sec-WebSocket-Key: dGhlIHNhbXBsZSBub25jZQ==\r\nSec-WebSocket-Version: 13\r\n"
+                   b"Sec-WebSocket-Protocol: foxglove.sdk.v1\r\n\r\n")
+        for _ in range(80):
+            with socket.create_connection(("127.0.0.1", port), timeout=5) as s:
+                s.sendall(upgrade)
+                assert s.recv(12) == b"HTTP/1.1 101"
+                s.sendall(b"\x81\x85\x00\x00\x00\x00hello")  # a text frame the server cannot parse
+                s.shutdown(socket.SHUT_WR)
         status, body = http_get(port, "/")
         assert status == 200 and b"app.js" in body
         status, body = http_get(port, "/state")
@@ -307,3 +321,49 @@ def test_a_recording_in_the_page_plays_pauses_and_moves(slipstream_bin, free_por
         view.send_signal(signal.SIGINT)
         _, err = view.communicate(timeout=30)
     assert view.returncode == 0, err[-2000:]
+
+
+FETCH = ("import sys, urllib.request as u\n"
+         "for path in ('/', '/state', '/frame?w=160'):\n"
+         "    with u.urlopen(sys.argv[1] + path, timeout=10) as r:\n"
+         "        print(path, r.status, r.headers['Content-Type'], len(r.read()))\n")
+
+
+def test_the_page_from_another_pc_on_the_lan(slipstream_bin):
+    """`up --view --view-host 0.0.0.0` on the simulator's PC: a laptop on the LAN (another
+    network namespace, joined by a bridge) gets the page, its state and a frame at the PC's
+    address; a view on the default host is not reachable from there."""
+    from netns import Lan, can_create_namespaces
+
+    reason = can_create_namespaces()
+    if reason:
+        pytest.skip(reason)
+    lan = Lan(["simpc", "laptop"], subnet="10.219.0")
+    up = local = None
+    try:
+        up = lan.popen("simpc", [slipstream_bin, "-n", "lanview", "up", "--scenario", "cut-in", "--duration", "120",
+                                 "--view", "--view-host", "0.0.0.0", "--plain"],
+                       stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=ROOT)
+        assert wait_for_url(up) == "http://localhost:8765"
+        local = lan.popen("simpc", [slipstream_bin, "-n", "lanview", "view", "--view-port", "8766", "--duration", "60"],
+                          stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=ROOT)
+        assert wait_for_url(local) == "http://localhost:8766"
+        got = ""
+        deadline = time.monotonic() + 60
+        while "/frame?w=160 200" not in got and time.monotonic() < deadline:
+            fetch = lan.popen("laptop", [sys.executable, "-c", FETCH, f"http://{lan.addr['simpc']}:8765"],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+            got = fetch.communicate(timeout=60)[0]
+            time.sleep(0.5)
+        assert "/ 200 text/html" in got and "/state 200 application/json" in got, got
+        assert "/frame?w=160 200 image/jpeg" in got, got
+        refused = lan.popen("laptop", [sys.executable, "-c", FETCH, f"http://{lan.addr['simpc']}:8766"],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        out, err = refused.communicate(timeout=60)
+        assert refused.returncode != 0 and "Connection refused" in err, (out, err[-500:])
+    finally:
+        for proc in (local, up):
+            if proc and proc.poll() is None:
+                proc.send_signal(signal.SIGINT)
+                proc.communicate(timeout=60)
+        lan.close()

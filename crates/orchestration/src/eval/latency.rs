@@ -43,6 +43,9 @@ pub struct LoopLatency {
     last_applied: u64,
     /// Per hop: (publish time of the later message, ns since the epoch; latency, ns).
     samples: [Vec<(u64, i64)>; 4],
+    /// Only the newest `LIVE_WINDOW` samples matter (the live view, open for hours): older
+    /// ones are dropped instead of kept for a report.
+    live_only: bool,
 }
 
 /// How long an unused trace entry is kept (a perception no command used, a command never
@@ -63,7 +66,7 @@ impl LoopLatency {
     /// A detections message: published at `pub_ns`, from the frame published at `frame_pub_ns`.
     pub fn on_detections(&mut self, pub_ns: u64, frame_pub_ns: u64) {
         insert_bounded(&mut self.origin, pub_ns, frame_pub_ns);
-        self.samples[FRAME_TO_DETECTIONS].push((pub_ns, pub_ns as i64 - frame_pub_ns as i64));
+        self.push(FRAME_TO_DETECTIONS, pub_ns, pub_ns as i64 - frame_pub_ns as i64);
     }
 
     /// A ground-truth message (the perception of `--perception ground-truth`).
@@ -80,7 +83,7 @@ impl LoopLatency {
         }
         self.last_basis = basis;
         insert_bounded(&mut self.basis, pub_ns, basis);
-        self.samples[DETECTIONS_TO_CONTROL].push((pub_ns, pub_ns as i64 - basis as i64));
+        self.push(DETECTIONS_TO_CONTROL, pub_ns, pub_ns as i64 - basis as i64);
     }
 
     /// A state saying the command published at `command_pub_ns` was first applied at
@@ -90,11 +93,25 @@ impl LoopLatency {
             return;
         }
         self.last_applied = command_pub_ns;
-        self.samples[CONTROL_TO_APPLIED].push((applied_ns, applied_ns as i64 - command_pub_ns as i64));
+        self.push(CONTROL_TO_APPLIED, applied_ns, applied_ns as i64 - command_pub_ns as i64);
         // The whole loop, once per perception message: its reacting command applied.
         let Some(basis) = self.basis.remove(&command_pub_ns) else { return };
         if let Some(origin) = self.origin.remove(&basis) {
-            self.samples[WHOLE_LOOP].push((applied_ns, applied_ns as i64 - origin as i64));
+            self.push(WHOLE_LOOP, applied_ns, applied_ns as i64 - origin as i64);
+        }
+    }
+
+    /// Keeps only what the live figures need ([`LatencyWatch::start_live`]).
+    pub fn live_only() -> LoopLatency {
+        LoopLatency { live_only: true, ..LoopLatency::default() }
+    }
+
+    fn push(&mut self, hop: usize, t_ns: u64, latency_ns: i64) {
+        let s = &mut self.samples[hop];
+        s.push((t_ns, latency_ns));
+        // Trimmed in batches: a drain per sample would move the window every time.
+        if self.live_only && s.len() >= 2 * LIVE_WINDOW {
+            s.drain(..s.len() - LIVE_WINDOW);
         }
     }
 
@@ -147,8 +164,24 @@ impl LatencyWatch {
         bus: &slipstream_contract::Bus,
         camera: bool,
     ) -> Result<LatencyWatch, slipstream_contract::BusError> {
+        Self::start_with(bus, camera, LoopLatency::default()).await
+    }
+
+    /// The same for live figures only: memory bounded however long it watches (the view).
+    pub async fn start_live(
+        bus: &slipstream_contract::Bus,
+        camera: bool,
+    ) -> Result<LatencyWatch, slipstream_contract::BusError> {
+        Self::start_with(bus, camera, LoopLatency::live_only()).await
+    }
+
+    async fn start_with(
+        bus: &slipstream_contract::Bus,
+        camera: bool,
+        latency: LoopLatency,
+    ) -> Result<LatencyWatch, slipstream_contract::BusError> {
         use slipstream_contract::topics;
-        let latency = std::sync::Arc::new(parking_lot::Mutex::new(LoopLatency::default()));
+        let latency = std::sync::Arc::new(parking_lot::Mutex::new(latency));
         let l = latency.clone();
         let detections = bus
             .subscribe_with(topics::PERCEPTION_OBJECTS, move |d| {
@@ -191,6 +224,18 @@ pub fn min_stable_time_gap_s(delay_s: f64, actuator_lag_s: f64) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_live_only_latency_keeps_a_bounded_window_with_the_newest_samples() {
+        let mut l = LoopLatency::live_only();
+        for k in 0..10_000u64 {
+            l.on_detections(1_000 + k * 10, k * 10);
+        }
+        let s = &l.samples[FRAME_TO_DETECTIONS];
+        assert!(s.len() < 2 * LIVE_WINDOW && s.len() >= LIVE_WINDOW, "{}", s.len());
+        assert_eq!(s.last().unwrap().0, 1_000 + 9_999 * 10);
+        assert_eq!(l.stats(true)[FRAME_TO_DETECTIONS].count, LIVE_WINDOW);
+    }
 
     #[test]
     fn each_hop_counts_the_message_that_moved_the_loop_on() {

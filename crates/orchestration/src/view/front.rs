@@ -22,6 +22,8 @@ use super::page::Page;
 
 /// Connections served at once; more are closed at once (counted).
 pub(crate) const MAX_CONNECTIONS: usize = 64;
+/// Of those, WebSockets at once: viewers that stay never take every place from the pages.
+pub(crate) const MAX_WEBSOCKETS: usize = 16;
 /// A connection with no request for this long is closed.
 const IDLE: Duration = Duration::from_secs(30);
 
@@ -33,6 +35,7 @@ const SDK_SUBPROTOCOL: &str = "foxglove.sdk.v1";
 pub(crate) fn serve(listener: TcpListener, foxglove_port: u16, page: Arc<Page>) -> tokio::task::JoinHandle<()> {
     tokio::spawn(async move {
         let slots = Arc::new(Semaphore::new(MAX_CONNECTIONS));
+        let sockets = Arc::new(Semaphore::new(MAX_WEBSOCKETS));
         loop {
             let Ok((stream, _)) = listener.accept().await else {
                 // Out of descriptors or the like: wait instead of spinning.
@@ -43,10 +46,10 @@ pub(crate) fn serve(listener: TcpListener, foxglove_port: u16, page: Arc<Page>) 
                 page.counters.refused("over the connection limit");
                 continue;
             };
-            let page = page.clone();
+            let (page, sockets) = (page.clone(), sockets.clone());
             tokio::spawn(async move {
                 let _ = stream.set_nodelay(true);
-                connection(stream, foxglove_port, &page).await;
+                connection(stream, foxglove_port, &page, &sockets).await;
                 drop(slot);
             });
         }
@@ -54,7 +57,7 @@ pub(crate) fn serve(listener: TcpListener, foxglove_port: u16, page: Arc<Page>) 
 }
 
 /// One connection: requests answered in turn until it closes, idles or upgrades.
-async fn connection(mut stream: TcpStream, foxglove_port: u16, page: &Page) {
+async fn connection(mut stream: TcpStream, foxglove_port: u16, page: &Page, sockets: &Arc<Semaphore>) {
     let mut buf = Vec::with_capacity(1024);
     loop {
         let head = match tokio::time::timeout(IDLE, http::read_request(&mut stream, &mut buf)).await {
@@ -71,6 +74,12 @@ async fn connection(mut stream: TcpStream, foxglove_port: u16, page: &Page) {
             Head::Request(req) => req,
         };
         if req.is_websocket() {
+            let Ok(_socket) = sockets.clone().try_acquire_owned() else {
+                page.counters.refused("over the WebSocket limit");
+                let busy = Response::text(503, "too many viewers connected: close one");
+                let _ = http::write_response(&mut stream, &busy, false, false).await;
+                return;
+            };
             page.counters.websocket();
             if let Err(e) = websocket(stream, req, buf, foxglove_port).await {
                 tracing::debug!("a viewer's WebSocket ended: {e}");
@@ -86,7 +95,9 @@ async fn connection(mut stream: TcpStream, foxglove_port: u16, page: &Page) {
 }
 
 /// Passes an upgrade to the Foxglove server and then the bytes both ways, until either side
-/// closes. `early` holds what the client sent after its request head.
+/// closes: the first end closes both (a half-closed pair would hold its place for ever, as a
+/// client gone without the closing handshake did). `early` holds what the client sent after
+/// its request head.
 async fn websocket(mut client: TcpStream, req: Request, early: Vec<u8>, foxglove_port: u16) -> std::io::Result<()> {
     let mut upstream = TcpStream::connect(("127.0.0.1", foxglove_port)).await?;
     upstream.set_nodelay(true)?;
@@ -97,7 +108,12 @@ async fn websocket(mut client: TcpStream, req: Request, early: Vec<u8>, foxglove
     let (status, headers) = http::read_response(&mut upstream, &mut buf).await?;
     client.write_all(&response_head(status, &headers, legacy)).await?;
     client.write_all(&buf).await?;
-    tokio::io::copy_bidirectional(&mut client, &mut upstream).await?;
+    let (mut from_client, mut to_client) = client.split();
+    let (mut from_upstream, mut to_upstream) = upstream.split();
+    tokio::select! {
+        r = tokio::io::copy(&mut from_client, &mut to_upstream) => r?,
+        r = tokio::io::copy(&mut from_upstream, &mut to_client) => r?,
+    };
     Ok(())
 }
 

@@ -297,7 +297,7 @@ impl LiveView {
             .await
             .map_err(|source| Error::View { what: "cannot start the Foxglove server on loopback".into(), source })?;
         let watcher = Watcher::start(bus, &bus.topics().every_key()).await?;
-        let latency = LatencyWatch::start(bus, false).await?;
+        let latency = LatencyWatch::start_live(bus, false).await?;
         let page = Arc::new(Page::new(board.clone(), watcher, latency, opts.timeline.clone()));
         let front = super::front::serve(listener, server.port(), page.clone());
         let counters = Arc::new(Counters::default());
