@@ -284,8 +284,9 @@ pub struct FrameSample {
     sample: Sample,
     header: Header,
     /// The payload joined into one buffer, only when Zenoh delivered it in fragments (a large
-    /// frame over the network): the one copy such a frame costs on the way in.
-    joined: Option<Vec<u8>>,
+    /// frame over the network): the one copy such a frame costs on the way in. Shared, so that
+    /// a clone of the sample (a reader keeping the frame) copies no pixels.
+    joined: Option<std::sync::Arc<Vec<u8>>>,
     /// Wall clock (ns since the epoch) when Zenoh handed the sample to this node.
     arrived_ns: u64,
 }
@@ -338,7 +339,11 @@ impl FrameSample {
 /// Validates a camera payload as a frame (joining fragments if Zenoh delivered it in pieces).
 fn accept_frame(sample: Sample) -> Result<(Header, usize, FrameSample), DecodeError> {
     let payload = sample.payload();
-    let joined = if payload.slices().nth(1).is_some() { Some(payload.to_bytes().into_owned()) } else { None };
+    let joined = if payload.slices().nth(1).is_some() {
+        Some(std::sync::Arc::new(payload.to_bytes().into_owned()))
+    } else {
+        None
+    };
     let len = payload.len();
     let bytes = match &joined {
         Some(v) => v.as_slice(),

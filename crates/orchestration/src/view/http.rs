@@ -51,57 +51,93 @@ pub(crate) enum Head {
     Malformed(&'static str),
 }
 
-/// Reads one request head into `buf` (bytes after it stay there: a pipelined request).
-pub(crate) async fn read_request<R: AsyncRead + Unpin>(r: &mut R, buf: &mut Vec<u8>) -> io::Result<Head> {
+/// What a head parser says of the bytes so far.
+enum Step<T> {
+    /// A whole head of this many bytes.
+    Done(usize, T),
+    /// Not whole yet: read more.
+    More,
+    /// Not a head it takes.
+    Stop(T),
+}
+
+/// How reading a head ended short of a parsed one.
+enum Short {
+    /// Over [`MAX_HEAD`] bytes and still not whole.
+    TooLong,
+    /// The stream ended first.
+    Ended,
+}
+
+/// Reads into `buf` until `parse` has a whole head (removed from `buf`; what follows stays)
+/// or refuses it: the one loop for requests and responses.
+async fn read_head<R: AsyncRead + Unpin, T>(
+    r: &mut R,
+    buf: &mut Vec<u8>,
+    mut parse: impl FnMut(&[u8]) -> Step<T>,
+) -> io::Result<Result<T, Short>> {
     loop {
         if !buf.is_empty() {
-            let mut headers = [httparse::EMPTY_HEADER; MAX_HEADERS];
-            let mut req = httparse::Request::new(&mut headers);
-            match req.parse(buf) {
-                Ok(httparse::Status::Complete(len)) => {
-                    let parsed = request_of(&req);
+            match parse(buf) {
+                Step::Done(len, head) => {
                     buf.drain(..len);
-                    return Ok(parsed.map_or(Head::Malformed("not an HTTP/1.x request"), Head::Request));
+                    return Ok(Ok(head));
                 }
-                Ok(httparse::Status::Partial) => {}
-                Err(httparse::Error::TooManyHeaders) => return Ok(Head::Malformed("too many headers")),
-                Err(_) => return Ok(Head::Malformed("not an HTTP request")),
+                Step::Stop(head) => return Ok(Ok(head)),
+                Step::More => {}
             }
         }
         if buf.len() >= MAX_HEAD {
-            return Ok(Head::Malformed("request head over 8 KiB"));
+            return Ok(Err(Short::TooLong));
         }
         if !read_more(r, buf).await? {
-            return Ok(Head::Closed);
+            return Ok(Err(Short::Ended));
         }
     }
 }
 
+/// Reads one request head into `buf` (bytes after it stay there: a pipelined request).
+pub(crate) async fn read_request<R: AsyncRead + Unpin>(r: &mut R, buf: &mut Vec<u8>) -> io::Result<Head> {
+    let head = read_head(r, buf, |bytes| {
+        let mut headers = [httparse::EMPTY_HEADER; MAX_HEADERS];
+        let mut req = httparse::Request::new(&mut headers);
+        match req.parse(bytes) {
+            Ok(httparse::Status::Complete(len)) => {
+                Step::Done(len, request_of(&req).map_or(Head::Malformed("not an HTTP/1.x request"), Head::Request))
+            }
+            Ok(httparse::Status::Partial) => Step::More,
+            Err(httparse::Error::TooManyHeaders) => Step::Stop(Head::Malformed("too many headers")),
+            Err(_) => Step::Stop(Head::Malformed("not an HTTP request")),
+        }
+    })
+    .await?;
+    Ok(match head {
+        Ok(head) => head,
+        Err(Short::TooLong) => Head::Malformed("request head over 8 KiB"),
+        Err(Short::Ended) => Head::Closed,
+    })
+}
+
+/// A response's status and headers.
+type ResponseHead = (u16, Vec<(String, Vec<u8>)>);
+
 /// Reads a response head (the upstream WebSocket server's answer) into `buf`: its status and
 /// headers, the bytes after it left in `buf`.
-pub(crate) async fn read_response<R: AsyncRead + Unpin>(
-    r: &mut R,
-    buf: &mut Vec<u8>,
-) -> io::Result<(u16, Vec<(String, Vec<u8>)>)> {
-    loop {
-        if !buf.is_empty() {
-            let mut headers = [httparse::EMPTY_HEADER; MAX_HEADERS];
-            let mut resp = httparse::Response::new(&mut headers);
-            match resp.parse(buf) {
-                Ok(httparse::Status::Complete(len)) => {
-                    let status = resp.code.unwrap_or(0);
-                    let headers = resp.headers.iter().map(|h| (h.name.to_string(), h.value.to_vec())).collect();
-                    buf.drain(..len);
-                    return Ok((status, headers));
-                }
-                Ok(httparse::Status::Partial) => {}
-                Err(e) => return Err(io::Error::new(io::ErrorKind::InvalidData, e)),
+pub(crate) async fn read_response<R: AsyncRead + Unpin>(r: &mut R, buf: &mut Vec<u8>) -> io::Result<ResponseHead> {
+    let head = read_head(r, buf, |bytes| {
+        let mut headers = [httparse::EMPTY_HEADER; MAX_HEADERS];
+        let mut resp = httparse::Response::new(&mut headers);
+        match resp.parse(bytes) {
+            Ok(httparse::Status::Complete(len)) => {
+                let headers = resp.headers.iter().map(|h| (h.name.to_string(), h.value.to_vec())).collect();
+                Step::Done(len, Ok((resp.code.unwrap_or(0), headers)))
             }
+            Ok(httparse::Status::Partial) => Step::More,
+            Err(e) => Step::Stop(Err(io::Error::new(io::ErrorKind::InvalidData, e))),
         }
-        if buf.len() >= MAX_HEAD || !read_more(r, buf).await? {
-            return Err(io::Error::new(io::ErrorKind::InvalidData, "no complete response head"));
-        }
-    }
+    })
+    .await?;
+    head.unwrap_or_else(|_| Err(io::Error::new(io::ErrorKind::InvalidData, "no complete response head")))
 }
 
 /// Reads what is there into `buf`; false at end of stream.
