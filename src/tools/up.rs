@@ -280,7 +280,7 @@ pub fn run_from(path: &Path, args: &UpArgs, connect: &ConnectArgs) -> Result<u8>
 pub fn run(args: &UpArgs, connect: &ConnectArgs) -> Result<Outcome> {
     let args = &UpArgs { sim: sim_source(args)?, ..args.clone() };
     let mut scenario = match args.sim {
-        SimSource::Builtin => Scenario::find(&args.scenario)?,
+        SimSource::Builtin => Scenario::find(&args.scenario)?.one_ego("slipstream up")?,
         SimSource::External => external_scenario(args)?,
     };
     if let Some(d) = args.duration {
@@ -466,8 +466,8 @@ fn loop_spec(args: &UpArgs, scenario: &Scenario) -> Result<LoopSpec> {
         duration_s: scenario.duration_s,
         clock: args.mode,
         perception: args.perception,
-        set_speed_mps: args.set_speed.unwrap_or(scenario.ego.controller_set_speed_mps()),
-        time_gap_s: scenario.ego.time_gap_s,
+        set_speed_mps: args.set_speed.unwrap_or(scenario.ego().controller_set_speed_mps()),
+        time_gap_s: scenario.ego().time_gap_s,
         vehicle: Some(LoopSpec::vehicle_of(scenario)),
         faults: args.faults.profile()?,
         link: Default::default(),
@@ -513,7 +513,7 @@ impl Extras {
         let ros2 = match args.ros2 {
             true => {
                 let config = crate::ros2::Ros2Config::from_topic_map(bus.topics())?;
-                let vehicle = VehicleParams::of_class(scenario.ego.class.into());
+                let vehicle = VehicleParams::of_class(scenario.ego().class.into());
                 let face = crate::ros2::RosFace::start(bus, &config, vehicle, false).await?;
                 let n = face.node();
                 eprintln!(
@@ -642,7 +642,7 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
     let plots = judged_outputs(&trace, &latency, &scenario.name, args, t0_ns, dir)?;
     let sim_time_s = trace.samples.last().map_or(0.0, |s| s.t_s);
     let sim_wall_time_s = sim.as_ref().map_or(sim_ran_s, |s| s.wall_time_s);
-    let lag_s = VehicleParams::of_class(scenario.ego.class.into()).actuator_lag_s;
+    let lag_s = VehicleParams::of_class(scenario.ego().class.into()).actuator_lag_s;
     let report = UpReport {
         command: std::env::args().collect::<Vec<_>>().join(" "),
         scenario: scenario.name.clone(),

@@ -18,6 +18,7 @@ mod discovery;
 mod faults;
 mod layering;
 mod record;
+mod sim_egos;
 mod sim_node;
 mod sim_world;
 mod structure;

@@ -1,6 +1,6 @@
 """The docs' commands, typed as a user types them.
 
-README.md, docs/tools.md, docs/recording.md and docs/own-node.md (their ```sh blocks) and every `--help`
+README.md, docs/tools.md, docs/recording.md, docs/own-node.md and docs/simulator.md (their ```sh blocks) and every `--help`
 example are run here on a host of their own (tests/python/user_host.py: the default config
 and port, nodes started by hand in separate processes, tools beside a live loop, two and three
 loops at once, signals). Each run checks what a user meets first: the exit code, that a
@@ -57,7 +57,7 @@ ELSEWHERE = {
 }
 
 BINS = ("slipstream", "slipstream-sim", "slipstream-detect", "slipstream-acc", "own-controller", "own-detector")
-DOCS = ("README.md", "docs/tools.md", "docs/recording.md", "docs/own-node.md")
+DOCS = ("README.md", "docs/tools.md", "docs/recording.md", "docs/own-node.md", "docs/simulator.md")
 
 
 def typed(command, **placeholders):
@@ -288,6 +288,22 @@ def test_a_controller_and_a_simulator_by_hand_and_a_loop_beside_them(host):
     assert host.finish(up, 120) == 0, up.stderr()[-3000:]
     directory = re.search(r"report in (\S+)", up.stderr()).group(1)
     assert report(host, directory)["namespace"] == "loop-2" and (host.dir / directory / "run.mcap").is_file()
+
+
+@needs_host
+def test_a_platoon_by_hand_eight_controllers_each_in_its_namespace(host):
+    """docs/simulator.md: platoon-8 in lockstep with the loop's `for` typed one ACC at a time."""
+    accs = [host.start(f"slipstream-acc -n car{k} --perception ground-truth --lockstep") for k in range(1, 9)]
+    sim = one_shot(host, "slipstream-sim --scenario platoon-8 --mode lockstep --duration 30", work_s=120)
+    out = summary_of(sim)
+    assert "platoon-8 (seed 8): success (duration of 30 s reached)" in out, out
+    assert "collisions: 0 ego, 0 traffic; lockstep timeouts 0, control timeouts 0" in out, out
+    for acc in accs:
+        assert "joined the bus" in acc.stderr()
+        stopped(host, acc)
+    # `up` runs one ego's nodes: it names the scenario's egos and what to do instead.
+    up = one_shot(host, "target/release/slipstream up --scenario platoon-8", work_s=2, expect=1)
+    assert "`platoon-8` has 8 controlled vehicles" in up.stderr() and "namespace" in up.stderr(), up.stderr()
 
 
 @needs_host

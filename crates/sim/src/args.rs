@@ -2,7 +2,7 @@
 
 use std::path::PathBuf;
 
-use super::scenario::{Scenario, BUILT_IN};
+use super::scenario::{Scenario, BUILT_IN, SEVERAL_EGOS};
 use super::settings::{Mode, OnTimeout, SimSettings};
 use slipstream_contract::config::{ConfigError, ConnectArgs, FaultArgs};
 
@@ -113,15 +113,19 @@ impl SimArgs {
         Ok(s)
     }
 
-    /// The built-in scenarios, one a line, with their descriptions.
+    /// The built-in scenarios, one a line, with their descriptions (the platoons last, with
+    /// their namespaces).
     pub fn scenario_list() -> String {
-        BUILT_IN
-            .iter()
-            .map(|(name, _)| {
-                let description = Scenario::find(name).map(|s| s.description).unwrap_or_default();
-                format!("{name:32} {description}\n")
-            })
-            .collect()
+        let line = |(name, _): &(&str, &str)| {
+            let s = Scenario::find(name).ok();
+            let description = s.as_ref().map(|s| s.description.clone()).unwrap_or_default();
+            let egos = s.filter(|s| s.egos().len() > 1).map(|s| {
+                let ns: Vec<&str> = s.egos().iter().filter_map(|e| e.namespace.as_deref()).collect();
+                format!(" [{} egos: {}]", ns.len(), ns.join(", "))
+            });
+            format!("{name:32} {description}{}\n", egos.unwrap_or_default())
+        };
+        BUILT_IN.iter().chain(SEVERAL_EGOS).map(line).collect()
     }
 }
 

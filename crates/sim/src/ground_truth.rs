@@ -7,10 +7,16 @@ use super::render::ObjectVisibility;
 use super::world::{VehicleView, World};
 use slipstream_contract::msg::{GroundTruthObject, GroundTruthObjects};
 
-/// Ground truth for the current state of `world`; `visibility` comes from the frame rendered
-/// from this same state (vehicles beyond the draw distance have no entry: no box, 0 visible).
+/// Ground truth for the current state of `world`, around the first ego; `visibility` comes
+/// from the frame rendered from this same state (vehicles beyond the draw distance have no
+/// entry: no box, 0 visible).
 pub fn ground_truth(world: &World, visibility: &[ObjectVisibility]) -> GroundTruthObjects {
-    let ego = world.ego();
+    ground_truth_of(world, 0, visibility)
+}
+
+/// Ground truth around ego `k`: every other vehicle, the other egos among them.
+pub fn ground_truth_of(world: &World, k: usize, visibility: &[ObjectVisibility]) -> GroundTruthObjects {
+    let ego = world.ego_at(k);
     let objects = world.vehicles().iter().filter(|v| v.id != ego.id).map(|v| object(ego, v, visibility)).collect();
     GroundTruthObjects { step: world.step_count(), objects }
 }

@@ -12,7 +12,10 @@
 //! - [`cameras`]: the front and the narrow camera drawn in process (eval), seeded as the node.
 //! - [`ground_truth`]: the objects message, from the world and the rendered frame.
 //! - [`settings`]: rates, camera, clock mode and control policy (config/sim.json5).
-//! - [`node`]: the simulator on the bus: clock modes, lockstep, publishing.
+//! - [`node`]: the simulator on the bus: clock modes, lockstep, the run's report.
+//! - `port`: one controlled vehicle's topics, cameras and control input, in its namespace.
+//! - `error`: the node's error, [`SimError`].
+//! - `control_in`: commands as they arrive, the timeout policy, lockstep's answers.
 //! - [`args`]: slipstream-sim's command-line flags.
 //! - [`preview`]: one frame to a PNG, off the bus, for scenario writers.
 //!
@@ -20,11 +23,14 @@
 
 pub mod args;
 pub mod cameras;
+mod control_in;
 pub mod driver;
 pub mod dynamics;
+mod error;
 pub mod ground_truth;
 pub mod node;
 pub mod physics;
+mod port;
 pub mod preview;
 pub mod render;
 pub mod rng;
@@ -32,7 +38,9 @@ pub mod scenario;
 pub mod settings;
 pub mod world;
 
+pub use error::SimError;
 pub use node::{run, SimReport, SimTime};
+pub use port::EgoRun;
 pub use scenario::Scenario;
 pub use settings::SimSettings;
 pub use world::World;

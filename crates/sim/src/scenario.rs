@@ -1,6 +1,7 @@
-//! Scenarios: the road, the ego's start, scripted traffic, end conditions, randomness and
-//! noise, read from JSON5 files (docs/simulator.md documents the format; scenarios/ has the
-//! built-in ones, compiled into the binary so `--scenario NAME` works from anywhere).
+//! Scenarios: the road, the controlled vehicles' starts (one `ego`, or several `egos` each in
+//! a namespace of its own), scripted traffic, end conditions, randomness and noise, read from
+//! JSON5 files (docs/simulator.md documents the format; scenarios/ has the built-in ones,
+//! compiled into the binary so `--scenario NAME` works from anywhere).
 
 use std::path::Path;
 
@@ -9,6 +10,7 @@ use serde::Deserialize;
 use slipstream_contract::config::{parse_json5, ConfigError, Invalid};
 use slipstream_contract::msg::ObjectClass;
 use slipstream_model::road::RoadSpec;
+use slipstream_model::vehicle::VehicleParams;
 
 /// The scenarios shipped in scenarios/, by name.
 pub const BUILT_IN: &[(&str, &str)] = &[
@@ -32,8 +34,25 @@ pub const BUILT_IN: &[(&str, &str)] = &[
     ("open-road", include_str!("../../../scenarios/open-road.json5")),
 ];
 
+/// The built-in scenarios with several controlled vehicles (platoons), by name: found by
+/// `--scenario NAME` like the others, and kept out of [`BUILT_IN`], the suites a single ego's
+/// detector and controller are judged on.
+pub const SEVERAL_EGOS: &[(&str, &str)] = &[
+    ("platoon-8", include_str!("../../../scenarios/platoon-8.json5")),
+    ("platoon-8-hard-brake", include_str!("../../../scenarios/platoon-8-hard-brake.json5")),
+    ("platoon-8-stop-and-go", include_str!("../../../scenarios/platoon-8-stop-and-go.json5")),
+];
+
 /// How far beyond its lane's edge a vehicle may be placed (`offset_m`): a shoulder's width.
 pub const MAX_SHOULDER_M: f64 = 3.0;
+
+/// Controlled vehicles one scenario may have: each costs a camera (or two) per frame and a
+/// detector and controller process.
+pub const MAX_EGOS: usize = 32;
+
+/// The smallest bumper-to-bumper gap between two egos starting in one lane: bodies placed
+/// closer touch at once.
+pub const MIN_START_GAP_M: f64 = 2.0;
 
 const FIX: &str = "see docs/simulator.md (scenario format) for every field and its allowed values";
 
@@ -77,7 +96,14 @@ pub struct Scenario {
     pub seed: u64,
     #[serde(default)]
     pub road: RoadSpec,
-    pub ego: EgoSpec,
+    /// The one controlled vehicle, as a file gives it; [`Scenario::parse`] moves it into
+    /// `egos`, so code reads [`Scenario::ego`] and [`Scenario::egos`] only.
+    #[serde(default, rename = "ego")]
+    single_ego: Option<EgoSpec>,
+    /// The controlled vehicles (at least one after parsing), each with its namespace. The
+    /// first is "the ego": scripted traffic is placed around it and reacts to it.
+    #[serde(default)]
+    egos: Vec<EgoSpec>,
     #[serde(default)]
     pub traffic: Vec<TrafficSpec>,
     #[serde(default)]
@@ -123,6 +149,11 @@ pub enum Warranted {
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct EgoSpec {
+    /// Where this vehicle's topics live under the run's namespace (`car1`: car1/vehicle/speed,
+    /// car1/camera/front, car1/vehicle/control, ...), and its nodes with them. None: the run's
+    /// namespace itself (one ego). Every ego of several has one of its own.
+    #[serde(default)]
+    pub namespace: Option<String>,
     pub lane: u32,
     /// Start position of the rear axle along the road.
     #[serde(default = "EgoSpec::default_s")]
@@ -300,7 +331,7 @@ impl Scenario {
         if name_or_path.contains('/') || name_or_path.ends_with(".json5") {
             return Scenario::load(Path::new(name_or_path));
         }
-        match BUILT_IN.iter().find(|(name, _)| *name == name_or_path) {
+        match BUILT_IN.iter().chain(SEVERAL_EGOS).find(|(name, _)| *name == name_or_path) {
             Some((name, text)) => Scenario::parse(text, &format!("scenarios/{name}.json5")),
             None => Err(ConfigError::new(
                 "--scenario",
@@ -308,7 +339,7 @@ impl Scenario {
                 format!("no built-in scenario named `{name_or_path}`"),
                 format!(
                     "use one of: {} (or a path to a .json5 file)",
-                    BUILT_IN.iter().map(|(n, _)| *n).collect::<Vec<_>>().join(", ")
+                    BUILT_IN.iter().chain(SEVERAL_EGOS).map(|(n, _)| *n).collect::<Vec<_>>().join(", ")
                 ),
             )),
         }
@@ -323,9 +354,69 @@ impl Scenario {
 
     /// Parses and checks scenario text; `origin` names it in errors.
     pub fn parse(text: &str, origin: &str) -> Result<Scenario, ConfigError> {
-        let scenario: Scenario = parse_json5(text, origin, FIX)?;
+        let mut scenario: Scenario = parse_json5(text, origin, FIX)?;
+        scenario.gather_egos().map_err(|i| i.at(origin))?;
         scenario.check().map_err(|i| i.at(origin))?;
         Ok(scenario)
+    }
+
+    /// The controlled vehicle traffic is placed around: the only one, or the first of `egos`.
+    pub fn ego(&self) -> &EgoSpec {
+        &self.egos[0]
+    }
+
+    /// This scenario for a tool that runs one ego's nodes: an error naming the scenario and
+    /// what to do instead when it has several.
+    pub fn one_ego(self, tool: &str) -> Result<Scenario, ConfigError> {
+        if self.egos.len() == 1 {
+            return Ok(self);
+        }
+        Err(ConfigError::new(
+            "--scenario",
+            "egos",
+            format!("`{}` has {} controlled vehicles and {tool} runs one ego's detector and controller", self.name, self.egos.len()),
+            "run slipstream-sim with it and each ego's nodes in its namespace (docs/simulator.md, \"Several controlled vehicles\"), or pick a scenario with one `ego`",
+        ))
+    }
+
+    /// Every controlled vehicle, the first being [`Scenario::ego`].
+    pub fn egos(&self) -> &[EgoSpec] {
+        &self.egos
+    }
+
+    /// The key a field of ego `k` is named by in errors: `ego.<field>` for a file with one
+    /// `ego`, `egos[k].<field>` for one with a list.
+    fn ego_key(&self, k: usize, field: &str) -> String {
+        if self.egos_listed() {
+            format!("egos[{k}].{field}")
+        } else {
+            format!("ego.{field}")
+        }
+    }
+
+    fn egos_listed(&self) -> bool {
+        self.single_ego.is_none()
+    }
+
+    /// `ego` or `egos`, exactly one of them, into `egos`.
+    fn gather_egos(&mut self) -> Result<(), Invalid> {
+        match (&self.single_ego, self.egos.is_empty()) {
+            (Some(_), false) => Invalid::err(
+                "egos",
+                "the file gives both `ego` and `egos`",
+                "give one `ego` for a single controlled vehicle, or list every one in `egos`",
+            ),
+            (None, true) => Invalid::err(
+                "ego",
+                "no controlled vehicle",
+                "give `ego: { lane, speed_mps }`, or `egos: [ { namespace, lane, s_m, speed_mps }, ... ]`",
+            ),
+            (Some(ego), true) => {
+                self.egos = vec![ego.clone()];
+                Ok(())
+            }
+            (None, false) => Ok(()),
+        }
     }
 
     /// The checks serde cannot make: ranges and references between fields. The first one
@@ -350,9 +441,6 @@ impl Scenario {
     }
 
     fn check_road_and_ego(&self) -> Result<(), Invalid> {
-        let lanes = self.road.lanes;
-        let lane_fix = format!("lanes are numbered 0 (rightmost) to {}", lanes.saturating_sub(1));
-        let speed_ok = |v: f64| v.is_finite() && (0.0..=70.0).contains(&v);
         if !(self.duration_s.is_finite() && self.duration_s > 0.0) {
             return Invalid::err(
                 "duration_s",
@@ -363,29 +451,87 @@ impl Scenario {
         if let Some(invalid) = self.road.invalid() {
             return Err(invalid);
         }
-        if self.ego.lane >= lanes {
+        for k in 0..self.egos.len() {
+            self.check_ego(k)?;
+        }
+        self.check_egos_apart()
+    }
+
+    /// Controlled vehicle `k`: its lane, speeds and time gap.
+    fn check_ego(&self, k: usize) -> Result<(), Invalid> {
+        let (ego, lanes) = (&self.egos[k], self.road.lanes);
+        let key = |field: &str| self.ego_key(k, field);
+        if ego.lane >= lanes {
             return Invalid::err(
-                "ego.lane",
-                format!("lane {} does not exist on a {lanes}-lane road", self.ego.lane),
-                &lane_fix,
+                key("lane"),
+                format!("lane {} does not exist on a {lanes}-lane road", ego.lane),
+                format!("lanes are numbered 0 (rightmost) to {}", lanes.saturating_sub(1)),
             );
         }
-        if let Some(end) = self.road.lane_end(self.ego.lane) {
+        if let Some(end) = self.road.lane_end(ego.lane) {
             return Invalid::err(
-                "ego.lane",
+                key("lane"),
                 format!("lane {} ends at {} m and the ego keeps its lane", end.lane, end.end_m),
                 "start the ego in a lane that goes on; traffic in the ending lane merges",
             );
         }
-        if !speed_ok(self.ego.speed_mps) {
-            return Invalid::err("ego.speed_mps", format!("{} m/s", self.ego.speed_mps), "use 0 to 70 m/s");
+        let speed_ok = |v: f64| v.is_finite() && (0.0..=70.0).contains(&v);
+        if !speed_ok(ego.speed_mps) {
+            return Invalid::err(key("speed_mps"), format!("{} m/s", ego.speed_mps), "use 0 to 70 m/s");
         }
-        if let Some(h) = self.ego.time_gap_s.filter(|h| !(0.8..=3.0).contains(h)) {
+        if let Some(v) = ego.set_speed_mps.filter(|v| !speed_ok(*v)) {
+            return Invalid::err(key("set_speed_mps"), format!("{v} m/s"), "use 0 to 70 m/s");
+        }
+        if !ego.s_m.is_finite() {
+            return Invalid::err(key("s_m"), format!("{}", ego.s_m), "give metres along the road");
+        }
+        if let Some(h) = ego.time_gap_s.filter(|h| !(0.8..=3.0).contains(h)) {
             return Invalid::err(
-                "ego.time_gap_s",
+                key("time_gap_s"),
                 format!("{h} s"),
                 "use 0.8 to 3.0 s (ISO 15622 asks at least 0.8 s)",
             );
+        }
+        Ok(())
+    }
+
+    /// Several egos: each in a namespace of its own, none where another is.
+    fn check_egos_apart(&self) -> Result<(), Invalid> {
+        if self.egos.len() > MAX_EGOS {
+            return Invalid::err(
+                "egos",
+                format!("{} controlled vehicles", self.egos.len()),
+                format!("use at most {MAX_EGOS}"),
+            );
+        }
+        if self.egos.len() == 1 {
+            return Ok(());
+        }
+        for (k, ego) in self.egos.iter().enumerate() {
+            let ns = ego.namespace.as_deref().unwrap_or("");
+            if let Some(why) = namespace_problem(ns) {
+                return Invalid::err(
+                    self.ego_key(k, "namespace"),
+                    why,
+                    "give each ego a plain key of its own, such as `car1`",
+                );
+            }
+            if let Some(j) = self.egos[..k].iter().position(|o| o.namespace == ego.namespace) {
+                return Invalid::err(
+                    self.ego_key(k, "namespace"),
+                    format!("`{ns}` is egos[{j}]'s namespace too"),
+                    "give each ego a namespace of its own: their topics would mix",
+                );
+            }
+            if let Some(j) =
+                self.egos[..k].iter().position(|o| o.lane == ego.lane && bumper_gap_m(o, ego) < MIN_START_GAP_M)
+            {
+                return Invalid::err(
+                    self.ego_key(k, "s_m"),
+                    format!("{} m in lane {} overlaps egos[{j}] (at {} m)", ego.s_m, ego.lane, self.egos[j].s_m),
+                    format!("start egos in one lane at least {MIN_START_GAP_M} m apart, bumper to bumper"),
+                );
+            }
         }
         Ok(())
     }
@@ -409,11 +555,20 @@ impl Scenario {
         if !self.offset_ok(t.offset_m) {
             return Invalid::err(key("offset_m"), format!("{} m", t.offset_m), self.offset_fix());
         }
-        if t.lane == self.ego.lane && t.gap_m.abs() < 2.0 {
+        if t.lane == self.ego().lane && t.gap_m.abs() < 2.0 {
             return Invalid::err(
                 key("gap_m"),
                 format!("{} m overlaps the ego in its lane", t.gap_m),
                 "use |gap_m| >= 2",
+            );
+        }
+        let overlaps =
+            |e: &&EgoSpec| e.lane == t.lane && self.traffic_gap_to_m(t, e) < MIN_START_GAP_M + self.variation.gap_m;
+        if let Some(k) = self.egos.iter().skip(1).position(|e| overlaps(&e)) {
+            return Invalid::err(
+                key("gap_m"),
+                format!("{} m from the first ego puts it where egos[{}] starts", t.gap_m, k + 1),
+                "keep scripted vehicles at least 2 m (plus variation.gap_m) from every ego, bumper to bumper",
             );
         }
         for (j, a) in t.actions.iter().enumerate() {
@@ -446,6 +601,21 @@ impl Scenario {
             }
         }
         Ok(())
+    }
+
+    /// Bumper-to-bumper gap between scripted vehicle `t` (placed from the first ego by its
+    /// `gap_m`) and ego `e`.
+    fn traffic_gap_to_m(&self, t: &TrafficSpec, e: &EgoSpec) -> f64 {
+        let ego = VehicleParams::of_class(self.ego().class.into());
+        let len = VehicleParams::of_class(t.class.into()).size_m[0];
+        let ego_rear = self.ego().s_m - ego.rear_overhang_m;
+        let rear = if t.gap_m >= 0.0 { ego_rear + ego.size_m[0] + t.gap_m } else { ego_rear + t.gap_m - len };
+        let (e_rear, e_front) = span(e);
+        if rear >= e_rear {
+            rear - e_front
+        } else {
+            e_rear - (rear + len)
+        }
     }
 
     /// An offset across a lane: within the lane, on its lines, or up to MAX_SHOULDER_M beyond.
@@ -518,6 +688,35 @@ impl Scenario {
     }
 }
 
+/// Why `ns` cannot be an ego's namespace, if it cannot: it is empty, or not a plain key.
+fn namespace_problem(ns: &str) -> Option<String> {
+    if ns.is_empty() {
+        return Some("has no namespace (several egos need one each)".into());
+    }
+    let plain = |c: char| c.is_ascii_alphanumeric() || matches!(c, '-' | '_' | '/');
+    if !ns.chars().all(plain) || ns.starts_with('/') || ns.ends_with('/') || ns.contains("//") {
+        return Some(format!("`{ns}` is not a plain key (letters, digits, -, _ and / between words)"));
+    }
+    None
+}
+
+/// Where an ego's bumpers start along the road: (rear, front).
+fn span(e: &EgoSpec) -> (f64, f64) {
+    let p = VehicleParams::of_class(e.class.into());
+    let rear = e.s_m - p.rear_overhang_m;
+    (rear, rear + p.size_m[0])
+}
+
+/// Bumper-to-bumper gap between two egos in one lane, from their rear axles and classes.
+fn bumper_gap_m(a: &EgoSpec, b: &EgoSpec) -> f64 {
+    let ((a0, a1), (b0, b1)) = (span(a), span(b));
+    if a0 <= b0 {
+        b0 - a1
+    } else {
+        a0 - b1
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -527,6 +726,14 @@ mod tests {
         for (name, _) in BUILT_IN {
             let s = Scenario::find(name).unwrap_or_else(|e| panic!("{e}"));
             assert_eq!(&s.name, name);
+            assert_eq!(s.egos().len(), 1, "{name}: the single-ego suites run it");
+        }
+        for (name, _) in SEVERAL_EGOS {
+            let s = Scenario::find(name).unwrap_or_else(|e| panic!("{e}"));
+            assert_eq!(&s.name, name);
+            assert!(s.egos().len() > 1, "{name}");
+            let e = s.one_ego("slipstream up").unwrap_err();
+            assert!(e.problem.contains("controlled vehicles") && e.fix.contains("namespace"), "{e}");
         }
     }
 
@@ -577,5 +784,46 @@ mod tests {
 
         let e = Scenario::find("no-such-scenario").unwrap_err();
         assert!(e.fix.contains("cut-in"), "{e}");
+    }
+
+    const TWO: &str = r#"{ name: "two", duration_s: 10, egos: [
+        { namespace: "car1", lane: 1, s_m: 120, speed_mps: 20 },
+        { namespace: "car2", lane: 1, s_m: 90, speed_mps: 20, time_gap_s: 2.0 } ] }"#;
+
+    #[test]
+    fn several_egos_are_listed_with_their_namespaces_and_one_ego_is_the_list_of_one() {
+        let s = Scenario::parse(TWO, "two.json5").unwrap();
+        assert_eq!(s.egos().len(), 2);
+        assert_eq!(s.ego().namespace.as_deref(), Some("car1"));
+        assert_eq!((s.egos()[1].s_m, s.egos()[1].time_gap_s), (90.0, Some(2.0)));
+        let one = Scenario::find("cut-in").unwrap();
+        assert_eq!((one.egos().len(), one.ego().namespace.as_deref()), (1, None));
+    }
+
+    #[test]
+    fn egos_in_one_place_or_one_namespace_name_the_key_and_the_fix() {
+        let err = |text: String| Scenario::parse(&text, "two.json5").unwrap_err();
+        let e = err(TWO.replace("s_m: 90", "s_m: 118"));
+        assert_eq!((e.origin.as_str(), e.key.as_str()), ("two.json5", "egos[1].s_m"), "{e}");
+        assert!(e.problem.contains("overlaps egos[0]") && e.fix.contains("2 m apart"), "{e}");
+        let e = err(TWO.replace("\"car2\"", "\"car1\""));
+        assert_eq!(e.key, "egos[1].namespace", "{e}");
+        assert!(e.problem.contains("egos[0]'s namespace too"), "{e}");
+        let e = err(TWO.replace("namespace: \"car2\", ", ""));
+        assert!(e.key == "egos[1].namespace" && e.problem.contains("no namespace"), "{e}");
+        let e = err(TWO.replace("\"car2\"", "\"car/*\""));
+        assert!(e.problem.contains("not a plain key"), "{e}");
+        let e = err(TWO.replace("lane: 1, s_m: 90", "lane: 7, s_m: 90"));
+        assert_eq!(e.key, "egos[1].lane", "{e}");
+        let e = err(TWO.replace("egos: [", "ego: { lane: 1, speed_mps: 20 }, egos: ["));
+        assert!(e.problem.contains("both `ego` and `egos`"), "{e}");
+        let e = err(r#"{ name: "none", duration_s: 10 }"#.to_string());
+        assert!(e.key == "ego" && e.fix.contains("egos"), "{e}");
+        // A scripted vehicle placed from the first ego onto the second.
+        let e = err(TWO.replace("] }", "], traffic: [ { lane: 1, gap_m: -30, speed_mps: 20 } ] }"));
+        assert_eq!(e.key, "traffic[0].gap_m", "{e}");
+        assert!(e.problem.contains("where egos[1] starts"), "{e}");
+        let apart = TWO.replace("] }", "], traffic: [ { lane: 1, gap_m: -50, speed_mps: 20 } ] }");
+        assert!(Scenario::parse(&apart, "two.json5").is_ok());
     }
 }

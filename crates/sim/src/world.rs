@@ -1,5 +1,6 @@
-//! The simulated world: road, ego and traffic, stepped at a fixed rate. No I/O: the node
-//! (crates/sim/src/node.rs) feeds it commands and publishes what it reports.
+//! The simulated world: road, the controlled vehicles (egos) and traffic, stepped at a fixed
+//! rate. No I/O: the node (crates/sim/src/node.rs) feeds it each ego's commands and publishes
+//! what it reports. The egos are bodies 0..n (ids 0..n, the scenario's order), traffic after.
 
 use nalgebra::{Rotation2, Vector2};
 
@@ -12,7 +13,8 @@ use slipstream_contract::msg::{ControlCommand, ObjectClass, VehicleState};
 use slipstream_model::road::Road;
 use slipstream_model::vehicle::{actuate_acceleration, lag_toward, VehicleParams};
 
-/// The ego's id in ground truth and collisions; traffic is numbered from 1.
+/// The (first) ego's id in ground truth and collisions; further egos are 1..n, traffic is
+/// numbered after them.
 pub const EGO_ID: u32 = 0;
 
 /// Body colours traffic is painted with (unless the scenario gives one).
@@ -110,8 +112,22 @@ pub struct Collision {
 }
 
 impl Collision {
+    /// Whether vehicle `id` is one of the two.
+    pub fn involves(&self, id: u32) -> bool {
+        self.id_a == id || self.id_b == id
+    }
+
     pub fn involves_ego(&self) -> bool {
-        self.id_a == EGO_ID || self.id_b == EGO_ID
+        self.involves(EGO_ID)
+    }
+
+    /// The other vehicle than `id`.
+    pub fn other_than(&self, id: u32) -> u32 {
+        if self.id_a == id {
+            self.id_b
+        } else {
+            self.id_a
+        }
     }
 }
 
@@ -142,6 +158,20 @@ struct Body {
     pedal_brake: f64,
 }
 
+/// What the world keeps of one controlled vehicle besides its body (body `k` for ego `k`).
+struct EgoSlot {
+    /// Drives it before a controller speaks (`EgoInput::Cruise`, `Follow`).
+    cruise: Cruise,
+    /// The command taken this step, as vehicle/state reports it.
+    applied: ControlCommand,
+    accel_body: Vector2<f64>,
+    start_s: f64,
+    collisions: u64,
+    /// Its own speed sensor's noise, drawn from a stream of its own: one ego's readings do
+    /// not change with how many others there are.
+    noise: SimRng,
+}
+
 /// The world and its clock.
 pub struct World {
     scenario: Scenario,
@@ -152,12 +182,9 @@ pub struct World {
     step: u64,
     bodies: Vec<Body>,
     views: Vec<VehicleView>,
-    ego_cruise: Cruise,
-    ego_applied: ControlCommand,
-    ego_accel_body: Vector2<f64>,
-    ego_start_s: f64,
-    noise: SimRng,
-    ego_collisions: u64,
+    egos: Vec<EgoSlot>,
+    /// Collisions between two egos (each also counts in both egos' own).
+    between_egos: u64,
     traffic_collisions: u64,
     end: Option<End>,
 }
@@ -201,10 +228,11 @@ impl Placing<'_> {
         self.bodies.push(Body { id, class, params, color, body, driver, applied, pedal_brake: 0.0 });
     }
 
-    /// The scenario's scripted traffic: start gaps and speeds vary a little with the seed.
+    /// The scenario's scripted traffic, placed from the first ego: start gaps and speeds vary
+    /// a little with the seed.
     fn scripted_traffic(&mut self, scenario: &Scenario, rng: &mut SimRng) {
         let ego = &self.bodies[0].params;
-        let ego_s = scenario.ego.s_m;
+        let ego_s = scenario.ego().s_m;
         let (ego_front, ego_rear) = (ego_s - ego.rear_overhang_m + ego.size_m[0], ego_s - ego.rear_overhang_m);
         let variation = &scenario.variation;
         for t in &scenario.traffic {
@@ -267,18 +295,29 @@ impl World {
         let road = Road::new(scenario.road.clone());
         let mut rng = SimRng::new(seed);
         let mut placing = Placing { road: &road, physics: Physics::new(dt), bodies: Vec::new(), starts: Vec::new() };
-        let ego = &scenario.ego;
-        let ego_class: ObjectClass = ego.class.into();
-        let ego_color = ego.color.unwrap_or([235, 235, 235]);
-        placing.add(ego_class, ego_color, ego.lane, 0.0, ego.s_m, ego.speed_mps, None);
+        for ego in scenario.egos() {
+            let color = ego.color.unwrap_or([235, 235, 235]);
+            placing.add(ego.class.into(), color, ego.lane, 0.0, ego.s_m, ego.speed_mps, None);
+        }
         placing.scripted_traffic(&scenario, &mut rng);
         if let Some(r) = &scenario.random_traffic {
-            placing.random_traffic(r, ego.s_m, &mut rng);
+            placing.random_traffic(r, scenario.ego().s_m, &mut rng);
         }
         let Placing { physics, bodies, starts, .. } = placing;
-        let ego_s = scenario.ego.s_m;
+        // The first ego's noise stream is the one a single-ego world always drew from.
+        let mut noise = rng.fork(0x5EED);
+        let mut egos = Vec::with_capacity(scenario.egos().len());
+        for (k, spec) in scenario.egos().iter().enumerate() {
+            egos.push(EgoSlot {
+                cruise: Cruise::new(spec.speed_mps),
+                applied: ControlCommand::NEUTRAL,
+                accel_body: Vector2::zeros(),
+                start_s: spec.s_m,
+                collisions: 0,
+                noise: if k == 0 { noise.clone() } else { noise.fork(k as u64) },
+            });
+        }
         let mut world = World {
-            ego_cruise: Cruise::new(scenario.ego.speed_mps),
             scenario,
             seed,
             road,
@@ -287,11 +326,8 @@ impl World {
             step: 0,
             bodies,
             views: Vec::new(),
-            ego_applied: ControlCommand::NEUTRAL,
-            ego_accel_body: Vector2::zeros(),
-            ego_start_s: ego_s,
-            noise: rng.fork(0x5EED),
-            ego_collisions: 0,
+            egos,
+            between_egos: 0,
             traffic_collisions: 0,
             end: None,
         };
@@ -357,16 +393,43 @@ impl World {
         &self.views
     }
 
+    /// The first ego.
     pub fn ego(&self) -> &VehicleView {
         &self.views[0]
     }
 
-    pub fn ego_collisions(&self) -> u64 {
-        self.ego_collisions
+    /// How many controlled vehicles there are.
+    pub fn ego_count(&self) -> usize {
+        self.egos.len()
     }
 
-    /// The ego's throttle and brake as they act on the wheels now: the commanded ones through
-    /// the actuator lag (vehicle/state's `applied` is the command taken).
+    /// Ego `k` (the scenario's `egos[k]`).
+    pub fn ego_at(&self, k: usize) -> &VehicleView {
+        &self.views[k]
+    }
+
+    /// Which ego vehicle `id` is, if it is one.
+    pub fn ego_index(&self, id: u32) -> Option<usize> {
+        (id < self.egos.len() as u32).then_some(id as usize)
+    }
+
+    /// The first ego's collisions.
+    pub fn ego_collisions(&self) -> u64 {
+        self.egos[0].collisions
+    }
+
+    /// Ego `k`'s collisions (with traffic or another ego).
+    pub fn collisions_of(&self, k: usize) -> u64 {
+        self.egos[k].collisions
+    }
+
+    /// Collisions between two egos.
+    pub fn collisions_between_egos(&self) -> u64 {
+        self.between_egos
+    }
+
+    /// The first ego's throttle and brake as they act on the wheels now: the commanded ones
+    /// through the actuator lag (vehicle/state's `applied` is the command taken).
     pub fn ego_actuation(&self) -> (f64, f64) {
         let a = self.bodies[0].applied;
         (a.throttle, a.brake)
@@ -392,14 +455,24 @@ impl World {
             .map(|(_, o)| Lead { gap_m: o.s_rear_m() - me.s_front_m(), speed_mps: o.forward_speed_mps() })
     }
 
-    /// Advances one physics step with the ego driven by `input`.
+    /// Advances one physics step with the first ego driven by `input` (any further egos cruise).
     pub fn step(&mut self, input: EgoInput) -> StepEvents {
+        let mut inputs = vec![EgoInput::Cruise; self.egos.len()];
+        inputs[0] = input;
+        self.step_all(&inputs)
+    }
+
+    /// Advances one physics step with ego `k` driven by `inputs[k]` (missing ones cruise).
+    pub fn step_all(&mut self, inputs: &[EgoInput]) -> StepEvents {
         let dt = 1.0 / self.physics_hz as f64;
         let t_s = self.step as f64 * dt;
         // Each driver decides from the same snapshot, so the order of vehicles does not matter.
         let neighbours = self.neighbours();
         let mut actuations = Vec::with_capacity(self.bodies.len());
-        actuations.push(self.ego_input(input, dt));
+        for k in 0..self.egos.len() {
+            let input = inputs.get(k).copied().unwrap_or(EgoInput::Cruise);
+            actuations.push(self.ego_input(k, input, dt));
+        }
         self.traffic_actuations(&neighbours, t_s, dt, &mut actuations);
         for (b, act) in self.bodies.iter_mut().zip(&actuations) {
             let lag = b.params.actuator_lag_s;
@@ -417,9 +490,11 @@ impl World {
         let before = std::mem::take(&mut self.views);
         let hints: Vec<f64> = before.iter().map(|v| v.s_m).collect();
         self.views = self.observe(&hints);
-        let ego_now = self.views[0];
-        let accel_world = (ego_now.velocity_mps - before[0].velocity_mps) / dt;
-        self.ego_accel_body = Rotation2::new(-ego_now.yaw_rad) * accel_world;
+        for (k, ego) in self.egos.iter_mut().enumerate() {
+            let now = self.views[k];
+            let accel_world = (now.velocity_mps - before[k].velocity_mps) / dt;
+            ego.accel_body = Rotation2::new(-now.yaw_rad) * accel_world;
+        }
 
         let mut events = StepEvents { collisions: self.collisions(started, &before), ..StepEvents::default() };
         if self.end.is_none() {
@@ -445,28 +520,30 @@ impl World {
             .collect()
     }
 
-    /// The ego's pedals and steering for this step: its own cruise controller (`Cruise`,
+    /// Ego `k`'s pedals and steering for this step: its own cruise controller (`Cruise`,
     /// `Follow`) or the command received, plus lane keeping when the scenario asks for it.
-    fn ego_input(&mut self, input: EgoInput, dt: f64) -> Actuation {
-        let ego = self.views[0];
-        let ego_params = self.bodies[0].params;
+    fn ego_input(&mut self, k: usize, input: EgoInput, dt: f64) -> Actuation {
+        let ego = self.views[k];
+        let ego_params = self.bodies[k].params;
         let lane_keep = |world: &World| -> f64 {
-            if !world.scenario.ego.lane_keeping {
+            let spec = &world.scenario.egos()[k];
+            if !spec.lane_keeping {
                 return 0.0;
             }
-            let lane = if ego.lane >= 0 { ego.lane as u32 } else { world.scenario.ego.lane };
+            let lane = if ego.lane >= 0 { ego.lane as u32 } else { spec.lane };
             pursue(&ego_params, &world.road, &ego.observation(), world.road.lane_center_d(lane))
         };
         match input {
             EgoInput::Cruise | EgoInput::Follow => {
-                let lead = if input == EgoInput::Follow { self.lead_of(0) } else { None };
-                let (throttle, brake) = self.ego_cruise.longitudinal(&ego_params, ego.forward_speed_mps(), lead, dt);
-                self.ego_applied =
+                let lead = if input == EgoInput::Follow { self.lead_of(k) } else { None };
+                let (throttle, brake) =
+                    self.egos[k].cruise.longitudinal(&ego_params, ego.forward_speed_mps(), lead, dt);
+                self.egos[k].applied =
                     ControlCommand { throttle: throttle as f32, brake: brake as f32, ..ControlCommand::NEUTRAL };
                 Actuation { throttle, brake, steer: lane_keep(self) }
             }
             EgoInput::Command(cmd) => {
-                self.ego_applied = cmd;
+                self.egos[k].applied = cmd;
                 Actuation {
                     throttle: cmd.throttle as f64,
                     brake: cmd.brake as f64,
@@ -477,10 +554,10 @@ impl World {
     }
 
     /// Each traffic vehicle's driver decides (a vehicle without one coasts), appended to
-    /// `actuations` in body order.
+    /// `actuations` in body order. Its triggers go by the gap to the first ego.
     fn traffic_actuations(&mut self, neighbours: &[Neighbour], t_s: f64, dt: f64, actuations: &mut Vec<Actuation>) {
         let ego = self.views[0];
-        for i in 1..self.bodies.len() {
+        for i in self.egos.len()..self.bodies.len() {
             let lead = self.lead_of(i);
             let view = self.views[i];
             let gap_to_ego = bumper_gap_m(&ego, &view);
@@ -509,10 +586,14 @@ impl World {
             let va = before.iter().find(|v| v.id == a).map(|v| v.velocity_mps).unwrap_or_default();
             let vb = before.iter().find(|v| v.id == b).map(|v| v.velocity_mps).unwrap_or_default();
             let collision = Collision { id_a: a, id_b: b, relative_speed_mps: (va - vb).norm() };
-            if collision.involves_ego() {
-                self.ego_collisions += 1;
-            } else {
-                self.traffic_collisions += 1;
+            let (ego_a, ego_b) = (self.ego_index(a), self.ego_index(b));
+            for k in [ego_a, ego_b].into_iter().flatten() {
+                self.egos[k].collisions += 1;
+            }
+            match (ego_a, ego_b) {
+                (None, None) => self.traffic_collisions += 1,
+                (Some(_), Some(_)) => self.between_egos += 1,
+                _ => {}
             }
             out.push(collision);
         }
@@ -520,38 +601,57 @@ impl World {
     }
 
     fn check_end(&self, events: &StepEvents) -> Option<End> {
+        let clean = self.egos.iter().all(|e| e.collisions == 0);
         if self.scenario.end.on_collision {
-            if let Some(c) = events.collisions.iter().find(|c| c.involves_ego()) {
-                let other = if c.id_a == EGO_ID { c.id_b } else { c.id_a };
+            for c in &events.collisions {
+                let Some(k) = [c.id_a, c.id_b].into_iter().find_map(|id| self.ego_index(id)) else { continue };
+                let who = self.ego_name(k);
+                let other = c.other_than(k as u32);
                 return Some(End {
-                    reason: format!("ego collided with vehicle {other} at {:.1} m/s", c.relative_speed_mps),
+                    reason: format!("{who} collided with vehicle {other} at {:.1} m/s", c.relative_speed_mps),
                     success: false,
                 });
             }
         }
         if let Some(d) = self.scenario.end.ego_distance_m {
-            if self.ego().s_m - self.ego_start_s >= d {
-                return Some(End { reason: format!("ego travelled {d} m"), success: self.ego_collisions == 0 });
+            if self.ego().s_m - self.egos[0].start_s >= d {
+                return Some(End { reason: format!("ego travelled {d} m"), success: clean });
             }
         }
         if self.time_ns() >= (self.scenario.duration_s * 1e9) as u64 {
-            return Some(End {
-                reason: format!("duration of {} s reached", self.scenario.duration_s),
-                success: self.ego_collisions == 0,
-            });
+            return Some(End { reason: format!("duration of {} s reached", self.scenario.duration_s), success: clean });
         }
         None
     }
 
-    /// The ego's speed as vehicle/speed reports it, with the scenario's sensor noise.
-    pub fn measured_speed_mps(&mut self) -> f64 {
-        let sd = self.scenario.noise.speed_mps;
-        self.ego().forward_speed_mps() + self.noise.normal(sd)
+    /// How messages name ego `k`: "ego" when it is the only one, else its namespace.
+    pub fn ego_name(&self, k: usize) -> String {
+        match (self.egos.len(), &self.scenario.egos()[k].namespace) {
+            (1, _) | (_, None) => "ego".to_string(),
+            (_, Some(ns)) => format!("ego {ns}"),
+        }
     }
 
-    /// The ego's full state (vehicle/state).
+    /// The first ego's speed as vehicle/speed reports it, with the scenario's sensor noise.
+    pub fn measured_speed_mps(&mut self) -> f64 {
+        self.measured_speed_of(0)
+    }
+
+    /// Ego `k`'s speed as its vehicle/speed reports it, with the scenario's sensor noise.
+    pub fn measured_speed_of(&mut self, k: usize) -> f64 {
+        let sd = self.scenario.noise.speed_mps;
+        self.views[k].forward_speed_mps() + self.egos[k].noise.normal(sd)
+    }
+
+    /// The first ego's full state (vehicle/state).
     pub fn ego_state(&self) -> VehicleState {
-        let e = self.ego();
+        self.ego_state_of(0)
+    }
+
+    /// Ego `k`'s full state (its vehicle/state).
+    pub fn ego_state_of(&self, k: usize) -> VehicleState {
+        let e = &self.views[k];
+        let slot = &self.egos[k];
         VehicleState {
             step: self.step,
             position_in_world_m: [e.rear_axle.x, e.rear_axle.y, 0.0],
@@ -559,11 +659,11 @@ impl World {
             pitch_rad: 0.0,
             roll_rad: 0.0,
             velocity_in_world_mps: [e.velocity_mps.x, e.velocity_mps.y, 0.0],
-            acceleration_in_body_mps2: [self.ego_accel_body.x, self.ego_accel_body.y, 0.0],
+            acceleration_in_body_mps2: [slot.accel_body.x, slot.accel_body.y, 0.0],
             yaw_rate_radps: e.yaw_rate_radps,
             speed_mps: e.forward_speed_mps(),
             lane: e.lane,
-            applied: self.ego_applied,
+            applied: slot.applied,
             // Wall-clock timing is the node's business (sim::node fills it in).
             control_timing: None,
         }

@@ -167,6 +167,30 @@ impl Bus {
         Ok(())
     }
 
+    /// The same sessions and node with its topics under `<namespace>/<sub>`: one process
+    /// serving several namespaces (the simulator with one per controlled vehicle) publishes and
+    /// subscribes in each through its scope. The scope shares the node's faults, clock and
+    /// input statistics; its liveliness stays the node's own (a scope is never announced).
+    pub fn scoped(&self, sub: &str) -> Result<Bus, BusError> {
+        let joined = match (self.topics.namespace(), sub.trim_matches('/')) {
+            (ns, "") => ns.to_string(),
+            ("", sub) => sub.to_string(),
+            (ns, sub) => format!("{ns}/{sub}"),
+        };
+        let topics = (*self.topics).clone().with_namespace(&joined)?;
+        Ok(Bus {
+            session: self.session.clone(),
+            low_latency: self.low_latency.clone(),
+            topics: Arc::new(topics),
+            node: self.node.clone(),
+            faults: self.faults.clone(),
+            clock: self.clock.clone(),
+            inputs: self.inputs.clone(),
+            token: tokio::sync::Mutex::new(None),
+            lossless: std::sync::atomic::AtomicBool::new(self.lossless.load(std::sync::atomic::Ordering::SeqCst)),
+        })
+    }
+
     /// Injects `profile`'s faults into every subscription declared from now on (a node's
     /// inputs; tools and observers never call this). Logged, so a run with faults says so.
     pub fn inject_faults(&mut self, profile: FaultProfile) {

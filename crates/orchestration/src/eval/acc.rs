@@ -193,7 +193,8 @@ pub fn run(args: &EvalAccArgs, connect: &slipstream_contract::config::ConnectArg
     } else {
         args.scenarios.clone()
     };
-    let scenarios: Vec<Scenario> = names.iter().map(|n| Scenario::find(n)).collect::<Result<_, _>>()?;
+    let scenarios: Vec<Scenario> =
+        names.iter().map(|n| Scenario::find(n).and_then(|s| s.one_ego("slipstream eval"))).collect::<Result<_, _>>()?;
     if let Some(dir) = &args.plots {
         std::fs::create_dir_all(dir).map_err(Error::file("create", dir))?;
     }
@@ -326,14 +327,14 @@ pub(crate) async fn run_one(
         scenario.duration_s = d;
     }
     let name = scenario.name.clone();
-    let set_speed = scenario.ego.controller_set_speed_mps();
+    let set_speed = scenario.ego().controller_set_speed_mps();
     let spec = LoopSpec {
         scenario: scenario_arg.to_string(),
         duration_s: scenario.duration_s,
         clock: ClockMode::Lockstep,
         perception: args.perception,
         set_speed_mps: set_speed,
-        time_gap_s: scenario.ego.time_gap_s,
+        time_gap_s: scenario.ego().time_gap_s,
         vehicle: Some(LoopSpec::vehicle_of(&scenario)),
         faults: under.faults,
         link: args.link,

@@ -287,7 +287,10 @@ pub fn scenarios(
     count: usize,
     seed: u64,
 ) -> Result<Vec<Scenario>, slipstream_contract::config::ConfigError> {
-    let mut out: Vec<Scenario> = names.iter().map(|n| Scenario::find(n)).collect::<Result<_, _>>()?;
+    let mut out: Vec<Scenario> = names
+        .iter()
+        .map(|n| Scenario::find(n).and_then(|s| s.one_ego("slipstream eval detect")))
+        .collect::<Result<_, _>>()?;
     if let Some(f) = family {
         for j in 0..count {
             out.push(super::sweep::families::nth(f, seed, j).parse()?);

@@ -24,7 +24,7 @@ pub struct Judged {
 /// collision count and end reason win over the recorder's, which may miss the last events),
 /// and judges it. `end_if_unknown` names the end when the simulator said nothing.
 pub fn judge(rec: &Recorded, scenario: &Scenario, sim: Option<&SimReport>, end_if_unknown: &str) -> Judged {
-    let ego = VehicleParams::of_class(scenario.ego.class.into());
+    let ego = VehicleParams::of_class(scenario.ego().class.into());
     let front_m = ego.size_m[0] - ego.rear_overhang_m;
     let mut trace = build_trace(rec, front_m, AccSettings::default().standstill_m);
     trace.collisions = sim.map_or(0, |s| s.ego_collisions).max(rec.collisions);

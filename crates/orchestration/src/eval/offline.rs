@@ -99,8 +99,8 @@ mod tests {
         let default = AccSettings::default();
         AccSettings {
             perception,
-            set_speed_mps: scenario.ego.controller_set_speed_mps(),
-            time_gap_s: scenario.ego.time_gap_s.unwrap_or(default.time_gap_s),
+            set_speed_mps: scenario.ego().controller_set_speed_mps(),
+            time_gap_s: scenario.ego().time_gap_s.unwrap_or(default.time_gap_s),
             ..default
         }
     }

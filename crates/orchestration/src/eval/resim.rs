@@ -567,7 +567,7 @@ pub async fn run(
             let problem = "has no acc/status: the ACC's set speed is unknown (record every key)".to_string();
             Error::Recording { path: path.to_path_buf(), problem }
         })?,
-        time_gap_s: scenario.as_ref().and_then(|s| s.ego.time_gap_s),
+        time_gap_s: scenario.as_ref().and_then(|s| s.ego().time_gap_s),
         vehicle: scenario.as_ref().map(LoopSpec::vehicle_of),
         faults: None,
         link: Default::default(),

@@ -91,7 +91,7 @@ pub struct LoopSpec {
 impl LoopSpec {
     /// The vehicle the ACC drives for a scenario: its ego's.
     pub fn vehicle_of(scenario: &slipstream_sim::Scenario) -> VehicleClass {
-        slipstream_contract::msg::ObjectClass::from(scenario.ego.class).into()
+        slipstream_contract::msg::ObjectClass::from(scenario.ego().class).into()
     }
 
     /// The nodes a run of this loop brings onto the bus: its observer, the ACC, the detector

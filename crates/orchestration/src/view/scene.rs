@@ -312,7 +312,7 @@ impl SceneContext {
         SceneContext {
             road: scenario.map(|s| Road::new(s.road.clone())),
             road_s: None,
-            ego: scenario.map(|s| VehicleParams::of_class(s.ego.class.into())),
+            ego: scenario.map(|s| VehicleParams::of_class(s.ego().class.into())),
         }
     }
 
