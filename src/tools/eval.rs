@@ -40,6 +40,17 @@ pub enum EvalCommand {
     ///   slipstream eval faults --scenario cut-in --plot envelope.png
     #[command(verbatim_doc_comment)]
     Faults(crate::eval::faults::EvalFaultsArgs),
+    /// A platoon's string stability: runs a platoon scenario (several egos behind a scripted
+    /// leader) in lockstep at each time gap, started in that gap's equilibrium, with every
+    /// ego's own slipstream-acc (and slipstream-detect with the camera) in its namespace, and
+    /// prints per car the peak speed error and deceleration after the leader's disturbance and
+    /// their ratios to the car ahead (string-stable when every speed ratio is at most 1), the
+    /// smallest time gap measured stable and the analytic bound 2 x (delay + actuator lag).
+    /// Writes platoon.json, platoon.png and the runs' logs under --report. Example:
+    ///
+    ///   slipstream eval platoon --scenario platoon-8-hard-brake --time-gaps 1.0,1.8
+    #[command(verbatim_doc_comment)]
+    Platoon(crate::eval::platoon::EvalPlatoonArgs),
     /// Driving judged at scale: generates --count scenarios (default 1,000) from parameterised
     /// families (Euro NCAP car-to-car rear, cut-ins, cut-outs, braking leads, the edge of
     /// range, bends with vehicles in the next lanes, lane ends, dense traffic), each declaring
@@ -145,6 +156,7 @@ pub fn command(command: &EvalCommand, connect: &ConnectArgs) -> Result<ExitCode>
             Ok(ExitCode::SUCCESS)
         }
         EvalCommand::Sweep(args) => sweep(args, connect),
+        EvalCommand::Platoon(args) => platoon(args),
         EvalCommand::SweepMerge(args) => sweep_merge(args),
         EvalCommand::SweepCompare(args) => {
             let compared = crate::eval::sweep::compare::compare(args)?;
@@ -158,6 +170,25 @@ pub fn command(command: &EvalCommand, connect: &ConnectArgs) -> Result<ExitCode>
             Ok(ExitCode::SUCCESS)
         }
     }
+}
+
+/// `eval platoon`: every time gap's run, the report in its directory, the tables.
+fn platoon(args: &crate::eval::platoon::EvalPlatoonArgs) -> Result<ExitCode> {
+    use crate::eval::platoon;
+    let stem = std::path::Path::new(&args.scenario).file_stem().and_then(|s| s.to_str()).unwrap_or("platoon");
+    let dir = match &args.report {
+        Some(d) => d.clone(),
+        None => super::fresh_report_dir(&format!("platoon-{stem}"))?,
+    };
+    let rt = tokio::runtime::Runtime::new()?;
+    let report = rt.block_on(platoon::measure(args, &dir))?;
+    let json = dir.join("platoon.json");
+    std::fs::write(&json, serde_json::to_string_pretty(&report)?)
+        .with_context(|| format!("write {}", json.display()))?;
+    platoon::plot(&report, &dir.join("platoon.png"))?;
+    print_report(args.json, &report, platoon::markdown)?;
+    eprintln!("report in {}", dir.display());
+    Ok(ExitCode::SUCCESS)
 }
 
 /// `eval detect`: the frames' link encoding by name, then the report.

@@ -17,6 +17,7 @@ mod detect_node;
 mod discovery;
 mod faults;
 mod layering;
+mod platoon;
 mod record;
 mod sim_egos;
 mod sim_node;

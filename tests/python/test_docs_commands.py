@@ -52,6 +52,8 @@ ELSEWHERE = {
         "tests/python/test_own_nodes.py runs the same sweep with --count 4: two hundred runs take minutes",
     "slipstream eval sweep --loop clients/python/examples/own_loop.json5 --count 1000 --perception ground-truth --report mine":
         "tests/python/test_loop_file.py runs a sweep over the same loop file with --count 2: a thousand runs take an hour",
+    "slipstream eval platoon --scenario platoon-8-hard-brake --time-gaps 1.0,1.8":
+        "tests/it/platoon.rs runs `eval platoon` on a three-car platoon at two time gaps: eight cars for 70 s twice take minutes",
     "slipstream eval faults --scenario cut-in --plot envelope.png":
         "tests/it/faults.rs runs `eval faults --scenario steady-follow ... --duration 4`: the envelope takes minutes",
 }

@@ -39,6 +39,7 @@ pub mod link_codec;
 pub(crate) mod metrics;
 #[cfg(test)]
 pub(crate) mod offline;
+pub mod platoon;
 pub mod plot;
 pub mod resim;
 pub mod sweep;

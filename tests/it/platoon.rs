@@ -1,0 +1,60 @@
+//! `slipstream eval platoon` with the real binaries: a three-car platoon at two time gaps, its
+//! figures read from the run (the leader's dip as scripted, every car's speeds recorded, the
+//! ratios those figures give), the files it writes, and a scenario that is no platoon refused.
+
+use std::time::Duration;
+
+use crate::common::{bin, run_with_limit, serial, temp_dir};
+
+/// Three cars behind a leader that dips from 20 to 16 m/s at 1.5 m/s2 from t = 3 s.
+const THREE: &str = r#"{ name: "three", duration_s: 14, road: { length_m: 3000 },
+  egos: [ { namespace: "a", lane: 1, s_m: 300, speed_mps: 20, set_speed_mps: 25 },
+          { namespace: "b", lane: 1, s_m: 250, speed_mps: 20, set_speed_mps: 25 },
+          { namespace: "c", lane: 1, s_m: 200, speed_mps: 20, set_speed_mps: 25 } ],
+  traffic: [ { lane: 1, gap_m: 40, speed_mps: 20, follow: false,
+               actions: [ { at_s: 3, speed_mps: 16, accel_mps2: 1.5 } ] } ],
+  variation: { gap_m: 0, speed_mps: 0 } }"#;
+
+#[test]
+fn a_platoon_is_measured_car_by_car_at_each_time_gap() {
+    let _serial = serial();
+    let dir = temp_dir("platoon");
+    let file = dir.join("three.json5");
+    std::fs::write(&file, THREE).unwrap();
+    let mut cmd = bin("slipstream");
+    cmd.args(["eval", "platoon", "--scenario"]).arg(&file).args(["--time-gaps", "1.0,2.0", "--json", "--report"]);
+    cmd.arg(dir.join("report"));
+    let out = run_with_limit(cmd, Duration::from_secs(300));
+    assert!(out.status.success(), "stderr: {}", String::from_utf8_lossy(&out.stderr));
+    let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert_eq!((r["cars"].as_u64(), r["disturbance_s"].as_f64()), (Some(3), Some(3.0)), "{r}");
+    let runs = r["runs"].as_array().unwrap();
+    assert_eq!(runs.len(), 2);
+    for (run, gap) in runs.iter().zip([1.0, 2.0]) {
+        assert_eq!(run["time_gap_s"].as_f64(), Some(gap));
+        assert_eq!((run["collisions"].as_u64(), run["lockstep_timeouts"].as_u64()), (Some(0), Some(0)), "{run}");
+        let cars = run["cars"].as_array().unwrap();
+        let names: Vec<&str> = cars.iter().map(|c| c["car"].as_str().unwrap()).collect();
+        assert_eq!(names, ["leader", "a", "b", "c"]);
+        let peak = |k: usize| cars[k]["peak_speed_error_mps"].as_f64().unwrap();
+        assert!((peak(0) - 4.0).abs() < 0.3, "the leader dips 4 m/s: {}", peak(0));
+        for (k, car) in cars.iter().enumerate().skip(1) {
+            assert!(peak(k) > 1.0, "car {k} follows the dip: {run}");
+            let ratio = car["speed_ratio"].as_f64().unwrap();
+            assert!((ratio - peak(k) / peak(k - 1)).abs() < 1e-9);
+        }
+        let largest = (1..4).map(|k| cars[k]["speed_ratio"].as_f64().unwrap()).fold(0.0, f64::max);
+        assert_eq!(run["stable"].as_bool(), Some(largest <= 1.0));
+    }
+    let bound = r["bound_s"].as_f64().unwrap();
+    assert!(bound > 0.0 && bound < 1.0, "2 x (one state period + a car's lag): {bound}");
+    for f in ["platoon.json", "platoon.png", "gap-1/scenario.json5", "gap-2/sim.json", "gap-2/acc-2.log"] {
+        assert!(dir.join("report").join(f).is_file(), "{f}");
+    }
+
+    let mut cmd = bin("slipstream");
+    cmd.args(["eval", "platoon", "--scenario", "cut-in", "--report"]).arg(dir.join("not"));
+    let out = run_with_limit(cmd, Duration::from_secs(60));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("not a built-in platoon"), "{err}");
+}
