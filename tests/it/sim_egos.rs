@@ -10,7 +10,7 @@ use slipstream::msg::{self, ControlCommand, GroundTruthObjects, SimEvent, SimEve
 use slipstream::sim::settings::{Mode, OnTimeout, SimSettings};
 use slipstream::sim::world::{EgoInput, World};
 use slipstream::sim::Scenario;
-use slipstream::{topics, Bus, TopicMap};
+use slipstream::{Bus, TopicMap};
 
 use crate::common::{connected_session, listening_session};
 
@@ -54,31 +54,16 @@ fn each_ego_follows_its_own_commands_and_a_collision_between_two_is_counted_once
     assert_eq!(w.traffic_collisions(), 0);
 }
 
-/// Every ego's lockstep run of these tests: 100 Hz, speed and state every step.
+/// Every ego's lockstep run of these tests: sim_node's settings (100 Hz, small frames).
 fn settings(wait_for: &[&str]) -> SimSettings {
-    let mut s = SimSettings { mode: Mode::Lockstep, physics_hz: 100, ..SimSettings::default() };
-    s.camera.width = 160;
-    s.camera.height = 120;
-    s.lockstep.wait_for = wait_for.iter().map(|s| s.to_string()).collect();
-    s.lockstep.start_timeout_ms = 10_000;
-    s
+    crate::sim_node::settings(Mode::Lockstep, wait_for)
 }
 
 /// A controller in one ego's namespace: answers each vehicle/state before `until_step` with
 /// `throttle` and `brake`.
 async fn controller(bus: Bus, throttle: f32, brake: f32, until_step: u64) -> tokio::task::JoinHandle<()> {
-    let states = bus.subscriber(topics::VEHICLE_STATE).await.unwrap();
-    let control = bus.publisher(topics::VEHICLE_CONTROL).await.unwrap();
-    tokio::spawn(async move {
-        let _alive = bus;
-        loop {
-            let r = states.recv().await;
-            if r.msg.step < until_step {
-                let cmd = ControlCommand { throttle, brake, answers_step: Some(r.msg.step), ..ControlCommand::NEUTRAL };
-                control.put(r.header.stamp_sim_ns, &cmd).unwrap();
-            }
-        }
-    })
+    crate::sim_node::answering(bus, until_step, move |_| ControlCommand { throttle, brake, ..ControlCommand::NEUTRAL })
+        .await
 }
 
 /// Every sample under the namespaces, by key.

@@ -36,7 +36,7 @@ fn lossless_map_with(extra: &str) -> TopicMap {
 }
 
 /// The worlds of these tests step at 100 Hz: speed, state and clock every step.
-fn settings(mode: Mode, wait_for: &[&str]) -> SimSettings {
+pub(crate) fn settings(mode: Mode, wait_for: &[&str]) -> SimSettings {
     let mut s = SimSettings { mode, physics_hz: 100, ..SimSettings::default() };
     s.camera.width = 160;
     s.camera.height = 120;
@@ -132,23 +132,34 @@ impl Recorder {
 
 /// A deterministic controller: answers every vehicle/state with a speed-holding command.
 async fn controller(bus: Bus, answer_until_step: u64) -> tokio::task::JoinHandle<()> {
+    answering(bus, answer_until_step, |state| {
+        let error = 22.0 - state.speed_mps;
+        ControlCommand {
+            throttle: (0.3 * error).clamp(0.0, 1.0) as f32,
+            brake: (-0.3 * error).clamp(0.0, 1.0) as f32,
+            ..ControlCommand::NEUTRAL
+        }
+    })
+    .await
+}
+
+/// A controller on `bus` answering each vehicle/state before step `until_step` with `law`'s
+/// command for it (its `answers_step` set to the state's step).
+pub(crate) async fn answering(
+    bus: Bus,
+    until_step: u64,
+    law: impl Fn(&msg::VehicleState) -> ControlCommand + Send + 'static,
+) -> tokio::task::JoinHandle<()> {
     let states = bus.subscriber(topics::VEHICLE_STATE).await.unwrap();
     let control = bus.publisher(topics::VEHICLE_CONTROL).await.unwrap();
     tokio::spawn(async move {
         let _alive = bus;
         loop {
             let r = states.recv().await;
-            if r.msg.step >= answer_until_step {
-                continue;
+            if r.msg.step < until_step {
+                let cmd = ControlCommand { answers_step: Some(r.msg.step), ..law(&r.msg) };
+                control.put(r.header.stamp_sim_ns, &cmd).unwrap();
             }
-            let error = 22.0 - r.msg.speed_mps;
-            let cmd = ControlCommand {
-                throttle: (0.3 * error).clamp(0.0, 1.0) as f32,
-                brake: (-0.3 * error).clamp(0.0, 1.0) as f32,
-                answers_step: Some(r.msg.step),
-                ..ControlCommand::NEUTRAL
-            };
-            control.put(r.header.stamp_sim_ns, &cmd).unwrap();
         }
     })
 }

@@ -272,9 +272,13 @@ impl<'a> Node<'a> {
         let mut late = Vec::new();
         for port in &mut self.ports {
             let left = deadline.saturating_duration_since(Instant::now()).as_millis() as u64;
-            let prefix = port.ego_namespace().map(|ns| format!("{ns}/")).unwrap_or_default();
             let missing = port.take_answers(k, t_ns, self.settings, left, stop).await?;
-            late.extend(missing.into_iter().map(|n| format!("{prefix}{n}")));
+            // Names are qualified only when a node was late: nothing is formatted on a step
+            // every ego answered.
+            late.extend(missing.into_iter().map(|n| match port.ego_namespace() {
+                Some(ns) => format!("{ns}/{n}"),
+                None => n,
+            }));
         }
         self.lockstep_timeouts += !late.is_empty() as u64;
         Ok(on_late(self.settings, k, &late))
