@@ -204,24 +204,32 @@ async fn a_node_with_faults_reports_its_inputs_for_top() {
         .unwrap();
     let publisher = tool.publisher(slipstream::topics::OBJECTS).await.unwrap();
     assert!(publisher.wait_for_subscriber(Duration::from_secs(10)).await);
+    // Messages go out at a pace until five have arrived: a loaded machine may drop some on
+    // the way (realtime QoS), and what is asserted is the split between real and injected
+    // losses, not that the network lost nothing.
     let truth = slipstream::msg::GroundTruthObjects { step: 1, objects: Vec::new() };
-    for i in 0..5u64 {
-        publisher.put(i * 50_000_000, &truth).unwrap();
-    }
-    let deadline = std::time::Instant::now() + Duration::from_secs(20);
+    let deadline = std::time::Instant::now() + Duration::from_secs(30);
+    let mut sent = 0u64;
     let report = loop {
         let last = reports.lock().unwrap().last().cloned();
-        if let Some(r) = last {
+        let row = last.and_then(|r| {
             let v: serde_json::Value = serde_json::from_slice(&r).unwrap();
-            let objects_row = v["inputs"].as_array().unwrap().iter().find(|i| i["topic"] == "objects").cloned();
-            if objects_row.as_ref().is_some_and(|o| o["received"] == 5) {
-                break objects_row.unwrap();
-            }
+            v["inputs"].as_array().unwrap().iter().find(|i| i["topic"] == "objects").cloned()
+        });
+        if let Some(row) = row.filter(|o| o["received"].as_u64().unwrap_or(0) >= 5) {
+            break row;
         }
-        assert!(std::time::Instant::now() < deadline, "no inputs report with the 5 messages");
+        assert!(
+            std::time::Instant::now() < deadline && sent < 300,
+            "no inputs report with 5 messages after {sent} sent"
+        );
+        publisher.put(sent * 50_000_000, &truth).unwrap();
+        sent += 1;
         tokio::time::sleep(Duration::from_millis(100)).await;
     };
-    assert_eq!(report["injected_dropped"], 5, "every one dropped by the profile: {report}");
-    assert_eq!(report["lost"], 0);
+    let received = report["received"].as_u64().unwrap();
+    assert_eq!(report["injected_dropped"].as_u64(), Some(received), "every arrival dropped by the profile: {report}");
+    let lost = report["lost"].as_u64().unwrap();
+    assert!(received + lost <= sent, "only what was sent is counted: {report}, {sent} sent");
     assert!(objects.try_recv().is_none(), "nothing delivered");
 }
