@@ -100,7 +100,7 @@ def phase(binary, minutes, report, bad, csv):
     view = subprocess.Popen(
         [binary, "-n", ns, "-e", f"tcp/127.0.0.1:{loop_port}", "-l", f"tcp/127.0.0.1:{free_port()}", "view",
          "--view-port", str(port), "--duration", str(seconds + 60)],
-        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)
+        cwd=ROOT, stdout=subprocess.DEVNULL, stderr=(report.parent / f"view-{int(bad)}.log").open("w"))
     time.sleep(5)
     driver = browser()
     driver.get(f"http://127.0.0.1:{port}/")
@@ -128,7 +128,8 @@ def phase(binary, minutes, report, bad, csv):
     up.send_signal(signal.SIGINT)
     up.wait(timeout=120)
     view.terminate()
-    _, err = view.communicate(timeout=60)
+    view.wait(timeout=60)
+    err = (report.parent / f"view-{int(bad)}.log").read_text(errors="replace")
     r = json.loads((report / "report.json").read_text())
     hop = next(h for h in r["latency"]["hops"] if h["hop"] == "frame -> applied")
     return samples, hop, r.get("recording") or {}, counted, counts, err
@@ -167,7 +168,7 @@ def main():
         samples, hop, rec, counted, counts, err = phase(args.slipstream, minutes, report, bad, csv)
         summary(name, samples, hop, rec, counted, counts)
         warnings = [line for line in err.splitlines() if "view:" in line or "WARN" in line]
-        print(f"  the view's warnings: {len(warnings)}", *warnings[:3], sep="\n    ")
+        print(f"  the view's log: {len(err)} bytes, {len(warnings)} warnings", *warnings[:3], sep="\n    ")
 
 
 if __name__ == "__main__":

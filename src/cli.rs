@@ -7,6 +7,8 @@ use tracing_subscriber::layer::{Context, Filter, SubscriberExt};
 use tracing_subscriber::util::SubscriberInitExt;
 use tracing_subscriber::{EnvFilter, Layer};
 
+mod repeats;
+
 pub use slipstream_contract::process::{
     apply_router_runtime, apply_zenoh_runtime_default, stop_requested, ZENOH_RUNTIME_DEFAULT,
 };
@@ -55,7 +57,8 @@ pub enum LogLevel {
 
 /// Logs to stderr, filtered by RUST_LOG (default by `level`; warnings for Zenoh and the
 /// Foxglove server), without the messages Zenoh prints for the loopback rendezvous working as
-/// designed (see config/zenoh.json5).
+/// designed (see config/zenoh.json5), and with a library's repeated warnings shown once per
+/// period ([`repeats`]: a peer sending garbage cannot flood stderr).
 pub fn init_tracing(level: LogLevel) {
     let base = match level {
         LogLevel::Node => "info",
@@ -69,6 +72,7 @@ pub fn init_tracing(level: LogLevel) {
         .with_writer(|| LogLine(Vec::new()))
         // Colours on a terminal only: `slipstream up` writes the nodes' logs to files.
         .with_ansi(colour(&std::io::stderr()))
+        .with_filter(repeats::Repeats::default())
         .with_filter(RendezvousNoise)
         .with_filter(AclRefusals::default())
         .with_filter(env);
