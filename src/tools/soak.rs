@@ -219,6 +219,7 @@ pub fn run(args: &SoakArgs, connect: &crate::config::ConnectArgs) -> Result<Soak
         faults: None,
         link: Default::default(),
         own: Default::default(),
+        egos: Vec::new(),
     };
     let namespace = format!("soak-{}", std::process::id());
     let network = Network::Isolated { topics: connect.topics.clone(), namespace };

@@ -34,6 +34,8 @@ use crate::vehicle::VehicleParams;
 use crate::view::{LiveView, ViewOptions, ViewStats};
 use crate::{topics, Bus};
 
+pub mod egos;
+
 /// Live view refresh on a terminal, and in plain mode (one line each).
 const REFRESH_TTY: Duration = Duration::from_millis(250);
 const REFRESH_PLAIN: Duration = Duration::from_millis(2000);
@@ -195,6 +197,12 @@ pub struct UpReport {
     pub ros2: Option<crate::ros2::FaceStats>,
     /// With --record --ros2: what went into run.ros2.mcap, per route.
     pub ros2_recording: Option<Vec<crate::ros2::RouteStats>>,
+    /// With several controlled vehicles: each one's run, judged apart (then `metrics` is
+    /// none and `latency` the first ego's).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub egos: Vec<egos::EgoReport>,
+    /// Collisions between two controlled vehicles (each also counted in both egos').
+    pub collisions_between_egos: u64,
     pub report_dir: PathBuf,
 }
 
@@ -280,7 +288,7 @@ pub fn run_from(path: &Path, args: &UpArgs, connect: &ConnectArgs) -> Result<u8>
 pub fn run(args: &UpArgs, connect: &ConnectArgs) -> Result<Outcome> {
     let args = &UpArgs { sim: sim_source(args)?, ..args.clone() };
     let mut scenario = match args.sim {
-        SimSource::Builtin => Scenario::find(&args.scenario)?.one_ego("slipstream up")?,
+        SimSource::Builtin => Scenario::find(&args.scenario)?,
         SimSource::External => external_scenario(args)?,
     };
     if let Some(d) = args.duration {
@@ -294,14 +302,25 @@ pub fn run(args: &UpArgs, connect: &ConnectArgs) -> Result<Outcome> {
         Some(d) => (d.clone(), !d.exists()),
         None => (super::fresh_report_dir(&scenario.name)?, true),
     };
+    let several = scenario.egos().len() > 1;
+    if several {
+        egos::check_args(args, &scenario)?;
+    }
     let rt = tokio::runtime::Runtime::new()?;
-    let report = rt.block_on(run_loop(args, connect, scenario, &dir)).inspect_err(|_| {
-        // A run that failed before anything was written (a taken view port, a namespace in
-        // use) leaves no empty report directory behind; one with logs keeps them.
-        if fresh {
-            remove_if_empty(&dir);
-        }
-    })?;
+    let report = rt
+        .block_on(async {
+            match several {
+                true => egos::run_loop(args, connect, scenario, &dir).await,
+                false => run_loop(args, connect, scenario, &dir).await,
+            }
+        })
+        .inspect_err(|_| {
+            // A run that failed before anything was written (a taken view port, a namespace in
+            // use) leaves no empty report directory behind; one with logs keeps them.
+            if fresh {
+                remove_if_empty(&dir);
+            }
+        })?;
     println!("{}", summary(&report));
     Ok(Outcome { report })
 }
@@ -343,10 +362,10 @@ fn external_scenario(args: &UpArgs) -> Result<Scenario> {
 
 /// What `up` follows on the bus while the loop runs: the run's record (the same recorder as
 /// `eval acc`), every key (as `top`), the loop latency, the clock and the scenario's end.
-struct Watch {
-    recorder: Recorder,
-    keys: Watcher,
-    latency: Arc<Mutex<LoopLatency>>,
+pub(super) struct Watch {
+    pub recorder: Recorder,
+    pub keys: Watcher,
+    pub latency: Arc<Mutex<LoopLatency>>,
     _latency: LatencyWatch,
     clock: Arc<Mutex<Option<SimClock>>>,
     end_event: Arc<Mutex<Option<String>>>,
@@ -354,7 +373,7 @@ struct Watch {
 }
 
 impl Watch {
-    async fn start(bus: &Bus, camera: bool) -> Result<Watch> {
+    pub async fn start(bus: &Bus, camera: bool) -> Result<Watch> {
         let watch = LatencyWatch::start(bus, camera).await?;
         let clock: Arc<Mutex<Option<SimClock>>> = Arc::default();
         let end_event: Arc<Mutex<Option<String>>> = Arc::default();
@@ -381,7 +400,7 @@ impl Watch {
 
     /// The live view's lines.
     /// The live view's lines; `duration_s` None: no known end (an external simulator's).
-    fn lines(&self, name: &str, mode: ClockMode, duration_s: Option<f64>, alive: &[String]) -> Vec<String> {
+    pub fn lines(&self, name: &str, mode: ClockMode, duration_s: Option<f64>, alive: &[String]) -> Vec<String> {
         let (sim_s, speed, status, collisions) = {
             let rec = self.recorder.rec.lock();
             (
@@ -421,17 +440,16 @@ impl Watch {
 
 /// Draws the live view (or prints a plain line) until the simulator ends, a node dies or
 /// a stop request (Ctrl-C, SIGTERM, SIGHUP). Returns the stop request's signal, if one came.
-async fn watch_until_over(
+/// `lines` draws the view from the names of the nodes alive.
+pub(super) async fn watch_until_over(
     lp: &mut LoopRun,
-    watch: &Watch,
+    lines: &dyn Fn(&[String]) -> Vec<String>,
     args: &UpArgs,
-    duration_s: Option<f64>,
     external: Option<&crate::launch::ExternalSim>,
 ) -> Result<Option<&'static str>> {
-    let name = lp.spec().scenario.clone();
     let shown = super::status::Status::lines(args.plain);
     let refresh = if shown.is_live() { REFRESH_TTY } else { REFRESH_PLAIN };
-    let nodes_seen = lp.bus().watch_nodes().await?;
+    let nodes_seen = lp.watch_all_nodes().await?;
     let ctrl_c = crate::cli::stop_requested();
     tokio::pin!(ctrl_c);
     // The end is noticed within NODE_POLL; the view is drawn at its own refresh rate.
@@ -447,7 +465,7 @@ async fn watch_until_over(
             continue;
         }
         drawn_at = Some(Instant::now());
-        let lines = watch.lines(&name, args.mode, duration_s, &nodes_seen.names());
+        let lines = lines(&nodes_seen.names());
         // A block of lines in place on a terminal; one line per refresh in a log.
         shown.show(&lines.join(if shown.is_live() { "\n" } else { "  |  " }));
         if over {
@@ -457,7 +475,7 @@ async fn watch_until_over(
     }
 }
 
-fn loop_spec(args: &UpArgs, scenario: &Scenario) -> Result<LoopSpec> {
+pub(super) fn loop_spec(args: &UpArgs, scenario: &Scenario) -> Result<LoopSpec> {
     Ok(LoopSpec {
         scenario: match args.sim {
             SimSource::Builtin => args.scenario.clone(),
@@ -472,6 +490,7 @@ fn loop_spec(args: &UpArgs, scenario: &Scenario) -> Result<LoopSpec> {
         faults: args.faults.profile()?,
         link: Default::default(),
         own: args.own.nodes()?,
+        egos: crate::launch::EgoNodes::of(scenario),
     })
 }
 
@@ -611,16 +630,11 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
     let external = start_nodes(&mut lp, args).await?;
     let sim_started = Instant::now();
     let shown = if external.is_some() { args.duration } else { Some(scenario.duration_s) };
-    let stopped_by = watch_until_over(&mut lp, &watch, args, shown, external.as_ref()).await?;
+    let name = lp.spec().scenario.clone();
+    let lines = |alive: &[String]| watch.lines(&name, args.mode, shown, alive);
+    let stopped_by = watch_until_over(&mut lp, &lines, args, external.as_ref()).await?;
     let sim_ran_s = sim_started.elapsed().as_secs_f64();
-    for node in lp.check().died {
-        let log = lp.log(&node);
-        let why = crate::launch::last_words(&log).map_or(String::new(), |e| format!(": {e}"));
-        eprintln!("{node} ended before the run was over{why}\n(its log: {})", log.display());
-    }
-    if let Some(signal) = stopped_by {
-        eprintln!("{signal}: stopping the nodes");
-    }
+    say_who_died(&mut lp, stopped_by);
     let nodes = lp.stop().await;
     let wall = started.elapsed().as_secs_f64();
     let done = extras.stop().await?;
@@ -672,10 +686,16 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
         view: done.view,
         ros2: done.ros2,
         ros2_recording: done.ros2_recording,
+        egos: Vec::new(),
+        collisions_between_egos: 0,
         report_dir: dir.to_path_buf(),
     };
-    // The report is on disk before the session closes: sessions still attached (top, echo, a
-    // Python client) can hold the close up, bounded as it is.
+    written(report, lp, dir).await
+}
+
+/// Writes report.json, then leaves the bus. The report is on disk before the session closes:
+/// sessions still attached (top, echo, a Python client) can hold the close up, bounded as it is.
+pub(super) async fn written(report: UpReport, lp: LoopRun, dir: &Path) -> Result<UpReport> {
     let path = dir.join("report.json");
     std::fs::write(&path, serde_json::to_string_pretty(&report)?)
         .with_context(|| format!("write {}", path.display()))?;
@@ -683,9 +703,22 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
     Ok(report)
 }
 
+/// Names each node that died before the run was over (with its last words and log), and the
+/// signal that stops the run, if one did.
+pub(super) fn say_who_died(lp: &mut LoopRun, stopped_by: Option<&str>) {
+    for node in lp.check().died {
+        let log = lp.log(&node);
+        let why = crate::launch::last_words(&log).map_or(String::new(), |e| format!(": {e}"));
+        eprintln!("{node} ended before the run was over{why}\n(its log: {})", log.display());
+    }
+    if let Some(signal) = stopped_by {
+        eprintln!("{signal}: stopping the nodes");
+    }
+}
+
 /// The run's first line: scenario, clock, perception, the namespace (and why, when the default
 /// one held another loop), the report directory.
-fn header(scenario: &str, args: &UpArgs, lp: &LoopRun, dir: &Path) -> String {
+pub(super) fn header(scenario: &str, args: &UpArgs, lp: &LoopRun, dir: &Path) -> String {
     let (clock, perception) = (args.mode.name(), args.perception.name());
     let ns = lp.bus().topics().namespace();
     let place = match lp.moved() {
@@ -725,7 +758,12 @@ fn judged_outputs(
 }
 
 /// `ego_lag_s`: the actuator lag of the scenario's ego, unless `--actuator-lag` says otherwise.
-fn latency_report(lat: &LoopLatency, args: &UpArgs, time_gap_s: Option<f64>, ego_lag_s: f64) -> LatencyReport {
+pub(super) fn latency_report(
+    lat: &LoopLatency,
+    args: &UpArgs,
+    time_gap_s: Option<f64>,
+    ego_lag_s: f64,
+) -> LatencyReport {
     let hops = lat.stats(false);
     let delay = hops[WHOLE_LOOP].p99_ms.map(|ms| ms / 1e3);
     let lag = args.actuator_lag.unwrap_or(ego_lag_s);
@@ -776,6 +814,9 @@ pub fn summary(r: &UpReport) -> String {
             f(h.p99_ms, 2),
             f(h.max_ms, 2)
         ));
+    }
+    if !r.egos.is_empty() {
+        s.push_str(&egos::table(&r.egos, r.collisions_between_egos));
     }
     if !r.ground_truth {
         s.push_str(

@@ -303,9 +303,29 @@ def test_a_platoon_by_hand_eight_controllers_each_in_its_namespace(host):
     for acc in accs:
         assert "joined the bus" in acc.stderr()
         stopped(host, acc)
-    # `up` runs one ego's nodes: it names the scenario's egos and what to do instead.
-    up = one_shot(host, "target/release/slipstream up --scenario platoon-8", work_s=2, expect=1)
-    assert "`platoon-8` has 8 controlled vehicles" in up.stderr() and "namespace" in up.stderr(), up.stderr()
+    # `eval acc` runs one ego's nodes: it names the scenario's egos and what to do instead.
+    ev = one_shot(host, "target/release/slipstream eval acc --scenario platoon-8", work_s=2, expect=1)
+    assert "`platoon-8` has 8 controlled vehicles" in ev.stderr() and "slipstream up" in ev.stderr(), ev.stderr()
+
+
+@needs_host
+def test_up_runs_a_platoon_live_each_car_with_its_own_detector_and_acc(host):
+    """docs/simulator.md: `slipstream up --scenario platoon-8`, in real time with the camera."""
+    up = one_shot(host, "slipstream up --scenario platoon-8 --duration 20", work_s=35)
+    r = report(host, only_report(host))
+    cars = [f"car{k}" for k in range(1, 9)]
+    assert [e["namespace"] for e in r["egos"]] == cars, r["egos"]
+    for e in r["egos"]:
+        assert e["collisions"] == 0 and e["metrics"] and e["metrics"]["min_gap_m"] > 20, e
+        assert e["control"]["frames"] > 0 and e["control"]["lockstep_timeouts"] == 0, e
+    assert r["collisions"] == 0 and r["collisions_between_egos"] == 0, r
+    nodes = {n["node"]: n for n in r["nodes"]}
+    assert set(nodes) == {f"{c}-{n}" for c in cars for n in ("acc", "detect")} | {"slipstream-sim"}, nodes
+    assert not any(n["died"] for n in nodes.values()), nodes
+    assert "collisions between controlled vehicles: 0" in up.stdout(), up.stdout()
+    # What follows one car is refused with the command that does it beside the run.
+    view = one_shot(host, "slipstream up --scenario platoon-8 --view", work_s=2, expect=1)
+    assert "slipstream -n car1 view" in view.stderr(), view.stderr()
 
 
 @needs_host

@@ -77,6 +77,7 @@ async fn side_by_side(n: usize, duration_s: f64) -> Result<ScaleRow> {
         faults: None,
         link: LinkKind::Unix,
         own: Default::default(),
+        egos: Vec::new(),
     };
     let logs = std::env::temp_dir().join(format!("slipstream-bench-scale-{}", std::process::id()));
     let cpu_before = children_cpu_s();

@@ -87,6 +87,7 @@ pub async fn run_node(
         faults: None,
         link: Default::default(),
         own: nodes(role, args)?,
+        egos: Vec::new(),
     };
     let pid = std::process::id();
     let logs = std::env::temp_dir().join(format!("slipstream-conform-{pid}"));

@@ -339,6 +339,7 @@ pub(crate) async fn run_one(
         faults: under.faults,
         link: args.link,
         own: under.own,
+        egos: Vec::new(),
     };
     let faults = spec.faults.as_ref().map(|p| p.summary());
     // A namespace and ports of this run's own: nothing else on the machine is disturbed.

@@ -24,10 +24,23 @@ pub struct Judged {
 /// collision count and end reason win over the recorder's, which may miss the last events),
 /// and judges it. `end_if_unknown` names the end when the simulator said nothing.
 pub fn judge(rec: &Recorded, scenario: &Scenario, sim: Option<&SimReport>, end_if_unknown: &str) -> Judged {
-    let ego = VehicleParams::of_class(scenario.ego().class.into());
+    judge_ego(rec, scenario, 0, sim, end_if_unknown)
+}
+
+/// [`judge`] for ego `k` of a scenario's several, on its own record (its namespace's
+/// topics): its class, its collisions in the simulator's report (with another ego too).
+pub fn judge_ego(
+    rec: &Recorded,
+    scenario: &Scenario,
+    k: usize,
+    sim: Option<&SimReport>,
+    end_if_unknown: &str,
+) -> Judged {
+    let ego = VehicleParams::of_class(scenario.egos()[k].class.into());
     let front_m = ego.size_m[0] - ego.rear_overhang_m;
     let mut trace = build_trace(rec, front_m, AccSettings::default().standstill_m);
-    trace.collisions = sim.map_or(0, |s| s.ego_collisions).max(rec.collisions);
+    let sim_collisions = sim.map_or(0, |s| s.egos.get(k).map_or(s.ego_collisions, |e| e.collisions));
+    trace.collisions = sim_collisions.max(rec.collisions);
     trace.traffic_collisions = sim.map_or(0, |s| s.traffic_collisions);
     trace.min_gap_aim_m = scenario.expect.min_gap_m;
     trace.braking_warranted = scenario.expect.braking;

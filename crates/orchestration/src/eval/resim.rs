@@ -572,6 +572,7 @@ pub async fn run(
         faults: None,
         link: Default::default(),
         own,
+        egos: Vec::new(),
     };
     let mut lp =
         LoopRun::open(spec.clone(), Network::User { connect, sim_elsewhere: false }, &dir.join("logs"), "resim")

@@ -33,6 +33,9 @@ use slipstream_contract::Bus;
 use slipstream_perception::node::DetectStats;
 use slipstream_sim::SimReport;
 
+mod egos;
+pub use egos::{AllNodes, EgoNodes};
+
 /// How the simulator's clock runs (slipstream-sim --mode).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, clap::ValueEnum)]
 #[serde(rename_all = "lowercase")]
@@ -86,6 +89,10 @@ pub struct LoopSpec {
     pub link: LinkKind,
     /// Nodes of the user's own in the place of ours (`--controller`, `--detector`).
     pub own: OwnNodes,
+    /// Several controlled vehicles ([`EgoNodes::of`] a scenario's `egos`): an ACC (and a
+    /// detector with camera perception) per ego in its namespace, each with its own settings;
+    /// empty: one ego in the run's namespace, set by the fields above.
+    pub egos: Vec<EgoNodes>,
 }
 
 impl LoopSpec {
@@ -462,6 +469,10 @@ impl LoopRun {
             std::fs::write(&path, p.to_json5()).map_err(Error::file("write", &path))?;
             self.base_flags.extend(["--faults".into(), path.display().to_string()]);
         }
+        if !spec.egos.is_empty() {
+            let waits = self.start_ego_controllers().await?;
+            return self.await_ready(waits).await;
+        }
         let mut waits = Vec::new();
         for node in &spec.own.others {
             let own = self.endpoints.extra(node.node())?;
@@ -534,18 +545,23 @@ impl LoopRun {
 
     /// slipstream-acc's flags for the spec.
     fn acc_args(&self) -> Vec<String> {
+        self.acc_args_of(self.spec.set_speed_mps, self.spec.time_gap_s, self.spec.vehicle)
+    }
+
+    /// slipstream-acc's flags for one ego's settings.
+    fn acc_args_of(&self, set_speed_mps: f64, time_gap_s: Option<f64>, vehicle: Option<VehicleClass>) -> Vec<String> {
         let spec = &self.spec;
         let mut acc_args = vec![
             "--json".to_string(),
             "--set-speed".into(),
-            spec.set_speed_mps.to_string(),
+            set_speed_mps.to_string(),
             "--perception".into(),
             spec.perception.name().into(),
         ];
-        if let Some(h) = spec.time_gap_s {
+        if let Some(h) = time_gap_s {
             acc_args.extend(["--time-gap".into(), h.to_string()]);
         }
-        if let Some(v) = spec.vehicle {
+        if let Some(v) = vehicle {
             acc_args.extend(["--vehicle".into(), v.name().into()]);
         }
         if spec.clock == ClockMode::Lockstep {
@@ -606,7 +622,7 @@ impl LoopRun {
 
     /// The simulator's first frame must find every node ready (listening).
     async fn await_ready(&mut self, waits: Vec<super::ready::Watch>) -> Result<()> {
-        let seen = self.bus.watch_nodes().await?;
+        let seen = self.watch_all_nodes().await?;
         let start = Instant::now();
         loop {
             let alive = seen.names();

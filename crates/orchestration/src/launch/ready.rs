@@ -67,7 +67,14 @@ impl Watch {
     pub fn awaited(&self) -> String {
         match &self.sample {
             Some((key, ..)) => format!("no sample on {key} (its ready.sample)"),
-            None => format!("no liveliness token nodes/{} (a node declares it once it listens)", self.node),
+            None => {
+                // An ego's node is named with its namespace (`car1/acc`): its token is car1/nodes/acc.
+                let key = match self.node.rsplit_once('/') {
+                    Some((ns, name)) => format!("{ns}/nodes/{name}"),
+                    None => format!("nodes/{}", self.node),
+                };
+                format!("no liveliness token {key} (a node declares it once it listens)")
+            }
         }
     }
 }
