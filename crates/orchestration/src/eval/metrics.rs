@@ -296,11 +296,11 @@ fn steady_lead(stretch: &[Sample], now: &Sample) -> bool {
         return false;
     }
     let lead_speed = |w: &Sample| w.lead_speed_mps().unwrap_or(w.speed_mps);
-    let (lo, hi) = stretch
-        .iter()
-        .filter(|w| w.t_s >= now.t_s - STEADY_S)
-        .map(lead_speed)
-        .fold((f64::MAX, f64::MIN), |(lo, hi), v| (lo.min(v), hi.max(v)));
+    // Samples are in time order: the window starts where a binary search finds it (a scan
+    // from the stretch's start made an hour behind one lead quadratic).
+    let start = stretch.partition_point(|w| w.t_s < now.t_s - STEADY_S);
+    let (lo, hi) =
+        stretch[start..].iter().map(lead_speed).fold((f64::MAX, f64::MIN), |(lo, hi), v| (lo.min(v), hi.max(v)));
     hi - lo < FOLLOWING_BAND_MPS
 }
 
@@ -326,7 +326,7 @@ impl Tally {
         // from a stop ahead of the ego, the gap still closing from 30 to 24 m at 1 m/s read as
         // a 0.06-0.09 s time-gap error with both perceptions).
         // (Scanned last: ten seconds of samples at each one.)
-        let past = s[from..=i].iter().filter(|w| w.t_s >= x.t_s - SETTLED_S);
+        let past = s[from + s[from..=i].partition_point(|w| w.t_s < x.t_s - SETTLED_S)..=i].iter();
         let kept = || past.clone().all(|w| w.truth.is_some_and(|t| t.relative_speed_mps.abs() < FOLLOWING_BAND_MPS));
         if x.mode == AccMode::Follow && x.speed_mps > 3.0 && steady_lead(&s[from..=i], x) && kept() {
             self.gap_errors.push((tl.gap_m - standstill_m) / x.speed_mps - x.time_gap_s);
@@ -580,8 +580,10 @@ impl Metrics {
         let dt = if s.len() > 1 { (s[s.len() - 1].t_s - s[0].t_s) / (s.len() - 1) as f64 } else { 0.01 };
         let emergency_times: Vec<f64> = s.iter().filter(|x| x.mode == AccMode::Emergency).map(|x| x.t_s).collect();
         // From a little before an emergency to a while after it (the release).
-        let near_emergency =
-            |t: f64| emergency_times.iter().any(|&e| e >= t - EMERGENCY_MARGIN_S.1 && e <= t + EMERGENCY_MARGIN_S.0);
+        let near_emergency = |t: f64| {
+            let first = emergency_times.partition_point(|&e| e < t - EMERGENCY_MARGIN_S.1);
+            emergency_times.get(first).is_some_and(|&e| e <= t + EMERGENCY_MARGIN_S.0)
+        };
         let samples_in = |window_s: f64| (window_s / dt.max(1e-6)).round().max(1.0) as usize;
         let jerk_lag = samples_in(JERK_WINDOW_S);
         let lead_accel = lead_accelerations(s, samples_in(HARD_BRAKING_WINDOW_S));
