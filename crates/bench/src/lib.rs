@@ -13,6 +13,7 @@
 mod cases;
 mod child;
 pub mod command;
+mod egos;
 mod figures;
 pub mod fleet;
 pub mod fleet_watch;

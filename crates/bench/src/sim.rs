@@ -2,7 +2,7 @@
 //! and 50 vehicles, software render time per frame, the vehicle detector's time per frame,
 //! both default cameras rendered and detected per frame,
 //! and the real-time factor of a whole run in fast mode with the camera publishing on a
-//! loopback bus. A frame-sized memcpy runs in the
+//! loopback bus, and with N egos in one world ([`super::egos`]). A frame-sized memcpy runs in the
 //! same process as the machine's yardstick for the render figures.
 
 use std::time::{Duration, Instant};
@@ -171,6 +171,32 @@ async fn fast_rtf(scenario: &str, sim_s: f64) -> Result<f64> {
     Ok(report.real_time_factor)
 }
 
+/// One figure of the suite: what, unit, aim, and how to take one run of it.
+type Figure<'a> = dyn FnMut(&str, &str, &str, &mut dyn FnMut() -> Result<f64>) -> Result<f64> + 'a;
+
+/// Many egos in one simulator ([`super::egos`]): the fast real-time factor at N egos with
+/// their cameras and on ground truth, and what it implies at real time for the largest N.
+fn egos_figures(rt: &tokio::runtime::Runtime, quick: bool, sim_s: f64, figure: &mut Figure) -> Result<()> {
+    let counts: &[usize] = if quick { &[1, 2] } else { &[1, 4, 8, 16] };
+    let camera = SimSettings { mode: Mode::Fast, ..SimSettings::default() };
+    let ground_truth = super::egos::ground_truth_settings();
+    for (what, settings) in [("cameras", &camera), ("ground truth (80x60 camera, no narrow)", &ground_truth)] {
+        let mut last = 0.0;
+        for &n in counts {
+            let egos = if n == 1 { "1 ego".to_string() } else { format!("{n} egos") };
+            let name = format!("fast mode real-time factor, {egos}, {what}, frames on the bus");
+            last = figure(&name, "x", "-", &mut || {
+                let run = super::egos::fast_rtf(n, settings, sim_s);
+                rt.block_on(async { tokio::time::timeout(Duration::from_secs(900), run).await? })
+            })?;
+        }
+        let n = *counts.last().unwrap_or(&1);
+        let served = n as f64 * last;
+        figure(&format!("egos served at real time, {what} ({n} x its factor)"), "egos", "-", &mut || Ok(served))?;
+    }
+    Ok(())
+}
+
 /// Runs the simulator suite; progress on stderr.
 pub fn run(quick: bool, repeat: usize) -> Result<Vec<SimFigure>> {
     let repeat = if quick { 1 } else { repeat.max(1) };
@@ -216,6 +242,7 @@ pub fn run(quick: bool, repeat: usize) -> Result<Vec<SimFigure>> {
             },
         )?;
     }
+    egos_figures(&rt, quick, sim_s, &mut figure)?;
     out.push(SimFigure {
         what: "render 640x480 / memcpy 640x480 (same run)".into(),
         value: vga / copy.max(1e-9),
