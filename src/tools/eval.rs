@@ -149,7 +149,7 @@ pub fn command(command: &EvalCommand, connect: &ConnectArgs) -> Result<ExitCode>
             use crate::eval::acc;
             let report = acc::run(args, connect)?;
             print_report(args.json, &report, acc::markdown)?;
-            let failed = report.results.iter().filter(|r| !r.metrics.pass || r.lockstep_timeouts > 0).count();
+            let failed = report.results.iter().filter(|r| !r.passed()).count();
             if failed > 0 {
                 anyhow::bail!("{failed} of {} scenarios missed an aim", report.results.len());
             }

@@ -303,8 +303,8 @@ def test_a_platoon_by_hand_eight_controllers_each_in_its_namespace(host):
     for acc in accs:
         assert "joined the bus" in acc.stderr()
         stopped(host, acc)
-    # `eval acc` runs one ego's nodes: it names the scenario's egos and what to do instead.
-    ev = one_shot(host, "target/release/slipstream eval acc --scenario platoon-8", work_s=2, expect=1)
+    # `eval faults` runs one ego's nodes: it names the scenario's egos and what to do instead.
+    ev = one_shot(host, "target/release/slipstream eval faults --scenario platoon-8", work_s=2, expect=1)
     assert "`platoon-8` has 8 controlled vehicles" in ev.stderr() and "slipstream up" in ev.stderr(), ev.stderr()
 
 

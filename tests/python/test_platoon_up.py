@@ -47,3 +47,21 @@ def test_a_cars_acc_killed_mid_run_is_named_and_the_other_cars_are_still_judged(
     # Every car drove until the run ended, and each is judged on what it recorded.
     assert all(e["metrics"] and e["metrics"]["duration_s"] > 1 for e in r["egos"]), r["egos"]
     assert "car3" in out and "collisions between controlled vehicles" in out, out
+
+
+def test_eval_acc_judges_every_car_of_a_platoon_against_the_aims(slipstream_bin):
+    done = subprocess.run([slipstream_bin, "eval", "acc", "--scenario", "platoon-8-hard-brake", "--perception",
+                           "ground-truth", "--duration", "30", "--json"], cwd=ROOT, capture_output=True, text=True,
+                          timeout=300)
+    report = json.loads(done.stdout)
+    run = report["results"][0]
+    assert [e["namespace"] for e in run["egos"]] == [f"car{k}" for k in range(1, 9)], run["egos"]
+    for e in run["egos"]:
+        assert e["metrics"]["collisions"] == 0 and e["lockstep_timeouts"] == 0, e
+    # The leader's hard brake reaches the first car hardest; the string passes on it or fails by it.
+    decels = [e["metrics"]["max_decel_mps2"] for e in run["egos"]]
+    assert decels[0] > decels[-1], decels
+    assert report["pass"] == all(e["metrics"]["pass"] for e in run["egos"]) == (done.returncode == 0), done.stderr
+    table = subprocess.run([slipstream_bin, "eval", "acc", "--scenario", "platoon-8-hard-brake", "--perception",
+                            "ground-truth", "--duration", "30"], cwd=ROOT, capture_output=True, text=True, timeout=300)
+    assert all(f"| platoon-8-hard-brake car{k} |" in table.stdout for k in range(1, 9)), table.stdout

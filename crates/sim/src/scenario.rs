@@ -375,7 +375,7 @@ impl Scenario {
             "--scenario",
             "egos",
             format!("`{}` has {} controlled vehicles and {tool} runs one ego's detector and controller", self.name, self.egos.len()),
-            "run it with `slipstream up` or `slipstream eval platoon`, or slipstream-sim with each ego's nodes in its namespace (docs/simulator.md, \"Several controlled vehicles\"); or pick a scenario with one `ego`",
+            "run it with `slipstream up`, `slipstream eval acc` or `slipstream eval platoon`, or slipstream-sim with each ego's nodes in its namespace (docs/simulator.md, \"Several controlled vehicles\"); or pick a scenario with one `ego`",
         ))
     }
 
@@ -732,7 +732,7 @@ mod tests {
             let s = Scenario::find(name).unwrap_or_else(|e| panic!("{e}"));
             assert_eq!(&s.name, name);
             assert!(s.egos().len() > 1, "{name}");
-            let e = s.one_ego("slipstream eval").unwrap_err();
+            let e = s.one_ego("slipstream eval faults").unwrap_err();
             assert!(e.problem.contains("controlled vehicles") && e.fix.contains("namespace"), "{e}");
         }
     }

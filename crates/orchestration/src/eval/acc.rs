@@ -16,7 +16,6 @@ use serde::Serialize;
 
 use super::judge::judge;
 use super::metrics::{aims, Metrics};
-use super::trace::Recorder;
 use super::{fmt_opt, plot};
 use crate::launch::{ClockMode, LinkKind, LoopRun, LoopSpec, Network, NodeInput, OwnNodeArgs, OwnNodes, NODE_POLL};
 use slipstream_acc::PerceptionSource;
@@ -83,12 +82,16 @@ pub struct ScenarioResult {
     /// Nodes their restart policy started again, and how often (a loop file's `restart`).
     #[serde(default, skip_serializing_if = "std::collections::BTreeMap::is_empty")]
     pub restarts: std::collections::BTreeMap<String, u32>,
+    /// With several controlled vehicles, each one judged on its own topics (`metrics` is then
+    /// the first's); the scenario passes when every one does.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub egos: Vec<super::egos::EgoResult>,
 }
 
 impl ScenarioResult {
     /// Passed: every check, and every step answered in time.
     pub fn passed(&self) -> bool {
-        self.metrics.pass && self.lockstep_timeouts == 0
+        self.metrics.pass && self.lockstep_timeouts == 0 && self.egos.iter().all(super::egos::EgoResult::passed)
     }
 
     /// A result with these metrics and nothing else to say (the sweep's unit tests).
@@ -107,6 +110,7 @@ impl ScenarioResult {
             inputs: Vec::new(),
             time: RunTime::default(),
             restarts: Default::default(),
+            egos: Vec::new(),
         }
     }
 }
@@ -193,8 +197,7 @@ pub fn run(args: &EvalAccArgs, connect: &slipstream_contract::config::ConnectArg
     } else {
         args.scenarios.clone()
     };
-    let scenarios: Vec<Scenario> =
-        names.iter().map(|n| Scenario::find(n).and_then(|s| s.one_ego("slipstream eval"))).collect::<Result<_, _>>()?;
+    let scenarios: Vec<Scenario> = names.iter().map(|n| Scenario::find(n)).collect::<Result<_, _>>()?;
     if let Some(dir) = &args.plots {
         std::fs::create_dir_all(dir).map_err(Error::file("create", dir))?;
     }
@@ -339,7 +342,7 @@ pub(crate) async fn run_one(
         faults: under.faults,
         link: args.link,
         own: under.own,
-        egos: Vec::new(),
+        egos: crate::launch::EgoNodes::of(&scenario),
     };
     let faults = spec.faults.as_ref().map(|p| p.summary());
     // A namespace and ports of this run's own: nothing else on the machine is disturbed.
@@ -348,7 +351,7 @@ pub(crate) async fn run_one(
     let network = Network::Isolated { topics: topics_file.map(Path::to_path_buf), namespace };
     let opened = Instant::now();
     let mut lp = LoopRun::open(spec, network, logs, "eval-acc").await?;
-    let recorder = Recorder::start(lp.bus()).await?;
+    let recorders = super::egos::record_each(&lp).await?;
     let started = Instant::now();
     lp.start().await?;
     let timeout = Duration::from_secs_f64(args.timeout);
@@ -361,11 +364,12 @@ pub(crate) async fn run_one(
     };
     let wall = started.elapsed().as_secs_f64();
     let ends = lp.stop().await;
-    let rec = recorder.take();
+    let recorded: Vec<_> = recorders.iter().map(|(ns, r)| (ns.clone(), r.take())).collect();
     let sim = lp.sim_report();
     let mut inputs = lp.inputs();
-    inputs.extend(recorder.inputs().into_iter().map(|stats| NodeInput { node: "observer".into(), stats }));
-    drop(recorder);
+    let observed = recorders.first().map(|(_, r)| r.inputs()).unwrap_or_default();
+    inputs.extend(observed.into_iter().map(|stats| NodeInput { node: "observer".into(), stats }));
+    drop(recorders);
     let (acc_busy_s, detect_busy_s) =
         (lp.acc_report().map_or(0.0, |a| a.busy_s), lp.detect_report().ok().flatten().map_or(0.0, |d| d.busy_s));
     lp.close().await;
@@ -381,7 +385,8 @@ pub(crate) async fn run_one(
         acc_busy_s,
     };
 
-    let judged = judge(&rec, &scenario, Some(&sim), "stopped");
+    let egos = super::egos::judge_each(&recorded, &scenario, &sim)?;
+    let judged = judge(&recorded[0].1, &scenario, Some(&sim), "stopped");
     let trace = judged.trace;
     let metrics = judged.metrics.ok_or_else(|| unjudged(trace.samples.len(), &sim))?;
     let plot = match &args.plots {
@@ -407,7 +412,36 @@ pub(crate) async fn run_one(
         inputs,
         time,
         restarts: ends.iter().filter(|e| e.restarts > 0).map(|e| (e.node.clone(), e.restarts)).collect(),
+        egos,
     })
+}
+
+/// "pass", or what failed.
+fn verdict(passed: bool, m: &Metrics, lockstep_timeouts: u64) -> String {
+    let failed: Vec<&str> = m.checks.iter().filter(|c| !c.pass).map(|c| c.name.as_str()).collect();
+    if passed {
+        "pass".to_string()
+    } else if lockstep_timeouts > 0 {
+        format!("FAIL: {lockstep_timeouts} lockstep timeouts {}", failed.join(", "))
+    } else {
+        format!("FAIL: {}", failed.join(", "))
+    }
+}
+
+/// One row of the table: a scenario's run, or one car's in a scenario with several.
+fn row(name: &str, perception: PerceptionSource, m: &Metrics, verdict: &str) -> String {
+    let [gap, ttc, time_gap, speed, accel, decel, jerk] = m.headline();
+    format!(
+        "| {name} | {perception:?} | {} ({}) | {gap} | {ttc} | {time_gap} | {speed} | {accel} | {decel} | {jerk} | {} | {} | {:.1} ({}) | {:.1} | {:.1} | {verdict} |\n",
+        m.collisions,
+        m.traffic_collisions,
+        fmt_opt(m.max_accel_swing_mps2, 2),
+        fmt_opt(m.hard_braking_response_s, 2),
+        m.emergency_s,
+        m.unwarranted_emergencies,
+        m.phantom_braking_s,
+        m.standstill_for_nothing_s,
+    )
 }
 
 /// The report as a markdown table.
@@ -416,35 +450,19 @@ pub fn markdown(report: &AccReport) -> String {
     out.push_str("| scenario | perception | collisions (traffic) | min gap m | min TTC s | time-gap RMS s | speed RMSE m/s | max accel | max decel | max jerk | accel swing | hard-braking answer s | emergency s (unwarranted) | phantom braking s | stopped for nothing s | result |\n");
     out.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for r in &report.results {
-        let m = &r.metrics;
-        let failed: Vec<&str> = m.checks.iter().filter(|c| !c.pass).map(|c| c.name.as_str()).collect();
-        let verdict = if r.passed() {
-            "pass".to_string()
-        } else if r.lockstep_timeouts > 0 {
-            format!("FAIL: {} lockstep timeouts {}", r.lockstep_timeouts, failed.join(", "))
-        } else {
-            format!("FAIL: {}", failed.join(", "))
-        };
         let restarted: Vec<String> = r.restarts.iter().map(|(n, k)| format!("{n} restarted {k}x")).collect();
-        let verdict = match restarted.is_empty() {
+        let with_restarts = |verdict: String| match restarted.is_empty() {
             true => verdict,
             false => format!("{verdict} ({})", restarted.join(", ")),
         };
-        let [gap, ttc, time_gap, speed, accel, decel, jerk] = m.headline();
-        out.push_str(&format!(
-            "| {} | {:?} | {} ({}) | {gap} | {ttc} | {time_gap} | {speed} | {accel} | {decel} | {jerk} | {} | {} | {:.1} ({}) | {:.1} | {:.1} | {} |\n",
-            r.scenario,
-            r.perception,
-            m.collisions,
-            m.traffic_collisions,
-            fmt_opt(m.max_accel_swing_mps2, 2),
-            fmt_opt(m.hard_braking_response_s, 2),
-            m.emergency_s,
-            m.unwarranted_emergencies,
-            m.phantom_braking_s,
-            m.standstill_for_nothing_s,
-            verdict
-        ));
+        if r.egos.is_empty() {
+            let verdict = with_restarts(verdict(r.passed(), &r.metrics, r.lockstep_timeouts));
+            out.push_str(&row(&r.scenario, r.perception, &r.metrics, &verdict));
+        }
+        for e in &r.egos {
+            let verdict = with_restarts(verdict(e.passed(), &e.metrics, e.lockstep_timeouts));
+            out.push_str(&row(&format!("{} {}", r.scenario, e.namespace), r.perception, &e.metrics, &verdict));
+        }
     }
     out.push_str(&format!(
         "\nAims: no collision; in steady following time-gap RMS error <= {} s and acceleration within {} m/s2 of the lead's; a scenario's own minimum gap (expect.min_gap_m); accel <= {}, decel <= {} m/s2 at {} m/s and above rising to {} at {} m/s and below (+{:.0}% tolerance) and jerk <= {} m/s3 outside emergencies, at speed; no unwarranted emergency, no phantom braking (beyond 1 m/s2 with nothing in the lane within twice the time gap), no standstill with nothing ahead. Traffic collisions and the answer to a lead braking beyond the comfort limit (until the ACC asks for 90% of what stopping behind it needs; aim {} s) are reported, not judged.\n",

@@ -275,8 +275,10 @@ pub fn run(args: &EvalFaultsArgs, connect: &slipstream_contract::config::Connect
     } else {
         args.scenarios.clone()
     };
-    let scenarios: Vec<Scenario> =
-        names.iter().map(|n| Scenario::find(n).and_then(|s| s.one_ego("slipstream eval"))).collect::<Result<_, _>>()?;
+    let scenarios: Vec<Scenario> = names
+        .iter()
+        .map(|n| Scenario::find(n).and_then(|s| s.one_ego("slipstream eval faults")))
+        .collect::<Result<_, _>>()?;
     let logs = match &args.logs {
         Some(dir) => dir.clone(),
         None => std::env::temp_dir().join(format!("slipstream-eval-faults-{}", std::process::id())),

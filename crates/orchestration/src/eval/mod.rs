@@ -16,7 +16,7 @@
 //!   bound.
 //! - [`plot`]: PNG plots of a trace and of the loop latency.
 //! - [`acc`]: `slipstream eval acc`, the scenario suite over separate processes (through
-//!   [`crate::launch`]).
+//!   [`crate::launch`]); [`egos`]: a run with several controlled vehicles judged car by car.
 //! - [`sweep`]: `slipstream eval sweep`, generated scenarios by the thousand, judged as
 //!   rates per 1,000 km (runs of [`acc`]).
 //! - [`faults`]: `slipstream eval faults`, the ACC's safety envelope under injected network
@@ -31,6 +31,7 @@ pub mod acc;
 pub(crate) mod bend_lateral;
 pub mod detect;
 pub mod detect_remote;
+pub mod egos;
 pub mod faults;
 pub mod frame_detector;
 pub mod judge;
