@@ -126,7 +126,7 @@ def phase(binary, minutes, report, bad, csv):
     # A loaded machine runs the realtime loop a little slower than the wall clock: the loop is
     # stopped as a user stops it (its report is written on Ctrl-C) rather than awaited.
     up.send_signal(signal.SIGINT)
-    up.wait(timeout=120)
+    up.wait(timeout=600)
     view.terminate()
     view.wait(timeout=60)
     err = (report.parent / f"view-{int(bad)}.log").read_text(errors="replace")

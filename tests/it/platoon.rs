@@ -1,6 +1,7 @@
 //! `slipstream eval platoon` with the real binaries: a three-car platoon at two time gaps, its
 //! figures read from the run (the leader's dip as scripted, every car's speeds recorded, the
-//! ratios those figures give), the files it writes, and a scenario that is no platoon refused.
+//! ratios those figures give), the files it writes, a scenario that is no platoon refused, and
+//! the same with camera perception, a detector per car.
 
 use std::time::Duration;
 
@@ -57,4 +58,29 @@ fn a_platoon_is_measured_car_by_car_at_each_time_gap() {
     let out = run_with_limit(cmd, Duration::from_secs(60));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success() && err.contains("not a built-in platoon"), "{err}");
+}
+
+/// The same platoon with camera perception: each car's detector beside its ACC, the leader's
+/// dip still read from the first car's ground truth, every car following it.
+#[test]
+fn a_platoon_on_camera_perception_runs_a_detector_per_car() {
+    let _serial = serial();
+    let dir = temp_dir("platoon-camera");
+    let file = dir.join("three.json5");
+    std::fs::write(&file, THREE).unwrap();
+    let mut cmd = bin("slipstream");
+    cmd.args(["eval", "platoon", "--perception", "camera", "--scenario"]).arg(&file);
+    cmd.args(["--time-gaps", "1.8", "--json", "--report"]).arg(dir.join("report"));
+    let out = run_with_limit(cmd, Duration::from_secs(300));
+    assert!(out.status.success(), "stderr: {}", String::from_utf8_lossy(&out.stderr));
+    let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let run = &r["runs"][0];
+    assert_eq!((run["collisions"].as_u64(), run["lockstep_timeouts"].as_u64()), (Some(0), Some(0)), "{run}");
+    let cars = run["cars"].as_array().unwrap();
+    let peak = |k: usize| cars[k]["peak_speed_error_mps"].as_f64().unwrap();
+    assert!((peak(0) - 4.0).abs() < 0.3, "the leader dips 4 m/s: {}", peak(0));
+    assert!((1..4).all(|k| peak(k) > 1.0), "every car follows the dip on its detections: {run}");
+    for k in 0..3 {
+        assert!(dir.join("report").join(format!("gap-1.8/detect-{k}.log")).is_file(), "car {k}'s detector log");
+    }
 }
