@@ -84,3 +84,40 @@ fn a_platoon_on_camera_perception_runs_a_detector_per_car() {
         assert!(dir.join("report").join(format!("gap-1.8/detect-{k}.log")).is_file(), "car {k}'s detector log");
     }
 }
+
+/// `--faults`: every car's ACC and the simulator inject the profile on their own inputs; the
+/// report names it; a profile lockstep cannot take is refused before anything runs.
+#[test]
+fn a_platoon_with_faults_on_every_cars_links_is_measured_and_says_so() {
+    let _serial = serial();
+    let dir = temp_dir("platoon-faults");
+    let file = dir.join("three.json5");
+    std::fs::write(&file, THREE).unwrap();
+    let mut cmd = bin("slipstream");
+    cmd.args(["eval", "platoon", "--faults", "wifi-busy", "--scenario"]).arg(&file);
+    cmd.args(["--time-gaps", "1.8", "--json", "--report"]).arg(dir.join("report"));
+    let out = run_with_limit(cmd, Duration::from_secs(300));
+    assert!(out.status.success(), "stderr: {}", String::from_utf8_lossy(&out.stderr));
+    let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    assert!(r["faults"].as_str().is_some_and(|f| f.starts_with("wifi-busy")), "{r}");
+    let run = &r["runs"][0];
+    assert_eq!((run["collisions"].as_u64(), run["lockstep_timeouts"].as_u64()), (Some(0), Some(0)), "{run}");
+    let sim: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("report/gap-1.8/sim.json")).unwrap()).unwrap();
+    let control = &sim["control_input"];
+    assert!(control["injected_delayed"].as_u64().unwrap() > 0, "the simulator delayed commands: {control}");
+    for k in 0..3 {
+        let log = std::fs::read_to_string(dir.join(format!("report/gap-1.8/acc-{k}.log"))).unwrap();
+        assert!(log.contains("injecting faults"), "car {k}'s ACC injects: {log}");
+    }
+
+    let speed = dir.join("speed.json5");
+    std::fs::write(&speed, r#"{ topics: { "vehicle/speed": { loss: 0.1 } } }"#).unwrap();
+    let mut cmd = bin("slipstream");
+    cmd.args(["eval", "platoon", "--faults"]).arg(&speed).args(["--scenario"]).arg(&file);
+    cmd.arg("--report").arg(dir.join("refused"));
+    let out = run_with_limit(cmd, Duration::from_secs(60));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success() && err.contains("cannot run in lockstep"), "{err}");
+    assert!(!dir.join("refused/gap-0.8").exists(), "nothing ran");
+}

@@ -44,8 +44,8 @@ pub use child::{free_ports, sibling_binary, Child};
 pub use external::ExternalSim;
 pub use foreign::{ForeignNode, OwnNodes};
 pub use nodes::{
-    last_error, last_words, log_of, AllNodes, ClockMode, EgoNodes, LinkKind, LoopRun, LoopSpec, Network, NodeEnd,
-    NodeInput, Progress,
+    last_error, last_words, log_of, refuse_in_lockstep, AllNodes, ClockMode, EgoNodes, LinkKind, LoopRun, LoopSpec,
+    Network, NodeEnd, NodeInput, Progress,
 };
 pub use own_args::OwnNodeArgs;
 

@@ -114,9 +114,7 @@ impl LoopSpec {
     }
 
     /// Faults a node of this loop cannot take: none can land in a node of the user's own (our
-    /// nodes inject them as they receive); in lockstep, every step waits for the ACC's answer
-    /// to its speed message and for the detections of its frame, so speed and camera frames
-    /// must arrive; their faults belong on what follows them.
+    /// nodes inject them as they receive), nor, in lockstep, [`refuse_in_lockstep`]'s.
     fn check_faults(&self) -> Result<()> {
         let Some(p) = &self.faults else { return Ok(()) };
         if let Some((topic, own)) = self.own.fault_into_foreign(p) {
@@ -127,22 +125,29 @@ impl LoopSpec {
                 own.command_line()
             )));
         }
-        if self.clock != ClockMode::Lockstep {
-            return Ok(());
+        match self.clock {
+            ClockMode::Lockstep => refuse_in_lockstep(p),
+            _ => Ok(()),
         }
-        for (topic, instead) in [
-            (slipstream_contract::topics::VEHICLE_SPEED.topic, "vehicle/state and vehicle/control"),
-            (slipstream_contract::topics::CAMERA_FRONT.topic, "perception/objects (ground truth: objects)"),
-        ] {
-            if p.topics.contains_key(&topic) {
-                return Err(Error::Refused(format!(
-                    "{}: key `topics.{topic}`: faults on {topic} cannot run in lockstep (each step waits for what follows from it) (fix: put them on {instead}, or use --mode realtime or fast)",
-                    p.name
-                )));
-            }
-        }
-        Ok(())
     }
+}
+
+/// Faults a lockstep loop cannot take: every step waits for the ACC's answer to its speed
+/// message and for the detections of its frame, so speed and camera frames must arrive; their
+/// faults belong on what follows them.
+pub fn refuse_in_lockstep(p: &FaultProfile) -> Result<()> {
+    for (topic, instead) in [
+        (slipstream_contract::topics::VEHICLE_SPEED.topic, "vehicle/state and vehicle/control"),
+        (slipstream_contract::topics::CAMERA_FRONT.topic, "perception/objects (ground truth: objects)"),
+    ] {
+        if p.topics.contains_key(&topic) {
+            return Err(Error::Refused(format!(
+                "{}: key `topics.{topic}`: faults on {topic} cannot run in lockstep (each step waits for what follows from it) (fix: put them on {instead}, or use --mode realtime or fast)",
+                p.name
+            )));
+        }
+    }
+    Ok(())
 }
 
 /// How the loop's processes find each other.

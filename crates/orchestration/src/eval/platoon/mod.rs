@@ -41,6 +41,11 @@ pub struct EvalPlatoonArgs {
     /// Print the report as JSON instead of tables
     #[arg(long)]
     pub json: bool,
+    /// Every node injects the profile's faults into what it receives: each car's ACC (and
+    /// detector) on its own links, the simulator on the commands (docs/faults.md; lockstep
+    /// refuses faults on vehicle/speed and camera/front)
+    #[command(flatten)]
+    pub faults: slipstream_contract::config::FaultArgs,
 }
 
 /// One time gap's run.
@@ -72,6 +77,8 @@ pub struct PlatoonReport {
     /// Whether every gap measured above the bound was stable (the bound held as a sufficient
     /// condition for this ACC).
     pub bound_holds: bool,
+    /// The fault profile every node injected (`--faults`), if any.
+    pub faults: Option<String>,
 }
 
 /// Runs the platoon at every time gap in turn.
@@ -79,6 +86,24 @@ pub async fn measure(args: &EvalPlatoonArgs, dir: &Path) -> Result<PlatoonReport
     let value = run::scenario_value(&args.scenario)?;
     let standstill = AccSettings::load_or_default(None)?.standstill_m;
     let sim = SimSettings::load_or_default(None)?;
+    let faults = match args.faults.profile()? {
+        Some(p) => {
+            crate::launch::refuse_in_lockstep(&p)?;
+            std::fs::create_dir_all(dir).map_err(|source| Error::File {
+                action: "create",
+                path: dir.into(),
+                source,
+            })?;
+            let file = dir.join("faults.json5");
+            std::fs::write(&file, p.to_json5()).map_err(|source| Error::File {
+                action: "write",
+                path: file.clone(),
+                source,
+            })?;
+            Some((file, p.summary()))
+        }
+        None => None,
+    };
     let mut runs = Vec::new();
     let (mut name, mut cars, mut from_s, mut lag) = (args.scenario.clone(), 0, 0.0, 0.0);
     for &h in &args.time_gaps {
@@ -90,7 +115,7 @@ pub async fn measure(args: &EvalPlatoonArgs, dir: &Path) -> Result<PlatoonReport
         (name, cars, from_s) = (scenario.name.clone(), scenario.egos().len(), run::disturbance_s(&scenario));
         lag = VehicleParams::of_class(scenario.ego().class.into()).actuator_lag_s;
         tracing::info!(time_gap_s = h, "platoon run");
-        let r = run::run(&scenario, &file, args.perception, &at).await?;
+        let r = run::run(&scenario, &file, args.perception, faults.as_ref().map(|f| f.0.as_path()), &at).await?;
         runs.push(AtGap {
             figures: string_figures(h, &r.leader, &r.cars, from_s),
             collisions: r.sim.ego_collisions,
@@ -117,6 +142,7 @@ pub async fn measure(args: &EvalPlatoonArgs, dir: &Path) -> Result<PlatoonReport
         delay_s,
         actuator_lag_s: lag,
         bound_holds,
+        faults: faults.map(|f| f.1),
     })
 }
 
@@ -127,6 +153,9 @@ pub fn markdown(r: &PlatoonReport) -> String {
         "# slipstream eval platoon: {} ({} cars, {} perception; figures from t = {:.1} s)\n",
         r.scenario, r.cars, r.perception, r.disturbance_s
     );
+    if let Some(f) = &r.faults {
+        s.push_str(&format!("\nfaults injected at every node: {f}\n"));
+    }
     for run in &r.runs {
         let f = &run.figures;
         let verdict = if f.stable && run.collisions == 0 { "string-stable" } else { "NOT string-stable" };

@@ -95,8 +95,15 @@ pub fn disturbance_s(scenario: &Scenario) -> f64 {
     actions.iter().filter_map(|a| a.at_s).fold(f64::INFINITY, f64::min).min(scenario.duration_s).max(0.0)
 }
 
-/// Runs `scenario` (written to `file`) once with every ego's nodes; records the speeds.
-pub async fn run(scenario: &Scenario, file: &Path, perception: PerceptionSource, dir: &Path) -> Result<PlatoonRun> {
+/// Runs `scenario` (written to `file`) once with every ego's nodes, each injecting the faults
+/// of the profile in `faults` when given; records the speeds.
+pub async fn run(
+    scenario: &Scenario,
+    file: &Path,
+    perception: PerceptionSource,
+    faults: Option<&Path>,
+    dir: &Path,
+) -> Result<PlatoonRun> {
     std::fs::create_dir_all(dir).map_err(|source| Error::File { action: "create", path: dir.into(), source })?;
     let ns = format!("platoon-{}-{}", std::process::id(), dir.file_name().and_then(|n| n.to_str()).unwrap_or("run"));
     let [port] = free_ports::<1>()?;
@@ -113,7 +120,7 @@ pub async fn run(scenario: &Scenario, file: &Path, perception: PerceptionSource,
     for (k, ego) in scenario.egos().iter().enumerate() {
         let car_ns = format!("{ns}/{}", ego.namespace.as_deref().unwrap_or_default());
         let log = |what: &str| dir.join(format!("{what}-{k}.log"));
-        let mut acc = node("slipstream-acc", &car_ns, &here, &log("acc"))?;
+        let mut acc = node("slipstream-acc", &car_ns, &here, &log("acc"), faults)?;
         acc.args(["--lockstep", "--perception", perception.name(), "--set-speed"])
             .arg(ego.controller_set_speed_mps().to_string())
             .arg("--time-gap")
@@ -122,12 +129,12 @@ pub async fn run(scenario: &Scenario, file: &Path, perception: PerceptionSource,
         if perception == PerceptionSource::Camera {
             nodes.push(Child::spawn(
                 "slipstream-detect",
-                &mut node("slipstream-detect", &car_ns, &here, &log("detect"))?,
+                &mut node("slipstream-detect", &car_ns, &here, &log("detect"), faults)?,
             )?);
         }
     }
     let report = dir.join("sim.json");
-    let mut sim = node("slipstream-sim", &ns, &here, &dir.join("sim.log"))?;
+    let mut sim = node("slipstream-sim", &ns, &here, &dir.join("sim.log"), faults)?;
     sim.args(["--mode", "lockstep", "--json", "--scenario"]).arg(file);
     sim.stdout(create(&report)?);
     let mut sim = Child::spawn("slipstream-sim", &mut sim)?;
@@ -155,10 +162,14 @@ pub async fn run(scenario: &Scenario, file: &Path, perception: PerceptionSource,
     Ok(PlatoonRun { leader, cars, sim })
 }
 
-/// A node's command: in `ns`, dialling the observer at `here`, its log to `log`.
-fn node(binary: &str, ns: &str, here: &str, log: &Path) -> Result<Command> {
+/// A node's command: in `ns`, dialling the observer at `here`, its log to `log`, injecting the
+/// faults of the profile file `faults`.
+fn node(binary: &str, ns: &str, here: &str, log: &Path, faults: Option<&Path>) -> Result<Command> {
     let mut cmd = Command::new(sibling_binary(binary)?);
     cmd.args(["-n", ns, "-e", here, "-l", "tcp/127.0.0.1:0", "--no-multicast-scouting"]);
+    if let Some(file) = faults {
+        cmd.arg("--faults").arg(file);
+    }
     cmd.stdout(std::process::Stdio::null()).stderr(create(log)?);
     Ok(cmd)
 }
