@@ -398,18 +398,21 @@ impl Watch {
         })
     }
 
-    /// The live view's lines.
     /// The live view's lines; `duration_s` None: no known end (an external simulator's).
     pub fn lines(&self, name: &str, mode: ClockMode, duration_s: Option<f64>, alive: &[String]) -> Vec<String> {
-        let (sim_s, speed, status, collisions) = {
-            let rec = self.recorder.rec.lock();
-            (
-                rec.states.last().map_or(0.0, |s| s.header.stamp_sim_ns as f64 / 1e9),
-                rec.states.last().map(|s| s.msg.speed_mps),
-                rec.statuses.last().map(|s| s.msg.clone()),
-                rec.collisions,
-            )
-        };
+        let hops = self.latency.lock().stats(true);
+        let hop = |(h, short): (&HopStats, &&str)| format!("{short} {}/{}", fmt_opt(h.p50_ms, 1), fmt_opt(h.p99_ms, 1));
+        vec![
+            self.progress_line(name, mode, duration_s),
+            format!("ego {}", self.ego_line()),
+            format!("latency p50/p99 ms: {}", hops.iter().zip(&HOPS_SHORT).map(hop).collect::<Vec<_>>().join("  ")),
+            format!("nodes alive: {}", if alive.is_empty() { "(none yet)".to_string() } else { alive.join(", ") }),
+        ]
+    }
+
+    /// The run's name, clock, simulated time (a bar towards `duration_s`) and real-time factor.
+    pub fn progress_line(&self, name: &str, mode: ClockMode, duration_s: Option<f64>) -> String {
+        let sim_s = self.recorder.rec.lock().states.last().map_or(0.0, |s| s.header.stamp_sim_ns as f64 / 1e9);
         let progress = match duration_s {
             Some(d) => {
                 let frac = (sim_s / d.max(1e-9)).clamp(0.0, 1.0);
@@ -419,6 +422,16 @@ impl Watch {
             }
             None => format!("{sim_s:6.1} s"),
         };
+        let rtf = self.clock.lock().map(|c| c.real_time_factor as f64);
+        format!("{name} [{}] {progress}  RTF {}", mode.name(), fmt_opt(rtf, 2))
+    }
+
+    /// The ego's speed, the ACC's mode with its lead, the collisions.
+    pub fn ego_line(&self) -> String {
+        let (speed, status, collisions) = {
+            let rec = self.recorder.rec.lock();
+            (rec.states.last().map(|s| s.msg.speed_mps), rec.statuses.last().map(|s| s.msg.clone()), rec.collisions)
+        };
         let acc = match &status {
             Some(AccStatus { mode, lead: Some(l), .. }) => {
                 format!("ACC {mode:?}, lead #{} gap {:.1} m (wants {:.1})", l.id, l.gap_m, l.desired_gap_m)
@@ -426,15 +439,7 @@ impl Watch {
             Some(AccStatus { mode, .. }) => format!("ACC {mode:?}, no lead"),
             None => "ACC: no status yet".into(),
         };
-        let rtf = self.clock.lock().map(|c| c.real_time_factor as f64);
-        let hops = self.latency.lock().stats(true);
-        let hop = |(h, short): (&HopStats, &&str)| format!("{short} {}/{}", fmt_opt(h.p50_ms, 1), fmt_opt(h.p99_ms, 1));
-        vec![
-            format!("{name} [{}] {progress}  RTF {}", mode.name(), fmt_opt(rtf, 2)),
-            format!("ego {} m/s  {acc}  collisions {collisions}", fmt_opt(speed, 1)),
-            format!("latency p50/p99 ms: {}", hops.iter().zip(&HOPS_SHORT).map(hop).collect::<Vec<_>>().join("  ")),
-            format!("nodes alive: {}", if alive.is_empty() { "(none yet)".to_string() } else { alive.join(", ") }),
-        ]
+        format!("{} m/s  {acc}  collisions {collisions}", fmt_opt(speed, 1))
     }
 }
 

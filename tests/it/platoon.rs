@@ -16,18 +16,24 @@ const THREE: &str = r#"{ name: "three", duration_s: 14, road: { length_m: 3000 }
                actions: [ { at_s: 3, speed_mps: 16, accel_mps2: 1.5 } ] } ],
   variation: { gap_m: 0, speed_mps: 0 } }"#;
 
+/// `slipstream eval platoon` on the three cars with `args` (and --json --report DIR/report):
+/// its report, once it ran successfully.
+fn eval_platoon(dir: &std::path::Path, args: &[&str]) -> serde_json::Value {
+    let file = dir.join("three.json5");
+    std::fs::write(&file, THREE).unwrap();
+    let mut cmd = bin("slipstream");
+    cmd.args(["eval", "platoon", "--scenario"]).arg(&file).args(args).args(["--json", "--report"]);
+    cmd.arg(dir.join("report"));
+    let out = run_with_limit(cmd, Duration::from_secs(300));
+    assert!(out.status.success(), "stderr: {}", String::from_utf8_lossy(&out.stderr));
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
 #[test]
 fn a_platoon_is_measured_car_by_car_at_each_time_gap() {
     let _serial = serial();
     let dir = temp_dir("platoon");
-    let file = dir.join("three.json5");
-    std::fs::write(&file, THREE).unwrap();
-    let mut cmd = bin("slipstream");
-    cmd.args(["eval", "platoon", "--scenario"]).arg(&file).args(["--time-gaps", "1.0,2.0", "--json", "--report"]);
-    cmd.arg(dir.join("report"));
-    let out = run_with_limit(cmd, Duration::from_secs(300));
-    assert!(out.status.success(), "stderr: {}", String::from_utf8_lossy(&out.stderr));
-    let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let r = eval_platoon(&dir, &["--time-gaps", "1.0,2.0"]);
     assert_eq!((r["cars"].as_u64(), r["disturbance_s"].as_f64()), (Some(3), Some(3.0)), "{r}");
     let runs = r["runs"].as_array().unwrap();
     assert_eq!(runs.len(), 2);
@@ -66,14 +72,7 @@ fn a_platoon_is_measured_car_by_car_at_each_time_gap() {
 fn a_platoon_on_camera_perception_runs_a_detector_per_car() {
     let _serial = serial();
     let dir = temp_dir("platoon-camera");
-    let file = dir.join("three.json5");
-    std::fs::write(&file, THREE).unwrap();
-    let mut cmd = bin("slipstream");
-    cmd.args(["eval", "platoon", "--perception", "camera", "--scenario"]).arg(&file);
-    cmd.args(["--time-gaps", "1.8", "--json", "--report"]).arg(dir.join("report"));
-    let out = run_with_limit(cmd, Duration::from_secs(300));
-    assert!(out.status.success(), "stderr: {}", String::from_utf8_lossy(&out.stderr));
-    let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
+    let r = eval_platoon(&dir, &["--perception", "camera", "--time-gaps", "1.8"]);
     let run = &r["runs"][0];
     assert_eq!((run["collisions"].as_u64(), run["lockstep_timeouts"].as_u64()), (Some(0), Some(0)), "{run}");
     let cars = run["cars"].as_array().unwrap();
@@ -91,14 +90,8 @@ fn a_platoon_on_camera_perception_runs_a_detector_per_car() {
 fn a_platoon_with_faults_on_every_cars_links_is_measured_and_says_so() {
     let _serial = serial();
     let dir = temp_dir("platoon-faults");
+    let r = eval_platoon(&dir, &["--faults", "wifi-busy", "--time-gaps", "1.8"]);
     let file = dir.join("three.json5");
-    std::fs::write(&file, THREE).unwrap();
-    let mut cmd = bin("slipstream");
-    cmd.args(["eval", "platoon", "--faults", "wifi-busy", "--scenario"]).arg(&file);
-    cmd.args(["--time-gaps", "1.8", "--json", "--report"]).arg(dir.join("report"));
-    let out = run_with_limit(cmd, Duration::from_secs(300));
-    assert!(out.status.success(), "stderr: {}", String::from_utf8_lossy(&out.stderr));
-    let r: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
     assert!(r["faults"].as_str().is_some_and(|f| f.starts_with("wifi-busy")), "{r}");
     let run = &r["runs"][0];
     assert_eq!((run["collisions"].as_u64(), run["lockstep_timeouts"].as_u64()), (Some(0), Some(0)), "{run}");

@@ -7,6 +7,8 @@
 //! on ground truth (the simulator publishes ground truth with each frame, so a frame stays):
 //! what remains is physics, ground truth and the bus.
 
+use std::time::Duration;
+
 use anyhow::{Context, Result};
 
 use super::peer::loopback_config;
@@ -46,17 +48,28 @@ pub fn ground_truth_settings() -> SimSettings {
 /// The real-time factor of a fast run of `n` egos under `settings`, every ego's front frames
 /// taken by a viewer in another session on loopback.
 pub async fn fast_rtf(n: usize, settings: &SimSettings, sim_s: f64) -> Result<f64> {
+    fast_rtf_of(scenario(n, sim_s)?, settings).await
+}
+
+/// The real-time factor of a fast run of `scenario` under `settings`, every ego's front frames
+/// taken by a viewer in another session on loopback (through shared memory, so publishing is
+/// included).
+pub async fn fast_rtf_of(scenario: Scenario, settings: &SimSettings) -> Result<f64> {
+    let n = scenario.egos().len();
     let sim_session = zenoh::open(loopback_config(Some("tcp/127.0.0.1:0"), &[])?).await.map_err(anyhow::Error::msg)?;
     let ep = sim_session.info().locators().await.first().context("sim session has no locator")?.to_string();
     let viewer = zenoh::open(loopback_config(None, std::slice::from_ref(&ep))?).await.map_err(anyhow::Error::msg)?;
     let map = slipstream_contract::TopicMap::default().with_namespace(&format!("bench-egos-{}", std::process::id()))?;
     let sim_bus = slipstream_contract::Bus::from_session(sim_session, map.clone(), "bench-sim").await?;
     let view_bus = slipstream_contract::Bus::from_session(viewer, map, "bench-viewer").await?;
-    let scenario = scenario(n, sim_s)?;
     let mut frames = Vec::new();
     for ego in scenario.egos() {
         let ns = ego.namespace.as_deref().unwrap_or_default();
         frames.push(view_bus.scoped(ns)?.frame_subscriber(topics::CAMERA_FRONT).await?);
+        // A short fast run is over in milliseconds: it starts once the simulator's session
+        // knows the viewer takes this ego's frames.
+        let probe = sim_bus.scoped(ns)?.publisher(topics::CAMERA_FRONT).await?;
+        anyhow::ensure!(probe.wait_for_subscriber(Duration::from_secs(10)).await, "the viewer never matched {ns}");
     }
     let settings = SimSettings { mode: Mode::Fast, ..settings.clone() };
     let world = World::new(scenario, 1, settings.physics_hz);

@@ -7,10 +7,9 @@
 
 use std::time::{Duration, Instant};
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use serde::Serialize;
 
-use super::peer::loopback_config;
 use slipstream_contract::msg::ImageEncoding;
 use slipstream_sim::render::{FrameLook, Renderer};
 use slipstream_sim::rng::SimRng;
@@ -152,23 +151,9 @@ fn memcpy_ms(width: u32, height: u32, copies: usize) -> f64 {
 /// Real-time factor of a fast-mode run of `scenario` with 640x480 frames at 20 Hz published
 /// through shared memory to a subscriber in another session on loopback.
 async fn fast_rtf(scenario: &str, sim_s: f64) -> Result<f64> {
-    let sim_session = zenoh::open(loopback_config(Some("tcp/127.0.0.1:0"), &[])?).await.map_err(anyhow::Error::msg)?;
-    let ep = sim_session.info().locators().await.first().context("sim session has no locator")?.to_string();
-    let sub_session =
-        zenoh::open(loopback_config(None, std::slice::from_ref(&ep))?).await.map_err(anyhow::Error::msg)?;
-    let topics = slipstream_contract::TopicMap::default();
-    let sim_bus = slipstream_contract::Bus::from_session(sim_session, topics.clone(), "bench-sim").await?;
-    let sub_bus = slipstream_contract::Bus::from_session(sub_session, topics, "bench-viewer").await?;
-    let frames = sub_bus.frame_subscriber(slipstream_contract::topics::CAMERA_FRONT).await?;
     let mut scenario = Scenario::find(scenario).map_err(anyhow::Error::msg)?;
     scenario.duration_s = sim_s;
-    let settings = SimSettings { mode: Mode::Fast, ..SimSettings::default() };
-    let world = World::new(scenario, 1, settings.physics_hz);
-    let report = slipstream_sim::run(&sim_bus, world, &settings, std::future::pending()).await?;
-    anyhow::ensure!(frames.stats().snapshot().received > 0, "the viewer received no frame");
-    sim_bus.close().await?;
-    sub_bus.close().await?;
-    Ok(report.real_time_factor)
+    super::egos::fast_rtf_of(scenario, &SimSettings::default()).await
 }
 
 /// One figure of the suite: what, unit, aim, and how to take one run of it.

@@ -158,11 +158,10 @@ fn view_lines(
     alive: &[String],
 ) -> Vec<String> {
     let Some((_, first)) = watches.first() else { return Vec::new() };
-    let mut lines = vec![first.lines(name, args.mode, Some(duration_s), alive).swap_remove(0)];
+    let mut lines = vec![first.progress_line(name, args.mode, Some(duration_s))];
     for (ns, w) in watches {
-        let ego = w.lines(name, args.mode, Some(duration_s), alive).swap_remove(1);
         let p99 = w.latency.lock().stats(true)[crate::eval::latency::WHOLE_LOOP].p99_ms;
-        lines.push(format!("{ns:<6} {}  loop p99 {} ms", ego.trim_start_matches("ego "), fmt_opt(p99, 1)));
+        lines.push(format!("{ns:<6} {}  loop p99 {} ms", w.ego_line(), fmt_opt(p99, 1)));
     }
     let per_car = if args.perception == PerceptionSource::Camera { 2 } else { 1 };
     let cars = alive.iter().filter(|n| n.contains('/')).count();

@@ -14,7 +14,6 @@ use std::time::{Duration, Instant};
 use crate::error::{Error, Result};
 use serde::Serialize;
 
-use super::judge::judge;
 use super::metrics::{aims, Metrics};
 use super::{fmt_opt, plot};
 use crate::launch::{ClockMode, LinkKind, LoopRun, LoopSpec, Network, NodeInput, OwnNodeArgs, OwnNodes, NODE_POLL};
@@ -384,9 +383,9 @@ pub(crate) async fn run_one(
         detect_busy_s,
         acc_busy_s,
     };
-
-    let egos = super::egos::judge_each(&recorded, &scenario, &sim)?;
-    let judged = judge(&recorded[0].1, &scenario, Some(&sim), "stopped");
+    let mut judged = super::egos::judge_all(&recorded, &scenario, &sim);
+    let egos = super::egos::results(&recorded, &judged, &sim)?;
+    let judged = judged.swap_remove(0);
     let trace = judged.trace;
     let metrics = judged.metrics.ok_or_else(|| unjudged(trace.samples.len(), &sim))?;
     let plot = match &args.plots {

@@ -4,7 +4,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::judge::judge_ego;
+use super::judge::{judge_ego, Judged};
 use super::metrics::Metrics;
 use super::trace::{Recorded, Recorder};
 use crate::error::{Error, Result};
@@ -40,18 +40,24 @@ pub async fn record_each(lp: &LoopRun) -> Result<Vec<(String, Recorder)>> {
     Ok(recorders)
 }
 
-/// Each ego judged on what was recorded in its namespace; empty for a run with one ego. A car
-/// too short-lived to judge is an error naming it.
-pub fn judge_each(recorded: &[(String, Recorded)], scenario: &Scenario, sim: &SimReport) -> Result<Vec<EgoResult>> {
+/// Each ego judged on what was recorded in its namespace, in the egos' order.
+pub fn judge_all(recorded: &[(String, Recorded)], scenario: &Scenario, sim: &SimReport) -> Vec<Judged> {
+    recorded.iter().enumerate().map(|(k, (_, rec))| judge_ego(rec, scenario, k, Some(sim), "stopped")).collect()
+}
+
+/// The results of several egos (`judged` by [`judge_all`]); empty for a run with one ego. A
+/// car too short-lived to judge is an error naming it.
+pub fn results(recorded: &[(String, Recorded)], judged: &[Judged], sim: &SimReport) -> Result<Vec<EgoResult>> {
     if recorded.len() < 2 {
         return Ok(Vec::new());
     }
     let mut egos = Vec::new();
-    for (k, (namespace, rec)) in recorded.iter().enumerate() {
-        let judged = judge_ego(rec, scenario, k, Some(sim), "stopped");
+    for (k, ((namespace, _), judged)) in recorded.iter().zip(judged).enumerate() {
         let samples = judged.trace.samples.len();
-        let metrics =
-            judged.metrics.ok_or_else(|| Error::Unjudged(format!("{namespace}: recorded only {samples} states")))?;
+        let metrics = judged
+            .metrics
+            .clone()
+            .ok_or_else(|| Error::Unjudged(format!("{namespace}: recorded only {samples} states")))?;
         let lockstep_timeouts = sim.egos.get(k).map_or(0, |e| e.lockstep_timeouts);
         egos.push(EgoResult { namespace: namespace.clone(), metrics, lockstep_timeouts });
     }

@@ -695,6 +695,13 @@ impl LoopRun {
             DETECT => DETECT_REPORT.to_string(),
             _ => format!("{bin}.out"),
         };
+        let cmd = self.command_of(bin, args, self.flags(own))?;
+        self.launch(bin, cmd, &stdout_name, own)
+    }
+
+    /// The command of one of our node binaries: `flags`, then `args`, then what the loop file
+    /// adds for that role.
+    fn command_of(&self, bin: &str, args: Vec<String>, flags: Vec<String>) -> Result<Command> {
         let b = &self.spec.own.builtin;
         let file_args = match bin {
             SIM => b.simulator.as_ref(),
@@ -704,8 +711,8 @@ impl LoopRun {
         .map(|n| n.args.clone())
         .unwrap_or_default();
         let mut cmd = Command::new(sibling_binary(bin)?);
-        cmd.args(self.flags(own)).args(args).args(file_args);
-        self.launch(bin, cmd, &stdout_name, own)
+        cmd.args(flags).args(args).args(file_args);
+        Ok(cmd)
     }
 
     /// A node of the user's own, under its process name (`controller.log`, `controller.out`).

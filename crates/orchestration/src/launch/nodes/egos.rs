@@ -106,12 +106,11 @@ impl LoopRun {
         Watch::new(bus, &qualified, &process, &self.spec.own.run_of(&process).ready).await
     }
 
-    /// One of our node binaries as `process`, in `bus`'s namespace.
+    /// One of our node binaries as `process`, in `bus`'s namespace, with what a loop file adds
+    /// for its role, as for the only ego's.
     fn spawn_in(&mut self, bus: &Bus, bin: &str, process: &str, args: Vec<String>) -> Result<()> {
         let own = self.endpoints.extra(process)?;
-        let flags = in_namespace(self.flags(&own), bus.topics().namespace());
-        let mut cmd = std::process::Command::new(crate::launch::sibling_binary(bin)?);
-        cmd.args(flags).args(args);
+        let cmd = self.command_of(bin, args, in_namespace(self.flags(&own), bus.topics().namespace()))?;
         self.launch(process, cmd, &format!("{process}.json"), &own)
     }
 }
