@@ -19,6 +19,7 @@ const THREE: &str = r#"{ name: "three", duration_s: 14, road: { length_m: 3000 }
 /// `slipstream eval platoon` on the three cars with `args` (and --json --report DIR/report):
 /// its report, once it ran successfully.
 fn eval_platoon(dir: &std::path::Path, args: &[&str]) -> serde_json::Value {
+    std::fs::create_dir_all(dir).unwrap();
     let file = dir.join("three.json5");
     std::fs::write(&file, THREE).unwrap();
     let mut cmd = bin("slipstream");
@@ -113,4 +114,28 @@ fn a_platoon_with_faults_on_every_cars_links_is_measured_and_says_so() {
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(!out.status.success() && err.contains("cannot run in lockstep"), "{err}");
     assert!(!dir.join("refused/gap-0.8").exists(), "nothing ran");
+}
+
+/// `--router` alone: the runs start a `slipstream router` of their own and every node is its
+/// client, so every car's messages cross it; lockstep makes the figures those of the direct
+/// links, car by car, and the report names the router.
+#[test]
+fn a_platoon_through_a_router_measures_the_figures_of_the_direct_links() {
+    let _serial = serial();
+    let dir = temp_dir("platoon-router");
+    let via = eval_platoon(&dir.join("via"), &["--router", "--time-gaps", "1.0"]);
+    let direct = eval_platoon(&dir.join("direct"), &["--time-gaps", "1.0"]);
+    assert!(via["router"].as_str().is_some_and(|r| r.starts_with("tcp/127.0.0.1:")), "{via}");
+    assert!(direct["router"].is_null(), "{direct}");
+    let peaks = |r: &serde_json::Value| -> Vec<(String, f64)> {
+        let cars = r["runs"][0]["cars"].as_array().unwrap().iter();
+        cars.map(|c| (c["car"].as_str().unwrap().to_string(), c["peak_speed_error_mps"].as_f64().unwrap())).collect()
+    };
+    let (v, d) = (peaks(&via), peaks(&direct));
+    assert_eq!(v.len(), 4);
+    for ((car, a), (_, b)) in v.iter().zip(&d) {
+        assert!(a > &1.0 && (a - b).abs() < 1e-4, "{car}: {a} through the router, {b} direct");
+    }
+    let log = std::fs::read_to_string(dir.join("via/report/router.log")).unwrap();
+    assert!(log.contains("router up"), "{log}");
 }

@@ -1,7 +1,9 @@
 """Three controlled vehicles in one world across PCs (tests/python/netns.py `Subnets`): the
 simulator on one subnet behind the first router, each car's ACC on a host of its own on a third
-subnet behind the second router, the two routers meshed over a second subnet; every node a
-client of its router (config/client.json5), shared memory off, so every message of the loop
+subnet behind the second router, the two routers meshed over a second subnet. The first router
+is ours (`slipstream router`), the second Eclipse's build of Zenoh's router (eclipse_router.py:
+the eclipse-zenoh wheel's runtime with zenohd's flags; zenohd is not installable here). Every
+node a client of its router (config/client.json5), shared memory off, so every message of the loop
 crosses two routers and the bridges. In lockstep the simulator waits at each step for all three
 cars' commands: the run ends with no lockstep timeout and each car followed its own commands.
 Ground-truth perception: three cameras' raw frames across two routers would measure the
@@ -9,8 +11,10 @@ machine's two cores, not the loop (docs/simulator.md). Figures to target/test-re
 
 import json
 import subprocess
+import sys
 
 import pytest
+from conftest import ROOT
 from netns import Subnets, can_create_namespaces
 from test_netns import NO_SHM, bins, record, running_on
 
@@ -45,7 +49,8 @@ def test_three_cars_each_on_its_own_host_close_one_lockstep_loop_across_two_rout
 
     with running_on(nets, tmp_path / "logs") as hosts:
         hosts.start("r1", router, name="r1")
-        hosts.start("r2", [*router, "-e", f"tcp/{nets.addr[('r1', 'b')]}:7447"], name="r2")
+        eclipse = [sys.executable, str(ROOT / "tests/python/eclipse_router.py"), "-c", "config/router.json5", *NO_SHM]
+        hosts.start("r2", [*eclipse, "-e", f"tcp/{nets.addr[('r1', 'b')]}:7447"], name="r2")
         for car in CARS:
             hosts.start(car, [b["slipstream-acc"], "-n", f"lab/{car}", "--perception", "ground-truth", "--lockstep",
                               "--time-gap", "1.8", *client(car, "c", "r2")], name=f"{car}-acc")

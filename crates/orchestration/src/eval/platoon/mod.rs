@@ -5,6 +5,7 @@
 //! stable is set against the analytic bound `up` prints, 2 x (loop delay + actuator lag).
 
 pub mod figures;
+pub mod links;
 pub mod run;
 
 use std::path::{Path, PathBuf};
@@ -13,6 +14,7 @@ use serde::Serialize;
 
 use crate::error::{Error, Result};
 use figures::{string_figures, StringFigures};
+use links::Links;
 use slipstream_acc::settings::AccSettings;
 use slipstream_acc::PerceptionSource;
 use slipstream_model::vehicle::VehicleParams;
@@ -46,6 +48,12 @@ pub struct EvalPlatoonArgs {
     /// refuses faults on vehicle/speed and camera/front)
     #[command(flatten)]
     pub faults: slipstream_contract::config::FaultArgs,
+    /// Every message through a Zenoh router, every node its client with shared memory off:
+    /// `--router` alone starts `slipstream router` on a free loopback port for the runs;
+    /// `--router tcp/HOST:7447` uses one already running (zenohd, or a router on another PC).
+    /// In lockstep the figures do not depend on the links; the wall time does
+    #[arg(long, value_name = "ENDPOINT", num_args = 0..=1, default_missing_value = "")]
+    pub router: Option<String>,
 }
 
 /// One time gap's run.
@@ -56,6 +64,8 @@ pub struct AtGap {
     /// Collisions of the controlled cars (any ends the run).
     pub collisions: u64,
     pub lockstep_timeouts: u64,
+    /// Simulated over wall seconds of the run (the links' cost shows here, not in the figures).
+    pub real_time_factor: f64,
 }
 
 #[derive(Debug, Clone, Serialize)]
@@ -79,6 +89,8 @@ pub struct PlatoonReport {
     pub bound_holds: bool,
     /// The fault profile every node injected (`--faults`), if any.
     pub faults: Option<String>,
+    /// The router every message crossed (`--router`), if any.
+    pub router: Option<String>,
 }
 
 /// Runs the platoon at every time gap in turn.
@@ -104,6 +116,10 @@ pub async fn measure(args: &EvalPlatoonArgs, dir: &Path) -> Result<PlatoonReport
         }
         None => None,
     };
+    std::fs::create_dir_all(dir).map_err(|source| Error::File { action: "create", path: dir.into(), source })?;
+    let links = Links::from_arg(args.router.as_deref(), &dir.join("router.log"))?;
+    let nodes =
+        run::Nodes { perception: args.perception, faults: faults.as_ref().map(|f| f.0.as_path()), links: &links };
     let mut runs = Vec::new();
     let (mut name, mut cars, mut from_s, mut lag) = (args.scenario.clone(), 0, 0.0, 0.0);
     for &h in &args.time_gaps {
@@ -115,11 +131,12 @@ pub async fn measure(args: &EvalPlatoonArgs, dir: &Path) -> Result<PlatoonReport
         (name, cars, from_s) = (scenario.name.clone(), scenario.egos().len(), run::disturbance_s(&scenario));
         lag = VehicleParams::of_class(scenario.ego().class.into()).actuator_lag_s;
         tracing::info!(time_gap_s = h, "platoon run");
-        let r = run::run(&scenario, &file, args.perception, faults.as_ref().map(|f| f.0.as_path()), &at).await?;
+        let r = run::run(&scenario, &file, &nodes, &at).await?;
         runs.push(AtGap {
             figures: string_figures(h, &r.leader, &r.cars, from_s),
             collisions: r.sim.ego_collisions,
             lockstep_timeouts: r.sim.lockstep_timeouts,
+            real_time_factor: r.sim.real_time_factor,
         });
     }
     let delay_s = 1.0 / sim.rates_hz.state;
@@ -143,6 +160,7 @@ pub async fn measure(args: &EvalPlatoonArgs, dir: &Path) -> Result<PlatoonReport
         actuator_lag_s: lag,
         bound_holds,
         faults: faults.map(|f| f.1),
+        router: links.router().map(String::from),
     })
 }
 
@@ -156,12 +174,15 @@ pub fn markdown(r: &PlatoonReport) -> String {
     if let Some(f) = &r.faults {
         s.push_str(&format!("\nfaults injected at every node: {f}\n"));
     }
+    if let Some(router) = &r.router {
+        s.push_str(&format!("\nevery message through the router at {router} (every node its client)\n"));
+    }
     for run in &r.runs {
         let f = &run.figures;
         let verdict = if f.stable && run.collisions == 0 { "string-stable" } else { "NOT string-stable" };
         s.push_str(&format!(
-            "\n## time gap {:.2} s: {verdict} (largest speed-error ratio {:.2}; collisions {}, lockstep timeouts {})\n\n",
-            f.time_gap_s, f.max_speed_ratio, run.collisions, run.lockstep_timeouts
+            "\n## time gap {:.2} s: {verdict} (largest speed-error ratio {:.2}; collisions {}, lockstep timeouts {}; real-time factor {:.2})\n\n",
+            f.time_gap_s, f.max_speed_ratio, run.collisions, run.lockstep_timeouts, run.real_time_factor
         ));
         s.push_str("| car | peak speed error m/s | ratio | peak decel m/s2 | ratio |\n|---|---|---|---|---|\n");
         for c in &f.cars {

@@ -1,7 +1,7 @@
 //! One platoon run on the bus: slipstream-sim in lockstep on the scenario rewritten to start in
 //! the equilibrium of the time gap asked, and per ego in its namespace a slipstream-acc (and a
-//! slipstream-detect with camera perception), all child processes on loopback in a namespace
-//! of the run's own. The launcher's observer records each car's vehicle/state and the leader's
+//! slipstream-detect with camera perception), all child processes in a namespace of the run's
+//! own, linked as [`Links`] says (directly on loopback, or through a router). The launcher's observer records each car's vehicle/state and the leader's
 //! speed from the first car's ground truth.
 
 use std::path::Path;
@@ -13,10 +13,11 @@ use parking_lot::Mutex;
 use serde_json::Value;
 
 use super::figures::CarSeries;
+use super::links::Links;
 use crate::error::{Error, Result};
 use crate::launch::child::{free_ports, sibling_binary, Child};
 use slipstream_acc::PerceptionSource;
-use slipstream_contract::config::{parse_json5_value, ConnectArgs, FaultArgs};
+use slipstream_contract::config::{parse_json5_value, FaultArgs};
 use slipstream_contract::msg::{GroundTruthObjects, VehicleState};
 use slipstream_contract::{topics, Bus};
 use slipstream_model::vehicle::VehicleParams;
@@ -95,32 +96,30 @@ pub fn disturbance_s(scenario: &Scenario) -> f64 {
     actions.iter().filter_map(|a| a.at_s).fold(f64::INFINITY, f64::min).min(scenario.duration_s).max(0.0)
 }
 
-/// Runs `scenario` (written to `file`) once with every ego's nodes, each injecting the faults
-/// of the profile in `faults` when given; records the speeds.
-pub async fn run(
-    scenario: &Scenario,
-    file: &Path,
-    perception: PerceptionSource,
-    faults: Option<&Path>,
-    dir: &Path,
-) -> Result<PlatoonRun> {
+/// How a run's nodes are started: their perception, the fault profile file each injects (when
+/// given), and how they reach each other.
+pub struct Nodes<'a> {
+    pub perception: PerceptionSource,
+    pub faults: Option<&'a Path>,
+    pub links: &'a Links,
+}
+
+/// Runs `scenario` (written to `file`) once with every ego's nodes; records the speeds.
+pub async fn run(scenario: &Scenario, file: &Path, nodes_of: &Nodes<'_>, dir: &Path) -> Result<PlatoonRun> {
+    let (perception, faults) = (nodes_of.perception, nodes_of.faults);
     std::fs::create_dir_all(dir).map_err(|source| Error::File { action: "create", path: dir.into(), source })?;
     let ns = format!("platoon-{}-{}", std::process::id(), dir.file_name().and_then(|n| n.to_str()).unwrap_or("run"));
     let [port] = free_ports::<1>()?;
     let here = format!("tcp/127.0.0.1:{port}");
-    let connect = ConnectArgs {
-        namespace: Some(ns.clone()),
-        listen: vec![here.clone()],
-        no_multicast_scouting: true,
-        ..ConnectArgs::default()
-    };
+    let connect = nodes_of.links.observer(&ns, &here);
+    let links = nodes_of.links.node_args(&here);
     let observer = Bus::open_node(&connect, &FaultArgs::default(), "platoon-eval").await?;
     let (cars, leader, _subs) = record(&observer, scenario).await?;
     let mut nodes = Vec::new();
     for (k, ego) in scenario.egos().iter().enumerate() {
         let car_ns = format!("{ns}/{}", ego.namespace.as_deref().unwrap_or_default());
         let log = |what: &str| dir.join(format!("{what}-{k}.log"));
-        let mut acc = node("slipstream-acc", &car_ns, &here, &log("acc"), faults)?;
+        let mut acc = node("slipstream-acc", &car_ns, &links, &log("acc"), faults)?;
         acc.args(["--lockstep", "--perception", perception.name(), "--set-speed"])
             .arg(ego.controller_set_speed_mps().to_string())
             .arg("--time-gap")
@@ -129,12 +128,12 @@ pub async fn run(
         if perception == PerceptionSource::Camera {
             nodes.push(Child::spawn(
                 "slipstream-detect",
-                &mut node("slipstream-detect", &car_ns, &here, &log("detect"), faults)?,
+                &mut node("slipstream-detect", &car_ns, &links, &log("detect"), faults)?,
             )?);
         }
     }
     let report = dir.join("sim.json");
-    let mut sim = node("slipstream-sim", &ns, &here, &dir.join("sim.log"), faults)?;
+    let mut sim = node("slipstream-sim", &ns, &links, &dir.join("sim.log"), faults)?;
     sim.args(["--mode", "lockstep", "--json", "--scenario"]).arg(file);
     sim.stdout(create(&report)?);
     let mut sim = Child::spawn("slipstream-sim", &mut sim)?;
@@ -162,11 +161,11 @@ pub async fn run(
     Ok(PlatoonRun { leader, cars, sim })
 }
 
-/// A node's command: in `ns`, dialling the observer at `here`, its log to `log`, injecting the
-/// faults of the profile file `faults`.
-fn node(binary: &str, ns: &str, here: &str, log: &Path, faults: Option<&Path>) -> Result<Command> {
+/// A node's command: in `ns`, with the connection flags `links`, its log to `log`, injecting
+/// the faults of the profile file `faults`.
+fn node(binary: &str, ns: &str, links: &[String], log: &Path, faults: Option<&Path>) -> Result<Command> {
     let mut cmd = Command::new(sibling_binary(binary)?);
-    cmd.args(["-n", ns, "-e", here, "-l", "tcp/127.0.0.1:0", "--no-multicast-scouting"]);
+    cmd.args(["-n", ns]).args(links);
     if let Some(file) = faults {
         cmd.arg("--faults").arg(file);
     }
