@@ -329,6 +329,25 @@ def test_up_runs_a_platoon_live_each_car_with_its_own_detector_and_acc(host):
 
 
 @needs_host
+def test_a_platoon_of_your_own_controllers_one_per_car(host):
+    """docs/simulator.md: the loop file's Python controller takes the controller's place in every
+    car, each process in its car's namespace (lockstep waits for each car's `acc`)."""
+    typed_as_documented = \
+        "slipstream up --scenario platoon-8 --loop clients/python/examples/own_loop.json5 --mode lockstep --perception ground-truth --duration 20"
+    one_shot(host, typed_as_documented, work_s=60)
+    r = report(host, only_report(host))
+    cars = [f"car{k}" for k in range(1, 9)]
+    nodes = {n["node"]: n for n in r["nodes"]}
+    assert set(nodes) == {f"{c}-controller" for c in cars} | {"slipstream-sim"}, nodes
+    assert not any(n["died"] for n in nodes.values()), nodes
+    for e in r["egos"]:
+        # Answered every step in its own namespace: no step timed out, no command from another car's.
+        assert e["collisions"] == 0 and e["control"]["lockstep_timeouts"] == 0, e
+        assert e["control"]["control_foreign"] == 0 and e["metrics"]["duration_s"] > 19, e
+    assert r["own"]["controller"]["command"] == ["python3", "own_acc.py"], r["own"]
+
+
+@needs_host
 def test_a_controller_of_your_own_beside_a_simulator(host):
     """docs/own-node.md: the example node on the contract crate alone drives the simulator."""
     sim = host.start("target/release/slipstream-sim --scenario steady-follow")

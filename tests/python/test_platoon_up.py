@@ -96,3 +96,17 @@ def eval_platoon(slipstream_bin, report, *args):
                            "--report", str(report), *args], cwd=ROOT, capture_output=True, text=True, timeout=300)
     assert done.returncode == 0, done.stderr[-3000:]
     return json.loads(done.stdout)
+
+
+def test_a_loop_files_node_in_no_role_is_refused_with_several_cars(slipstream_bin, tmp_path):
+    """A loop file's controller runs once per car (test_docs_commands.py); a node in no role
+    would be one for all the cars: refused before anything starts, with the way by hand."""
+    loop = tmp_path / "loop.json5"
+    loop.write_text('{ others: [ { name: "monitor", command: "python3 -c pass" } ] }')
+    done = subprocess.run([slipstream_bin, "up", "--scenario", "platoon-8", "--loop", str(loop), "--mode", "lockstep",
+                           "--perception", "ground-truth", "--report", str(tmp_path / "run")], cwd=ROOT,
+                          capture_output=True, text=True, timeout=120)
+    assert done.returncode != 0, done.stderr[-2000:]
+    assert "monitor: a node in no role is one node for all of them" in done.stderr, done.stderr[-2000:]
+    assert "-n <run namespace>/car1" in done.stderr, done.stderr[-2000:]
+    assert not list((tmp_path / "run").glob("logs/*-acc.log")), "no car's node started"

@@ -23,7 +23,7 @@ use crate::error::{Error, Result};
 use serde::Serialize;
 
 use super::child::{free_ports, sibling_binary};
-use super::foreign::{ForeignNode, OwnNodes, RestartPolicy, Role};
+use super::foreign::{ForeignNode, NodeRun, OwnNodes, RestartPolicy, Role};
 use super::supervise::{State, Supervised};
 use super::{NODE_POLL, SETTLE, STOP_GRACE};
 use slipstream_acc::node::AccStats;
@@ -228,6 +228,17 @@ const SIM_NODE: &str = "sim";
 const OWN_SIM_CLOSE: std::time::Duration = std::time::Duration::from_secs(2);
 
 /// Whether a node process is the loop's simulator: ours, or the user's (its role's name).
+/// Says on the terminal what `up` waits for instead of starting `node` (started elsewhere).
+fn announce_elsewhere(node: &ForeignNode, ns: &str) {
+    let ns = if ns.is_empty() { "the default namespace".to_string() } else { format!("namespace `{ns}`") };
+    eprintln!(
+        "waiting up to {} s for the {} started elsewhere: its token nodes/{} in {ns}",
+        node.run.ready.timeout_s,
+        node.process(),
+        node.node()
+    );
+}
+
 fn is_sim(process: &str) -> bool {
     process == SIM || process == Role::Simulator.process()
 }
@@ -719,13 +730,7 @@ impl LoopRun {
     fn spawn_foreign(&mut self, node: &ForeignNode, own: &str) -> Result<()> {
         let name = node.process().to_string();
         if node.elsewhere {
-            let ns = self.bus.topics().namespace();
-            let ns = if ns.is_empty() { "the default namespace".to_string() } else { format!("namespace `{ns}`") };
-            eprintln!(
-                "waiting up to {} s for the {name} started elsewhere: its token nodes/{} in {ns}",
-                node.run.ready.timeout_s,
-                node.node()
-            );
+            announce_elsewhere(node, self.bus.topics().namespace());
             return Ok(());
         }
         let run = [self.spec.clock.name(), self.spec.perception.name()];
@@ -741,6 +746,11 @@ impl LoopRun {
     /// its endpoint, which the nodes started after it dial.
     fn launch(&mut self, name: &str, cmd: Command, stdout_name: &str, own: &str) -> Result<()> {
         let run = self.spec.own.run_of(name);
+        self.launch_as(name, run, cmd, stdout_name, own)
+    }
+
+    /// [`Self::launch`] with the loop file's settings `run` given (a role's, for one ego's node).
+    fn launch_as(&mut self, name: &str, run: NodeRun, cmd: Command, stdout_name: &str, own: &str) -> Result<()> {
         let log = run.log.as_ref().map_or_else(|| log_of(&self.logs, name), |l| self.logs.join(l));
         if let Some(dir) = log.parent() {
             std::fs::create_dir_all(dir).map_err(Error::file("create", dir))?;

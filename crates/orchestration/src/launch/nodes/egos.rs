@@ -2,8 +2,9 @@
 //! slipstream-acc, and with camera perception its slipstream-detect, each in the ego's
 //! namespace under the run's (`car1` in the run's namespace `loop` is `loop/car1`), where
 //! the simulator publishes that ego's topics. Every ego's nodes are ours, with the flags every
-//! node of the run gets; nodes of the user's own take one ego's place through their own
-//! commands (docs/simulator.md), not through `up`'s roles, which name one node each.
+//! node of the run gets and what a loop file says of ours, or the loop file's node of the
+//! user's own in that role, one process per ego with the ego's namespace in its environment
+//! (docs/own-node.md): the same command drives every car, as our ACC does.
 
 use slipstream_acc::VehicleClass;
 use slipstream_contract::bus::NodesWatch;
@@ -11,6 +12,7 @@ use slipstream_contract::Bus;
 
 use super::{LoopRun, ACC, ACC_NODE, DETECT, DETECT_NODE};
 use crate::error::{Error, Result};
+use crate::launch::foreign::{ForeignNode, NodeRun};
 use crate::launch::ready::Watch;
 
 /// One ego's controller settings, from its scenario entry.
@@ -74,44 +76,94 @@ impl LoopRun {
         Ok(AllNodes { watches })
     }
 
-    /// Starts every ego's ACC (and detector with camera perception) in its namespace;
-    /// returns what to wait for before the simulator starts.
+    /// Starts every ego's controller (and detector with camera perception) in its namespace:
+    /// ours, or the loop file's node of the user's own in that role, one per ego; returns
+    /// what to wait for before the simulator starts.
     pub(super) async fn start_ego_controllers(&mut self) -> Result<Vec<Watch>> {
-        let own = &self.spec.own;
-        if let Some(node) = own.controller.iter().chain(&own.detector).chain(&own.others).next() {
-            return Err(Error::Refused(format!(
-                "the scenario has {} controlled vehicles: a loop file's or --controller/--detector node ({}) would be one node for all of them (fix: start your node by hand in one ego's namespace, `-n <run namespace>/car1`, beside a simulator run as docs/simulator.md shows; or run a scenario with one ego)",
-                self.spec.egos.len(),
-                node.process()
-            )));
-        }
+        self.refuse_for_egos()?;
+        let (controller, detector) = (self.spec.own.controller.clone(), self.spec.own.detector.clone());
         let mut waits = Vec::new();
         for ego in self.spec.egos.clone() {
             let bus = self.bus.scoped(&ego.namespace)?;
-            let acc = ego.process(ACC_NODE);
-            waits.push(self.ego_watch(&bus, &ego, ACC_NODE).await?);
-            let args = self.acc_args_of(ego.set_speed_mps, ego.time_gap_s, Some(ego.vehicle));
-            self.spawn_in(&bus, ACC, &acc, args)?;
+            waits.push(self.ego_watch(&bus, &ego, ACC_NODE, controller.as_ref().map_or(ACC, |n| n.process())).await?);
+            match &controller {
+                Some(node) => self.spawn_foreign_in(&bus, &ego, node)?,
+                None => {
+                    let args = self.acc_args_of(ego.set_speed_mps, ego.time_gap_s, Some(ego.vehicle));
+                    self.spawn_in(&bus, &ego, ACC, ACC_NODE, args)?
+                }
+            }
             if self.camera() {
-                waits.push(self.ego_watch(&bus, &ego, DETECT_NODE).await?);
-                self.spawn_in(&bus, DETECT, &ego.process(DETECT_NODE), vec!["--json".into()])?;
+                let role = detector.as_ref().map_or(DETECT, |n| n.process());
+                waits.push(self.ego_watch(&bus, &ego, DETECT_NODE, role).await?);
+                match &detector {
+                    Some(node) => self.spawn_foreign_in(&bus, &ego, node)?,
+                    None => self.spawn_in(&bus, &ego, DETECT, DETECT_NODE, vec!["--json".into()])?,
+                }
             }
         }
         Ok(waits)
     }
 
-    async fn ego_watch(&self, bus: &Bus, ego: &EgoNodes, node: &str) -> Result<Watch> {
-        let process = ego.process(node);
-        let qualified = format!("{}/{node}", ego.namespace);
-        Watch::new(bus, &qualified, &process, &self.spec.own.run_of(&process).ready).await
+    /// What one node per ego cannot be: a node in no role (one for all the cars, or one per car?
+    /// started by hand, it says), and a ROS 2 controller (its bridge is one per run).
+    fn refuse_for_egos(&self) -> Result<()> {
+        let own = &self.spec.own;
+        let other = own.others.first().map(|n| (n.process(), "a node in no role is one node for all of them"));
+        let ros2 = own.controller.as_ref().filter(|n| n.ros2).map(|n| (n.process(), "its ROS 2 bridge is one per run"));
+        match other.or(ros2) {
+            Some((node, why)) => Err(Error::Refused(format!(
+                "the scenario has {} controlled vehicles: {node}: {why} (fix: start it by hand in one ego's namespace, `-n <run namespace>/car1`, beside the run; or run a scenario with one ego)",
+                self.spec.egos.len()
+            ))),
+            None => Ok(()),
+        }
     }
 
-    /// One of our node binaries as `process`, in `bus`'s namespace, with what a loop file adds
-    /// for its role, as for the only ego's.
-    fn spawn_in(&mut self, bus: &Bus, bin: &str, process: &str, args: Vec<String>) -> Result<()> {
-        let own = self.endpoints.extra(process)?;
+    /// The watch for `node` (acc, detect) in `ego`'s namespace, ready as the loop file says of
+    /// the process in that role (`role`: ours by binary, or the user's node by its process).
+    async fn ego_watch(&self, bus: &Bus, ego: &EgoNodes, node: &str, role: &str) -> Result<Watch> {
+        let process = ego.process(node);
+        let qualified = format!("{}/{node}", ego.namespace);
+        Watch::new(bus, &qualified, &process, &self.spec.own.run_of(role).ready).await
+    }
+
+    /// One of our node binaries as `ego`'s `node` (`car1-acc`), in `bus`'s namespace, with what
+    /// a loop file says of it, as for the only ego's.
+    fn spawn_in(&mut self, bus: &Bus, ego: &EgoNodes, bin: &str, node: &str, args: Vec<String>) -> Result<()> {
+        let process = ego.process(node);
+        let own = self.endpoints.extra(&process)?;
         let cmd = self.command_of(bin, args, in_namespace(self.flags(&own), bus.topics().namespace()))?;
-        self.launch(process, cmd, &format!("{process}.json"), &own)
+        let run = self.role_run(bin, &ego.namespace);
+        self.launch_as(&process, run, cmd, &format!("{process}.json"), &own)
+    }
+
+    /// The user's `node` for `ego`, in `bus`'s namespace, as `car1-controller`: its Zenoh
+    /// config written under logs/car1/, the loop file's settings of its role (a log file it
+    /// names goes under car1/ too). Started elsewhere: waited for in the ego's namespace.
+    fn spawn_foreign_in(&mut self, bus: &Bus, ego: &EgoNodes, node: &ForeignNode) -> Result<()> {
+        let ns = bus.topics().namespace().to_string();
+        if node.elsewhere {
+            super::announce_elsewhere(node, &ns);
+            return Ok(());
+        }
+        let process = ego.process(node.process());
+        let own = self.endpoints.extra(&process)?;
+        let dir = self.logs.join(&ego.namespace);
+        std::fs::create_dir_all(&dir).map_err(Error::file("create", &dir))?;
+        let run = [self.spec.clock.name(), self.spec.perception.name()];
+        let cmd = node.command(&in_namespace(self.flags(&own), &ns), &dir, run)?;
+        let run = self.role_run(node.process(), &ego.namespace);
+        self.launch_as(&process, run, cmd, &format!("{process}.out"), &own)
+    }
+
+    /// The loop file's settings of the process in a role (`role`: ours by binary, or the
+    /// user's node by its process name) for one ego's: a log it names is kept apart per ego
+    /// (`car1/<log>`, `ego` the ego's namespace); none named, `<process>.log`.
+    fn role_run(&self, role: &str, ego: &str) -> NodeRun {
+        let mut run = self.spec.own.run_of(role);
+        run.log = run.log.map(|l| std::path::Path::new(ego).join(l));
+        run
     }
 }
 
