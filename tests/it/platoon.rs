@@ -1,7 +1,8 @@
 //! `slipstream eval platoon` with the real binaries: a three-car platoon at two time gaps, its
 //! figures read from the run (the leader's dip as scripted, every car's speeds recorded, the
-//! ratios those figures give), the files it writes, a scenario that is no platoon refused, and
-//! the same with camera perception, a detector per car.
+//! ratios those figures give), the files it writes, a scenario that is no platoon refused; the
+//! same with camera perception (a detector per car), with faults, through a router and on the
+//! realtime clock.
 
 use std::time::Duration;
 
@@ -138,4 +139,30 @@ fn a_platoon_through_a_router_measures_the_figures_of_the_direct_links() {
     }
     let log = std::fs::read_to_string(dir.join("via/report/router.log")).unwrap();
     assert!(log.contains("router up"), "{log}");
+}
+
+/// `--mode realtime`: the simulator runs on the wall clock without waiting for the cars, so the
+/// run measures the first car's loop latency, and the bound takes it as its delay.
+#[test]
+fn a_realtime_platoon_takes_the_measured_loop_latency_into_the_bound() {
+    let _serial = serial();
+    let dir = temp_dir("platoon-realtime");
+    let r = eval_platoon(&dir, &["--mode", "realtime", "--time-gaps", "1.8"]);
+    assert_eq!(r["clock"].as_str(), Some("realtime"), "{r}");
+    let run = &r["runs"][0];
+    assert_eq!(run["collisions"].as_u64(), Some(0), "{run}");
+    let p99_ms = run["loop_p99_ms"].as_f64().expect("car 1's latency measured");
+    let (delay, lag, bound) =
+        (r["delay_s"].as_f64().unwrap(), r["actuator_lag_s"].as_f64().unwrap(), r["bound_s"].as_f64().unwrap());
+    assert!(p99_ms > 0.0 && (delay - p99_ms / 1e3).abs() < 1e-9, "delay {delay} s, p99 {p99_ms} ms");
+    assert!((bound - 2.0 * (delay + lag)).abs() < 1e-9, "{r}");
+    let cars = run["cars"].as_array().unwrap();
+    assert!(
+        (1..4).all(|k| cars[k]["peak_speed_error_mps"].as_f64().unwrap() > 1.0),
+        "every car follows the dip: {run}"
+    );
+    let sim = std::fs::read_to_string(dir.join("report/gap-1.8/sim.log")).unwrap();
+    assert!(sim.contains("mode=Realtime"), "{sim}");
+    let acc = std::fs::read_to_string(dir.join("report/gap-1.8/acc-0.log")).unwrap();
+    assert!(acc.contains("lockstep=false"), "{acc}");
 }

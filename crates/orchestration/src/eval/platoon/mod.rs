@@ -54,6 +54,19 @@ pub struct EvalPlatoonArgs {
     /// In lockstep the figures do not depend on the links; the wall time does
     #[arg(long, value_name = "ENDPOINT", num_args = 0..=1, default_missing_value = "")]
     pub router: Option<String>,
+    /// The simulator's clock: lockstep (every car's command awaited at every step, so the
+    /// figures are the control's alone) or realtime (the loop's wall-clock latency delays
+    /// every car as on the road, and the bound takes the first car's measured p99 latency;
+    /// each run takes its duration)
+    #[arg(long, value_enum, default_value = "lockstep")]
+    pub mode: PlatoonClock,
+}
+
+/// `eval platoon --mode`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum PlatoonClock {
+    Lockstep,
+    Realtime,
 }
 
 /// One time gap's run.
@@ -66,12 +79,16 @@ pub struct AtGap {
     pub lockstep_timeouts: u64,
     /// Simulated over wall seconds of the run (the links' cost shows here, not in the figures).
     pub real_time_factor: f64,
+    /// In realtime, the first car's loop latency p99 (frame or ground truth -> command applied).
+    pub loop_p99_ms: Option<f64>,
 }
 
 #[derive(Debug, Clone, Serialize)]
 pub struct PlatoonReport {
     pub scenario: String,
     pub perception: &'static str,
+    /// The simulator's clock: lockstep or realtime.
+    pub clock: &'static str,
     pub cars: usize,
     /// When the leader's disturbance began (simulated s): the figures are taken from it on.
     pub disturbance_s: f64,
@@ -80,8 +97,8 @@ pub struct PlatoonReport {
     pub smallest_stable_time_gap_s: Option<f64>,
     /// The analytic bound: 2 x (delay + actuator lag).
     pub bound_s: f64,
-    /// The loop's delay in simulated time: in lockstep a command acts one state period after
-    /// the state it answers.
+    /// The loop's delay: in lockstep one state period (a command acts one state period after
+    /// the state it answers), in realtime the largest of the runs' measured p99 latencies.
     pub delay_s: f64,
     pub actuator_lag_s: f64,
     /// Whether every gap measured above the bound was stable (the bound held as a sufficient
@@ -95,12 +112,15 @@ pub struct PlatoonReport {
 
 /// Runs the platoon at every time gap in turn.
 pub async fn measure(args: &EvalPlatoonArgs, dir: &Path) -> Result<PlatoonReport> {
+    let realtime = args.mode == PlatoonClock::Realtime;
     let value = run::scenario_value(&args.scenario)?;
     let standstill = AccSettings::load_or_default(None)?.standstill_m;
     let sim = SimSettings::load_or_default(None)?;
     let faults = match args.faults.profile()? {
         Some(p) => {
-            crate::launch::refuse_in_lockstep(&p)?;
+            if !realtime {
+                crate::launch::refuse_in_lockstep(&p)?;
+            }
             std::fs::create_dir_all(dir).map_err(|source| Error::File {
                 action: "create",
                 path: dir.into(),
@@ -118,8 +138,8 @@ pub async fn measure(args: &EvalPlatoonArgs, dir: &Path) -> Result<PlatoonReport
     };
     std::fs::create_dir_all(dir).map_err(|source| Error::File { action: "create", path: dir.into(), source })?;
     let links = Links::from_arg(args.router.as_deref(), &dir.join("router.log"))?;
-    let nodes =
-        run::Nodes { perception: args.perception, faults: faults.as_ref().map(|f| f.0.as_path()), links: &links };
+    let faults_file = faults.as_ref().map(|f| f.0.as_path());
+    let nodes = run::Nodes { perception: args.perception, faults: faults_file, links: &links, realtime };
     let mut runs = Vec::new();
     let (mut name, mut cars, mut from_s, mut lag) = (args.scenario.clone(), 0, 0.0, 0.0);
     for &h in &args.time_gaps {
@@ -137,9 +157,12 @@ pub async fn measure(args: &EvalPlatoonArgs, dir: &Path) -> Result<PlatoonReport
             collisions: r.sim.ego_collisions,
             lockstep_timeouts: r.sim.lockstep_timeouts,
             real_time_factor: r.sim.real_time_factor,
+            loop_p99_ms: r.loop_p99_s.map(|s| s * 1e3),
         });
     }
-    let delay_s = 1.0 / sim.rates_hz.state;
+    let measured =
+        runs.iter().filter_map(|r| r.loop_p99_ms).fold(None, |m: Option<f64>, x| Some(m.map_or(x, |m| m.max(x))));
+    let delay_s = measured.map_or(1.0 / sim.rates_hz.state, |ms| ms / 1e3);
     let bound_s = 2.0 * (delay_s + lag);
     let stable = |r: &&AtGap| r.figures.stable && r.collisions == 0;
     let smallest = runs
@@ -151,6 +174,7 @@ pub async fn measure(args: &EvalPlatoonArgs, dir: &Path) -> Result<PlatoonReport
     Ok(PlatoonReport {
         scenario: name,
         perception: args.perception.name(),
+        clock: if realtime { "realtime" } else { "lockstep" },
         cars,
         disturbance_s: from_s,
         runs,
@@ -168,8 +192,8 @@ pub async fn measure(args: &EvalPlatoonArgs, dir: &Path) -> Result<PlatoonReport
 /// ratios to the car ahead, then the verdict against the bound.
 pub fn markdown(r: &PlatoonReport) -> String {
     let mut s = format!(
-        "# slipstream eval platoon: {} ({} cars, {} perception; figures from t = {:.1} s)\n",
-        r.scenario, r.cars, r.perception, r.disturbance_s
+        "# slipstream eval platoon: {} ({} cars, {} perception, {} clock; figures from t = {:.1} s)\n",
+        r.scenario, r.cars, r.perception, r.clock, r.disturbance_s
     );
     if let Some(f) = &r.faults {
         s.push_str(&format!("\nfaults injected at every node: {f}\n"));
@@ -181,8 +205,9 @@ pub fn markdown(r: &PlatoonReport) -> String {
         let f = &run.figures;
         let verdict = if f.stable && run.collisions == 0 { "string-stable" } else { "NOT string-stable" };
         s.push_str(&format!(
-            "\n## time gap {:.2} s: {verdict} (largest speed-error ratio {:.2}; collisions {}, lockstep timeouts {}; real-time factor {:.2})\n\n",
-            f.time_gap_s, f.max_speed_ratio, run.collisions, run.lockstep_timeouts, run.real_time_factor
+            "\n## time gap {:.2} s: {verdict} (largest speed-error ratio {:.2}; collisions {}, lockstep timeouts {}; real-time factor {:.2}{})\n\n",
+            f.time_gap_s, f.max_speed_ratio, run.collisions, run.lockstep_timeouts, run.real_time_factor,
+            run.loop_p99_ms.map_or(String::new(), |ms| format!("; car 1's loop p99 {ms:.1} ms"))
         ));
         s.push_str("| car | peak speed error m/s | ratio | peak decel m/s2 | ratio |\n|---|---|---|---|---|\n");
         for c in &f.cars {

@@ -15,6 +15,7 @@ use serde_json::Value;
 use super::figures::CarSeries;
 use super::links::Links;
 use crate::error::{Error, Result};
+use crate::eval::latency::{LatencyWatch, WHOLE_LOOP};
 use crate::launch::child::{free_ports, sibling_binary, Child};
 use slipstream_acc::PerceptionSource;
 use slipstream_contract::config::{parse_json5_value, FaultArgs};
@@ -33,6 +34,9 @@ pub struct PlatoonRun {
     pub leader: CarSeries,
     pub cars: Vec<CarSeries>,
     pub sim: SimReport,
+    /// The first car's loop latency in wall-clock time (frame or ground truth published ->
+    /// its command applied), p99, seconds: measured in realtime only, where it delays the car.
+    pub loop_p99_s: Option<f64>,
 }
 
 /// A platoon scenario as JSON: a built-in one by name, or a file.
@@ -97,16 +101,21 @@ pub fn disturbance_s(scenario: &Scenario) -> f64 {
 }
 
 /// How a run's nodes are started: their perception, the fault profile file each injects (when
-/// given), and how they reach each other.
+/// given), how they reach each other, and the simulator's clock (realtime: the loop's latency
+/// delays every car as on the road; else lockstep).
 pub struct Nodes<'a> {
     pub perception: PerceptionSource,
     pub faults: Option<&'a Path>,
     pub links: &'a Links,
+    pub realtime: bool,
 }
+
+/// How long every car's nodes may take to be up before a realtime run starts without them.
+const NODES_UP: Duration = Duration::from_secs(30);
 
 /// Runs `scenario` (written to `file`) once with every ego's nodes; records the speeds.
 pub async fn run(scenario: &Scenario, file: &Path, nodes_of: &Nodes<'_>, dir: &Path) -> Result<PlatoonRun> {
-    let (perception, faults) = (nodes_of.perception, nodes_of.faults);
+    let (perception, faults, realtime) = (nodes_of.perception, nodes_of.faults, nodes_of.realtime);
     std::fs::create_dir_all(dir).map_err(|source| Error::File { action: "create", path: dir.into(), source })?;
     let ns = format!("platoon-{}-{}", std::process::id(), dir.file_name().and_then(|n| n.to_str()).unwrap_or("run"));
     let [port] = free_ports::<1>()?;
@@ -120,7 +129,10 @@ pub async fn run(scenario: &Scenario, file: &Path, nodes_of: &Nodes<'_>, dir: &P
         let car_ns = format!("{ns}/{}", ego.namespace.as_deref().unwrap_or_default());
         let log = |what: &str| dir.join(format!("{what}-{k}.log"));
         let mut acc = node("slipstream-acc", &car_ns, &links, &log("acc"), faults)?;
-        acc.args(["--lockstep", "--perception", perception.name(), "--set-speed"])
+        if !realtime {
+            acc.arg("--lockstep");
+        }
+        acc.args(["--perception", perception.name(), "--set-speed"])
             .arg(ego.controller_set_speed_mps().to_string())
             .arg("--time-gap")
             .arg(ego.time_gap_s.unwrap_or(1.8).to_string());
@@ -132,12 +144,19 @@ pub async fn run(scenario: &Scenario, file: &Path, nodes_of: &Nodes<'_>, dir: &P
             )?);
         }
     }
+    let mut latency = None;
+    if realtime {
+        let first = observer.scoped(scenario.egos()[0].namespace.as_deref().unwrap_or_default())?;
+        latency = Some(LatencyWatch::start(&first, perception == PerceptionSource::Camera).await?);
+        nodes_up(&observer, scenario, perception, dir).await?;
+    }
     let report = dir.join("sim.json");
     let mut sim = node("slipstream-sim", &ns, &links, &dir.join("sim.log"), faults)?;
-    sim.args(["--mode", "lockstep", "--json", "--scenario"]).arg(file);
+    sim.args(["--mode", if realtime { "realtime" } else { "lockstep" }, "--json", "--scenario"]).arg(file);
     sim.stdout(create(&report)?);
     let mut sim = Child::spawn("slipstream-sim", &mut sim)?;
-    let limit = Duration::from_secs_f64(60.0 + scenario.duration_s * WALL_PER_SIM_S);
+    let per_sim_s = if realtime { 1.5 } else { WALL_PER_SIM_S };
+    let limit = Duration::from_secs_f64(60.0 + scenario.duration_s * per_sim_s);
     let ended = tokio::task::block_in_place(|| sim.wait_for(limit));
     for n in &mut nodes {
         n.stop(Duration::from_secs(5));
@@ -158,7 +177,38 @@ pub async fn run(scenario: &Scenario, file: &Path, nodes_of: &Nodes<'_>, dir: &P
     })?;
     let cars = cars.iter().map(|c| c.lock().clone()).collect();
     let leader = leader.lock().clone();
-    Ok(PlatoonRun { leader, cars, sim })
+    let loop_p99_s = latency.and_then(|l| l.latency.lock().stats(false)[WHOLE_LOOP].p99_ms).map(|ms| ms / 1e3);
+    Ok(PlatoonRun { leader, cars, sim, loop_p99_s })
+}
+
+/// Waits until every car's ACC (and detector with the camera) is up: in realtime the
+/// simulator does not wait for them, and a car without its controller for the first seconds
+/// would be a disturbance of its own.
+async fn nodes_up(observer: &Bus, scenario: &Scenario, perception: PerceptionSource, dir: &Path) -> Result<()> {
+    let mut watches = Vec::new();
+    for ego in scenario.egos() {
+        let ns = ego.namespace.clone().unwrap_or_default();
+        watches.push((observer.scoped(&ns)?.watch_nodes().await?, ns));
+    }
+    let wanted: &[&str] = if perception == PerceptionSource::Camera { &["acc", "detect"] } else { &["acc"] };
+    let deadline = tokio::time::Instant::now() + NODES_UP;
+    loop {
+        let missing: Vec<String> = watches
+            .iter()
+            .flat_map(|(w, ns)| {
+                let names = w.names();
+                wanted.iter().filter(move |n| !names.iter().any(|m| m == *n)).map(move |n| format!("{ns}/{n}"))
+            })
+            .collect();
+        if missing.is_empty() {
+            return Ok(());
+        }
+        if tokio::time::Instant::now() > deadline {
+            let problem = format!("not up within {NODES_UP:?}: {} (logs in {})", missing.join(", "), dir.display());
+            return Err(Error::Node { node: "the cars' nodes".into(), problem });
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
 }
 
 /// A node's command: in `ns`, with the connection flags `links`, its log to `log`, injecting
