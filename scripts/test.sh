@@ -83,14 +83,12 @@ step "python tests (against target/release/slipstream)"
 rm -f target/test-reports/netns.json
 # Two workers, each taking whole files (a file's fixtures and its order kept): most tests wait
 # on loops they drive, using about a quarter of two cores, so two at once halve the wall time.
-# Every test's namespaces and ports are its own (pid-named namespaces, free ports). The tests
-# marked `alone` (commands of the README and docs/ with realtime loops: a recorder whose exit
-# code says whether anything was lost, rates and latencies checked) run afterwards with the
-# machine to themselves: a loaded machine loses. The slowest tests of each part are listed.
+# Every test's namespaces and ports are its own (pid-named namespaces, free ports). The
+# commands of the README and docs/ run alone afterwards: they include realtime loops with a
+# recorder, whose exit code says whether anything was lost, and a loaded machine loses.
 SLIPSTREAM_BIN="$PWD/target/release/slipstream" .venv/bin/python -m pytest -q -rs -n 2 --dist loadfile \
-  --durations=8 -m "not alone" tests/python
-SLIPSTREAM_BIN="$PWD/target/release/slipstream" .venv/bin/python -m pytest -q -rs --durations=5 -m alone \
-  tests/python/test_docs_commands.py
+  --ignore tests/python/test_docs_commands.py tests/python
+SLIPSTREAM_BIN="$PWD/target/release/slipstream" .venv/bin/python -m pytest -q -rs tests/python/test_docs_commands.py
 
 for f in target/test-reports/scenario-sample.txt target/test-reports/sweep-40.txt; do
   if [ -f "$f" ]; then

@@ -10,12 +10,6 @@ import pytest
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 
 
-def pytest_configure(config):
-    config.addinivalue_line(
-        "markers", "alone: runs with the machine to itself (scripts/test.sh runs these after the rest): a realtime "
-                   "loop whose recorder, rates or latency a busy machine would fail")
-
-
 @pytest.fixture(scope="session")
 def slipstream_bin():
     path = pathlib.Path(os.environ.get("SLIPSTREAM_BIN", ROOT / "target" / "release" / "slipstream"))

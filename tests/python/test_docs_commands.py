@@ -28,10 +28,6 @@ from user_host import UserHost, can_create
 
 NO_HOST = can_create()
 needs_host = pytest.mark.skipif(NO_HOST is not None, reason=f"a host of its own: {NO_HOST}")
-# Realtime loops whose recorder, rates or latency a busy machine would fail (a lost message
-# makes `up --record` exit 1, as documented): scripts/test.sh runs these with the machine to
-# themselves; the lockstep and fast ones run beside the other tests.
-alone = pytest.mark.alone
 
 # A tool's exit after its work ended (its --count or --duration, a signal). A session closes in
 # milliseconds; a close stuck on a peer waited out Zenoh's 10 s timeout. The bound sits between,
@@ -143,7 +139,6 @@ WATCHERS = (
 
 
 @needs_host
-@alone
 def test_the_quick_start_loop_with_the_tools_beside_it_and_two_more_loops(host):
     up = host.start("target/release/slipstream up")
     host.wait_for(up, "slipstream up: cut-in (realtime clock, camera perception), report in reports/cut-in-", 60)
@@ -247,7 +242,6 @@ def summary_of(proc):
 
 
 @needs_host
-@alone
 def test_conform_beside_a_simulator_started_by_hand(host):
     sim = host.start("slipstream-sim --mode realtime")
     verdict = one_shot(host, "target/release/slipstream conform sim", work_s=8)
@@ -263,7 +257,6 @@ def test_conform_beside_a_simulator_started_by_hand(host):
 
 
 @needs_host
-@alone
 def test_a_controller_and_a_simulator_by_hand_and_a_loop_beside_them(host):
     acc = host.start("slipstream-acc -n t1 --perception ground-truth")
     sim = one_shot(host, "slipstream-sim -n t1 --duration 5", work_s=5)
@@ -316,7 +309,6 @@ def test_a_platoon_by_hand_eight_controllers_each_in_its_namespace(host):
 
 
 @needs_host
-@alone
 def test_up_runs_a_platoon_live_each_car_with_its_own_detector_and_acc(host):
     """docs/simulator.md: `slipstream up --scenario platoon-8`, in real time with the camera."""
     up = one_shot(host, "slipstream up --scenario platoon-8 --duration 20", work_s=35)
@@ -356,7 +348,6 @@ def test_a_platoon_of_your_own_controllers_one_per_car(host):
 
 
 @needs_host
-@alone
 def test_a_controller_of_your_own_beside_a_simulator(host):
     """docs/own-node.md: the example node on the contract crate alone drives the simulator."""
     sim = host.start("target/release/slipstream-sim --scenario steady-follow")
@@ -392,7 +383,6 @@ def test_a_simulator_alone_in_fast_mode_and_a_preview(host):
 
 
 @needs_host
-@alone
 def test_a_router_and_nodes_in_client_mode(host):
     router = host.start("slipstream router")
     host.wait_for(router, "listening on", 30, stream="stdout")
@@ -451,7 +441,6 @@ def test_faults_land_only_in_our_nodes_as_own_node_md_gives_it(host):
 
 
 @needs_host
-@alone
 def test_the_examples_keep_the_node_contract_as_own_node_md_checks_it(host):
     for role, command in (
             ("controller", "slipstream conform controller --command 'python3 clients/python/examples/own_acc.py'"),
@@ -461,7 +450,6 @@ def test_the_examples_keep_the_node_contract_as_own_node_md_checks_it(host):
 
 
 @needs_host
-@alone
 def test_a_rust_detector_of_your_own_as_own_node_md_gives_it(host):
     checked = one_shot(host, "slipstream conform detector --command target/release/own-detector", work_s=15)
     assert "the detector keeps the contract" in checked.stdout(), checked.stdout()
@@ -529,7 +517,6 @@ def comparable(text):
 
 
 @needs_host
-@alone
 def test_recording_playback_and_re_simulation(host):
     live = host.start("target/release/slipstream up --record --viewable")
     host.wait_for(live, "nodes alive: acc, detect, sim, up", 60)
@@ -640,7 +627,6 @@ def test_a_sweep_in_shards_merges_to_the_whole_sweeps_report(host):
 
 
 @needs_host
-@alone
 def test_loops_with_a_view_a_ros2_face_and_other_settings_side_by_side(host):
     viewed = host.start("slipstream up --record --view")
     host.wait_for(viewed, "live view on http://localhost:8765", 60)
