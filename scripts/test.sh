@@ -86,9 +86,11 @@ rm -f target/test-reports/netns.json
 # Every test's namespaces and ports are its own (pid-named namespaces, free ports). The
 # commands of the README and docs/ run alone afterwards: they include realtime loops with a
 # recorder, whose exit code says whether anything was lost, and a loaded machine loses.
+# The slowest tests of each part are listed.
 SLIPSTREAM_BIN="$PWD/target/release/slipstream" .venv/bin/python -m pytest -q -rs -n 2 --dist loadfile \
-  --ignore tests/python/test_docs_commands.py tests/python
-SLIPSTREAM_BIN="$PWD/target/release/slipstream" .venv/bin/python -m pytest -q -rs tests/python/test_docs_commands.py
+  --durations=8 --ignore tests/python/test_docs_commands.py tests/python
+SLIPSTREAM_BIN="$PWD/target/release/slipstream" .venv/bin/python -m pytest -q -rs --durations=5 \
+  tests/python/test_docs_commands.py
 
 for f in target/test-reports/scenario-sample.txt target/test-reports/sweep-40.txt; do
   if [ -f "$f" ]; then
