@@ -12,14 +12,58 @@
 //! - whether it **brakes beyond the comfort limit** (its mildest deceleration past the limit by
 //!   the perception's margin, held until it brakes less than the limit).
 //!
-//! The threat is judged on the mildest acceleration, comfort braking plans for the slowest speed
-//! and the hardest braking where comfort can cope with them, and an emergency for a lead braking
-//! hard is decided on the likely one (`super::decision`).
+//! From these it yields the hypotheses ([`Hypotheses`]: mildest, revealed, confirmed, likely,
+//! hardest), each as the threat it would pose, which the decision's one table maps to comfort
+//! braking or an emergency (`super::decision`).
 
 use super::lead_filter::LeadFilter;
 use super::settings::AccSettings;
 use super::threat::{threat, Threat};
 use super::tuning::ThreatTuning;
+
+/// What the lead hides or reveals in the lane (the nearest vehicle past it, or entering before
+/// it: `super::select`), as a threat: as seen, and once seen over the confirmation time.
+#[derive(Debug, Clone, Copy, Default)]
+pub(super) struct Around {
+    pub(super) revealed: Option<Threat>,
+    pub(super) revealed_confirmed: Option<Threat>,
+}
+
+/// The lead's hypotheses this step, each as the threat it would pose.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Hypotheses {
+    /// The lead braking the least it plausibly does.
+    pub(super) mildest: Threat,
+    /// The vehicle it hides or reveals, holding its measured speed.
+    pub(super) revealed: Option<Threat>,
+    /// The mildest or the revealed, whichever is worse, once each has been measured over
+    /// `tuning.decision.confirm_s` (in more than one frame; a vehicle in the lane for one frame
+    /// may be a lane changer's measurement); None before.
+    pub(super) confirmed: Option<Threat>,
+    /// The lead braking as estimated, while it brakes beyond the comfort limit.
+    pub(super) likely: Option<Threat>,
+    pub(super) hardest: Hardest,
+}
+
+impl Hypotheses {
+    /// The threat: the mildest or the revealed, whichever is worse.
+    pub(super) fn threat(&self) -> Threat {
+        self.revealed.map_or(self.mildest, |r| self.mildest.or_worse(&r))
+    }
+}
+
+/// The worst the lead plausibly does while it is not yet measured.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) enum Hardest {
+    /// Measured: nothing worse than the mildest is plausible.
+    Measured,
+    /// A new lead at its slowest speed, or a lead whose lamps just came on braking at the
+    /// comfort limit at least.
+    Is(Threat),
+    /// A new lead far ahead whose wait to be measured costs little comfort: not planned for
+    /// yet, only what it hides or reveals.
+    NotYet,
+}
 
 /// The lead as believed now.
 #[derive(Debug, Clone, Copy)]
@@ -109,49 +153,59 @@ impl LeadBelief {
         self.brake_lights && self.mildest_accel() <= -decel
     }
 
-    /// What comfort braking plans for: `threat`, or a worse one while the lead's speed or its
-    /// braking is not yet measured, where comfort braking could cope with that case.
-    ///
-    /// - A new lead's speed is still being measured (far ahead, a camera needs a few tenths of
-    ///   a second): comfort braking plans for it being its slowest, so a standing car seen at
-    ///   the edge of range is braked for from the first frames. Beyond twice the time gap only
-    ///   where waiting would cost comfort: far away a "lead" may be no vehicle (in a bend, two
-    ///   cars standing either side 200 m ahead merged into one in the ego's lane for half a
-    ///   second). There the vehicle it hides or reveals (`revealed`) is planned for alone.
-    /// - For a moment after its lamps come on, the pedal is pressed but its speed cannot yet
-    ///   say how hard: comfort braking plans for it braking at the comfort limit, where that
-    ///   would need much of the comfort braking (slow and far back, a late answer costs
-    ///   nothing, and braking for every touch of the pedal would cost the time gap).
-    pub(super) fn comfort_plan(
+    /// The hypotheses this step (`super::decision` maps each one's need to the decision):
+    /// the mildest, what the lead hides or reveals (`around`), both as confirmed, the likely
+    /// braking while the lead brakes beyond the comfort limit (`hard`: the perception's
+    /// margin, and whether it was found so before), and the hardest.
+    pub(super) fn hypotheses(
         &self,
         s: &AccSettings,
-        threat: Threat,
-        revealed: Option<Threat>,
         v: f64,
         time_gap_s: f64,
-    ) -> Option<Threat> {
+        around: Around,
+        hard: (f64, bool),
+    ) -> Hypotheses {
+        let k = &s.tuning.threat;
+        let mildest = self.threat(k, v);
+        let confirmed = self
+            .confirmed(s.tuning.decision.confirm_s.get())
+            .then(|| around.revealed_confirmed.map_or(mildest, |r| mildest.or_worse(&r)));
+        let likely = self.brakes_hard(s, hard.0, hard.1).then(|| self.likely_threat(k, v));
+        Hypotheses { mildest, revealed: around.revealed, confirmed, likely, hardest: self.hardest(s, v, time_gap_s) }
+    }
+
+    /// The worst the lead plausibly does before it is measured.
+    ///
+    /// - A new lead's speed is still being measured (far ahead, a camera needs a few tenths of
+    ///   a second): its slowest, so a standing car seen at the edge of range is braked for from
+    ///   the first frames. Beyond twice the time gap only where waiting would cost comfort: far
+    ///   away a "lead" may be no vehicle (in a bend, two cars standing either side 200 m ahead
+    ///   merged into one in the ego's lane for half a second); there it is not yet planned for.
+    /// - For a moment after its lamps come on, the pedal is pressed but its speed cannot yet
+    ///   say how hard: braking at the comfort limit, where that would need much of the comfort
+    ///   braking (slow and far back, a late answer costs nothing, and braking for every touch
+    ///   of the pedal would cost the time gap).
+    fn hardest(&self, s: &AccSettings, v: f64, time_gap_s: f64) -> Hardest {
         let b = &s.tuning.belief;
         let decel = s.limits.decel_at(v);
-        let within_comfort =
-            |worse: Threat| if worse.needed_decel_mps2 <= decel { threat.or_worse(&worse) } else { threat };
         if !self.settled {
             let slowest = (self.speed_mps - b.unmeasured_sigmas.get() * self.speed_sigma_mps).max(0.0);
-            let slower = |gap_m: f64| self::threat(&s.tuning.threat, gap_m, v, slowest, self.mildest_accel());
+            let slower = |gap_m: f64| threat(&s.tuning.threat, gap_m, v, slowest, self.mildest_accel());
             let far = self.gap_m > s.standstill_m + s.tuning.command.far_time_gaps.get() * time_gap_s * v;
             let wait_s = (s.tuning.filter.settle_s.get() - self.followed_s).max(0.0);
             let waited = slower(self.gap_m - (v - slowest).max(0.0) * wait_s);
             if far && waited.needed_decel_mps2 <= b.unsettled_wait_share.get() * decel {
-                return revealed;
+                return Hardest::NotYet;
             }
-            return Some(within_comfort(slower(self.gap_m)));
+            return Hardest::Is(slower(self.gap_m));
         }
         if self.lit_for_s.is_some_and(|t| t < b.lit_anticipation_s.get()) {
             let hardest = self.mildest_accel().min(-s.limits.decel_mps2);
-            let hard = self::threat(&s.tuning.threat, self.gap_m, v, self.speed_mps, hardest);
+            let hard = threat(&s.tuning.threat, self.gap_m, v, self.speed_mps, hardest);
             if hard.needed_decel_mps2 >= b.lit_need_share.get() * decel {
-                return Some(within_comfort(hard));
+                return Hardest::Is(hard);
             }
         }
-        Some(threat)
+        Hardest::Measured
     }
 }

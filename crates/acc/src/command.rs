@@ -29,7 +29,7 @@ pub(super) struct Inputs<'a> {
     pub(super) set_speed_mps: f64,
     pub(super) time_gap_s: f64,
     pub(super) lead: Option<LeadBelief>,
-    /// What comfort braking plans for (`LeadBelief::comfort_plan`).
+    /// What comfort braking plans for (`super::decision::comfort_plan`).
     pub(super) plan: Option<Threat>,
     pub(super) dt: f64,
 }

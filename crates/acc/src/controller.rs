@@ -11,16 +11,15 @@
 //! Units: seconds of simulated time, metres, m/s, m/s2. The ego's body frame: x forward from the
 //! rear axle, y left.
 
-use super::belief::LeadBelief;
+use super::belief::{Around, Hypotheses, LeadBelief};
 use super::command::{Command, Inputs};
-use super::decision::{warns, Decision, Situation};
+use super::decision::{comfort_plan, warns, Decision, Now};
 use super::ego::EgoNow;
 use super::lead_filter::Noise;
 use super::low_level::LowLevel;
 use super::objects::PerceptionFrame;
 use super::select::LeadSelect;
 use super::settings::{AccSettings, SET_SPEED_RANGE_MPS, TIME_GAP_RANGE_S};
-use super::threat::Threat;
 use slipstream_contract::msg::{AccCommand, AccMode, AccStatus, AccWarning, LeadInfo, RoadSpec};
 use slipstream_model::road::Road;
 use slipstream_model::vehicle::VehicleParams;
@@ -142,9 +141,8 @@ impl Controller {
         let stale = !warnings.is_empty();
 
         let lead = self.belief(ego.t_s, v, stale);
-        let k = &self.s.tuning.threat;
-        let revealed = self.select.revealed(k, ego.t_s, v);
-        let threat = lead.map(|l| l.threat(k, v)).map(|t| revealed.map_or(t, |r| t.or_worse(&r)));
+        let hypotheses = lead.map(|l| self.hypotheses(&l, ego.t_s, v));
+        let threat = hypotheses.map(|h| h.threat());
         if threat.is_some_and(|t| warns(&self.s, &t, v, self.command.accel_cmd)) {
             warnings.push(AccWarning::ForwardCollision);
         }
@@ -158,7 +156,7 @@ impl Controller {
             let (from, step) = (self.command.accel_cmd, self.s.limits.jerk_mps3 * dt);
             (AccMode::Stale, (-self.s.stale.decel_mps2).clamp(from - step, from + step))
         } else {
-            self.drive(lead, threat, revealed, v, ego.t_s, dt)
+            self.drive(lead, hypotheses, v, ego.t_s, dt)
         };
         // The actuators lag: ask for the target plus lag x its rate of change, so the applied
         // acceleration follows a ramping target instead of trailing it (a jump, as into an
@@ -191,40 +189,30 @@ impl Controller {
 
     /// Engaged with fresh inputs: the decision, then an emergency's deceleration or the comfort
     /// command.
-    fn drive(
-        &mut self,
-        lead: Option<LeadBelief>,
-        threat: Option<Threat>,
-        revealed: Option<Threat>,
-        v: f64,
-        t_s: f64,
-        dt: f64,
-    ) -> (AccMode, f64) {
-        let was_hard = |l: &LeadBelief| self.decision.hard_lead == Some(l.id);
-        let margin = self.select.noise.hard_braking_margin_mps2;
-        let hard = lead.filter(|l| l.brakes_hard(&self.s, margin, was_hard(l)));
-        self.decision.hard_lead = hard.map(|l| l.id);
-        let accel_cmd = self.command.accel_cmd;
-        // What may start an emergency for being beyond comfort: the threat of a lead, and of a
-        // vehicle it hides or reveals, each seen in more than one frame.
-        let confirm_s = self.s.tuning.decision.confirm_s.get();
-        let confirmed = lead.filter(|l| l.confirmed(confirm_s)).map(|l| {
-            let t = l.threat(&self.s.tuning.threat, v);
-            self.select.revealed_for(&self.s.tuning.threat, t_s, v, confirm_s).map_or(t, |r| t.or_worse(&r))
-        });
-        let hard = hard.map(|l| l.likely_threat(&self.s.tuning.threat, v));
-        let situation = Situation { s: &self.s, threat, hard, confirmed, v, accel_cmd, t_s };
-        self.decision.update(&situation);
-        if let Some(t) = threat.filter(|_| self.decision.emergency) {
-            return (AccMode::Emergency, -self.decision.decel(&self.s, &t, v));
+    fn drive(&mut self, lead: Option<LeadBelief>, h: Option<Hypotheses>, v: f64, t_s: f64, dt: f64) -> (AccMode, f64) {
+        self.decision.hard_lead = lead.filter(|_| h.is_some_and(|h| h.likely.is_some())).map(|l| l.id);
+        let now = Now { s: &self.s, v, accel_cmd: self.command.accel_cmd, t_s };
+        self.decision.update(h.as_ref(), &now);
+        if let Some(h) = h.filter(|_| self.decision.emergency) {
+            return (AccMode::Emergency, -self.decision.decel(&self.s, &h.threat(), v));
         }
-        let plan = match (lead, threat) {
-            (Some(l), Some(t)) => l.comfort_plan(&self.s, t, revealed, v, self.time_gap_s),
-            _ => threat,
-        };
+        let plan = h.and_then(|h| comfort_plan(&h, &self.s, v));
         let time_gap_s = self.time_gap_s;
         let inputs = Inputs { s: &self.s, v, set_speed_mps: self.set_speed_mps, time_gap_s, lead, plan, dt };
         self.command.comfort(&inputs)
+    }
+
+    /// The lead's hypotheses this step, with what it hides or reveals as lead selection sees it.
+    fn hypotheses(&self, lead: &LeadBelief, t_s: f64, v: f64) -> Hypotheses {
+        let k = &self.s.tuning.threat;
+        let confirm_s = self.s.tuning.decision.confirm_s.get();
+        let around = Around {
+            revealed: self.select.revealed(k, t_s, v),
+            revealed_confirmed: self.select.revealed_for(k, t_s, v, confirm_s),
+        };
+        let was_hard = self.decision.hard_lead == Some(lead.id);
+        let margin = self.select.noise.hard_braking_margin_mps2;
+        lead.hypotheses(&self.s, v, self.time_gap_s, around, (margin, was_hard))
     }
 
     /// The lead believed now: its estimate moved on to `t_s`. None while stale: the

@@ -1,14 +1,24 @@
-//! The decision between comfort braking and an emergency, and the emergency's deceleration.
-//! Comfort braking (the comfort limits, the jerk limit) answers what it can; an emergency
-//! starts only where the belief says it cannot, and only for what has been measured in more
-//! than one frame: a collision closing fast while the ego brakes less than it needs, a threat
-//! that comfort braking from now on would not keep clear of, or
-//! a lead braking beyond the comfort limit that comfort braking would not keep clear of were it
-//! braking as its estimate says. Those last two wait for the last responsible moment: while
-//! comfort braking for a little longer and an emergency after it would still keep clear, the
-//! ACC brakes within comfort and looks again (a lead braking hard often stops braking before
-//! it stops: then comfort braking was enough, and an emergency would have been for nothing).
+//! The decision, as one table: each hypothesis of the lead belief (`super::belief`) has a
+//! need (the deceleration that keeps clear of it, and its TTC), and where that need falls
+//! against the comfort envelope (what comfort braking from now on keeps clear of, at the jerk
+//! limit up to each speed's limit) and the emergency envelope (what an emergency can still do
+//! later) decides:
+//!
+//! | hypothesis | comfort command plans for it | an emergency starts when | an emergency holds while |
+//! |---|---|---|---|
+//! | mildest (or the revealed, the worse) | always (the law answers alone below `needed_guard_mps2`) | - | its TTC <= `release_ttc_s` or its need >= `release_share` of the comfort limit |
+//! | confirmed (the same, measured over `confirm_s`) | - | *beyond comfort*: TTC < `release_ttc_s`, need above this speed's comfort limit, comfort braking does not keep clear, and it cannot wait; or *closing fast*: TTC < `brake_ttc_s` while braking less than the need by `under_braking_s` of jerk | - |
+//! | likely (while the lead brakes beyond comfort) | - | *lead braking hard*: its need (or the mildest's, the worse) > `emergency_factor` x `needed_guard_mps2` and it cannot wait | the mildest's need >= `needed_guard_mps2` |
+//! | hardest (a new lead's slowest speed; lamps just lit: the comfort limit) | with the mildest, the worse, where comfort braking copes with it; else the mildest alone | - | - |
+//! | hardest not yet (a new lead far ahead, cheap to wait for) | only the revealed | - | - |
+//!
+//! "It cannot wait": comfort braking for `wait_s` more and then an emergency at
+//! `planned_emergency_mps2` would not keep the standstill distance either. An emergency
+//! therefore comes at the last responsible moment: a lead braking hard often stops braking
+//! before it stops, and then comfort braking was enough. At standstill an emergency ends. Only
+//! what has been measured in more than one frame starts one.
 
+use super::belief::{Hardest, Hypotheses};
 use super::settings::AccSettings;
 use super::threat::{threat, Threat};
 
@@ -20,19 +30,24 @@ pub(super) struct Decision {
     pub(super) hard_lead: Option<u32>,
 }
 
-/// What a decision reads this step.
-pub(super) struct Situation<'a> {
+/// What a decision reads this step besides the hypotheses.
+pub(super) struct Now<'a> {
     pub(super) s: &'a AccSettings,
-    /// The threat (on the lead's mildest braking, or what it hides or reveals).
-    pub(super) threat: Option<Threat>,
-    /// The threat on the lead's likely braking, when it brakes beyond the comfort limit.
-    pub(super) hard: Option<Threat>,
-    /// The threat of what has been seen in more than one frame (`LeadBelief::confirmed`).
-    pub(super) confirmed: Option<Threat>,
     pub(super) v: f64,
     /// The command of the last step (negative: braking).
     pub(super) accel_cmd: f64,
     pub(super) t_s: f64,
+}
+
+/// What comfort braking plans for (the table's second column): the threat, or a worse one
+/// while the lead is not yet measured, where comfort braking copes with that.
+pub(super) fn comfort_plan(h: &Hypotheses, s: &AccSettings, v: f64) -> Option<Threat> {
+    let threat = h.threat();
+    match h.hardest {
+        Hardest::NotYet => h.revealed,
+        Hardest::Is(worse) if worse.needed_decel_mps2 <= s.limits.decel_at(v) => Some(threat.or_worse(&worse)),
+        _ => Some(threat),
+    }
 }
 
 impl Decision {
@@ -41,55 +56,26 @@ impl Decision {
         *self = Decision::default();
     }
 
-    /// Enters an emergency where comfort braking cannot cope (above); leaves it at standstill
-    /// or once the threat is comfortably over and the lead no longer brakes hard.
-    pub(super) fn update(&mut self, x: &Situation) {
-        let Some(t) = x.threat.as_ref() else {
+    /// Enters an emergency where a row of the table starts one; leaves it at standstill or
+    /// where no row holds it.
+    pub(super) fn update(&mut self, h: Option<&Hypotheses>, x: &Now) {
+        let Some(h) = h else {
             self.emergency = false;
             return;
         };
-        let (s, v) = (x.s, x.v);
-        let (e, lim, d) = (&s.emergency, &s.limits, &s.tuning.decision);
+        let t = h.threat();
         let ttc = t.ttc_s.unwrap_or(f64::INFINITY);
-        // An emergency starts only for what has been measured in more than one frame.
-        let beyond_comfort =
-            x.confirmed.is_some_and(|c| beyond_comfort(s, &c, v, x.accel_cmd) && !can_wait(s, &c, v, x.accel_cmd));
-        let hard_lead = x.hard.is_some();
-        // The lead brakes hard: an emergency only where comfort braking would not keep clear
-        // were it braking as estimated (a lead braking at 6 m/s2 40 m ahead of an ego at
-        // 15 m/s is stopped behind at 3 m/s2).
-        let hard_and_needed = x.hard.is_some_and(|h| {
-            let h = h.or_worse(t);
-            h.needed_decel_mps2 > d.emergency_factor.get() * d.needed_guard_mps2.get()
-                && !can_wait(s, &h, v, x.accel_cmd)
-        });
-        // A short TTC alone is no emergency while the ego already brakes about as hard as the
-        // threat needs: in a planned stop the TTC (at constant speeds) falls below any
-        // threshold as the car comes to rest behind the lead.
-        let closing_fast = x.confirmed.is_some_and(|c| {
-            let behind_need = c.needed_decel_mps2 > -x.accel_cmd + d.under_braking_s.get() * lim.jerk_mps3;
-            c.ttc_s.is_some_and(|ttc| ttc < e.brake_ttc_s) && behind_need
-        });
-        if !self.emergency && (closing_fast || beyond_comfort || hard_and_needed) {
-            tracing::warn!(
-                t_s = x.t_s,
-                ttc_s = ttc,
-                needed_decel_mps2 = t.needed_decel_mps2,
-                hard_lead,
-                "emergency braking"
-            );
-            self.emergency = true;
-        } else if self.emergency
-            && (v < s.tuning.low_level.standstill_mps.get()
-                || ((!hard_lead || t.needed_decel_mps2 < d.needed_guard_mps2.get())
-                    && ttc > e.release_ttc_s
-                    && t.needed_decel_mps2 < d.release_share.get() * lim.decel_mps2))
-        {
+        if !self.emergency {
+            if let Some(rule) = starts(h, x) {
+                let (needed_decel_mps2, hard_lead) = (t.needed_decel_mps2, h.likely.is_some());
+                tracing::warn!(t_s = x.t_s, ttc_s = ttc, needed_decel_mps2, hard_lead, rule, "emergency braking");
+                self.emergency = true;
+            }
+        } else if x.v < x.s.tuning.low_level.standstill_mps.get() || !holds(h, x.s) {
             tracing::info!(t_s = x.t_s, ttc_s = ttc, "emergency over");
             self.emergency = false;
         }
     }
-
     /// Emergency deceleration: the vehicle's maximum when TTC is below full_brake_ttc_s, else
     /// `emergency_factor` times what the threat needs, and no less than stopping the standstill
     /// distance behind needs (an emergency that started at the last responsible moment has no
@@ -117,6 +103,40 @@ impl Decision {
 /// brakes' lag and the estimate's error).
 fn short_of_standstill(s: &AccSettings, t: &Threat) -> Threat {
     Threat { room_m: t.room_m - s.standstill_m, ..*t }
+}
+
+/// The row of the table that starts an emergency now, if any.
+fn starts(h: &Hypotheses, x: &Now) -> Option<&'static str> {
+    let (s, v, accel_cmd) = (x.s, x.v, x.accel_cmd);
+    let d = &s.tuning.decision;
+    let beyond = h.confirmed.is_some_and(|c| beyond_comfort(s, &c, v, accel_cmd) && !can_wait(s, &c, v, accel_cmd));
+    // A short TTC alone is no emergency while the ego already brakes about as hard as the
+    // threat needs: in a planned stop the TTC (at constant speeds) falls below any threshold as
+    // the car comes to rest behind the lead.
+    let closing_fast = h.confirmed.is_some_and(|c| {
+        let behind_need = c.needed_decel_mps2 > -accel_cmd + d.under_braking_s.get() * s.limits.jerk_mps3;
+        c.ttc_s.is_some_and(|ttc| ttc < s.emergency.brake_ttc_s) && behind_need
+    });
+    // Behind a lead braking hard, only where comfort braking would not keep clear were it
+    // braking as estimated (a lead braking at 6 m/s2 40 m ahead of an ego at 15 m/s is
+    // stopped behind at 3 m/s2).
+    let hard = h.likely.is_some_and(|l| {
+        let l = l.or_worse(&h.threat());
+        l.needed_decel_mps2 > d.emergency_factor.get() * d.needed_guard_mps2.get() && !can_wait(s, &l, v, accel_cmd)
+    });
+    [(closing_fast, "closing fast"), (beyond, "beyond comfort"), (hard, "lead braking hard")]
+        .into_iter()
+        .find_map(|(now, rule)| now.then_some(rule))
+}
+
+/// Whether a row of the table holds an emergency on: the threat still close or needing much
+/// of the comfort limit, or a lead braking hard with a need above the guard.
+fn holds(h: &Hypotheses, s: &AccSettings) -> bool {
+    let t = h.threat();
+    let d = &s.tuning.decision;
+    let ttc = t.ttc_s.unwrap_or(f64::INFINITY);
+    let eased = h.likely.is_none() || t.needed_decel_mps2 < d.needed_guard_mps2.get();
+    !(eased && ttc > s.emergency.release_ttc_s && t.needed_decel_mps2 < d.release_share.get() * s.limits.decel_mps2)
 }
 
 /// The forward-collision warning: TTC below its threshold, or closing within release_ttc_s
