@@ -89,6 +89,10 @@ pub struct Child {
     pub name: String,
     child: std::process::Child,
     status: Option<ExitStatus>,
+    /// SIGINT has been sent. It is sent once: a second one, by the convention of Ctrl-C pressed
+    /// twice, cuts a node's own close short (a Python node then dies of the signal in its
+    /// `finally`, its session left unclosed), so stopping after an interrupt only waits.
+    interrupted: bool,
 }
 
 impl Child {
@@ -107,7 +111,7 @@ impl Child {
         let child = sent
             .and_then(|()| rx.recv().map_err(|_| gone())?)
             .map_err(|source| Error::System { what: format!("start {name} ({program:?})"), source })?;
-        Ok(Child { name: name.to_string(), child, status: None })
+        Ok(Child { name: name.to_string(), child, status: None, interrupted: false })
     }
     pub fn pid(&self) -> u32 {
         self.child.id()
@@ -121,14 +125,16 @@ impl Child {
         self.status
     }
 
-    /// Asks the process to stop (SIGINT) unless it has ended.
+    /// Asks the process to stop (SIGINT) unless it has ended or has been asked already.
     pub fn interrupt(&mut self) {
-        if self.exited().is_none() {
+        if self.exited().is_none() && !self.interrupted {
+            self.interrupted = true;
             interrupt(self.pid());
         }
     }
 
-    /// SIGINT, then up to `grace` for it to end, then SIGKILL. Returns the exit status.
+    /// SIGINT (unless sent already), then up to `grace` for it to end, then SIGKILL. Returns
+    /// the exit status.
     pub fn stop(&mut self, grace: Duration) -> Option<ExitStatus> {
         self.interrupt();
         if self.wait_for(grace).is_none() {
@@ -157,5 +163,24 @@ impl Child {
 impl Drop for Child {
     fn drop(&mut self) {
         self.stop(Duration::from_secs(5));
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A node slow to close after its SIGINT (a Python node closing its session) is waited
+    /// for, not interrupted a second time: the shell counts the SIGINTs it got and exits with
+    /// that count once its 0.4 s "close" is done.
+    #[test]
+    fn a_stop_after_an_interrupt_does_not_interrupt_again() {
+        let script = "n=0; trap 'n=$((n+1))' INT; while [ $n -eq 0 ]; do sleep 0.02; done; sleep 0.4; exit $n";
+        let mut child = Child::spawn("slow-close", Command::new("sh").args(["-c", script])).unwrap();
+        std::thread::sleep(Duration::from_millis(200));
+        child.interrupt();
+        std::thread::sleep(Duration::from_millis(100));
+        let status = child.stop(Duration::from_secs(10)).expect("ended within the grace");
+        assert_eq!(status.code(), Some(1), "SIGINTs received: {status:?}");
     }
 }
