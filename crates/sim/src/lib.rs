@@ -24,12 +24,12 @@
 pub mod args;
 pub mod cameras;
 mod control_in;
-pub mod driver;
-pub mod dynamics;
+mod driver;
+mod dynamics;
 mod error;
 pub mod ground_truth;
-pub mod node;
-pub mod physics;
+mod node;
+mod physics;
 mod port;
 pub mod preview;
 pub mod render;
