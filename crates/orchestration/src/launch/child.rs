@@ -64,13 +64,22 @@ fn spawner() -> &'static std::sync::Mutex<std::sync::mpsc::Sender<SpawnRequest>>
     })
 }
 
-/// Forks `cmd` with the parent-death signal set (SIGTERM) in the child.
+/// Forks `cmd` with the parent-death signal set (SIGTERM) in the child, and SIGINT and
+/// SIGTERM at their default actions: a launcher started in the background (`cmd &`, nohup)
+/// has SIGINT ignored, an ignored signal stays ignored across exec, and a node that cannot be
+/// interrupted is killed at the end of its stop grace instead of closing (a Python node then
+/// never closes its session; a shell cannot even trap it).
 fn spawn_tied(cmd: &mut Command) -> std::io::Result<std::process::Child> {
     use std::os::unix::process::CommandExt as _;
     let parent = std::process::id() as libc::pid_t;
-    // SAFETY: between fork and exec only async-signal-safe calls (prctl, getppid).
+    // SAFETY: between fork and exec only async-signal-safe calls (signal, prctl, getppid).
     unsafe {
         cmd.pre_exec(move || {
+            for sig in [libc::SIGINT, libc::SIGTERM] {
+                if libc::signal(sig, libc::SIG_DFL) == libc::SIG_ERR {
+                    return Err(std::io::Error::last_os_error());
+                }
+            }
             if libc::prctl(libc::PR_SET_PDEATHSIG, libc::SIGTERM) != 0 {
                 return Err(std::io::Error::last_os_error());
             }
@@ -182,5 +191,28 @@ mod tests {
         std::thread::sleep(Duration::from_millis(100));
         let status = child.stop(Duration::from_secs(10)).expect("ended within the grace");
         assert_eq!(status.code(), Some(1), "SIGINTs received: {status:?}");
+    }
+
+    /// A launcher with SIGINT ignored (started with `&` or nohup) still starts nodes that a
+    /// SIGINT stops: the shell traps it (a trap on a signal ignored at its start is refused).
+    #[test]
+    fn a_node_can_be_interrupted_when_its_launcher_ignores_sigint() {
+        let script = "trap 'exit 7' INT; while :; do sleep 0.02; done";
+        let mut cmd = Command::new("sh");
+        cmd.args(["-c", script]);
+        // The launcher's ignored SIGINT, as the child would inherit it, without touching this
+        // test process's own handlers.
+        // SAFETY: signal(2) is async-signal-safe; it runs between fork and exec, before ours.
+        unsafe {
+            use std::os::unix::process::CommandExt as _;
+            cmd.pre_exec(|| {
+                libc::signal(libc::SIGINT, libc::SIG_IGN);
+                Ok(())
+            });
+        }
+        let mut child = Child::spawn("ignoring-launcher", &mut cmd).unwrap();
+        std::thread::sleep(Duration::from_millis(300));
+        let status = child.stop(Duration::from_secs(10)).expect("ended within the grace");
+        assert_eq!(status.code(), Some(7), "{status:?}");
     }
 }
