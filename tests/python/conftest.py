@@ -3,11 +3,19 @@
 
 import os
 import pathlib
+import signal
 import socket
 
 import pytest
 
 ROOT = pathlib.Path(__file__).resolve().parents[2]
+
+# A test command started in the background (`bash scripts/test.sh &`, nohup) has SIGINT
+# ignored, and an ignored signal stays ignored in every process started from here: the Python
+# nodes and tools the tests stop with SIGINT, as Ctrl-C would, would never stop. With a handler
+# in this process each child starts with the default action instead.
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 @pytest.fixture(scope="session")
