@@ -1,8 +1,9 @@
-//! One platoon run on the bus: slipstream-sim in lockstep on the scenario rewritten to start in
-//! the equilibrium of the time gap asked, and per ego in its namespace a slipstream-acc (and a
-//! slipstream-detect with camera perception), all child processes in a namespace of the run's
-//! own, linked as [`Links`] says (directly on loopback, or through a router). The launcher's observer records each car's vehicle/state and the leader's
-//! speed from the first car's ground truth.
+//! One platoon run on the bus: slipstream-sim (in lockstep, or on the wall clock) on the
+//! scenario rewritten to start in the equilibrium of the time gap asked, and per ego in its
+//! namespace a slipstream-acc (and a slipstream-detect with camera perception), all child
+//! processes in a namespace of the run's own, linked as [`Links`] says (directly on loopback,
+//! or through a router). The launcher's observer records each car's vehicle/state and the
+//! leader's speed from the first car's ground truth.
 
 use std::path::Path;
 use std::process::Command;
