@@ -21,7 +21,7 @@ fn run() -> Result<()> {
     let seed = cli.sim.seed.unwrap_or(scenario.seed);
     let world = slipstream::sim::World::new(scenario, seed, settings.physics_hz);
     if let Some(path) = &cli.sim.preview {
-        let (png, truth) = slipstream::sim::preview::preview(world, &settings, cli.sim.at, true)
+        let (png, truth) = slipstream::sim::preview(world, &settings, cli.sim.at, true)
             .map_err(anyhow::Error::msg)
             .context("sim: preview")?;
         std::fs::write(path, png).with_context(|| format!("write {}", path.display()))?;

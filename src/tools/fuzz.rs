@@ -17,7 +17,7 @@ use anyhow::Result;
 use serde::Serialize;
 
 use crate::msg::{self, CameraFrameRef, MessageKind};
-use crate::sim::rng::SimRng;
+use crate::sim::SimRng;
 
 const TOPIC_CONFIG: &str = include_str!("../../config/slipstream.json5");
 const ACC_SETTINGS: &str = include_str!("../../config/acc.json5");

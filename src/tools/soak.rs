@@ -132,7 +132,7 @@ async fn flood(
 ) -> u64 {
     let examples: Vec<Vec<u8>> = crate::msg::examples().into_iter().map(|(_, b)| b).collect();
     let others: Vec<&[u8]> = examples.iter().map(Vec::as_slice).collect();
-    let mut rng = crate::sim::rng::SimRng::new(15);
+    let mut rng = crate::sim::SimRng::new(15);
     let tick = Duration::from_millis(10);
     let per_tick = (rate as f64 * tick.as_secs_f64()).ceil() as u64;
     let mut interval = tokio::time::interval(tick);

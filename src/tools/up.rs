@@ -373,7 +373,7 @@ pub(super) struct Watch {
 }
 
 impl Watch {
-    pub async fn start(bus: &Bus, camera: bool) -> Result<Watch> {
+    pub(super) async fn start(bus: &Bus, camera: bool) -> Result<Watch> {
         let watch = LatencyWatch::start(bus, camera).await?;
         let clock: Arc<Mutex<Option<SimClock>>> = Arc::default();
         let end_event: Arc<Mutex<Option<String>>> = Arc::default();
@@ -399,7 +399,7 @@ impl Watch {
     }
 
     /// The live view's lines; `duration_s` None: no known end (an external simulator's).
-    pub fn lines(&self, name: &str, mode: ClockMode, duration_s: Option<f64>, alive: &[String]) -> Vec<String> {
+    pub(super) fn lines(&self, name: &str, mode: ClockMode, duration_s: Option<f64>, alive: &[String]) -> Vec<String> {
         let hops = self.latency.lock().stats(true);
         let hop = |(h, short): (&HopStats, &&str)| format!("{short} {}/{}", fmt_opt(h.p50_ms, 1), fmt_opt(h.p99_ms, 1));
         vec![
@@ -411,7 +411,7 @@ impl Watch {
     }
 
     /// The run's name, clock, simulated time (a bar towards `duration_s`) and real-time factor.
-    pub fn progress_line(&self, name: &str, mode: ClockMode, duration_s: Option<f64>) -> String {
+    pub(super) fn progress_line(&self, name: &str, mode: ClockMode, duration_s: Option<f64>) -> String {
         let sim_s = self.recorder.rec.lock().states.last().map_or(0.0, |s| s.header.stamp_sim_ns as f64 / 1e9);
         let progress = match duration_s {
             Some(d) => {
@@ -427,7 +427,7 @@ impl Watch {
     }
 
     /// The ego's speed, the ACC's mode with its lead, the collisions.
-    pub fn ego_line(&self) -> String {
+    pub(super) fn ego_line(&self) -> String {
         let (speed, status, collisions) = {
             let rec = self.recorder.rec.lock();
             (rec.states.last().map(|s| s.msg.speed_mps), rec.statuses.last().map(|s| s.msg.clone()), rec.collisions)

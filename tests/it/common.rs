@@ -7,7 +7,7 @@ use std::time::Duration;
 use slipstream::{Bus, TopicMap};
 
 /// Every await in a test gets this long before the test fails instead of hanging CI.
-pub const TIMEOUT: Duration = Duration::from_secs(20);
+pub(crate) const TIMEOUT: Duration = Duration::from_secs(20);
 
 #[macro_export]
 macro_rules! within {
@@ -20,7 +20,7 @@ macro_rules! within {
 /// time, or on two cores they starve each other (and the realtime pacing some of them need).
 static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
 
-pub fn serial() -> std::sync::MutexGuard<'static, ()> {
+pub(crate) fn serial() -> std::sync::MutexGuard<'static, ()> {
     ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner())
 }
 
@@ -33,7 +33,7 @@ fn base_config() -> zenoh::Config {
 }
 
 /// A session listening on an OS-chosen loopback port.
-pub async fn listening_session() -> (zenoh::Session, String) {
+pub(crate) async fn listening_session() -> (zenoh::Session, String) {
     let mut c = base_config();
     c.insert_json5("listen/endpoints", r#"["tcp/127.0.0.1:0"]"#).unwrap();
     let s = zenoh::open(c).await.unwrap();
@@ -42,7 +42,7 @@ pub async fn listening_session() -> (zenoh::Session, String) {
 }
 
 /// A session that connects to `endpoint`.
-pub async fn connected_session(endpoint: &str) -> zenoh::Session {
+pub(crate) async fn connected_session(endpoint: &str) -> zenoh::Session {
     let mut c = base_config();
     c.insert_json5("listen/endpoints", "[]").unwrap();
     c.insert_json5("connect/endpoints", &format!(r#"["{endpoint}"]"#)).unwrap();
@@ -50,25 +50,25 @@ pub async fn connected_session(endpoint: &str) -> zenoh::Session {
 }
 
 /// Two buses on two sessions joined over tcp/127.0.0.1.
-pub async fn bus_pair(a: TopicMap, b: TopicMap) -> (Bus, Bus) {
+pub(crate) async fn bus_pair(a: TopicMap, b: TopicMap) -> (Bus, Bus) {
     let (s1, ep) = listening_session().await;
     let s2 = connected_session(&ep).await;
     (Bus::from_session(s1, a, "node-a").await.unwrap(), Bus::from_session(s2, b, "node-b").await.unwrap())
 }
 
-pub fn map(json5: &str) -> TopicMap {
+pub(crate) fn map(json5: &str) -> TopicMap {
     TopicMap::from_json5(json5, "test config").unwrap()
 }
 
 /// Runs a command with a deadline; kills it and fails the test if it overruns.
-pub fn run_with_limit(mut cmd: std::process::Command, limit: Duration) -> std::process::Output {
+pub(crate) fn run_with_limit(mut cmd: std::process::Command, limit: Duration) -> std::process::Output {
     let child = cmd.stdout(std::process::Stdio::piped()).stderr(std::process::Stdio::piped()).spawn().unwrap();
     wait_with_limit(child, limit, &format!("{cmd:?}"))
 }
 
 /// Waits for a started child's output with a deadline; kills it and fails the test if it
 /// overruns.
-pub fn wait_with_limit(child: std::process::Child, limit: Duration, what: &str) -> std::process::Output {
+pub(crate) fn wait_with_limit(child: std::process::Child, limit: Duration, what: &str) -> std::process::Output {
     let id = child.id();
     let (tx, rx) = std::sync::mpsc::channel();
     std::thread::spawn(move || {
@@ -84,7 +84,7 @@ pub fn wait_with_limit(child: std::process::Child, limit: Duration, what: &str) 
 }
 
 /// Every .rs file under `dir`, recursively.
-pub fn rust_files(dir: &std::path::Path, out: &mut Vec<std::path::PathBuf>) {
+pub(crate) fn rust_files(dir: &std::path::Path, out: &mut Vec<std::path::PathBuf>) {
     for entry in std::fs::read_dir(dir).unwrap() {
         let path = entry.unwrap().path();
         if path.is_dir() {
@@ -97,7 +97,7 @@ pub fn rust_files(dir: &std::path::Path, out: &mut Vec<std::path::PathBuf>) {
 
 /// A binary of this build (`slipstream`, `slipstream-sim`, `slipstream-detect`,
 /// `slipstream-acc`), with none of the caller's settings: no RUST_LOG, no SLIPSTREAM_*.
-pub fn bin(name: &str) -> std::process::Command {
+pub(crate) fn bin(name: &str) -> std::process::Command {
     let path = match name {
         "slipstream" => env!("CARGO_BIN_EXE_slipstream"),
         "slipstream-sim" => env!("CARGO_BIN_EXE_slipstream-sim"),
@@ -116,17 +116,17 @@ pub fn bin(name: &str) -> std::process::Command {
 }
 
 /// A loopback port free at the time of asking.
-pub fn free_port() -> u16 {
+pub(crate) fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
 }
 
 /// The Zenoh endpoint of a loopback port.
-pub fn ep(port: u16) -> String {
+pub(crate) fn ep(port: u16) -> String {
     format!("tcp/127.0.0.1:{port}")
 }
 
 /// An empty scratch directory of this test process's own, named `name`.
-pub fn temp_dir(name: &str) -> std::path::PathBuf {
+pub(crate) fn temp_dir(name: &str) -> std::path::PathBuf {
     let dir = std::env::temp_dir().join(format!("slipstream-it-{}-{name}", std::process::id()));
     let _ = std::fs::remove_dir_all(&dir);
     std::fs::create_dir_all(&dir).unwrap();
@@ -134,7 +134,7 @@ pub fn temp_dir(name: &str) -> std::path::PathBuf {
 }
 
 /// A child process killed and reaped when the test ends, passed or failed.
-pub struct Killed(pub std::process::Child);
+pub(crate) struct Killed(pub std::process::Child);
 
 impl Drop for Killed {
     fn drop(&mut self) {

@@ -130,7 +130,7 @@ fn a_seeded_sample_of_the_wider_net_passes_with_both_perceptions() {
         .collect();
     files.sort();
     assert!(files.len() >= SAMPLE, "{} scenarios", files.len());
-    let mut rng = slipstream::sim::rng::SimRng::new(seed);
+    let mut rng = slipstream::sim::SimRng::new(seed);
     let mut sample = Vec::new();
     while sample.len() < SAMPLE {
         let pick = files.remove(rng.below(files.len() as u64) as usize);

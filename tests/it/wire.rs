@@ -1,7 +1,7 @@
 //! The wire format: round trips for every message, strict decoding of bad input.
 
 use slipstream::msg::*;
-use slipstream::sim::rng::SimRng;
+use slipstream::sim::SimRng;
 
 /// Cases per message type: each from its own seed, so a failure names the case to rerun.
 const CASES: u64 = 64;

@@ -122,7 +122,7 @@ impl Controller {
     }
 
     /// Whether the road's map has come (sim/road).
-    pub fn has_road(&self) -> bool {
+    pub(crate) fn has_road(&self) -> bool {
         self.select.road.is_some()
     }
 

@@ -23,7 +23,7 @@ pub struct EgoNow {
 /// acceleration (no vehicle/state yet) the reading is taken as it is; a jump beyond
 /// EGO_SPEED_RESET_MPS (a replay starting over, a reset vehicle) is too.
 #[derive(Debug, Clone, Copy, Default)]
-pub struct EgoSpeedFilter {
+pub(crate) struct EgoSpeedFilter {
     last: Option<(f64, f64)>,
 }
 
@@ -35,7 +35,7 @@ const EGO_SPEED_RESET_MPS: f64 = 2.0;
 impl EgoSpeedFilter {
     /// The speed at `t_s` from the reading `measured_mps` and the acceleration measured since
     /// the last reading, when there is one.
-    pub fn update(&mut self, t_s: f64, measured_mps: f64, accel_mps2: Option<f64>) -> f64 {
+    pub(crate) fn update(&mut self, t_s: f64, measured_mps: f64, accel_mps2: Option<f64>) -> f64 {
         let v = match (self.last, accel_mps2) {
             (Some((t0, v0)), Some(a)) if t_s > t0 => {
                 let dt = t_s - t0;

@@ -35,15 +35,14 @@ mod objects;
 mod select;
 pub mod settings;
 mod threat;
-mod tuning;
+pub mod tuning;
 
 pub use args::VehicleClass;
-pub use controller::Controller;
+pub use controller::{Controller, Output};
 pub use ego::{EgoNow, Pose};
 pub use objects::{Object, PerceptionFrame};
 pub use settings::{AccSettings, PerceptionSource};
-pub use threat::{threat, Threat};
-pub use tuning::{Amount, Share, Tuning};
+pub use tuning::Share;
 
 #[cfg(test)]
 mod tests;

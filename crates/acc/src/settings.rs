@@ -11,7 +11,7 @@ use slipstream_contract::config::{parse_layered, read_config, ConfigError, Inval
 use slipstream_model::vehicle::VehicleParams;
 
 pub const DEFAULT_ACC_CONFIG: &str = include_str!("../../../config/acc.json5");
-pub const DEFAULT_ACC_CONFIG_PATH: &str = "config/acc.json5";
+pub(crate) const DEFAULT_ACC_CONFIG_PATH: &str = "config/acc.json5";
 
 const FIX: &str = "see the comments in config/acc.json5 for every key and its allowed values";
 
@@ -36,7 +36,7 @@ impl PerceptionSource {
 }
 
 /// The longest `perception_wait_ms` the settings take.
-pub const MAX_PERCEPTION_WAIT_MS: u64 = 50;
+pub(crate) const MAX_PERCEPTION_WAIT_MS: u64 = 50;
 
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -74,7 +74,7 @@ pub struct Limits {
 
 impl Limits {
     /// The comfort deceleration at speed `v`.
-    pub fn decel_at(&self, v_mps: f64) -> f64 {
+    pub(crate) fn decel_at(&self, v_mps: f64) -> f64 {
         comfort_decel_at(v_mps, self.decel_mps2, self.low_speed_decel_mps2)
     }
 }
@@ -208,10 +208,10 @@ impl Default for AccSettings {
 
 /// The set speeds the ACC accepts, m/s (252 km/h: above any road's limit, below the number
 /// a sign error or a km/h value typed as m/s would give).
-pub const SET_SPEED_RANGE_MPS: std::ops::RangeInclusive<f64> = 0.0..=70.0;
+pub(crate) const SET_SPEED_RANGE_MPS: std::ops::RangeInclusive<f64> = 0.0..=70.0;
 
 /// The time gaps the ACC accepts (ISO 15622 asks at least 0.8 s).
-pub const TIME_GAP_RANGE_S: std::ops::RangeInclusive<f64> = 0.8..=3.0;
+pub(crate) const TIME_GAP_RANGE_S: std::ops::RangeInclusive<f64> = 0.8..=3.0;
 
 impl AccSettings {
     /// Settings from a file, or the built-in defaults.

@@ -12,7 +12,7 @@ const MIN_CLOSING_MPS: f64 = 0.1;
 
 /// The threat a lead poses now.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Threat {
+pub(crate) struct Threat {
     pub ttc_s: Option<f64>,
     /// Deceleration (positive) that keeps `tuning.threat.margin_m` to the lead.
     pub needed_decel_mps2: f64,
@@ -38,7 +38,13 @@ impl Threat {
 /// Time to collision and the deceleration that still avoids one, from the gap, the speeds and
 /// the lead's acceleration (a lead braking harder than `k.braking_mps2` is assumed to brake to
 /// a stop), keeping `k.margin_m`.
-pub fn threat(k: &ThreatTuning, gap_m: f64, ego_speed_mps: f64, lead_speed_mps: f64, lead_accel_mps2: f64) -> Threat {
+pub(crate) fn threat(
+    k: &ThreatTuning,
+    gap_m: f64,
+    ego_speed_mps: f64,
+    lead_speed_mps: f64,
+    lead_accel_mps2: f64,
+) -> Threat {
     let closing = ego_speed_mps - lead_speed_mps;
     let ttc_s = (closing > MIN_CLOSING_MPS).then(|| gap_m.max(0.0) / closing);
     let room = (gap_m - k.margin_m.get()).max(MIN_ROOM_M);

@@ -8,7 +8,7 @@ use super::Suite;
 
 /// ZENOH_RUNTIME value that gives Zenoh's own thread layout (a pool per role) instead of
 /// slipstream's default handover layout (`slipstream_contract::process::ZENOH_RUNTIME_DEFAULT`).
-pub const ZENOH_OWN_RUNTIME: &str = "()";
+pub(crate) const ZENOH_OWN_RUNTIME: &str = "()";
 
 /// A frame size of section b.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
@@ -173,18 +173,18 @@ pub struct CaseId {
     pub path: Path,
 }
 
-pub struct Case {
+pub(crate) struct Case {
     pub id: CaseId,
     pub spec: CaseSpec,
 }
 
 /// Another build's binary, by label (`--with-build LABEL=PATH`).
-pub struct OtherBuild {
+pub(crate) struct OtherBuild {
     pub label: String,
     pub exe: String,
 }
 
-pub fn other_builds(args: &[String]) -> anyhow::Result<Vec<OtherBuild>> {
+pub(crate) fn other_builds(args: &[String]) -> anyhow::Result<Vec<OtherBuild>> {
     args.iter()
         .map(|a| {
             let (label, exe) = a.split_once('=').ok_or_else(|| {
@@ -199,7 +199,7 @@ pub fn other_builds(args: &[String]) -> anyhow::Result<Vec<OtherBuild>> {
         .collect()
 }
 
-pub fn speed_spec(transport: Transport, count: u64) -> CaseSpec {
+pub(crate) fn speed_spec(transport: Transport, count: u64) -> CaseSpec {
     CaseSpec {
         transport,
         payload: Payload::Speed,
@@ -226,7 +226,7 @@ pub fn speed_spec(transport: Transport, count: u64) -> CaseSpec {
 
 /// Frames of `size` at `rate_hz` (a latency case: 60 frames) or as fast as the sender can
 /// (throughput: up to 3 s), from one sender to one receiver.
-pub fn frame_spec(
+pub(crate) fn frame_spec(
     transport: Transport,
     (width, height): (u32, u32),
     shm: bool,
@@ -254,7 +254,7 @@ pub fn frame_spec(
 
 /// Every case of the suites asked for, in table order. `seed`: the seed's Python peers can
 /// run here.
-pub fn cases(suites: &[Suite], quick: bool, builds: &[OtherBuild], seed: bool) -> Vec<Case> {
+pub(crate) fn cases(suites: &[Suite], quick: bool, builds: &[OtherBuild], seed: bool) -> Vec<Case> {
     let mut out = Vec::new();
     if suites.contains(&Suite::Speed) {
         speed_cases(&mut out, if quick { 50 } else { 500 }, builds, seed);

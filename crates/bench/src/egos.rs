@@ -21,7 +21,7 @@ const LANES: usize = 3;
 const SPACING_M: f64 = 60.0;
 
 /// A scenario with `n` egos, three lanes abreast, 60 m apart along each lane, cruising.
-pub fn scenario(n: usize, duration_s: f64) -> Result<Scenario> {
+pub(crate) fn scenario(n: usize, duration_s: f64) -> Result<Scenario> {
     let egos: Vec<String> = (0..n)
         .map(|k| {
             let s = 2000.0 - SPACING_M * (k / LANES) as f64;
@@ -37,7 +37,7 @@ pub fn scenario(n: usize, duration_s: f64) -> Result<Scenario> {
 
 /// The settings of an ego driven on ground truth, as far as this simulator has them: the front
 /// camera 80x60, the narrow one off.
-pub fn ground_truth_settings() -> SimSettings {
+pub(crate) fn ground_truth_settings() -> SimSettings {
     let mut s = SimSettings { mode: Mode::Fast, ..SimSettings::default() };
     s.camera.width = 80;
     s.camera.height = 60;
@@ -47,14 +47,14 @@ pub fn ground_truth_settings() -> SimSettings {
 
 /// The real-time factor of a fast run of `n` egos under `settings`, every ego's front frames
 /// taken by a viewer in another session on loopback.
-pub async fn fast_rtf(n: usize, settings: &SimSettings, sim_s: f64) -> Result<f64> {
+pub(crate) async fn fast_rtf(n: usize, settings: &SimSettings, sim_s: f64) -> Result<f64> {
     fast_rtf_of(scenario(n, sim_s)?, settings).await
 }
 
 /// The real-time factor of a fast run of `scenario` under `settings`, every ego's front frames
 /// taken by a viewer in another session on loopback (through shared memory, so publishing is
 /// included).
-pub async fn fast_rtf_of(scenario: Scenario, settings: &SimSettings) -> Result<f64> {
+pub(crate) async fn fast_rtf_of(scenario: Scenario, settings: &SimSettings) -> Result<f64> {
     let n = scenario.egos().len();
     let sim_session = zenoh::open(loopback_config(Some("tcp/127.0.0.1:0"), &[])?).await.map_err(anyhow::Error::msg)?;
     let ep = sim_session.info().locators().await.first().context("sim session has no locator")?.to_string();

@@ -64,7 +64,7 @@ pub struct RouterLoad {
 
 /// What `bench fleet` runs.
 #[derive(Debug, Clone)]
-pub struct FleetPlan {
+pub(crate) struct FleetPlan {
     pub vehicles: Vec<usize>,
     pub caps_mbit_s: Vec<u32>,
     pub seconds: f64,
@@ -77,7 +77,7 @@ pub struct FleetPlan {
 }
 
 /// Every cap, every number of vehicles; progress on stderr.
-pub fn run(plan: &FleetPlan) -> Result<Vec<FleetRow>> {
+pub(crate) fn run(plan: &FleetPlan) -> Result<Vec<FleetRow>> {
     let mut rows = Vec::new();
     for &cap in &plan.caps_mbit_s {
         for &n in &plan.vehicles {
@@ -345,7 +345,7 @@ fn figures(
 }
 
 /// The rows as a markdown table.
-pub fn markdown(rows: &[FleetRow]) -> String {
+pub(crate) fn markdown(rows: &[FleetRow]) -> String {
     let mut s = String::from(
         "\n### h. a fleet through capped links (simulator PC -> router(s) -> client PC)\n\n| link cap Mbit/s | vehicles | client reads | frames delivered / published | frames lost % | speed lost | control lost | loop p50 ms | loop p99 ms | slowest RTF | router CPU % of a core | each router: CPU %, peak MiB, vehicles served |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );

@@ -136,7 +136,7 @@ fn run_once(specs: &[CaseSpec]) -> Result<Run> {
 
 /// f. The fan-out table: for each path and number of subscribers, a throughput run and a
 /// 20 Hz latency run, `repeat` times each.
-pub fn fanout(counts: &[usize], quick: bool, repeat: usize) -> Result<Vec<FanoutRow>> {
+pub(crate) fn fanout(counts: &[usize], quick: bool, repeat: usize) -> Result<Vec<FanoutRow>> {
     let mut rows = Vec::new();
     for path in [FanoutPath::SharedMemory, FanoutPath::Router] {
         for &n in counts {
@@ -240,7 +240,7 @@ fn vehicle_spec(i: usize, via_router: bool, quick: bool) -> CaseSpec {
 }
 
 /// g. The router table: the direct baseline, then 1..N vehicles through one router.
-pub fn router(counts: &[usize], quick: bool, repeat: usize) -> Result<Vec<RouterRow>> {
+pub(crate) fn router(counts: &[usize], quick: bool, repeat: usize) -> Result<Vec<RouterRow>> {
     let mut cases: Vec<(bool, usize)> = vec![(false, 1)];
     cases.extend(counts.iter().map(|&n| (true, n)));
     let mut rows: Vec<RouterRow> = Vec::new();
@@ -317,7 +317,7 @@ fn vehicle_figures(groups: &[(SendReport, Vec<RecvReport>)], router: Option<Rout
 }
 
 /// Both tables as markdown (either may be empty).
-pub fn markdown(fanout: &[FanoutRow], router: &[RouterRow]) -> String {
+pub(crate) fn markdown(fanout: &[FanoutRow], router: &[RouterRow]) -> String {
     use slipstream_orchestration::eval::fmt_opt;
     let mut s = String::new();
     if !fanout.is_empty() {

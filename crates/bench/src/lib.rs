@@ -30,15 +30,21 @@ mod spec;
 
 use anyhow::{Context, Result};
 
-pub use cases::{CaseId, FrameSize, Path, Phase, Table, ZENOH_OWN_RUNTIME};
+pub use cases::{CaseId, FrameSize, Path, Phase, Table};
 pub(crate) use child::{process_cpu_s, process_peak_rss_mib};
 use child::{python_available, remove_seed_script, run_case, run_groups, RouterProcess, PYTHON};
 use figures::Latencies;
 pub use figures::{median, Row};
-pub use peer::{run_receiver, run_sender};
+pub use fleet::{FleetRow, RouterLoad};
+pub use growth::{FanoutPath, FanoutRow, RouterRow};
+pub use nodes::NodesRow;
+pub(crate) use peer::{run_receiver, run_sender};
 pub use ratios::Ratio;
 pub use report::{markdown, BenchReport};
-pub use spec::{Background, CaseSpec, Payload, RecvReport, SendReport, TcpBuffer, Transport};
+pub use scale::ScaleRow;
+pub use sim::SimFigure;
+pub(crate) use spec::CaseSpec;
+pub use spec::{Background, Payload};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum Suite {

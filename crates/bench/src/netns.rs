@@ -9,7 +9,7 @@ use std::process::Command;
 use anyhow::{bail, Context, Result};
 
 /// Hosts by role on one or several subnets (`<prefix>.0/24`).
-pub struct Lan {
+pub(crate) struct Lan {
     /// Role -> namespace name.
     ns: Vec<(String, String)>,
     /// `role@prefix` -> the host's address on that subnet.
@@ -27,14 +27,14 @@ fn ip(args: &[&str]) -> Result<()> {
 
 impl Lan {
     /// Creates the hosts on one subnet. `tag` makes the names unique to this run (a pid).
-    pub fn create(tag: &str, roles: &[&str], subnet: &str) -> Result<Lan> {
+    pub(crate) fn create(tag: &str, roles: &[&str], subnet: &str) -> Result<Lan> {
         Lan::create_subnets(tag, &[(subnet, roles)])
     }
 
     /// Creates several subnets, each a bridge of its own: `(prefix, roles)`, role i of a subnet
     /// at `<prefix>.i+1`. A role on several subnets is one host with a leg (eth0, eth1, ...) on
     /// each (a router between subnets); [`Lan::addr_on`] gives its address on each.
-    pub fn create_subnets(tag: &str, subnets: &[(&str, &[&str])]) -> Result<Lan> {
+    pub(crate) fn create_subnets(tag: &str, subnets: &[(&str, &[&str])]) -> Result<Lan> {
         // SAFETY: geteuid has no preconditions.
         if unsafe { libc::geteuid() } != 0 {
             bail!("`bench fleet` builds network namespaces: run it as root (e.g. sudo)");
@@ -76,7 +76,7 @@ impl Lan {
     }
 
     /// A host's address on the subnet `prefix`.
-    pub fn addr_on(&self, role: &str, prefix: &str) -> &str {
+    pub(crate) fn addr_on(&self, role: &str, prefix: &str) -> &str {
         Self::get(&self.addr, &format!("{role}@{prefix}"))
     }
 
@@ -86,7 +86,7 @@ impl Lan {
 
     /// Caps what a host sends at `mbit_s` on each of its legs (a token bucket on each link: a
     /// port of that speed).
-    pub fn cap(&self, role: &str, mbit_s: u32) -> Result<()> {
+    pub(crate) fn cap(&self, role: &str, mbit_s: u32) -> Result<()> {
         // The bucket holds at least 10 ms of the rate (and 64 KiB): tbf needs rate / HZ.
         let burst_kb = (mbit_s as u64 * 1000 / 8 / 100).max(64);
         let legs = self.addr.iter().filter(|(r, _)| r.starts_with(&format!("{role}@"))).count();
@@ -106,7 +106,7 @@ impl Lan {
 
     /// A command that runs `program` on a host (`ip netns exec` execs it: the child's pid is
     /// the program's own).
-    pub fn command(&self, role: &str, program: &std::path::Path) -> Command {
+    pub(crate) fn command(&self, role: &str, program: &std::path::Path) -> Command {
         let mut c = Command::new("ip");
         c.args(["netns", "exec", Self::get(&self.ns, role)]).arg(program);
         c

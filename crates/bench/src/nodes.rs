@@ -101,7 +101,7 @@ fn sweep(exe: &Path, command: Option<&str>, count: usize, dir: &Path) -> Result<
 }
 
 /// Runs the suite; progress on stderr.
-pub fn run(quick: bool, repeat: usize) -> Result<Vec<NodesRow>> {
+pub(crate) fn run(quick: bool, repeat: usize) -> Result<Vec<NodesRow>> {
     let exe = std::env::current_exe().context("this binary's path")?;
     let count = if quick { 2 } else { 10 };
     let repeat = if quick { 1 } else { repeat.max(1) };
@@ -144,7 +144,7 @@ pub fn run(quick: bool, repeat: usize) -> Result<Vec<NodesRow>> {
 }
 
 /// The suite's table.
-pub fn markdown(rows: &[NodesRow]) -> String {
+pub(crate) fn markdown(rows: &[NodesRow]) -> String {
     let mut s = String::from(
         "\n### i. your own controller against slipstream-acc (eval sweep, ground truth, -j 1, same run)\n\n| controller | steps | sweep wall s | x slipstream-acc | awaited per step us | added per step us |\n|---|---|---|---|---|---|\n",
     );

@@ -87,7 +87,7 @@ impl Collector {
 /// shared memory, transport and socket-buffer choices.
 /// The default config on exactly these loopback endpoints: no rendezvous, no gossip, and the
 /// listener bound before the session opens returns.
-pub fn loopback_config(listen: Option<&str>, connect: &[String]) -> Result<zenoh::Config> {
+pub(crate) fn loopback_config(listen: Option<&str>, connect: &[String]) -> Result<zenoh::Config> {
     let mut c = zenoh::Config::from_json5(slipstream_contract::config::DEFAULT_ZENOH_CONFIG)
         .map_err(|e| anyhow::anyhow!("default config: {e}"))?;
     let set = |c: &mut zenoh::Config, k: &str, v: &str| c.insert_json5(k, v).map_err(|e| anyhow::anyhow!("{k}: {e}"));
@@ -103,7 +103,7 @@ pub fn loopback_config(listen: Option<&str>, connect: &[String]) -> Result<zenoh
 
 /// A bench peer's config: listening on `listen` (a receiver in peer mode) or connecting to
 /// `connect` (a sender; or, with `via_router`, either side as the router's client).
-pub fn peer_config(spec: &CaseSpec, listen: Option<&str>, connect: &[String]) -> Result<zenoh::Config> {
+pub(crate) fn peer_config(spec: &CaseSpec, listen: Option<&str>, connect: &[String]) -> Result<zenoh::Config> {
     let mut c = loopback_config(listen, connect)?;
     let set = |c: &mut zenoh::Config, k: &str, v: &str| c.insert_json5(k, v).map_err(|e| anyhow::anyhow!("{k}: {e}"));
     if spec.via_router {
@@ -130,7 +130,7 @@ pub fn peer_config(spec: &CaseSpec, listen: Option<&str>, connect: &[String]) ->
 
 /// The topic map of a bench peer: the defaults, or every topic at Zenoh's defaults
 /// (`qos: false`), and shared memory for frames as the case says.
-pub fn peer_topics(spec: &CaseSpec) -> Result<TopicMap> {
+pub(crate) fn peer_topics(spec: &CaseSpec) -> Result<TopicMap> {
     let flat = r#"{ priority: "data", express: false, congestion_control: "drop" }"#;
     let topics = if spec.qos {
         String::new()
@@ -157,7 +157,7 @@ struct Receiving {
 
 /// Receiver: prints `READY <endpoint>`, collects until stdin closes (or a hard limit), then
 /// prints `RESULT <json>`. `router`: the router's endpoint when the case goes through one.
-pub async fn run_receiver(spec: CaseSpec, router: Option<String>) -> Result<()> {
+pub(crate) async fn run_receiver(spec: CaseSpec, router: Option<String>) -> Result<()> {
     if spec.via_router != router.is_some() {
         bail!("a case through a router needs the router's endpoint (--endpoint), and only such a case");
     }
@@ -407,7 +407,7 @@ async fn read_frames(
 
 /// Marks an endpoint of a receiver's low-latency session (in READY and a sender's
 /// `--endpoint` list).
-pub const LOW_LATENCY_TAG: &str = "ll=";
+pub(crate) const LOW_LATENCY_TAG: &str = "ll=";
 
 /// A bus peer's low-latency session, as a node derives it (unless the case runs one session
 /// or goes through a router); a sender dials `connect`, the receiver's.
@@ -536,7 +536,7 @@ const DRAIN: Duration = Duration::from_millis(300);
 
 /// Sender: connects to `endpoint`, sends the measured stream (and background frames), prints
 /// `SENT <json>`.
-pub async fn run_sender(spec: CaseSpec, endpoints: Vec<String>) -> Result<()> {
+pub(crate) async fn run_sender(spec: CaseSpec, endpoints: Vec<String>) -> Result<()> {
     let endpoint = endpoints.first().cloned().context("a sender needs an endpoint")?;
     // The sending time a case allows counts from its first message, once the receiver is
     // matched: a session that is slow to connect on a loaded machine does not eat it.

@@ -16,7 +16,7 @@ type Line = (String, plotters::style::RGBColor, Vec<(f64, f64)>);
 /// A panel: title, y axis name, whether y is drawn on a log10 scale, its lines.
 type Panel = (String, String, bool, Vec<Line>);
 
-pub fn growth(report: &BenchReport, path: &Path) -> Result<()> {
+pub(crate) fn growth(report: &BenchReport, path: &Path) -> Result<()> {
     let rows: Vec<[Panel; 2]> =
         [scale_panels(report), fanout_panels(report), router_panels(report)].into_iter().flatten().collect();
     anyhow::ensure!(!rows.is_empty(), "--plot draws scale, fanout or router: run one of them");

@@ -144,7 +144,7 @@ fn frame_ratios(out: &mut Vec<RatioDef>, size: FrameSize) {
 }
 
 /// The ratios whose tables ran; a needed row that is absent is named in `missing`.
-pub fn ratios(rows: &[Row], builds: &[OtherBuild]) -> Vec<Ratio> {
+pub(crate) fn ratios(rows: &[Row], builds: &[OtherBuild]) -> Vec<Ratio> {
     let find = |id: &CaseId| rows.iter().find(|r| &r.id == id);
     let ran = |table: Table| rows.iter().any(|r| r.id.table == table);
     let mut out = Vec::new();

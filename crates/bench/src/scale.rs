@@ -17,9 +17,9 @@ use slipstream_orchestration::launch::{ClockMode, LinkKind, LoopRun, LoopSpec, N
 use slipstream_sim::Scenario;
 
 /// A loop holds real time when its simulator runs at least this fast.
-pub const MIN_RTF: f64 = 0.97;
+pub(crate) const MIN_RTF: f64 = 0.97;
 /// ... and its frame -> applied latency p50 is at most this (the loop's aim).
-pub const MAX_LOOP_P50_MS: f64 = 5.0;
+pub(crate) const MAX_LOOP_P50_MS: f64 = 5.0;
 /// The scenario every loop drives.
 const SCENARIO: &str = "cut-in";
 
@@ -40,7 +40,7 @@ pub struct ScaleRow {
 }
 
 /// Runs `loops` side by side for `duration_s` simulated seconds each, for every count.
-pub fn run(counts: &[usize], duration_s: f64) -> Result<Vec<ScaleRow>> {
+pub(crate) fn run(counts: &[usize], duration_s: f64) -> Result<Vec<ScaleRow>> {
     let rt = tokio::runtime::Runtime::new()?;
     let mut rows = Vec::new();
     for &n in counts {
@@ -58,7 +58,7 @@ pub fn run(counts: &[usize], duration_s: f64) -> Result<Vec<ScaleRow>> {
 }
 
 /// The largest number of loops that held real time and the 5 ms loop (and every smaller one).
-pub fn largest_holding(rows: &[ScaleRow]) -> Option<usize> {
+pub(crate) fn largest_holding(rows: &[ScaleRow]) -> Option<usize> {
     let mut sorted: Vec<&ScaleRow> = rows.iter().collect();
     sorted.sort_by_key(|r| r.loops);
     sorted.iter().take_while(|r| r.holds).last().map(|r| r.loops)
@@ -152,7 +152,7 @@ fn children_cpu_s() -> f64 {
 }
 
 /// The rows as a markdown table, with the largest number that holds.
-pub fn markdown(rows: &[ScaleRow]) -> String {
+pub(crate) fn markdown(rows: &[ScaleRow]) -> String {
     let mut s = String::from(
         "\n### e. complete loops side by side (realtime, camera)\n\n| loops | RTF slowest | RTF median | loop p50 ms | loop p99 ms | CPU per loop (% of a core) | holds RTF and 5 ms |\n|---|---|---|---|---|---|---|\n",
     );

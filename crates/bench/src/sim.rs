@@ -11,11 +11,11 @@ use anyhow::Result;
 use serde::Serialize;
 
 use slipstream_contract::msg::ImageEncoding;
-use slipstream_sim::render::{FrameLook, Renderer};
-use slipstream_sim::rng::SimRng;
 use slipstream_sim::settings::{Mode, SimSettings};
 use slipstream_sim::world::{EgoInput, World};
 use slipstream_sim::Scenario;
+use slipstream_sim::SimRng;
+use slipstream_sim::{FrameLook, Renderer};
 
 /// One simulator figure, the median over runs.
 #[derive(Debug, Clone, Serialize)]
@@ -114,7 +114,7 @@ fn cameras_ms(frames: usize) -> Result<f64> {
     let settings = SimSettings::default();
     let scenario = Scenario::find("busy-traffic").map_err(anyhow::Error::msg)?;
     let mut world = World::new(scenario, 7, settings.physics_hz);
-    let mut cameras = slipstream_sim::cameras::Cameras::new(&settings, &world);
+    let mut cameras = slipstream_sim::Cameras::new(&settings, &world);
     let mut rig = slipstream_perception::CameraRig::new(
         cameras.front.info(),
         cameras.narrow_info(),
@@ -183,7 +183,7 @@ fn egos_figures(rt: &tokio::runtime::Runtime, quick: bool, sim_s: f64, figure: &
 }
 
 /// Runs the simulator suite; progress on stderr.
-pub fn run(quick: bool, repeat: usize) -> Result<Vec<SimFigure>> {
+pub(crate) fn run(quick: bool, repeat: usize) -> Result<Vec<SimFigure>> {
     let repeat = if quick { 1 } else { repeat.max(1) };
     let (steps, frames, sim_s) = if quick { (300, 10, 3.0) } else { (5000, 200, 60.0) };
     let mut out = Vec::new();

@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 /// The path a message takes.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
-pub enum Transport {
+pub(crate) enum Transport {
     /// slipstream's typed bus (encode, header, QoS from the topic map, decode).
     Bus,
     /// Zenoh put/subscribe of the same bytes, no typed layer.
@@ -24,7 +24,7 @@ pub enum Transport {
 
 impl Transport {
     /// The seed's own peers: the Python script, not `slipstream bench-peer`.
-    pub fn is_seed(self) -> bool {
+    pub(crate) fn is_seed(self) -> bool {
         matches!(self, Transport::SeedPythonUdp | Transport::SeedPythonTcpPickle)
     }
 }
@@ -53,7 +53,7 @@ pub struct Background {
 /// TCP socket buffer sizes (so_sndbuf, so_rcvbuf) of Zenoh's links.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
-pub enum TcpBuffer {
+pub(crate) enum TcpBuffer {
     /// As config/zenoh.json5 sets them.
     Default,
     /// The kernel's defaults.
@@ -64,7 +64,7 @@ pub enum TcpBuffer {
 /// The reader of a latency case's frames: the hand-off from Zenoh's receive thread to the
 /// application is what the rows tell apart.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
-pub enum FrameReader {
+pub(crate) enum FrameReader {
     /// A latest-only `FrameSubscriber` awaited by a task of the async runtime.
     #[default]
     Task,
@@ -78,7 +78,7 @@ pub enum FrameReader {
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct CaseSpec {
+pub(crate) struct CaseSpec {
     pub transport: Transport,
     pub payload: Payload,
     /// Messages in the measured stream.
@@ -138,7 +138,7 @@ fn one() -> usize {
 
 /// The receiver's report.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-pub struct RecvReport {
+pub(crate) struct RecvReport {
     pub received: u64,
     /// Sequence numbers never seen (sender's count minus received, from the gaps).
     pub highest_seq: Option<u64>,
@@ -164,7 +164,7 @@ pub struct RecvReport {
 
 /// The sender's report.
 #[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
-pub struct SendReport {
+pub(crate) struct SendReport {
     pub sent: u64,
     /// From start (session open included) to the last message, s.
     pub elapsed_s: f64,

@@ -23,12 +23,12 @@ impl CameraModel {
     }
 
     /// Camera centre in the body frame.
-    pub fn origin_in_body(&self) -> Point3<f64> {
+    pub(crate) fn origin_in_body(&self) -> Point3<f64> {
         self.body_from_camera * Point3::origin()
     }
 
     /// Direction (not normalized) of the ray through pixel coordinates (u, v), body frame.
-    pub fn ray_in_body(&self, u: f64, v: f64) -> Vector3<f64> {
+    pub(crate) fn ray_in_body(&self, u: f64, v: f64) -> Vector3<f64> {
         let i = &self.info;
         self.body_from_camera * Vector3::new(1.0, (i.cx_px - u) / i.fx_px, (i.cy_px - v) / i.fy_px)
     }
@@ -57,17 +57,8 @@ impl CameraModel {
         (a + b) / 2.0
     }
 
-    /// Forward distance (body x) of a vertical surface of width `width_m` facing the camera
-    /// whose edges are at columns `u0` < `u1`, measured on row `v` of the surface.
-    pub fn distance_from_width(&self, u0: f64, u1: f64, v: f64, width_m: f64) -> Option<f64> {
-        let o = self.origin_in_body();
-        let (r0, r1) = (self.ray_in_body(u0, v), self.ray_in_body(u1, v));
-        let spread = r0.y / r0.x - r1.y / r1.x;
-        (spread > 1e-9 && r0.x > 0.0 && r1.x > 0.0).then(|| o.x + width_m / spread)
-    }
-
     /// Lateral offset (body y) of the point at column `u` on a surface `x_m` ahead, row `v`.
-    pub fn lateral_at(&self, u: f64, v: f64, x_m: f64) -> f64 {
+    pub(crate) fn lateral_at(&self, u: f64, v: f64, x_m: f64) -> f64 {
         let o = self.origin_in_body();
         let r = self.ray_in_body(u, v);
         o.y + (x_m - o.x) * r.y / r.x
@@ -113,13 +104,11 @@ mod tests {
     }
 
     #[test]
-    fn a_surface_of_known_width_gives_its_distance_and_lateral_offset() {
+    fn a_point_at_a_known_distance_gives_its_lateral_offset() {
         let cam = camera();
-        let (x, y0, y1, z) = (30.0, -1.2, 0.6, 0.8);
-        let (u0, v) = cam.project(&Point3::new(x, y1, z)).unwrap();
-        let (u1, _) = cam.project(&Point3::new(x, y0, z)).unwrap();
-        let d = cam.distance_from_width(u0, u1, v, y1 - y0).unwrap();
-        assert!((d - x).abs() < 1e-9, "{d}");
-        assert!((cam.lateral_at(u0, v, x) - y1).abs() < 1e-9);
+        for (x, y, z) in [(30.0, 0.6, 0.8), (12.0, -1.2, 0.3), (80.0, 2.5, 1.1)] {
+            let (u, v) = cam.project(&Point3::new(x, y, z)).unwrap();
+            assert!((cam.lateral_at(u, v, x) - y).abs() < 1e-9, "({x}, {y}, {z})");
+        }
     }
 }

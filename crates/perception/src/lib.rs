@@ -22,8 +22,8 @@ mod rig;
 mod settings;
 mod tracker;
 
-pub use detector::{Detector, DetectorParams, FrameDetection, Rejection};
+pub use detector::{Detector, DetectorParams, FrameDetection};
 pub use geometry::CameraModel;
 pub use rig::CameraRig;
-pub use settings::{DetectSettings, FusionParams, DEFAULT_DETECT_CONFIG, DEFAULT_DETECT_CONFIG_PATH};
-pub use tracker::{Tracker, TrackerParams};
+pub use settings::{DetectSettings, FusionParams};
+pub use tracker::TrackerParams;

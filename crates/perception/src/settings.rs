@@ -12,8 +12,8 @@ use super::detector::DetectorParams;
 use super::tracker::TrackerParams;
 use slipstream_contract::config::{parse_layered, read_config, ConfigError, Invalid};
 
-pub const DEFAULT_DETECT_CONFIG: &str = include_str!("../../../config/detect.json5");
-pub const DEFAULT_DETECT_CONFIG_PATH: &str = "config/detect.json5";
+pub(crate) const DEFAULT_DETECT_CONFIG: &str = include_str!("../../../config/detect.json5");
+pub(crate) const DEFAULT_DETECT_CONFIG_PATH: &str = "config/detect.json5";
 
 const FIX: &str = "see the comments in config/detect.json5 for every key and its allowed values";
 

@@ -59,7 +59,7 @@ impl TrackerParams {
 
 /// One tracked vehicle.
 #[derive(Debug, Clone)]
-pub struct Track {
+pub(crate) struct Track {
     pub id: u32,
     /// Distance (m) and its rate (relative speed, m/s).
     x: Vector2<f64>,
@@ -72,16 +72,16 @@ pub struct Track {
 }
 
 impl Track {
-    pub fn distance_m(&self) -> f64 {
+    pub(crate) fn distance_m(&self) -> f64 {
         self.x[0]
     }
 
-    pub fn relative_speed_mps(&self) -> f64 {
+    pub(crate) fn relative_speed_mps(&self) -> f64 {
         self.x[1]
     }
 
     /// The standard deviations of the distance and of the relative speed.
-    pub fn sigmas(&self) -> (f64, f64) {
+    pub(crate) fn sigmas(&self) -> (f64, f64) {
         (self.p[(0, 0)].max(0.0).sqrt(), self.p[(1, 1)].max(0.0).sqrt())
     }
 
@@ -113,7 +113,7 @@ impl Track {
 
 /// Keeps the tracks of one camera.
 #[derive(Debug)]
-pub struct Tracker {
+pub(crate) struct Tracker {
     params: TrackerParams,
     tracks: Vec<Track>,
     next_id: u32,
@@ -121,17 +121,18 @@ pub struct Tracker {
 }
 
 impl Tracker {
-    pub fn new(params: TrackerParams) -> Self {
+    pub(crate) fn new(params: TrackerParams) -> Self {
         Tracker { params, tracks: Vec::new(), next_id: 1, last_t_s: None }
     }
 
-    pub fn tracks(&self) -> &[Track] {
+    #[cfg(test)]
+    fn tracks(&self) -> &[Track] {
         &self.tracks
     }
 
     /// Takes one frame's detections at simulation time `t_s`; returns them as tracked
     /// detections (same order as the input).
-    pub fn update(&mut self, detections: &[FrameDetection], t_s: f64) -> Vec<Detection> {
+    pub(crate) fn update(&mut self, detections: &[FrameDetection], t_s: f64) -> Vec<Detection> {
         let dt = self.last_t_s.map_or(0.0, |last| (t_s - last).max(0.0));
         self.last_t_s = Some(t_s);
         let p = self.params;

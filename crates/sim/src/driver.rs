@@ -17,7 +17,7 @@ use slipstream_model::vehicle::{actuate_acceleration, lag_toward, VehicleParams}
 
 /// Where a vehicle is and how it moves, as a driver sees it.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Observation {
+pub(crate) struct Observation {
     pub id: u32,
     /// Rear axle along the road and across it.
     pub s_m: f64,
@@ -29,7 +29,7 @@ pub struct Observation {
 
 /// The nearest vehicle ahead that overlaps this one's path.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Lead {
+pub(crate) struct Lead {
     /// Bumper to bumper.
     pub gap_m: f64,
     pub speed_mps: f64,
@@ -42,7 +42,7 @@ const FOLLOW_STANDSTILL_M: f64 = 4.0;
 /// The gap acceptance of a random lane change (a MOBIL-like safety criterion): after it,
 /// neither the new follower in the target lane nor the changer itself behind its new leader
 /// may need to brake harder than this, by the traffic's own following law.
-pub const LANE_CHANGE_SAFE_DECEL_MPS2: f64 = 2.0;
+pub(crate) const LANE_CHANGE_SAFE_DECEL_MPS2: f64 = 2.0;
 /// ... and no bumper comes closer than this.
 const LANE_CHANGE_MIN_GAP_M: f64 = 3.0;
 /// A driver in a lane that ends moves over from this far before its taper begins, when the
@@ -62,7 +62,7 @@ fn lookahead_m(speed_mps: f64) -> f64 {
 }
 
 /// Steering that pursues the point `lookahead` ahead on the road at lateral offset `d_target`.
-pub fn pursue(params: &VehicleParams, road: &Road, me: &Observation, d_target: f64) -> f64 {
+pub(crate) fn pursue(params: &VehicleParams, road: &Road, me: &Observation, d_target: f64) -> f64 {
     let lookahead = lookahead_m(me.speed_mps);
     let target = road.to_world(me.s_m + lookahead, d_target) - me.rear_axle;
     let (sin, cos) = me.yaw_rad.sin_cos();
@@ -75,7 +75,7 @@ pub fn pursue(params: &VehicleParams, road: &Road, me: &Observation, d_target: f
 /// Holds a speed (with optional following) and a lane: the ego's stand-in before a controller
 /// sends its first command, and the base of every traffic driver.
 #[derive(Debug, Clone)]
-pub struct Cruise {
+pub(crate) struct Cruise {
     pub target_mps: f64,
     /// Acceleration or deceleration used to reach `target_mps`.
     pub ramp_mps2: f64,
@@ -86,12 +86,12 @@ pub struct Cruise {
 }
 
 impl Cruise {
-    pub fn new(speed_mps: f64) -> Self {
+    pub(crate) fn new(speed_mps: f64) -> Self {
         Cruise { target_mps: speed_mps, ramp_mps2: 2.0, reference_mps: speed_mps, reference_accel: 0.0 }
     }
 
     /// Throttle and brake for this step.
-    pub fn longitudinal(
+    pub(crate) fn longitudinal(
         &mut self,
         params: &VehicleParams,
         speed_mps: f64,
@@ -144,7 +144,7 @@ impl LaneChange {
 
 /// Random lane changes of generated traffic.
 #[derive(Debug, Clone)]
-pub struct Wander {
+pub(crate) struct Wander {
     pub mean_interval_s: f64,
     pub lanes: Vec<u32>,
     pub next_s: f64,
@@ -153,7 +153,7 @@ pub struct Wander {
 
 /// What a traffic driver sees of the others when it considers a lane change.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Neighbour {
+pub(crate) struct Neighbour {
     pub id: u32,
     /// Along-road positions of the rear and front bumpers.
     pub rear_m: f64,
@@ -169,7 +169,7 @@ pub struct Neighbour {
 /// (the new follower) and the changer behind the nearest one ahead (its new leader) each need
 /// at most LANE_CHANGE_SAFE_DECEL_MPS2 by the following law, with LANE_CHANGE_MIN_GAP_M
 /// between bumpers. `me` is the changer as a neighbour.
-pub fn safe_to_enter(me: &Neighbour, lane: u32, others: &[Neighbour]) -> bool {
+pub(crate) fn safe_to_enter(me: &Neighbour, lane: u32, others: &[Neighbour]) -> bool {
     let in_lane = others.iter().filter(|o| (o.lane == lane as i32 || o.target_lane == lane as i32) && o.id != me.id);
     let follower = in_lane.clone().filter(|o| o.front_m <= me.front_m).max_by(|a, b| a.front_m.total_cmp(&b.front_m));
     let leader = in_lane.filter(|o| o.front_m > me.front_m).min_by(|a, b| a.rear_m.total_cmp(&b.rear_m));
@@ -186,7 +186,7 @@ pub fn safe_to_enter(me: &Neighbour, lane: u32, others: &[Neighbour]) -> bool {
 
 /// A scripted traffic driver.
 #[derive(Debug, Clone)]
-pub struct TrafficDriver {
+pub(crate) struct TrafficDriver {
     pub cruise: Cruise,
     pub follow: bool,
     lane: u32,
@@ -199,7 +199,7 @@ pub struct TrafficDriver {
 }
 
 impl TrafficDriver {
-    pub fn new(
+    pub(crate) fn new(
         lane: u32,
         offset_m: f64,
         speed_mps: f64,
@@ -224,7 +224,7 @@ impl TrafficDriver {
     }
 
     /// The lane the driver is in or heading to.
-    pub fn lane(&self) -> u32 {
+    pub(crate) fn lane(&self) -> u32 {
         self.lane
     }
 
@@ -296,7 +296,7 @@ impl TrafficDriver {
 
     /// This step's actuation.
     #[allow(clippy::too_many_arguments)]
-    pub fn drive(
+    pub(crate) fn drive(
         &mut self,
         params: &VehicleParams,
         road: &Road,

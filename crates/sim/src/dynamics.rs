@@ -11,12 +11,12 @@
 
 use nalgebra::Vector2;
 
-pub use slipstream_model::vehicle::VehicleParams;
+pub(crate) use slipstream_model::vehicle::VehicleParams;
 use slipstream_model::vehicle::GRAVITY_MPS2;
 
 /// What a driver (a controller or the traffic model) asks of a vehicle this step.
 #[derive(Debug, Clone, Copy, PartialEq, Default)]
-pub struct Actuation {
+pub(crate) struct Actuation {
     /// 0..1
     pub throttle: f64,
     /// 0..1
@@ -27,7 +27,7 @@ pub struct Actuation {
 
 /// A vehicle's planar motion, at its centre of mass, in the world frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct PlanarState {
+pub(crate) struct PlanarState {
     pub center: Vector2<f64>,
     pub yaw_rad: f64,
     pub velocity_mps: Vector2<f64>,
@@ -35,25 +35,25 @@ pub struct PlanarState {
 }
 
 impl PlanarState {
-    pub fn heading(&self) -> Vector2<f64> {
+    pub(crate) fn heading(&self) -> Vector2<f64> {
         Vector2::new(self.yaw_rad.cos(), self.yaw_rad.sin())
     }
 
     /// Speed along the heading (negative when rolling backwards).
-    pub fn forward_speed_mps(&self) -> f64 {
+    pub(crate) fn forward_speed_mps(&self) -> f64 {
         self.velocity_mps.dot(&self.heading())
     }
 }
 
 /// Force at the centre of mass and torque about z, world frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct PlanarWrench {
+pub(crate) struct PlanarWrench {
     pub force_n: Vector2<f64>,
     pub torque_nm: f64,
 }
 
 /// The forces on a vehicle for one step of `dt_s`.
-pub fn forces(params: &VehicleParams, state: &PlanarState, input: &Actuation, dt_s: f64) -> PlanarWrench {
+pub(crate) fn forces(params: &VehicleParams, state: &PlanarState, input: &Actuation, dt_s: f64) -> PlanarWrench {
     let m = params.mass_kg;
     let heading = state.heading();
     let left = Vector2::new(-heading.y, heading.x);

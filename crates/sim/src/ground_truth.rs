@@ -15,7 +15,7 @@ pub fn ground_truth(world: &World, visibility: &[ObjectVisibility]) -> GroundTru
 }
 
 /// Ground truth around ego `k`: every other vehicle, the other egos among them.
-pub fn ground_truth_of(world: &World, k: usize, visibility: &[ObjectVisibility]) -> GroundTruthObjects {
+pub(crate) fn ground_truth_of(world: &World, k: usize, visibility: &[ObjectVisibility]) -> GroundTruthObjects {
     let ego = world.ego_at(k);
     let objects = world.vehicles().iter().filter(|v| v.id != ego.id).map(|v| object(ego, v, visibility)).collect();
     GroundTruthObjects { step: world.step_count(), objects }

@@ -24,7 +24,7 @@ use super::world::{End, World};
 use slipstream_contract::bus::{Bus, NodeClock, StatsSnapshot};
 use slipstream_contract::msg::SimEventKind;
 
-pub use super::error::SimError;
+pub(crate) use super::error::SimError;
 
 /// How a run went.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]

@@ -25,20 +25,20 @@ fn planar(v: GVec3) -> Vector2<f64> {
 
 /// A vehicle's body in the physics world.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct BodyId {
+pub(crate) struct BodyId {
     body: RigidBodyHandle,
     collider: ColliderHandle,
 }
 
 /// The rigid-body world.
-pub struct Physics {
+pub(crate) struct Physics {
     world: PhysicsWorld,
     /// Pairs of vehicle ids touching after the last step, to report only new contacts.
     touching: BTreeSet<(u32, u32)>,
 }
 
 impl Physics {
-    pub fn new(dt_s: f64) -> Physics {
+    pub(crate) fn new(dt_s: f64) -> Physics {
         let mut world = PhysicsWorld::new();
         // Motion is planar (z locked), so gravity acts only through the tyre loads the vehicle
         // model computes.
@@ -49,7 +49,7 @@ impl Physics {
 
     /// Adds a vehicle with its rear axle at `rear_axle` (world, on the ground), heading `yaw_rad`
     /// and moving forward at `speed_mps`. `id` comes back in contacts.
-    pub fn add_vehicle(
+    pub(crate) fn add_vehicle(
         &mut self,
         id: u32,
         params: &VehicleParams,
@@ -83,7 +83,7 @@ impl Physics {
     }
 
     /// Motion at the centre of mass.
-    pub fn state(&self, id: BodyId) -> PlanarState {
+    pub(crate) fn state(&self, id: BodyId) -> PlanarState {
         let b = &self.world.bodies[id.body];
         let x_axis = *b.rotation() * GVec3::X;
         PlanarState {
@@ -95,12 +95,12 @@ impl Physics {
     }
 
     /// The body origin: rear-axle centre on the ground.
-    pub fn rear_axle(&self, id: BodyId) -> Vector2<f64> {
+    pub(crate) fn rear_axle(&self, id: BodyId) -> Vector2<f64> {
         planar(self.world.bodies[id.body].translation())
     }
 
     /// Applies one step's worth (`dt_s`) of a wrench as impulses.
-    pub fn apply(&mut self, id: BodyId, wrench: &PlanarWrench, dt_s: f64) {
+    pub(crate) fn apply(&mut self, id: BodyId, wrench: &PlanarWrench, dt_s: f64) {
         let b = &mut self.world.bodies[id.body];
         b.apply_impulse(to_glam(wrench.force_n * dt_s), true);
         b.apply_torque_impulse(GVec3::new(0.0, 0.0, (wrench.torque_nm * dt_s) as f32), true);
@@ -108,7 +108,7 @@ impl Physics {
 
     /// Advances the world one step and returns the pairs of vehicle ids (smaller first) that
     /// started touching in it.
-    pub fn step(&mut self) -> Vec<(u32, u32)> {
+    pub(crate) fn step(&mut self) -> Vec<(u32, u32)> {
         self.world.step();
         let mut now = BTreeSet::new();
         for pair in self.world.narrow_phase.contact_pairs() {

@@ -44,15 +44,15 @@ pub const SEVERAL_EGOS: &[(&str, &str)] = &[
 ];
 
 /// How far beyond its lane's edge a vehicle may be placed (`offset_m`): a shoulder's width.
-pub const MAX_SHOULDER_M: f64 = 3.0;
+pub(crate) const MAX_SHOULDER_M: f64 = 3.0;
 
 /// Controlled vehicles one scenario may have: each costs a camera (or two) per frame and a
 /// detector and controller process.
-pub const MAX_EGOS: usize = 32;
+pub(crate) const MAX_EGOS: usize = 32;
 
 /// The smallest bumper-to-bumper gap between two egos starting in one lane: bodies placed
 /// closer touch at once.
-pub const MIN_START_GAP_M: f64 = 2.0;
+pub(crate) const MIN_START_GAP_M: f64 = 2.0;
 
 const FIX: &str = "see docs/simulator.md (scenario format) for every field and its allowed values";
 

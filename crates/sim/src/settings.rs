@@ -11,8 +11,8 @@ use slipstream_contract::config::{parse_layered, read_config, ConfigError, Inval
 use slipstream_contract::msg::{CameraInfo, ImageEncoding, SimMode};
 
 /// The settings file shipped with the project; its values are the built-in defaults.
-pub const DEFAULT_SIM_CONFIG: &str = include_str!("../../../config/sim.json5");
-pub const DEFAULT_SIM_CONFIG_PATH: &str = "config/sim.json5";
+pub(crate) const DEFAULT_SIM_CONFIG: &str = include_str!("../../../config/sim.json5");
+pub(crate) const DEFAULT_SIM_CONFIG_PATH: &str = "config/sim.json5";
 
 const FIX: &str = "see the comments in config/sim.json5 for every key and its allowed values";
 

@@ -53,7 +53,7 @@ pub struct VehicleView {
 
 /// Brake pedal (0..1) beyond which a vehicle's brake lights come on: about 0.3 m/s2 of a
 /// car's 9 m/s2, so that a driver's lightest touch lights them and coasting does not.
-pub const BRAKE_LIGHT_PEDAL: f64 = 0.03;
+pub(crate) const BRAKE_LIGHT_PEDAL: f64 = 0.03;
 
 impl VehicleView {
     pub fn forward_speed_mps(&self) -> f64 {
@@ -61,7 +61,7 @@ impl VehicleView {
     }
 
     /// Along-road positions of the rear and front bumpers.
-    pub fn s_rear_m(&self) -> f64 {
+    pub(crate) fn s_rear_m(&self) -> f64 {
         self.s_m - self.params.rear_overhang_m
     }
 
@@ -82,7 +82,7 @@ impl VehicleView {
 }
 
 /// Bumper-to-bumper distance between two vehicles along the road (negative: overlapping).
-pub fn bumper_gap_m(a: &VehicleView, b: &VehicleView) -> f64 {
+pub(crate) fn bumper_gap_m(a: &VehicleView, b: &VehicleView) -> f64 {
     if b.s_m >= a.s_m {
         b.s_rear_m() - a.s_front_m()
     } else {
@@ -113,7 +113,7 @@ pub struct Collision {
 
 impl Collision {
     /// Whether vehicle `id` is one of the two.
-    pub fn involves(&self, id: u32) -> bool {
+    pub(crate) fn involves(&self, id: u32) -> bool {
         self.id_a == id || self.id_b == id
     }
 
@@ -122,7 +122,7 @@ impl Collision {
     }
 
     /// The other vehicle than `id`.
-    pub fn other_than(&self, id: u32) -> u32 {
+    pub(crate) fn other_than(&self, id: u32) -> u32 {
         if self.id_a == id {
             self.id_b
         } else {
@@ -409,7 +409,7 @@ impl World {
     }
 
     /// Which ego vehicle `id` is, if it is one.
-    pub fn ego_index(&self, id: u32) -> Option<usize> {
+    pub(crate) fn ego_index(&self, id: u32) -> Option<usize> {
         (id < self.egos.len() as u32).then_some(id as usize)
     }
 
@@ -625,7 +625,7 @@ impl World {
     }
 
     /// How messages name ego `k`: "ego" when it is the only one, else its namespace.
-    pub fn ego_name(&self, k: usize) -> String {
+    pub(crate) fn ego_name(&self, k: usize) -> String {
         match (self.egos.len(), &self.scenario.egos()[k].namespace) {
             (1, _) | (_, None) => "ego".to_string(),
             (_, Some(ns)) => format!("ego {ns}"),
@@ -638,7 +638,7 @@ impl World {
     }
 
     /// Ego `k`'s speed as its vehicle/speed reports it, with the scenario's sensor noise.
-    pub fn measured_speed_of(&mut self, k: usize) -> f64 {
+    pub(crate) fn measured_speed_of(&mut self, k: usize) -> f64 {
         let sd = self.scenario.noise.speed_mps;
         self.views[k].forward_speed_mps() + self.egos[k].noise.normal(sd)
     }

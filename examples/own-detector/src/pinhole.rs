@@ -4,23 +4,23 @@
 
 use slipstream_contract::msg::{BoundingBox2d, CameraInfo};
 
-pub struct Pinhole<'a> {
+pub(crate) struct Pinhole<'a> {
     info: &'a CameraInfo,
     pitch: f64,
 }
 
 impl<'a> Pinhole<'a> {
-    pub fn new(info: &'a CameraInfo) -> Self {
+    pub(crate) fn new(info: &'a CameraInfo) -> Self {
         Pinhole { info, pitch: info.mount_roll_pitch_yaw_rad[1] }
     }
 
     /// The image row of the horizon.
-    pub fn horizon_v(&self) -> f64 {
+    pub(crate) fn horizon_v(&self) -> f64 {
         self.info.cy_px - self.info.fy_px * self.pitch.tan()
     }
 
     /// The road point (x, y) pixel (u, v) sees, None at or above the horizon.
-    pub fn ground(&self, u: f64, v: f64) -> Option<(f64, f64)> {
+    pub(crate) fn ground(&self, u: f64, v: f64) -> Option<(f64, f64)> {
         let (i, m) = (self.info, self.info.mount_position_in_ego_m);
         let a = (i.cy_px - v) / i.fy_px;
         let (s, c) = self.pitch.sin_cos();
@@ -34,7 +34,7 @@ impl<'a> Pinhole<'a> {
     }
 
     /// The pixel of a body-frame point, None behind the camera.
-    pub fn project(&self, x: f64, y: f64, z: f64) -> Option<(f64, f64)> {
+    pub(crate) fn project(&self, x: f64, y: f64, z: f64) -> Option<(f64, f64)> {
         let (i, m) = (self.info, self.info.mount_position_in_ego_m);
         let (px, py, pz) = (x - m[0], y - m[1], z - m[2]);
         let (s, c) = self.pitch.sin_cos();
@@ -48,7 +48,7 @@ impl<'a> Pinhole<'a> {
 
     /// The image box of a vehicle's rear face centred at (x, y) on the road, clipped to the
     /// image; None when none of it is inside.
-    pub fn rear_box(&self, x: f64, y: f64, width_m: f64, height_m: f64) -> Option<BoundingBox2d> {
+    pub(crate) fn rear_box(&self, x: f64, y: f64, width_m: f64, height_m: f64) -> Option<BoundingBox2d> {
         let (u0, v0) = self.project(x, y + width_m / 2.0, height_m)?;
         let (u1, v1) = self.project(x, y - width_m / 2.0, 0.0)?;
         let (w, h) = (self.info.width as f64, self.info.height as f64);
@@ -65,7 +65,7 @@ impl<'a> Pinhole<'a> {
 /// The connected dark regions of `mask` (rows of `width`), each as its columns (first, last)
 /// and its lowest row: 4-connected, so that single noisy pixels touching at a corner do not
 /// chain into a band a vehicle wide.
-pub fn bands(mask: &[bool], width: usize) -> Vec<(usize, usize, usize)> {
+pub(crate) fn bands(mask: &[bool], width: usize) -> Vec<(usize, usize, usize)> {
     let rows = mask.len() / width.max(1);
     let mut label = vec![false; mask.len()];
     let mut out = Vec::new();

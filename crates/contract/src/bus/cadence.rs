@@ -33,7 +33,7 @@ const MAX_JITTER_SHARE: f64 = 0.1;
 
 /// Learns a stream's period from its arrivals.
 #[derive(Debug, Clone, Default)]
-pub struct Cadence {
+pub(super) struct Cadence {
     last: Option<Instant>,
     /// The latest intervals, s (oldest first).
     intervals: VecDeque<f64>,
@@ -41,7 +41,7 @@ pub struct Cadence {
 
 impl Cadence {
     /// Records an arrival at `at`.
-    pub fn arrived(&mut self, at: Instant) {
+    pub(super) fn arrived(&mut self, at: Instant) {
         if let Some(last) = self.last {
             if self.intervals.len() == INTERVALS {
                 self.intervals.pop_front();
@@ -52,7 +52,7 @@ impl Cadence {
     }
 
     /// The window around the next arrival, `(opens, closes)`, while the stream is periodic.
-    pub fn window(&self) -> Option<(Instant, Instant)> {
+    pub(super) fn window(&self) -> Option<(Instant, Instant)> {
         let last = self.last?;
         if self.intervals.len() < MIN_INTERVALS {
             return None;

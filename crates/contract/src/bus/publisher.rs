@@ -210,7 +210,7 @@ impl<M: Message> Publisher<M> {
 }
 
 /// The Zenoh encoding every sample of `kind` carries.
-pub fn encoding_of(kind: msg::MessageKind) -> Encoding {
+pub(super) fn encoding_of(kind: msg::MessageKind) -> Encoding {
     Encoding::APPLICATION_OCTET_STREAM.with_schema(kind.encoding_schema())
 }
 

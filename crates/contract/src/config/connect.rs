@@ -12,7 +12,7 @@ pub const DEFAULT_ZENOH_CONFIG_PATH: &str = "config/zenoh.json5";
 pub const DEFAULT_ZENOH_CONFIG: &str = include_str!("../../../../config/zenoh.json5");
 
 /// config/router.json5 as shipped: what `slipstream router` runs without -c.
-pub const DEFAULT_ROUTER_CONFIG: &str = include_str!("../../../../config/router.json5");
+pub(super) const DEFAULT_ROUTER_CONFIG: &str = include_str!("../../../../config/router.json5");
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum ModeArg {

@@ -14,4 +14,6 @@ pub use error::{
 };
 pub use faults::{FaultArgs, FaultProfile, GilbertElliott, Jitter, JitterDist, Loss, Outage, TopicFaults};
 pub use low_latency::{dial_own_main, low_latency_config, LowLatencyEndpoints};
-pub use topic_map::{CameraEncoding, CameraSettings, ResolvedTopic, TopicMap, DEFAULT_SLIPSTREAM_CONFIG_PATH};
+pub use topic_map::{
+    CameraEncoding, CameraSettings, EncodingSet, ResolvedTopic, TopicMap, DEFAULT_SLIPSTREAM_CONFIG_PATH,
+};

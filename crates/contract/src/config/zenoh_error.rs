@@ -13,7 +13,7 @@ use super::ConfigError;
 const FIX: &str = "compare with the keys documented in config/zenoh.json5 (and Zenoh's DEFAULT_CONFIG.json5)";
 
 /// A ConfigError for `error`, raised by Zenoh on the config file `origin` whose text is `text`.
-pub fn file_error(origin: &str, text: &str, error: &dyn std::fmt::Display) -> ConfigError {
+pub(super) fn file_error(origin: &str, text: &str, error: &dyn std::fmt::Display) -> ConfigError {
     let raw = crate::bus::without_source_locations(&error.to_string());
     let Some((message, position)) = serde_message(&raw) else {
         return ConfigError::new(origin, "", raw, FIX);
@@ -28,7 +28,7 @@ pub fn file_error(origin: &str, text: &str, error: &dyn std::fmt::Display) -> Co
 
 /// What Zenoh said was wrong with a value, without the debug struct around it: the serde
 /// message, or for a JSON5 syntax error its "expected ..." line.
-pub fn message(error: &dyn std::fmt::Display) -> String {
+pub(super) fn message(error: &dyn std::fmt::Display) -> String {
     let raw = crate::bus::without_source_locations(&error.to_string());
     match serde_message(&raw) {
         Some((m, _)) => {

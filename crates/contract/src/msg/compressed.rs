@@ -6,7 +6,13 @@ use super::image_encoding::ImageEncoding;
 
 /// RGB8 pixels as JPEG (`quality` 1..=100) or PNG.
 #[cfg(feature = "images")]
-pub fn encode(rgb: &[u8], width: u32, height: u32, encoding: ImageEncoding, quality: u8) -> Result<Vec<u8>, String> {
+pub(super) fn encode(
+    rgb: &[u8],
+    width: u32,
+    height: u32,
+    encoding: ImageEncoding,
+    quality: u8,
+) -> Result<Vec<u8>, String> {
     use image::ImageEncoder as _;
     let mut out = Vec::with_capacity(rgb.len() / 4);
     match encoding {
@@ -29,7 +35,7 @@ pub fn encode(rgb: &[u8], width: u32, height: u32, encoding: ImageEncoding, qual
 
 /// A JPEG or PNG frame's pixels as RGB8; its header must state the frame's size.
 #[cfg(feature = "images")]
-pub fn decode(data: &[u8], width: u32, height: u32, encoding: ImageEncoding) -> Result<Vec<u8>, String> {
+pub(super) fn decode(data: &[u8], width: u32, height: u32, encoding: ImageEncoding) -> Result<Vec<u8>, String> {
     let format = match encoding {
         ImageEncoding::Jpeg => image::ImageFormat::Jpeg,
         ImageEncoding::Png => image::ImageFormat::Png,

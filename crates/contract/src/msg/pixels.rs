@@ -18,7 +18,7 @@ pub const MAX_FRAME_PIXELS: u64 = 8192 * 8192;
 
 /// LZ4 turns n bytes into at most ~255 n: a block shorter than `expected / 255` cannot be an
 /// honest frame of that size.
-pub const LZ4_MAX_RATIO: usize = 255;
+pub(super) const LZ4_MAX_RATIO: usize = 255;
 
 /// Whether a frame's stated size and byte count are acceptable for its encoding, checked
 /// before any decoding (what a decoder needs to trust the size it allocates).

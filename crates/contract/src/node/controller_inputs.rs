@@ -85,7 +85,7 @@ pub(super) struct Known {
 impl Known {
     /// Whether the state of `step` (stamped `t_ns`) came with a camera frame whose objects are
     /// still to come: by the clock rule once both rates are known, the first frame before.
-    pub fn frame_due(&self, step: u64, t_ns: u64) -> bool {
+    pub(super) fn frame_due(&self, step: u64, t_ns: u64) -> bool {
         if self.ahead_stamp_ns.is_some_and(|s| s >= t_ns) {
             return false;
         }
@@ -96,7 +96,7 @@ impl Known {
     }
 
     /// What is ahead, each gap from the ego's front bumper.
-    pub fn ahead_of_bumper(&self) -> Vec<Ahead> {
+    pub(super) fn ahead_of_bumper(&self) -> Vec<Ahead> {
         self.ahead.iter().map(|a| Ahead { gap_m: a.gap_m - self.front_m, ..*a }).collect()
     }
 
@@ -134,7 +134,7 @@ pub(super) struct Inputs {
 }
 
 impl Inputs {
-    pub async fn open(bus: &Bus, ground_truth: bool) -> Result<Inputs, BusError> {
+    pub(super) async fn open(bus: &Bus, ground_truth: bool) -> Result<Inputs, BusError> {
         let objects = match ground_truth {
             true => Objects::GroundTruth(bus.subscriber(topics::OBJECTS).await?),
             false => Objects::Camera(bus.subscriber(topics::PERCEPTION_OBJECTS).await?),
@@ -149,7 +149,7 @@ impl Inputs {
     }
 
     /// Takes everything that arrived.
-    pub fn poll(&self, k: &mut Known) {
+    pub(super) fn poll(&self, k: &mut Known) {
         while let Some(seen) = self.objects.try_next() {
             k.take_objects(seen);
         }
@@ -169,7 +169,7 @@ impl Inputs {
 
     /// Waits up to `wait` for the latched inputs an answer depends on: the vehicle (sim/ego)
     /// and the camera's rate. True when both are in.
-    pub async fn latched(&self, k: &mut Known, wait: Duration) -> bool {
+    pub(super) async fn latched(&self, k: &mut Known, wait: Duration) -> bool {
         let deadline = Instant::now() + wait;
         loop {
             self.poll(k);
@@ -184,7 +184,7 @@ impl Inputs {
     }
 
     /// Waits up to `wait` for objects stamped `t_ns` or later. True when they came.
-    pub async fn objects_at(&self, k: &mut Known, t_ns: u64, wait: Duration) -> bool {
+    pub(super) async fn objects_at(&self, k: &mut Known, t_ns: u64, wait: Duration) -> bool {
         let deadline = Instant::now() + wait;
         loop {
             self.poll(k);
@@ -201,7 +201,7 @@ impl Inputs {
         }
     }
 
-    pub fn stats(&self) -> Vec<StatsSnapshot> {
+    pub(super) fn stats(&self) -> Vec<StatsSnapshot> {
         vec![self.objects.stats(), self.command.stats().snapshot(), self.ego.stats().snapshot()]
     }
 }

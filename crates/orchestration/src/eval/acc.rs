@@ -133,13 +133,13 @@ pub struct RunTime {
 
 impl RunTime {
     /// Starting and stopping the processes: the run less the simulator's own run.
-    pub fn start_stop_s(&self) -> f64 {
+    pub(crate) fn start_stop_s(&self) -> f64 {
         (self.wall_s - self.sim_wall_s).max(0.0)
     }
 
     /// What the simulator waited for that no node spent computing: the messages' way through
     /// the transport, the nodes' wake-ups and the ACC's wait for the detections.
-    pub fn transport_s(&self) -> f64 {
+    pub(crate) fn transport_s(&self) -> f64 {
         (self.sim.awaiting_s - self.detect_busy_s - self.acc_busy_s).max(0.0)
     }
 
@@ -159,7 +159,7 @@ impl RunTime {
 
 /// Scenarios run at once when --jobs is not given: one per core, at most this many (each
 /// loop holds shared-memory pools for its cameras).
-pub const MAX_DEFAULT_JOBS: usize = 4;
+pub(crate) const MAX_DEFAULT_JOBS: usize = 4;
 
 #[derive(Debug, Clone, Serialize)]
 pub struct AccReport {
@@ -482,7 +482,7 @@ pub fn markdown(report: &AccReport) -> String {
 }
 
 /// Where the suite's time went: the runs' wall time summed, split by what the processes did.
-pub fn time_table(report: &AccReport) -> String {
+pub(crate) fn time_table(report: &AccReport) -> String {
     let mut t = RunTime::default();
     for r in &report.results {
         t.add(&r.time);

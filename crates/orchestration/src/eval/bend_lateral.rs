@@ -15,10 +15,10 @@ use slipstream_contract::msg::GroundTruthObject;
 use slipstream_model::road::Road;
 
 /// Range bands, metres ahead.
-pub const RANGE_BANDS_M: [(f64, f64); 4] = [(40.0, 80.0), (80.0, 120.0), (120.0, 160.0), (160.0, 200.0)];
+pub(crate) const RANGE_BANDS_M: [(f64, f64); 4] = [(40.0, 80.0), (80.0, 120.0), (120.0, 160.0), (160.0, 200.0)];
 /// Bend bands by the tightest radius seen through, metres: straight (no curve between the ego
 /// and the vehicle), then ever tighter: the ACC's table's classes (crates/acc/src/in_lane.rs).
-pub const BEND_BANDS: [(&str, f64, f64); 4] = [
+pub(crate) const BEND_BANDS: [(&str, f64, f64); 4] = [
     ("straight", f64::INFINITY, f64::INFINITY),
     ("R >= 1000 m", GENTLE_MIN_RADIUS_M, f64::INFINITY),
     ("R 500-1000 m", BEND_MIN_RADIUS_M, GENTLE_MIN_RADIUS_M),
@@ -27,7 +27,7 @@ pub const BEND_BANDS: [(&str, f64, f64); 4] = [
 
 /// The road as seen from the ego's pose: the bend each vehicle is seen through, and where a
 /// point seen from the ego lies across the road.
-pub struct RoadView<'a> {
+pub(crate) struct RoadView<'a> {
     road: &'a Road,
     ego_s: f64,
     ego_xy: Vector2<f64>,
@@ -36,13 +36,13 @@ pub struct RoadView<'a> {
 
 impl<'a> RoadView<'a> {
     /// From the ego's world position and heading.
-    pub fn new(road: &'a Road, ego_xyz: [f64; 3], yaw_rad: f64) -> Self {
+    pub(crate) fn new(road: &'a Road, ego_xyz: [f64; 3], yaw_rad: f64) -> Self {
         let ego_xy = Vector2::new(ego_xyz[0], ego_xyz[1]);
         RoadView { road, ego_s: road.project_anywhere(ego_xy).0, ego_xy, yaw_rad }
     }
 
     /// The bend a ground-truth vehicle is seen through.
-    pub fn bend_of(&self, o: &GroundTruthObject) -> Option<f64> {
+    pub(crate) fn bend_of(&self, o: &GroundTruthObject) -> Option<f64> {
         let p = o.position_in_world_m;
         let (s, _) = self.road.project(Vector2::new(p[0], p[1]), self.ego_s + o.position_in_ego_m[0]);
         self.road.tightest_radius_between(self.ego_s, s)
@@ -50,7 +50,7 @@ impl<'a> RoadView<'a> {
 
     /// Where a point `x_m` ahead and `y_m` left of the ego lies across the road (metres left of
     /// the reference line), measured where the point is.
-    pub fn across_m(&self, x_m: f64, y_m: f64) -> f64 {
+    pub(crate) fn across_m(&self, x_m: f64, y_m: f64) -> f64 {
         let (sin, cos) = self.yaw_rad.sin_cos();
         let p = self.ego_xy + Vector2::new(x_m * cos - y_m * sin, x_m * sin + y_m * cos);
         self.road.project(p, self.ego_s + x_m).1
@@ -71,7 +71,7 @@ pub struct LateralCell {
 }
 
 /// The table from (true distance, bend radius, signed lateral error) triples.
-pub fn table(errors: impl Iterator<Item = (f64, Option<f64>, f64)> + Clone) -> Vec<LateralCell> {
+pub(crate) fn table(errors: impl Iterator<Item = (f64, Option<f64>, f64)> + Clone) -> Vec<LateralCell> {
     let mut cells = Vec::new();
     for &(lo, hi) in &RANGE_BANDS_M {
         for &(name, r_lo, r_hi) in &BEND_BANDS {
@@ -100,7 +100,7 @@ pub fn table(errors: impl Iterator<Item = (f64, Option<f64>, f64)> + Clone) -> V
 
 /// The table as markdown: a row per range band, a column per bend band, "sigma (bias, n)",
 /// then `caption`.
-pub fn markdown(cells: &[LateralCell], caption: &str) -> String {
+pub(crate) fn markdown(cells: &[LateralCell], caption: &str) -> String {
     let mut s = String::from("| range |");
     for (name, _, _) in BEND_BANDS {
         s.push_str(&format!(" {name} |"));

@@ -17,27 +17,28 @@ use super::link_codec::{LinkCodec, LinkCost};
 use crate::launch::ForeignNode;
 use slipstream_contract::msg::{Detection, GroundTruthObject};
 use slipstream_perception::DetectSettings;
-use slipstream_sim::cameras::Cameras;
-use slipstream_sim::ground_truth::ground_truth;
+use slipstream_sim::ground_truth;
 use slipstream_sim::settings::SimSettings;
 use slipstream_sim::world::{EgoInput, World};
+use slipstream_sim::Cameras;
 use slipstream_sim::Scenario;
 
 pub const IOU_MATCH: f32 = 0.3;
 /// An overlap match also needs the distance within this share of the true one.
-pub const IOU_DISTANCE_SHARE: f64 = 0.3;
+pub(crate) const IOU_DISTANCE_SHARE: f64 = 0.3;
 
 /// Distance bands errors are reported in.
-pub const RANGES_M: [(f64, f64); 5] = [(0.0, 20.0), (20.0, 40.0), (40.0, 60.0), (60.0, 150.0), (150.0, f64::INFINITY)];
+pub(crate) const RANGES_M: [(f64, f64); 5] =
+    [(0.0, 20.0), (20.0, 40.0), (40.0, 60.0), (60.0, 150.0), (150.0, f64::INFINITY)];
 
 /// Beyond the near range, recall counts vehicles in full view (at least this visible): a
 /// vehicle far ahead is partly hidden by a nearer one at its bottom, where the detector finds
 /// vehicles (docs/perception.md).
-pub const FAR_MIN_VISIBLE: f32 = 0.9;
+pub(crate) const FAR_MIN_VISIBLE: f32 = 0.9;
 
 /// Beyond the near range, the long range recall is counted to: cars and vans to 150 m,
 /// trucks to 200 m (what an ACC needs at motorway speed, docs/perception.md).
-pub fn long_range_m(class: slipstream_contract::msg::ObjectClass) -> f64 {
+pub(crate) fn long_range_m(class: slipstream_contract::msg::ObjectClass) -> f64 {
     match class {
         slipstream_contract::msg::ObjectClass::Truck => 200.0,
         _ => 150.0,
@@ -47,8 +48,8 @@ pub fn long_range_m(class: slipstream_contract::msg::ObjectClass) -> f64 {
 /// A detection also matches a vehicle whose rear it places within this share of the
 /// distance and `PLACED_LATERAL_M` across: a vehicle 150 m ahead is a few pixels in the front
 /// image the boxes are in, and a box of a partly hidden one overlaps its whole box little.
-pub const PLACED_DISTANCE_SHARE: f64 = 0.05;
-pub const PLACED_LATERAL_M: f64 = 1.0;
+pub(crate) const PLACED_DISTANCE_SHARE: f64 = 0.05;
+pub(crate) const PLACED_LATERAL_M: f64 = 1.0;
 
 /// How well `d` places `o` (1 exactly, towards 0 at the limits), None beyond them.
 fn placed_on(d: &Detection, o: &GroundTruthObject) -> Option<f32> {
@@ -60,7 +61,7 @@ fn placed_on(d: &Detection, o: &GroundTruthObject) -> Option<f32> {
 
 /// One matched pair's errors.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
-pub struct MatchError {
+pub(crate) struct MatchError {
     pub true_distance_m: f64,
     /// |estimated - true| / true.
     pub distance_rel: f64,
@@ -106,7 +107,7 @@ impl BrakeLightCounts {
 
 /// Counts and errors accumulated over frames.
 #[derive(Debug, Clone, Default, Serialize)]
-pub struct Tally {
+pub(crate) struct Tally {
     pub frames: u64,
     /// Frames the detector left unanswered.
     pub unanswered_frames: u64,
@@ -131,7 +132,7 @@ pub struct Tally {
 impl Tally {
     /// Scores one frame: greedy matching by IoU, best pairs first; `view` names the bend each
     /// vehicle is seen through and places points across the road.
-    pub fn add_frame(
+    pub(crate) fn add_frame(
         &mut self,
         dets: &[Detection],
         truth: &[GroundTruthObject],
@@ -202,7 +203,7 @@ impl Tally {
         }
     }
 
-    pub fn precision(&self) -> f64 {
+    pub(crate) fn precision(&self) -> f64 {
         if self.detections == 0 {
             1.0
         } else {
@@ -210,7 +211,7 @@ impl Tally {
         }
     }
 
-    pub fn recall(&self) -> f64 {
+    pub(crate) fn recall(&self) -> f64 {
         if self.eligible == 0 {
             1.0
         } else {
@@ -219,22 +220,22 @@ impl Tally {
     }
 
     /// Recall beyond the near range, None when no vehicle was there.
-    pub fn far_recall(&self) -> Option<f64> {
+    pub(crate) fn far_recall(&self) -> Option<f64> {
         (self.far_eligible > 0).then(|| self.far_found as f64 / self.far_eligible as f64)
     }
 
     /// (median, p90) of relative distance error for true distances in [lo, hi).
-    pub fn distance_error(&self, lo: f64, hi: f64) -> Option<(f64, f64)> {
+    pub(crate) fn distance_error(&self, lo: f64, hi: f64) -> Option<(f64, f64)> {
         percentiles(
             self.errors.iter().filter(|e| e.true_distance_m >= lo && e.true_distance_m < hi).map(|e| e.distance_rel),
         )
     }
 
-    pub fn relative_speed_error(&self) -> Option<(f64, f64)> {
+    pub(crate) fn relative_speed_error(&self) -> Option<(f64, f64)> {
         percentiles(self.errors.iter().filter_map(|e| e.relative_speed_abs_mps))
     }
 
-    pub fn lateral_error(&self) -> Option<(f64, f64)> {
+    pub(crate) fn lateral_error(&self) -> Option<(f64, f64)> {
         percentiles(self.errors.iter().map(|e| e.lateral_abs_m))
     }
 }
@@ -251,7 +252,7 @@ fn percentiles(values: impl Iterator<Item = f64>) -> Option<(f64, f64)> {
 
 /// Runs one scenario (for at most `max_seconds` simulated) and scores every frame of the
 /// detector `make` builds for its cameras.
-pub fn evaluate_scenario<'a>(
+pub(crate) fn evaluate_scenario<'a>(
     scenario: Scenario,
     seed: u64,
     settings: &SimSettings,
@@ -352,7 +353,7 @@ pub struct ScenarioScore {
 }
 
 impl ScenarioScore {
-    pub fn from_tally(scenario: &str, t: &Tally) -> ScenarioScore {
+    pub(crate) fn from_tally(scenario: &str, t: &Tally) -> ScenarioScore {
         ScenarioScore {
             scenario: scenario.to_string(),
             frames: t.frames,
@@ -428,7 +429,7 @@ pub fn evaluate(
 }
 
 impl Tally {
-    pub fn merge(&mut self, other: Tally) {
+    pub(crate) fn merge(&mut self, other: Tally) {
         self.frames += other.frames;
         self.unanswered_frames += other.unanswered_frames;
         self.detections += other.detections;
@@ -506,12 +507,12 @@ pub fn markdown(report: &DetectReport) -> String {
 mod rendered {
     use slipstream_contract::msg::{ImageEncoding, ObjectClass};
     use slipstream_perception::{DetectSettings, Detector, DetectorParams, FrameDetection};
-    use slipstream_sim::ground_truth::ground_truth;
-    use slipstream_sim::render::{FrameLook, Renderer};
-    use slipstream_sim::rng::SimRng;
+    use slipstream_sim::ground_truth;
     use slipstream_sim::settings::SimSettings;
     use slipstream_sim::world::World;
     use slipstream_sim::Scenario;
+    use slipstream_sim::SimRng;
+    use slipstream_sim::{FrameLook, Renderer};
 
     /// Renders the start of a one-off scenario and runs the detector on it.
     fn detect_in(
@@ -616,7 +617,7 @@ mod rendered {
         ];
         let text = "{ name: 't', duration_s: 10, seed: 3, variation: { gap_m: 0, speed_mps: 0 }, ego: { lane: 1, speed_mps: 0 }, traffic: [] }";
         let world = World::new(Scenario::parse(text, "test").unwrap(), 3, 100);
-        let mut cameras = slipstream_sim::cameras::Cameras::new(&SimSettings::default(), &world);
+        let mut cameras = slipstream_sim::Cameras::new(&SimSettings::default(), &world);
         cameras.draw(&world);
         let info = cameras.narrow_info().unwrap().clone();
         let mut narrow = cameras.narrow_rgb().unwrap().to_vec();
@@ -749,7 +750,7 @@ mod rendered {
             "{{ name: 't', duration_s: 10, seed: 3, road: {road}, variation: {{ gap_m: 0, speed_mps: 0 }}, noise: {{ camera_stddev: {noise} }}, ego: {{ lane: 1, speed_mps: 0 }}, traffic: [{traffic}] }}"
         );
         let world = World::new(Scenario::parse(&text, "test").unwrap(), 3, 100);
-        let mut cameras = slipstream_sim::cameras::Cameras::new(&SimSettings::default(), &world);
+        let mut cameras = slipstream_sim::Cameras::new(&SimSettings::default(), &world);
         let vis = cameras.draw(&world);
         let mut rig = slipstream_perception::CameraRig::new(
             cameras.front.info(),
@@ -773,7 +774,7 @@ mod rendered {
                 world.step(slipstream_sim::world::EgoInput::Cruise);
             }
             let truth = world.vehicles()[1].brake_lights;
-            let mut cameras = slipstream_sim::cameras::Cameras::new(&SimSettings::default(), &world);
+            let mut cameras = slipstream_sim::Cameras::new(&SimSettings::default(), &world);
             cameras.draw(&world);
             let mut rig = slipstream_perception::CameraRig::new(
                 cameras.front.info(),
@@ -911,7 +912,7 @@ mod rendered {
         while world.time_ns() < 19_000_000_000 {
             world.step(slipstream_sim::world::EgoInput::Follow);
         }
-        let mut cameras = slipstream_sim::cameras::Cameras::new(&SimSettings::default(), &world);
+        let mut cameras = slipstream_sim::Cameras::new(&SimSettings::default(), &world);
         let truth = ground_truth(&world, &cameras.draw(&world));
         let mut rig = slipstream_perception::CameraRig::new(
             cameras.front.info(),

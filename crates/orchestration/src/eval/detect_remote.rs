@@ -20,13 +20,13 @@ use slipstream_contract::bus::{FramePublisher, Publisher, Received, Subscriber};
 use slipstream_contract::config::DEFAULT_ZENOH_CONFIG;
 use slipstream_contract::msg::{CameraInfo, Detection, Detections};
 use slipstream_contract::{topics, Bus, TopicMap};
-use slipstream_sim::cameras::Cameras;
+use slipstream_sim::Cameras;
 
 /// How long a frame waits for its detections.
-pub const ANSWER_TIMEOUT: Duration = Duration::from_secs(5);
+pub(crate) const ANSWER_TIMEOUT: Duration = Duration::from_secs(5);
 
 /// The detector's process and the suite's end of the bus.
-pub struct Yours {
+pub(crate) struct Yours {
     rt: tokio::runtime::Runtime,
     bus: Option<Bus>,
     /// Latched: kept for as long as the detector may join.
@@ -40,7 +40,7 @@ pub struct Yours {
 impl Yours {
     /// Starts `node` for a scenario drawn by `cameras` (logs in `logs`) and waits until it is
     /// ready (its token), with the camera's info latched for it.
-    pub fn start(node: &ForeignNode, cameras: &Cameras, logs: &Path) -> Result<Yours> {
+    pub(crate) fn start(node: &ForeignNode, cameras: &Cameras, logs: &Path) -> Result<Yours> {
         std::fs::create_dir_all(logs).map_err(Error::file("create the log directory", logs))?;
         let rt = tokio::runtime::Builder::new_multi_thread()
             .worker_threads(1)

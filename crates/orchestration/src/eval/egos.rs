@@ -29,7 +29,7 @@ impl EgoResult {
 
 /// Recorders of the run's ego, or of each ego in its namespace when there are several; the
 /// first is the first ego's.
-pub async fn record_each(lp: &LoopRun) -> Result<Vec<(String, Recorder)>> {
+pub(crate) async fn record_each(lp: &LoopRun) -> Result<Vec<(String, Recorder)>> {
     if lp.spec().egos.is_empty() {
         return Ok(vec![(String::new(), Recorder::start(lp.bus()).await?)]);
     }
@@ -41,7 +41,7 @@ pub async fn record_each(lp: &LoopRun) -> Result<Vec<(String, Recorder)>> {
 }
 
 /// Each ego judged on what was recorded in its namespace, in the egos' order.
-pub fn judge_all(recorded: &[(String, Recorded)], scenario: &Scenario, sim: &SimReport) -> Vec<Judged> {
+pub(crate) fn judge_all(recorded: &[(String, Recorded)], scenario: &Scenario, sim: &SimReport) -> Vec<Judged> {
     recorded.iter().enumerate().map(|(k, (_, rec))| judge_ego(rec, scenario, k, Some(sim), "stopped")).collect()
 }
 

@@ -26,11 +26,11 @@ use slipstream_contract::topics::{self, Topic};
 use slipstream_sim::Scenario;
 
 /// More emergency braking than the fault-free run, by this many simulated seconds, fails a run.
-pub const EMERGENCY_SLACK_S: f64 = 0.3;
+pub(crate) const EMERGENCY_SLACK_S: f64 = 0.3;
 
 /// The scenarios the envelope is taken over by default: every built-in one with a vehicle to
 /// follow (open road has nobody ahead; busy traffic's lead changes at random).
-pub const STANDARD: &[&str] = &[
+pub(crate) const STANDARD: &[&str] = &[
     "steady-follow",
     "approach-slower-lead",
     "lead-brakes-to-stop",

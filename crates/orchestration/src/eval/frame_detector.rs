@@ -6,10 +6,10 @@
 use super::link_codec::LinkCodec;
 use slipstream_contract::msg::Detection;
 use slipstream_perception::{CameraRig, DetectSettings};
-use slipstream_sim::cameras::Cameras;
+use slipstream_sim::Cameras;
 
 /// A detector under test: the detections of each frame the cameras drew.
-pub trait FrameDetector {
+pub(crate) trait FrameDetector {
     fn frame(&mut self, cameras: &Cameras, t_ns: u64) -> crate::error::Result<Vec<Detection>>;
 
     /// Frames it left unanswered (scored as frames without detections).
@@ -20,13 +20,13 @@ pub trait FrameDetector {
 
 /// slipstream-detect's detector and tracker, in process; with `codec`, every frame goes
 /// through its encoding and back first.
-pub struct Ours<'a> {
+pub(crate) struct Ours<'a> {
     rig: CameraRig,
     codec: Option<&'a mut LinkCodec>,
 }
 
 impl<'a> Ours<'a> {
-    pub fn new(cameras: &Cameras, detect: &DetectSettings, codec: Option<&'a mut LinkCodec>) -> Ours<'a> {
+    pub(crate) fn new(cameras: &Cameras, detect: &DetectSettings, codec: Option<&'a mut LinkCodec>) -> Ours<'a> {
         Ours { rig: CameraRig::new(cameras.front.info(), cameras.narrow_info(), detect), codec }
     }
 }

@@ -9,7 +9,7 @@ use slipstream_model::vehicle::VehicleParams;
 use slipstream_sim::{Scenario, SimReport};
 
 /// Fewer samples than this and a run is not judged (it hardly ran).
-pub const MIN_SAMPLES: usize = 10;
+pub(crate) const MIN_SAMPLES: usize = 10;
 
 /// A finished run of the loop on the bus, judged: the one tail of `slipstream up` and
 /// `eval acc` (recording -> trace -> metrics).

@@ -17,10 +17,11 @@ use std::collections::HashMap;
 use serde::Serialize;
 
 /// The hops, in loop order; the constants below index them.
-pub const HOPS: [&str; 4] = ["frame -> detections", "detections -> control", "control -> applied", "frame -> applied"];
-pub const FRAME_TO_DETECTIONS: usize = 0;
-pub const DETECTIONS_TO_CONTROL: usize = 1;
-pub const CONTROL_TO_APPLIED: usize = 2;
+pub(crate) const HOPS: [&str; 4] =
+    ["frame -> detections", "detections -> control", "control -> applied", "frame -> applied"];
+pub(crate) const FRAME_TO_DETECTIONS: usize = 0;
+pub(crate) const DETECTIONS_TO_CONTROL: usize = 1;
+pub(crate) const CONTROL_TO_APPLIED: usize = 2;
 /// The whole loop: frame published -> control applied.
 pub const WHOLE_LOOP: usize = 3;
 /// The same, short (the live view).
@@ -64,13 +65,13 @@ pub struct HopStats {
 
 impl LoopLatency {
     /// A detections message: published at `pub_ns`, from the frame published at `frame_pub_ns`.
-    pub fn on_detections(&mut self, pub_ns: u64, frame_pub_ns: u64) {
+    pub(crate) fn on_detections(&mut self, pub_ns: u64, frame_pub_ns: u64) {
         insert_bounded(&mut self.origin, pub_ns, frame_pub_ns);
         self.push(FRAME_TO_DETECTIONS, pub_ns, pub_ns as i64 - frame_pub_ns as i64);
     }
 
     /// A ground-truth message (the perception of `--perception ground-truth`).
-    pub fn on_ground_truth(&mut self, pub_ns: u64) {
+    pub(crate) fn on_ground_truth(&mut self, pub_ns: u64) {
         insert_bounded(&mut self.origin, pub_ns, pub_ns);
     }
 
@@ -88,7 +89,7 @@ impl LoopLatency {
 
     /// A state saying the command published at `command_pub_ns` was first applied at
     /// `applied_ns` (every state while the command holds says so: counted once).
-    pub fn on_applied(&mut self, command_pub_ns: u64, applied_ns: u64) {
+    pub(crate) fn on_applied(&mut self, command_pub_ns: u64, applied_ns: u64) {
         if command_pub_ns <= self.last_applied {
             return;
         }
@@ -102,7 +103,7 @@ impl LoopLatency {
     }
 
     /// Keeps only what the live figures need ([`LatencyWatch::start_live`]).
-    pub fn live_only() -> LoopLatency {
+    pub(crate) fn live_only() -> LoopLatency {
         LoopLatency { live_only: true, ..LoopLatency::default() }
     }
 
@@ -168,7 +169,7 @@ impl LatencyWatch {
     }
 
     /// The same for live figures only: memory bounded however long it watches (the view).
-    pub async fn start_live(
+    pub(crate) async fn start_live(
         bus: &slipstream_contract::Bus,
         camera: bool,
     ) -> Result<LatencyWatch, slipstream_contract::BusError> {

@@ -10,29 +10,29 @@ use slipstream_contract::msg::AccMode;
 use slipstream_sim::scenario::Warranted;
 
 /// The ACC's aims (docs/control.md).
-pub mod aims {
-    pub const TIME_GAP_RMS_S: f64 = 0.05;
+pub(crate) mod aims {
+    pub(crate) const TIME_GAP_RMS_S: f64 = 0.05;
     /// Settled behind a lead that holds its speed, the ego's acceleration stays this close to
     /// the lead's.
-    pub const MAX_ACCEL_SWING_MPS2: f64 = 0.3;
-    pub const MAX_ACCEL_MPS2: f64 = 2.0;
+    pub(crate) const MAX_ACCEL_SWING_MPS2: f64 = 0.3;
+    pub(crate) const MAX_ACCEL_MPS2: f64 = 2.0;
     /// Comfort deceleration at 20 m/s and above; it grows linearly to MAX_DECEL_LOW_SPEED_MPS2
     /// at 5 m/s and below (full-speed-range ACC, ISO 22179).
-    pub const MAX_DECEL_MPS2: f64 = 3.5;
-    pub const MAX_DECEL_LOW_SPEED_MPS2: f64 = 5.0;
-    pub const MAX_JERK_MPS3: f64 = 2.5;
+    pub(crate) const MAX_DECEL_MPS2: f64 = 3.5;
+    pub(crate) const MAX_DECEL_LOW_SPEED_MPS2: f64 = 5.0;
+    pub(crate) const MAX_JERK_MPS3: f64 = 2.5;
     /// Easing off braking (the deceleration shrinking) is judged apart: braking for a target
     /// that has gone is to be released at once, and a released brake is felt far less than an
     /// applied one. The ACC's own release jerk (tuning.command.release_jerk_mps3) is 10.
-    pub const MAX_RELEASE_JERK_MPS3: f64 = 12.0;
+    pub(crate) const MAX_RELEASE_JERK_MPS3: f64 = 12.0;
     /// A lead braking beyond the comfort limit is answered within this long. Reported
     /// in every run, not judged: where comfort braking keeps clear of such a lead, the ACC
     /// answers with the comfort ramp, which takes longer (docs/control.md, results).
-    pub const HARD_BRAKING_RESPONSE_S: f64 = 0.5;
+    pub(crate) const HARD_BRAKING_RESPONSE_S: f64 = 0.5;
     /// Tolerance on the measured acceleration and deceleration: the vehicle's response to a
     /// limited target overshoots a little (tyre and suspension dynamics of the physics
     /// engine). Jerk has none: the controller limits it to 2.2 m/s3.
-    pub const COMFORT_TOLERANCE: f64 = 0.1;
+    pub(crate) const COMFORT_TOLERANCE: f64 = 0.1;
 }
 
 /// How long a stretch must last before it counts as steady.

@@ -30,10 +30,10 @@
 pub mod acc;
 pub(crate) mod bend_lateral;
 pub mod detect;
-pub mod detect_remote;
+pub(crate) mod detect_remote;
 pub mod egos;
 pub mod faults;
-pub mod frame_detector;
+pub(crate) mod frame_detector;
 pub mod judge;
 pub mod latency;
 pub mod link_codec;
@@ -46,7 +46,8 @@ pub mod resim;
 pub mod sweep;
 pub mod trace;
 
-pub use metrics::Metrics;
+pub use bend_lateral::LateralCell;
+pub use metrics::{Check, Metrics};
 pub use trace::{Recorder, Trace};
 
 /// An optional figure with `digits` decimals, or "-" (tables of `eval`, `bench`, `up`, `top`).

@@ -7,10 +7,10 @@ use super::trace::{truth_in_lane, Sample, Trace};
 use slipstream_acc::{AccSettings, Controller, EgoNow, PerceptionFrame, PerceptionSource, Pose};
 use slipstream_contract::msg::{due, ControlCommand};
 use slipstream_perception::{CameraRig, DetectSettings};
-use slipstream_sim::cameras::Cameras;
-use slipstream_sim::ground_truth::ground_truth;
+use slipstream_sim::ground_truth;
 use slipstream_sim::settings::SimSettings;
 use slipstream_sim::world::{EgoInput, World};
+use slipstream_sim::Cameras;
 use slipstream_sim::Scenario;
 
 /// The default cameras, drawn, and the detection behind them.
@@ -38,7 +38,7 @@ impl Camera {
 
 /// Runs `scenario` to its end with the ACC on the perception its settings name; physics at
 /// `physics_hz`, perception at `camera_hz`.
-pub fn run(scenario: Scenario, settings: AccSettings, physics_hz: u32, camera_hz: f64) -> Trace {
+pub(crate) fn run(scenario: Scenario, settings: AccSettings, physics_hz: u32, camera_hz: f64) -> Trace {
     let seed = scenario.seed;
     let (standstill_m, min_gap_aim_m, braking_warranted) =
         (settings.standstill_m, scenario.expect.min_gap_m, scenario.expect.braking);

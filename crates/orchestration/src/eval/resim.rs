@@ -35,7 +35,7 @@ use slipstream_contract::msg::{
 use slipstream_contract::topics::Topic;
 
 /// How long a step waits for the outputs the recording has for it.
-pub const OUTPUT_WAIT: Duration = Duration::from_secs(5);
+pub(crate) const OUTPUT_WAIT: Duration = Duration::from_secs(5);
 /// How often a wait for outputs looks whether the replay is to stop.
 const STOP_POLL: Duration = Duration::from_millis(100);
 /// Steps in a row whose outputs did not come before the replay gives up (the nodes stopped).

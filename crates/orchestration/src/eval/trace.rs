@@ -35,7 +35,7 @@ pub struct TruthLead {
 
 /// The nearest two vehicles ahead whose centres are in the ego's lane: the true lead and the
 /// next beyond it.
-pub fn truth_in_lane(
+pub(crate) fn truth_in_lane(
     gt: &GroundTruthObjects,
     ego_lane: i32,
     ego_front_m: f64,
@@ -163,7 +163,7 @@ impl Recorder {
 }
 
 /// One sample per recorded state, with the newest status and ground truth at its time.
-pub fn build_trace(rec: &Recorded, ego_front: f64, standstill_m: f64) -> Trace {
+pub(crate) fn build_trace(rec: &Recorded, ego_front: f64, standstill_m: f64) -> Trace {
     let mut states: Vec<&Received<VehicleState>> = rec.states.iter().collect();
     states.sort_by_key(|r| r.header.stamp_sim_ns);
     states.dedup_by_key(|r| r.header.stamp_sim_ns);

@@ -15,7 +15,7 @@ use slipstream_contract::msg::{SimEvent, SimEventKind, Speed};
 use slipstream_contract::topics;
 
 /// An external simulator that sends nothing for this long has stopped.
-pub const SILENCE: Duration = Duration::from_secs(5);
+pub(crate) const SILENCE: Duration = Duration::from_secs(5);
 
 #[derive(Default)]
 struct Seen {

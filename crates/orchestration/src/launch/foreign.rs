@@ -24,9 +24,9 @@ use slipstream_contract::config::{ConnectArgs, FaultProfile};
 use slipstream_contract::topics::Topic;
 
 /// The environment variable that names the node to itself.
-pub const NODE_ENV: &str = "SLIPSTREAM_NODE";
+pub(crate) const NODE_ENV: &str = "SLIPSTREAM_NODE";
 /// Where rmw_zenoh (and zenoh-ros2-sdk) read a ROS 2 node's Zenoh session config.
-pub const RMW_ZENOH_CONFIG_ENV: &str = "ZENOH_SESSION_CONFIG_URI";
+pub(crate) const RMW_ZENOH_CONFIG_ENV: &str = "ZENOH_SESSION_CONFIG_URI";
 /// slipstream's binaries: a loop file's command naming one runs the one beside this slipstream.
 const OUR_BINARIES: [&str; 4] = ["slipstream", "slipstream-sim", "slipstream-acc", "slipstream-detect"];
 
@@ -90,7 +90,7 @@ impl OwnNodes {
     /// are injected by our nodes' bus as a message arrives; a process of someone else's has no
     /// such layer. None: every fault lands at one of our nodes (the simulator, slipstream-acc
     /// or slipstream-detect), whatever else the loop runs.
-    pub fn fault_into_foreign(&self, profile: &FaultProfile) -> Option<(Topic, &ForeignNode)> {
+    pub(crate) fn fault_into_foreign(&self, profile: &FaultProfile) -> Option<(Topic, &ForeignNode)> {
         profile.topics.iter().find_map(|(topic, f)| {
             self.foreign().find(|n| n.role.reads(*topic) && f.applies_at(n.node())).map(|n| (*topic, n))
         })
@@ -98,7 +98,7 @@ impl OwnNodes {
 
     /// How a node of the loop runs, by its process name (`controller`, `slipstream-acc`,
     /// `logger`): the loop file's settings, or the defaults.
-    pub fn run_of(&self, process: &str) -> NodeRun {
+    pub(crate) fn run_of(&self, process: &str) -> NodeRun {
         let ours = |b: &Option<BuiltinNode>| b.as_ref().map(|b| b.run.clone());
         let found = match process {
             "slipstream-acc" => ours(&self.builtin.controller),
@@ -366,7 +366,7 @@ impl ForeignNode {
     }
 
     /// The command as a shell would take it back (a node started elsewhere: its name, said so).
-    pub fn command_line(&self) -> String {
+    pub(crate) fn command_line(&self) -> String {
         if self.elsewhere {
             return format!("{} (started elsewhere)", self.node());
         }

@@ -16,13 +16,13 @@ use crate::error::{Error, Result};
 
 /// A held namespace: the lock goes with this value (or with the process).
 #[derive(Debug)]
-pub struct Hold {
+pub(crate) struct Hold {
     _file: std::fs::File,
 }
 
 /// What an attempt at a namespace's hold got.
 #[derive(Debug)]
-pub enum Attempt {
+pub(crate) enum Attempt {
     /// The hold, this process's until it is dropped.
     Held(Hold),
     /// Another process holds it: what that process wrote (its pid and command line).
@@ -30,7 +30,7 @@ pub enum Attempt {
 }
 
 /// Takes the hold of `namespace` ("" for the default one), or says who has it.
-pub fn take(namespace: &str) -> Result<Attempt> {
+pub(crate) fn take(namespace: &str) -> Result<Attempt> {
     let dir = lock_dir();
     std::fs::create_dir_all(&dir).map_err(Error::file("create", &dir))?;
     let path = dir.join(file_name(namespace));

@@ -36,7 +36,7 @@ pub(crate) mod hold;
 pub mod loop_file;
 pub(crate) mod namespace;
 pub(crate) mod nodes;
-pub mod own_args;
+pub(crate) mod own_args;
 pub(crate) mod ready;
 pub(crate) mod supervise;
 
@@ -50,12 +50,12 @@ pub use nodes::{
 pub use own_args::OwnNodeArgs;
 
 /// How long the controllers may take to appear on the bus.
-pub const NODE_START_TIMEOUT: Duration = Duration::from_secs(30);
+pub(crate) const NODE_START_TIMEOUT: Duration = Duration::from_secs(30);
 /// How often the launcher checks the bus and the processes.
 pub const NODE_POLL: Duration = Duration::from_millis(20);
 /// After the simulator ends: time for its last messages to reach the observer.
 pub const SETTLE: Duration = Duration::from_millis(200);
 /// SIGINT, then this long, then SIGKILL.
-pub const STOP_GRACE: Duration = Duration::from_secs(5);
+pub(crate) const STOP_GRACE: Duration = Duration::from_secs(5);
 /// RUST_LOG for the nodes when the user set none: lifecycle at INFO, Zenoh's chatter off.
-pub const DEFAULT_RUST_LOG: &str = "info,zenoh=warn,zenoh_ext=warn";
+pub(crate) const DEFAULT_RUST_LOG: &str = "info,zenoh=warn,zenoh_ext=warn";

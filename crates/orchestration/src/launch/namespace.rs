@@ -35,7 +35,7 @@ const SETTLE_POLLS: u32 = 15;
 const SETTLED_AFTER: u32 = 2;
 
 /// The namespace the run got, and whether it moved there from the default one.
-pub struct Claimed {
+pub(crate) struct Claimed {
     pub map: TopicMap,
     /// Set when the default namespace held another loop: the namespace moved to.
     pub moved_to: Option<String>,
@@ -49,7 +49,12 @@ pub struct Claimed {
 /// Claims `map`'s namespace for a run that brings the nodes `ours`, or moves (see the module
 /// doc). `expected_here`: a node not ours (the simulator with `--sim external`, a node of a
 /// loop file started elsewhere) waits in the namespace, so the run cannot move.
-pub async fn claim(session: &zenoh::Session, map: TopicMap, ours: &[&str], expected_here: bool) -> Result<Claimed> {
+pub(crate) async fn claim(
+    session: &zenoh::Session,
+    map: TopicMap,
+    ours: &[&str],
+    expected_here: bool,
+) -> Result<Claimed> {
     settle(session).await;
     let alive = nodes_by_namespace(session).await?;
     let taken_by = |ns: &str| -> Result<Attempt> {

@@ -833,7 +833,7 @@ impl LoopRun {
     }
 
     /// The ACC's statistics (its --json output), once it has been stopped.
-    pub fn acc_report(&self) -> Result<AccStats> {
+    pub(crate) fn acc_report(&self) -> Result<AccStats> {
         let path = self.logs.join(ACC_REPORT);
         let bytes = std::fs::read(&path).map_err(Error::file("read", &path))?;
         serde_json::from_slice(&bytes).map_err(|source| Error::Json { path, what: "holds no ACC statistics", source })
@@ -841,7 +841,7 @@ impl LoopRun {
 
     /// The detector's statistics (its --json output), once it has been stopped; None without
     /// camera perception.
-    pub fn detect_report(&self) -> Result<Option<DetectStats>> {
+    pub(crate) fn detect_report(&self) -> Result<Option<DetectStats>> {
         if !self.camera() || self.spec.own.detector.is_some() {
             return Ok(None);
         }

@@ -27,7 +27,7 @@ pub(crate) struct Watch {
 impl Watch {
     /// Watches for `node` (started as `process`) to become ready as `ready` says: subscribes
     /// now to its sample's key, a topic of the loop (in its namespace) or a key expression.
-    pub async fn new(bus: &Bus, node: &str, process: &str, ready: &Ready) -> Result<Watch> {
+    pub(crate) async fn new(bus: &Bus, node: &str, process: &str, ready: &Ready) -> Result<Watch> {
         let sample = match &ready.sample {
             None => None,
             Some(what) => {
@@ -52,19 +52,19 @@ impl Watch {
     }
 
     /// Whether it is ready, given the names whose tokens are seen.
-    pub fn ready(&self, alive: &[String]) -> bool {
+    pub(crate) fn ready(&self, alive: &[String]) -> bool {
         match &self.sample {
             Some((_, seen, _)) => seen.load(Ordering::Relaxed),
             None => alive.contains(&self.node),
         }
     }
 
-    pub fn timeout(&self) -> Duration {
+    pub(crate) fn timeout(&self) -> Duration {
         self.timeout
     }
 
     /// What it was waited for, for a person.
-    pub fn awaited(&self) -> String {
+    pub(crate) fn awaited(&self) -> String {
         match &self.sample {
             Some((key, ..)) => format!("no sample on {key} (its ready.sample)"),
             None => {

@@ -29,19 +29,19 @@ pub use replay::{private_bus, Replay};
 use std::time::Duration;
 
 /// Payload bytes waiting for the writer at most; past this the recorder drops and counts.
-pub const QUEUE_BYTES: usize = 512 << 20;
+pub(crate) const QUEUE_BYTES: usize = 512 << 20;
 /// How often the writer ends its chunk, so a crash loses at most this much.
 pub const FLUSH_EVERY: Duration = Duration::from_secs(1);
 /// The MCAP message encoding of every channel: slipstream's wire format, this version.
-pub fn message_encoding() -> String {
+pub(crate) fn message_encoding() -> String {
     format!("slipstream/v{}", slipstream_contract::msg::WIRE_VERSION)
 }
 /// The schema name of a message type's channels.
-pub fn schema_name(kind: Option<slipstream_contract::msg::MessageKind>) -> String {
+pub(crate) fn schema_name(kind: Option<slipstream_contract::msg::MessageKind>) -> String {
     match kind {
         Some(k) => format!("slipstream.{}", k.name()),
         None => "slipstream.Invalid".to_string(),
     }
 }
 /// The name of the metadata record with the recording's summary.
-pub const METADATA_NAME: &str = "slipstream.recording";
+pub(crate) const METADATA_NAME: &str = "slipstream.recording";

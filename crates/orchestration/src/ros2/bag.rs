@@ -20,7 +20,7 @@ use slipstream_contract::msg::Header;
 
 /// The profile and encodings of the ROS 2 MCAP convention.
 pub const PROFILE: &str = "ros2";
-pub const MESSAGE_ENCODING: &str = "cdr";
+pub(crate) const MESSAGE_ENCODING: &str = "cdr";
 pub const SCHEMA_ENCODING: &str = "ros2msg";
 
 struct Open {

@@ -10,7 +10,7 @@
 /// `(full name, field lines)` for every type the bridge sends or receives, and every type those
 /// refer to. A field's type is a primitive, `string`, or another type of this table given as
 /// `package/Type` (a bare `Type` means the same package); `[]` is a sequence, `[N]` an array.
-pub const TYPES: &[(&str, &str)] = &[
+pub(crate) const TYPES: &[(&str, &str)] = &[
     ("builtin_interfaces/msg/Time", "int32 sec\nuint32 nanosec"),
     ("builtin_interfaces/msg/Duration", "int32 sec\nuint32 nanosec"),
     ("std_msgs/msg/Header", "builtin_interfaces/Time stamp\nstring frame_id"),

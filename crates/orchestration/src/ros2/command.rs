@@ -19,21 +19,21 @@ use slipstream_contract::msg::ControlCommand;
 use slipstream_model::vehicle::{actuate_acceleration, VehicleParams};
 
 /// A command older than this is not applied (0.5 s: five missed commands of a 10 Hz node).
-pub const STALE_AFTER_NS: u64 = 500_000_000;
+pub(crate) const STALE_AFTER_NS: u64 = 500_000_000;
 /// Fastest speed a command may ask for.
-pub const MAX_SPEED_MPS: f32 = 70.0;
+pub(crate) const MAX_SPEED_MPS: f32 = 70.0;
 /// Largest acceleration a command may ask for, either way.
-pub const MAX_ACCEL_MPS2: f32 = 10.0;
+pub(crate) const MAX_ACCEL_MPS2: f32 = 10.0;
 /// Limits used when a command gives acceleration 0: ISO 15622's comfort figures.
-pub const DEFAULT_ACCEL_MPS2: f64 = 2.0;
-pub const DEFAULT_DECEL_MPS2: f64 = 3.5;
+pub(crate) const DEFAULT_ACCEL_MPS2: f64 = 2.0;
+pub(crate) const DEFAULT_DECEL_MPS2: f64 = 3.5;
 /// Speed error to acceleration (1/s): 1 m/s short asks 0.8 m/s2, within the limits.
-pub const SPEED_GAIN_PER_S: f64 = 0.8;
+pub(crate) const SPEED_GAIN_PER_S: f64 = 0.8;
 
 /// Why a command is refused: a `Copy` value with the figure that ruled it out, said only when
 /// counted and logged.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Refusal {
+pub(crate) enum Refusal {
     /// A second publisher (its gid) while the first is still sending.
     SecondPublisher([u8; 16]),
     /// A field that is NaN or infinite.
@@ -72,7 +72,7 @@ pub struct CommandStats {
 
 /// The one publisher whose commands count, and its latest command.
 #[derive(Debug, Default)]
-pub struct CommandGate {
+pub(crate) struct CommandGate {
     owner: Option<[u8; 16]>,
     latest: Option<(AckermannDrive, u64)>,
     pub stats: CommandStats,
@@ -82,7 +82,7 @@ pub struct CommandGate {
 
 impl CommandGate {
     /// Takes a command from publisher `gid` received at `now_ns`, or refuses it with why.
-    pub fn offer(
+    pub(crate) fn offer(
         &mut self,
         gid: [u8; 16],
         now_ns: u64,
@@ -102,7 +102,7 @@ impl CommandGate {
     }
 
     /// Counts a refused command, logging why at most once a second.
-    pub fn refuse(&mut self, now_ns: u64, why: &dyn std::fmt::Display) {
+    pub(crate) fn refuse(&mut self, now_ns: u64, why: &dyn std::fmt::Display) {
         self.stats.refused += 1;
         self.refused_since_log += 1;
         self.stats.last_refusal = Some(why.to_string());
@@ -143,13 +143,13 @@ impl CommandGate {
     }
 
     /// The newest command taken, fresh or not.
-    pub fn latest(&self) -> Option<AckermannDrive> {
+    pub(crate) fn latest(&self) -> Option<AckermannDrive> {
         self.latest.map(|(d, _)| d)
     }
 
     /// The command to apply at `now_ns` at the ego's `speed_mps`, or None when there is no
     /// fresh command.
-    pub fn control(&self, now_ns: u64, speed_mps: f64, params: &VehicleParams) -> Option<ControlCommand> {
+    pub(crate) fn control(&self, now_ns: u64, speed_mps: f64, params: &VehicleParams) -> Option<ControlCommand> {
         let (d, at) = self.latest?;
         if now_ns.saturating_sub(at) >= STALE_AFTER_NS {
             return None;
@@ -160,14 +160,14 @@ impl CommandGate {
 
 /// The acceleration a command asks for at `speed_mps`: toward its speed, within its own limit
 /// (or the comfort limits when it gives none).
-pub fn acceleration(d: &AckermannDrive, speed_mps: f64) -> f64 {
+pub(crate) fn acceleration(d: &AckermannDrive, speed_mps: f64) -> f64 {
     let limit = f64::from(d.acceleration.abs());
     let (up, down) = if limit > 0.0 { (limit, limit) } else { (DEFAULT_ACCEL_MPS2, DEFAULT_DECEL_MPS2) };
     (SPEED_GAIN_PER_S * (f64::from(d.speed) - speed_mps)).clamp(-down, up)
 }
 
 /// Throttle, brake and steer that take the ego from `speed_mps` toward the command's speed.
-pub fn control(d: &AckermannDrive, speed_mps: f64, params: &VehicleParams) -> ControlCommand {
+pub(crate) fn control(d: &AckermannDrive, speed_mps: f64, params: &VehicleParams) -> ControlCommand {
     let accel = acceleration(d, speed_mps);
     let (throttle, brake) = if d.speed == 0.0 && speed_mps < 0.5 {
         (0.0, 0.3) // hold still

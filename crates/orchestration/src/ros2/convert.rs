@@ -23,27 +23,27 @@ use slipstream_model::vehicle::VehicleParams;
 
 /// The frame names of one vehicle.
 #[derive(Debug, Clone, PartialEq, Eq)]
-pub struct Frames {
+pub(crate) struct Frames {
     prefix: String,
 }
 
 impl Frames {
     /// Frames under the bus namespace `ns` (none when empty): `car1/ego`, `car1/camera_front`.
-    pub fn new(ns: &str) -> Frames {
+    pub(crate) fn new(ns: &str) -> Frames {
         let ns = ns.trim_matches('/');
         Frames { prefix: if ns.is_empty() { String::new() } else { format!("{ns}/") } }
     }
 
-    pub fn world(&self) -> String {
+    pub(crate) fn world(&self) -> String {
         "world".into()
     }
 
-    pub fn ego(&self) -> String {
+    pub(crate) fn ego(&self) -> String {
         format!("{}ego", self.prefix)
     }
 
     /// A camera's mount frame (`camera_front`) and its optical frame.
-    pub fn camera(&self, camera: &str) -> (String, String) {
+    pub(crate) fn camera(&self, camera: &str) -> (String, String) {
         (format!("{}camera_{camera}", self.prefix), format!("{}camera_{camera}_optical", self.prefix))
     }
 }
@@ -56,12 +56,12 @@ fn header(stamp_sim_ns: u64, frame_id: String) -> Header {
 /// CompressedImage, never re-encoded. LZ4 is no ROS image format: the caller decodes it to
 /// raw first (translate.rs); given one, it is labelled "lz4", which no ROS tool reads.
 #[derive(Debug)]
-pub enum RosImage<'a> {
+pub(crate) enum RosImage<'a> {
     Raw(Image<'a>),
     Compressed(CompressedImage<'a>),
 }
 
-pub fn image<'a>(stamp_sim_ns: u64, frame_id: String, frame: &CameraFrameRef<'a>) -> RosImage<'a> {
+pub(crate) fn image<'a>(stamp_sim_ns: u64, frame_id: String, frame: &CameraFrameRef<'a>) -> RosImage<'a> {
     let header = header(stamp_sim_ns, frame_id);
     match frame.encoding {
         ImageEncoding::Rgb8 => RosImage::Raw(Image {
@@ -81,7 +81,7 @@ pub fn image<'a>(stamp_sim_ns: u64, frame_id: String, frame: &CameraFrameRef<'a>
 
 /// The pinhole calibration: K, R = identity, P = [K | 0], no distortion (the camera is drawn
 /// as an ideal pinhole).
-pub fn camera_info(stamp_sim_ns: u64, optical_frame: String, info: &CameraInfo) -> RosCameraInfo {
+pub(crate) fn camera_info(stamp_sim_ns: u64, optical_frame: String, info: &CameraInfo) -> RosCameraInfo {
     let (fx, fy, cx, cy) = (info.fx_px, info.fy_px, info.cx_px, info.cy_px);
     RosCameraInfo {
         header: header(stamp_sim_ns, optical_frame),
@@ -117,7 +117,7 @@ fn stamped(
 }
 
 /// ego -> camera mount -> optical frame, for /tf_static.
-pub fn mount_transforms(frames: &Frames, camera: &str, info: &CameraInfo) -> Vec<TransformStamped> {
+pub(crate) fn mount_transforms(frames: &Frames, camera: &str, info: &CameraInfo) -> Vec<TransformStamped> {
     let (mount, optical) = frames.camera(camera);
     let [roll, pitch, yaw] = info.mount_roll_pitch_yaw_rad;
     let half_pi = std::f64::consts::FRAC_PI_2;
@@ -134,14 +134,14 @@ pub fn mount_transforms(frames: &Frames, camera: &str, info: &CameraInfo) -> Vec
 }
 
 /// world -> ego, for /tf.
-pub fn ego_transform(stamp_sim_ns: u64, frames: &Frames, state: &VehicleState) -> TransformStamped {
+pub(crate) fn ego_transform(stamp_sim_ns: u64, frames: &Frames, state: &VehicleState) -> TransformStamped {
     let rotation = Quaternion::from_rpy(state.roll_rad, state.pitch_rad, state.yaw_in_world_rad);
     stamped(stamp_sim_ns, frames.world(), frames.ego(), vec3(state.position_in_world_m), rotation)
 }
 
 /// The ego's pose in the world and its twist in its own frame (REP 105's odometry), from the
 /// simulator's state: exact, so the covariances are zero.
-pub fn odometry(stamp_sim_ns: u64, frames: &Frames, state: &VehicleState) -> Odometry {
+pub(crate) fn odometry(stamp_sim_ns: u64, frames: &Frames, state: &VehicleState) -> Odometry {
     let (sin, cos) = state.yaw_in_world_rad.sin_cos();
     let [vx, vy, vz] = state.velocity_in_world_mps;
     let linear = Vector3 { x: cos * vx + sin * vy, y: -sin * vx + cos * vy, z: vz };
@@ -158,7 +158,7 @@ pub fn odometry(stamp_sim_ns: u64, frames: &Frames, state: &VehicleState) -> Odo
     }
 }
 
-pub fn clock(stamp_sim_ns: u64) -> Clock {
+pub(crate) fn clock(stamp_sim_ns: u64) -> Clock {
     Clock { clock: Time::from_ns(stamp_sim_ns) }
 }
 
@@ -218,7 +218,7 @@ fn array(stamp_sim_ns: u64, frame: &str, ns: &str, boxes: impl Iterator<Item = M
 }
 
 /// Ground truth as boxes in the ego's frame: position, heading and size as simulated.
-pub fn ground_truth_markers(stamp_sim_ns: u64, frames: &Frames, objects: &GroundTruthObjects) -> MarkerArray {
+pub(crate) fn ground_truth_markers(stamp_sim_ns: u64, frames: &Frames, objects: &GroundTruthObjects) -> MarkerArray {
     let ego = frames.ego();
     let boxes = objects.objects.iter().map(|o| {
         let pose =
@@ -230,7 +230,7 @@ pub fn ground_truth_markers(stamp_sim_ns: u64, frames: &Frames, objects: &Ground
 
 /// Detections as boxes in the ego's frame: the rear at the measured distance, centred on the
 /// measured lateral offset, the size of the detected class's typical vehicle.
-pub fn detection_markers(stamp_sim_ns: u64, frames: &Frames, detections: &Detections) -> MarkerArray {
+pub(crate) fn detection_markers(stamp_sim_ns: u64, frames: &Frames, detections: &Detections) -> MarkerArray {
     let ego = frames.ego();
     let boxes = detections.detections.iter().map(|d| {
         let size = VehicleParams::of_class(d.class).size_m;
@@ -242,7 +242,7 @@ pub fn detection_markers(stamp_sim_ns: u64, frames: &Frames, detections: &Detect
 }
 
 /// The ACC status's fields, in the order of [`acc_status`]'s data.
-pub const ACC_STATUS_FIELDS: [&str; 10] = [
+pub(crate) const ACC_STATUS_FIELDS: [&str; 10] = [
     "mode",
     "set_speed_mps",
     "time_gap_s",
@@ -258,7 +258,7 @@ pub const ACC_STATUS_FIELDS: [&str; 10] = [
 /// acc/status as numbers a plot takes: mode 0 off, 1 speed, 2 follow, 3 stale, 4 emergency;
 /// the lead's fields NaN without a lead (ttc NaN when not closing in); warnings counted. The
 /// layout's one dimension is labelled with the field names, comma-separated.
-pub fn acc_status(status: &AccStatus) -> Float64MultiArray {
+pub(crate) fn acc_status(status: &AccStatus) -> Float64MultiArray {
     let mode = match status.mode {
         AccMode::Off => 0.0,
         AccMode::Speed => 1.0,

@@ -63,20 +63,20 @@ const DEFAULT_DEPTH: u32 = 42;
 
 impl RosQos {
     /// ROS's "sensor data" profile: best effort, keep the last 5.
-    pub const SENSOR: RosQos =
+    pub(crate) const SENSOR: RosQos =
         RosQos { reliability: Reliability::BestEffort, durability: Durability::Volatile, depth: 5 };
     /// ROS's default: reliable, volatile, keep the last 10.
-    pub const DEFAULT: RosQos =
+    pub(crate) const DEFAULT: RosQos =
         RosQos { reliability: Reliability::Reliable, durability: Durability::Volatile, depth: 10 };
     /// Latched: a late subscriber gets the last message (rviz2's camera info, /tf_static).
-    pub const LATCHED: RosQos =
+    pub(crate) const LATCHED: RosQos =
         RosQos { reliability: Reliability::Reliable, durability: Durability::TransientLocal, depth: 1 };
 
     /// The QoS part of a token, as rmw_zenoh writes it: reliability (1 reliable, 2 best
     /// effort), durability (1 transient local, 2 volatile), history `<kind>,<depth>`, then
     /// deadline, lifespan and liveliness (always the defaults here); each left empty where it
     /// equals rmw_zenoh's default (reliable, volatile, keep last 42, infinite, automatic).
-    pub fn token_part(&self) -> String {
+    pub(crate) fn token_part(&self) -> String {
         let reliability = match self.reliability {
             Reliability::Reliable => "",
             Reliability::BestEffort => "2",
@@ -111,7 +111,7 @@ pub enum EndpointKind {
 
 impl NodeId {
     /// The node's liveliness token.
-    pub fn node_token(&self) -> String {
+    pub(crate) fn node_token(&self) -> String {
         let id = self.node_id;
         format!(
             "@ros2_lv/{}/{}/{id}/{id}/NN/%/{}/{}",
@@ -139,7 +139,7 @@ impl NodeId {
     }
 
     /// The liveliness token of endpoint `entity_id` on `topic` (resolved).
-    pub fn endpoint_token(
+    pub(crate) fn endpoint_token(
         &self,
         entity_id: u32,
         kind: EndpointKind,
@@ -193,7 +193,7 @@ fn mangle_ns(namespace: &str) -> String {
 }
 
 /// A publisher's global id: 16 bytes from its token, the same for the same token.
-pub fn gid(token: &str) -> [u8; 16] {
+pub(crate) fn gid(token: &str) -> [u8; 16] {
     use sha2::Digest as _;
     let digest = sha2::Sha256::digest(token.as_bytes());
     let mut out = [0u8; 16];
@@ -204,14 +204,14 @@ pub fn gid(token: &str) -> [u8; 16] {
 /// The attachment of every rmw_zenoh sample: sequence number, source timestamp (Unix ns) and
 /// the publisher's gid, in Zenoh's own serialization (as rmw_zenoh and hiroz write it).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct Attachment {
+pub(crate) struct Attachment {
     pub sequence_number: i64,
     pub source_timestamp_ns: i64,
     pub source_gid: [u8; 16],
 }
 
 impl Attachment {
-    pub fn to_zbytes(&self) -> ZBytes {
+    pub(crate) fn to_zbytes(self) -> ZBytes {
         let mut ser = zenoh_ext::ZSerializer::new();
         ser.serialize(self.sequence_number);
         ser.serialize(self.source_timestamp_ns);
@@ -219,7 +219,7 @@ impl Attachment {
         ser.finish()
     }
 
-    pub fn from_zbytes(bytes: &ZBytes) -> Result<Attachment, Ros2Error> {
+    pub(crate) fn from_zbytes(bytes: &ZBytes) -> Result<Attachment, Ros2Error> {
         let mut de = zenoh_ext::ZDeserializer::new(bytes);
         let bad = |e: zenoh_ext::ZDeserializeError| Ros2Error::Attachment(format!("{e:?}"));
         let sequence_number = de.deserialize::<i64>().map_err(bad)?;

@@ -25,7 +25,7 @@ use slipstream_contract::topics;
 use slipstream_model::vehicle::VehicleParams;
 
 /// ROS commands in, vehicle/control out.
-pub struct CommandPath {
+pub(crate) struct CommandPath {
     gate: Arc<Mutex<CommandGate>>,
     _subscriber: zenoh::pubsub::Subscriber<()>,
     _token: LivelinessToken,
@@ -35,7 +35,7 @@ pub struct CommandPath {
 impl CommandPath {
     /// Subscribes to the ROS commands of `entry` and sends them on as vehicle/control: per
     /// speed message, or, with `lockstep`, as the answer to the state each one names.
-    pub async fn start(
+    pub(crate) async fn start(
         bus: &Bus,
         node: &RosNode,
         entry: &Entry,
@@ -72,7 +72,7 @@ impl CommandPath {
         Ok(CommandPath { gate, _subscriber: subscriber, _token: token, _loop_side: loop_side })
     }
 
-    pub fn stats(&self) -> CommandStats {
+    pub(crate) fn stats(&self) -> CommandStats {
         self.gate.lock().stats.clone()
     }
 }

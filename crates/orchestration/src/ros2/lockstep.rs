@@ -16,7 +16,7 @@ const KEPT: usize = 64;
 
 /// A vehicle/state waiting for the command that answers it.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Awaited {
+pub(crate) struct Awaited {
     pub step: u64,
     pub stamp_sim_ns: u64,
     pub speed_mps: f64,
@@ -24,7 +24,7 @@ pub struct Awaited {
 
 /// Why a stamped command answers no step.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub struct NoState {
+pub(crate) struct NoState {
     pub stamp_ns: u64,
 }
 
@@ -40,13 +40,13 @@ impl std::fmt::Display for NoState {
 
 /// The states not answered yet, oldest first.
 #[derive(Debug, Default)]
-pub struct StepAnswers {
+pub(crate) struct StepAnswers {
     awaited: VecDeque<Awaited>,
 }
 
 impl StepAnswers {
     /// A state arrived: it now awaits its command.
-    pub fn state(&mut self, state: Awaited) {
+    pub(crate) fn state(&mut self, state: Awaited) {
         if self.awaited.len() == KEPT {
             self.awaited.pop_front();
         }
@@ -55,7 +55,7 @@ impl StepAnswers {
 
     /// The state a command stamped `stamp` answers; it and every older one are answered then
     /// (the simulator moved past them).
-    pub fn answer(&mut self, stamp: Time) -> Result<Awaited, NoState> {
+    pub(crate) fn answer(&mut self, stamp: Time) -> Result<Awaited, NoState> {
         let stamp_ns = u64::try_from(stamp.sec).unwrap_or(0) * 1_000_000_000 + u64::from(stamp.nanosec);
         let at = self.awaited.iter().position(|a| a.stamp_sim_ns == stamp_ns).ok_or(NoState { stamp_ns })?;
         let found = self.awaited[at];

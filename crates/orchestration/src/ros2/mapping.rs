@@ -175,7 +175,7 @@ struct RawQos {
 }
 
 /// `ROS_DOMAIN_ID` as ROS reads it: a number 0-232, else an error naming the variable.
-pub fn domain_from_env() -> Result<Option<u32>, ConfigError> {
+pub(crate) fn domain_from_env() -> Result<Option<u32>, ConfigError> {
     match std::env::var("ROS_DOMAIN_ID") {
         Err(_) => Ok(None),
         Ok(v) if v.trim().is_empty() => Ok(None),

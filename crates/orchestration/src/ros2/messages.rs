@@ -10,10 +10,10 @@ use serde::{Deserialize, Serialize};
 use super::error::Ros2Error;
 
 /// CDR, little endian, no options: the encapsulation header of every ROS 2 payload.
-pub const CDR_LE: [u8; 4] = [0x00, 0x01, 0x00, 0x00];
+pub(crate) const CDR_LE: [u8; 4] = [0x00, 0x01, 0x00, 0x00];
 
 /// Serializes `msg` behind the encapsulation header.
-pub fn to_cdr<T: Serialize>(msg: &T, size_hint: usize) -> Result<Vec<u8>, Ros2Error> {
+pub(crate) fn to_cdr<T: Serialize>(msg: &T, size_hint: usize) -> Result<Vec<u8>, Ros2Error> {
     let mut buf = Vec::with_capacity(size_hint + CDR_LE.len());
     buf.extend_from_slice(&CDR_LE);
     let mut ser = hiroz_cdr::CdrSerializer::<hiroz_cdr::LittleEndian>::new(&mut buf);
@@ -23,7 +23,7 @@ pub fn to_cdr<T: Serialize>(msg: &T, size_hint: usize) -> Result<Vec<u8>, Ros2Er
 
 /// Deserializes a CDR payload (either byte order), refusing a bad header and trailing bytes
 /// beyond CDR's 4-byte padding.
-pub fn from_cdr<T: for<'de> Deserialize<'de>>(payload: &[u8]) -> Result<T, Ros2Error> {
+pub(crate) fn from_cdr<T: for<'de> Deserialize<'de>>(payload: &[u8]) -> Result<T, Ros2Error> {
     if payload.len() < 4 {
         return Err(Ros2Error::Cdr(format!("{} bytes is shorter than the CDR header", payload.len())));
     }
@@ -41,27 +41,27 @@ pub fn from_cdr<T: for<'de> Deserialize<'de>>(payload: &[u8]) -> Result<T, Ros2E
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-pub struct Time {
+pub(crate) struct Time {
     pub sec: i32,
     pub nanosec: u32,
 }
 
 impl Time {
     /// Nanoseconds (of simulation time) as a ROS time; beyond i32 seconds it saturates.
-    pub fn from_ns(ns: u64) -> Time {
+    pub(crate) fn from_ns(ns: u64) -> Time {
         let sec = (ns / 1_000_000_000).min(i32::MAX as u64) as i32;
         Time { sec, nanosec: (ns % 1_000_000_000) as u32 }
     }
 }
 
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
-pub struct Header {
+pub(crate) struct Header {
     pub stamp: Time,
     pub frame_id: String,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-pub struct ColorRgba {
+pub(crate) struct ColorRgba {
     pub r: f32,
     pub g: f32,
     pub b: f32,
@@ -69,35 +69,35 @@ pub struct ColorRgba {
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct MultiArrayDimension {
+pub(crate) struct MultiArrayDimension {
     pub label: String,
     pub size: u32,
     pub stride: u32,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct MultiArrayLayout {
+pub(crate) struct MultiArrayLayout {
     pub dim: Vec<MultiArrayDimension>,
     pub data_offset: u32,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Float64MultiArray {
+pub(crate) struct Float64MultiArray {
     pub layout: MultiArrayLayout,
     pub data: Vec<f64>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-pub struct Vector3 {
+pub(crate) struct Vector3 {
     pub x: f64,
     pub y: f64,
     pub z: f64,
 }
 
-pub type Point = Vector3;
+pub(crate) type Point = Vector3;
 
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct Quaternion {
+pub(crate) struct Quaternion {
     pub x: f64,
     pub y: f64,
     pub z: f64,
@@ -105,10 +105,10 @@ pub struct Quaternion {
 }
 
 impl Quaternion {
-    pub const IDENTITY: Quaternion = Quaternion { x: 0.0, y: 0.0, z: 0.0, w: 1.0 };
+    pub(crate) const IDENTITY: Quaternion = Quaternion { x: 0.0, y: 0.0, z: 0.0, w: 1.0 };
 
     /// From roll, pitch, yaw (rad), applied yaw, then pitch, then roll (ROS's convention).
-    pub fn from_rpy(roll: f64, pitch: f64, yaw: f64) -> Quaternion {
+    pub(crate) fn from_rpy(roll: f64, pitch: f64, yaw: f64) -> Quaternion {
         let (sr, cr) = (roll / 2.0).sin_cos();
         let (sp, cp) = (pitch / 2.0).sin_cos();
         let (sy, cy) = (yaw / 2.0).sin_cos();
@@ -122,14 +122,14 @@ impl Quaternion {
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct Pose {
+pub(crate) struct Pose {
     pub position: Point,
     pub orientation: Quaternion,
 }
 
 /// A 6x6 covariance, row major (serde has no arrays of 36).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Covariance(pub [f64; 36]);
+pub(crate) struct Covariance(pub [f64; 36]);
 
 impl Serialize for Covariance {
     fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
@@ -163,48 +163,48 @@ impl<'de> Deserialize<'de> for Covariance {
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct PoseWithCovariance {
+pub(crate) struct PoseWithCovariance {
     pub pose: Pose,
     pub covariance: Covariance,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct Twist {
+pub(crate) struct Twist {
     pub linear: Vector3,
     pub angular: Vector3,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct TwistWithCovariance {
+pub(crate) struct TwistWithCovariance {
     pub twist: Twist,
     pub covariance: Covariance,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct Transform {
+pub(crate) struct Transform {
     pub translation: Vector3,
     pub rotation: Quaternion,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct TransformStamped {
+pub(crate) struct TransformStamped {
     pub header: Header,
     pub child_frame_id: String,
     pub transform: Transform,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct TfMessage {
+pub(crate) struct TfMessage {
     pub transforms: Vec<TransformStamped>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
-pub struct Clock {
+pub(crate) struct Clock {
     pub clock: Time,
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Odometry {
+pub(crate) struct Odometry {
     pub header: Header,
     pub child_frame_id: String,
     pub pose: PoseWithCovariance,
@@ -213,7 +213,7 @@ pub struct Odometry {
 
 /// sensor_msgs/msg/Image with its pixels borrowed.
 #[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct Image<'a> {
+pub(crate) struct Image<'a> {
     pub header: Header,
     pub height: u32,
     pub width: u32,
@@ -226,7 +226,7 @@ pub struct Image<'a> {
 
 /// sensor_msgs/msg/CompressedImage with its bytes borrowed.
 #[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct CompressedImage<'a> {
+pub(crate) struct CompressedImage<'a> {
     pub header: Header,
     pub format: &'a str,
     #[serde(with = "serde_bytes")]
@@ -234,7 +234,7 @@ pub struct CompressedImage<'a> {
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-pub struct RegionOfInterest {
+pub(crate) struct RegionOfInterest {
     pub x_offset: u32,
     pub y_offset: u32,
     pub height: u32,
@@ -243,7 +243,7 @@ pub struct RegionOfInterest {
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct CameraInfo {
+pub(crate) struct CameraInfo {
     pub header: Header,
     pub height: u32,
     pub width: u32,
@@ -258,13 +258,13 @@ pub struct CameraInfo {
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-pub struct UvCoordinate {
+pub(crate) struct UvCoordinate {
     pub u: f32,
     pub v: f32,
 }
 
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
-pub struct MeshFile {
+pub(crate) struct MeshFile {
     pub filename: String,
     #[serde(with = "serde_bytes")]
     pub data: Vec<u8>,
@@ -272,7 +272,7 @@ pub struct MeshFile {
 
 /// sensor_msgs/msg/CompressedImage, owned (an empty texture inside a Marker).
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
-pub struct OwnedCompressedImage {
+pub(crate) struct OwnedCompressedImage {
     pub header: Header,
     pub format: String,
     #[serde(with = "serde_bytes")]
@@ -281,7 +281,7 @@ pub struct OwnedCompressedImage {
 
 /// visualization_msgs/msg/Marker.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Marker {
+pub(crate) struct Marker {
     pub header: Header,
     pub ns: String,
     pub id: i32,
@@ -307,12 +307,12 @@ pub struct Marker {
 }
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct MarkerArray {
+pub(crate) struct MarkerArray {
     pub markers: Vec<Marker>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
-pub struct AckermannDrive {
+pub(crate) struct AckermannDrive {
     pub steering_angle: f32,
     pub steering_angle_velocity: f32,
     pub speed: f32,
@@ -321,7 +321,7 @@ pub struct AckermannDrive {
 }
 
 #[derive(Debug, Clone, PartialEq, Default, Serialize, Deserialize)]
-pub struct AckermannDriveStamped {
+pub(crate) struct AckermannDriveStamped {
     pub header: Header,
     pub drive: AckermannDrive,
 }

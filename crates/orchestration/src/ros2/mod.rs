@@ -39,6 +39,8 @@ pub mod translate;
 
 pub use bag::Bag;
 pub use bridge::{Bridge, RouteStats};
+pub use command::CommandStats;
 pub use face::{FaceStats, RosFace};
 pub use mapping::{Ros2Config, Route};
+pub use outlet::Outlet;
 pub use schema::Distro;

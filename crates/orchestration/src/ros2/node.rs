@@ -15,7 +15,7 @@ use super::graph::{gid, Attachment, Durability, EndpointKind, NodeId, Reliabilit
 use super::mapping::Ros2Config;
 
 /// A node and the ids it hands its endpoints.
-pub struct RosNode {
+pub(crate) struct RosNode {
     session: zenoh::Session,
     pub id: NodeId,
     next_entity: AtomicU32,
@@ -24,13 +24,13 @@ pub struct RosNode {
 
 impl RosNode {
     /// Declares the node on `session` (its `NN` token).
-    pub async fn declare(session: &zenoh::Session, config: &Ros2Config) -> Result<RosNode> {
+    pub(crate) async fn declare(session: &zenoh::Session, config: &Ros2Config) -> Result<RosNode> {
         let id = config.node_id(session.zid().to_string());
         let token = declare_token(session, &id.node_token()).await?;
         Ok(RosNode { session: session.clone(), id, next_entity: AtomicU32::new(1), _token: token })
     }
 
-    pub fn session(&self) -> &zenoh::Session {
+    pub(crate) fn session(&self) -> &zenoh::Session {
         &self.session
     }
 
@@ -53,7 +53,7 @@ impl RosNode {
     }
 
     /// A publisher of `type_name` on `topic` (relative names resolve under the namespace).
-    pub async fn publisher(&self, topic: &str, type_name: &str, qos: RosQos) -> Result<RosPublisher> {
+    pub(crate) async fn publisher(&self, topic: &str, type_name: &str, qos: RosQos) -> Result<RosPublisher> {
         let (topic, key, token_key) = self.endpoint(EndpointKind::Publisher, topic, type_name, &qos)?;
         let congestion = match qos.reliability {
             Reliability::Reliable => CongestionControl::Block,
@@ -98,7 +98,12 @@ impl RosNode {
 
     /// The token and key of a subscription of `type_name` on `topic`; the caller subscribes
     /// to the key (with the handler it needs) and keeps the token as long.
-    pub async fn subscription(&self, topic: &str, type_name: &str, qos: RosQos) -> Result<(String, LivelinessToken)> {
+    pub(crate) async fn subscription(
+        &self,
+        topic: &str,
+        type_name: &str,
+        qos: RosQos,
+    ) -> Result<(String, LivelinessToken)> {
         let (_, key, token_key) = self.endpoint(EndpointKind::Subscription, topic, type_name, &qos)?;
         Ok((key, declare_token(&self.session, &token_key).await?))
     }
@@ -118,7 +123,7 @@ enum Inner {
 }
 
 /// One ROS 2 publisher: CDR payloads with rmw_zenoh's attachment.
-pub struct RosPublisher {
+pub(crate) struct RosPublisher {
     /// Whether a subscriber matches (None: always send). Declared before `inner` so that it
     /// drops first: a publisher's undeclaration also removes its matching listeners, and a
     /// listener dropped after that logs an error from Zenoh.
@@ -158,12 +163,12 @@ impl Watched {
 
 impl RosPublisher {
     /// Whether a message sent now reaches anyone (or is kept for late subscribers).
-    pub fn wanted(&self) -> bool {
+    pub(crate) fn wanted(&self) -> bool {
         self.watched.as_ref().is_none_or(|w| w.matching.load(Ordering::Relaxed))
     }
 
     /// Sends one CDR payload (with its encapsulation header).
-    pub fn put(&self, cdr: Vec<u8>) -> Result<()> {
+    pub(crate) fn put(&self, cdr: Vec<u8>) -> Result<()> {
         let attachment = Attachment {
             sequence_number: self.seq.fetch_add(1, Ordering::Relaxed),
             source_timestamp_ns: slipstream_contract::msg::wall_clock_ns() as i64,

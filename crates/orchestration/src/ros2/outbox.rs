@@ -11,11 +11,11 @@ use parking_lot::{Condvar, Mutex};
 use super::mapping::Route;
 
 /// Work for the sending thread: convert and put one message. Returns the bytes sent.
-pub type Job = Box<dyn FnOnce() -> crate::error::Result<usize> + Send>;
+pub(crate) type Job = Box<dyn FnOnce() -> crate::error::Result<usize> + Send>;
 
 /// What one route has done so far.
 #[derive(Debug, Default)]
-pub struct RouteCounters {
+pub(crate) struct RouteCounters {
     pub sent: AtomicU64,
     pub bytes: AtomicU64,
     /// Dropped in the hand-off (the sender fell behind).
@@ -30,7 +30,7 @@ struct Queue {
 }
 
 /// A bounded queue with one consumer thread.
-pub struct Outbox {
+pub(crate) struct Outbox {
     queue: Mutex<Queue>,
     ready: Condvar,
     capacity: usize,
@@ -39,7 +39,7 @@ pub struct Outbox {
 
 impl Outbox {
     /// An outbox of `capacity` jobs whose thread `name` runs them in order.
-    pub fn start(
+    pub(crate) fn start(
         name: &str,
         capacity: usize,
         counters: Arc<dyn Fn(Route) -> Arc<RouteCounters> + Send + Sync>,
@@ -56,7 +56,7 @@ impl Outbox {
     }
 
     /// Queues `job`; when full, the oldest job is dropped and counted against its route.
-    pub fn push(&self, route: Route, job: Job) {
+    pub(crate) fn push(&self, route: Route, job: Job) {
         let dropped = {
             let mut q = self.queue.lock();
             if q.closed {
@@ -73,7 +73,7 @@ impl Outbox {
     }
 
     /// Ends the thread once the queued jobs are done.
-    pub fn close(&self) {
+    pub(crate) fn close(&self) {
         self.queue.lock().closed = true;
         self.ready.notify_all();
     }

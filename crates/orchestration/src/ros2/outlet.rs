@@ -25,12 +25,12 @@ pub trait Outlet: Send + Sync {
 }
 
 /// The ROS graph: one publisher per route that is on.
-pub struct RosOutlet {
+pub(crate) struct RosOutlet {
     publishers: BTreeMap<Route, RosPublisher>,
 }
 
 impl RosOutlet {
-    pub async fn declare(node: &RosNode, config: &Ros2Config) -> Result<RosOutlet> {
+    pub(crate) async fn declare(node: &RosNode, config: &Ros2Config) -> Result<RosOutlet> {
         let mut publishers = BTreeMap::new();
         for (route, entry) in config.enabled().filter(|(r, _)| r.direction() == Direction::ToRos) {
             let p = node.publisher(&entry.name, &entry.type_name, entry.qos).await?;

@@ -27,7 +27,7 @@ pub enum Distro {
 
 impl Distro {
     /// The hash part of a key: RIHS01 from Iron on, a fixed word in Humble.
-    pub fn hash_of(self, type_name: &str) -> Result<String, Ros2Error> {
+    pub(crate) fn hash_of(self, type_name: &str) -> Result<String, Ros2Error> {
         match self {
             Distro::Humble => Ok("TypeHashNotSupported".to_string()),
             Distro::Jazzy => type_hash(type_name),

@@ -23,7 +23,7 @@ const DEFAULT_SET_SPEED_MPS: f64 = 25.0;
 const DEFAULT_TIME_GAP_S: f64 = 1.8;
 
 /// The status publisher, its clock and the driver's settings.
-pub struct StatusOut {
+pub(crate) struct StatusOut {
     status: Publisher<AccStatus>,
     settings: Arc<Mutex<(f64, f64)>>,
     tick: Mutex<Option<i64>>,
@@ -31,7 +31,7 @@ pub struct StatusOut {
 }
 
 impl StatusOut {
-    pub async fn start(bus: &Bus) -> Result<StatusOut> {
+    pub(crate) async fn start(bus: &Bus) -> Result<StatusOut> {
         let settings = Arc::new(Mutex::new((DEFAULT_SET_SPEED_MPS, DEFAULT_TIME_GAP_S)));
         let s = settings.clone();
         let ego = bus
@@ -43,7 +43,7 @@ impl StatusOut {
     }
 
     /// acc/status for a command sent at `stamp_sim_ns` asking `accel_mps2`, when its tick is due.
-    pub fn sent(&self, stamp_sim_ns: u64, accel_mps2: f64) {
+    pub(crate) fn sent(&self, stamp_sim_ns: u64, accel_mps2: f64) {
         let tick = (stamp_sim_ns as f64 / 1e9 * STATUS_HZ + 1e-9).floor() as i64;
         if self.tick.lock().replace(tick) == Some(tick) {
             return;

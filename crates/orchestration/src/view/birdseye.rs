@@ -12,7 +12,7 @@ use slipstream_model::vehicle::VehicleParams;
 /// What a body is to the loop.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "lowercase")]
-pub enum Role {
+pub(crate) enum Role {
     Ego,
     /// The true lead: the nearest vehicle ahead in the ego's lane.
     Lead,
@@ -21,7 +21,7 @@ pub enum Role {
 
 /// A vehicle's footprint.
 #[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct Footprint {
+pub(crate) struct Footprint {
     /// The ground truth's id (none for the ego).
     pub id: Option<u32>,
     pub role: Role,
@@ -35,13 +35,13 @@ pub struct Footprint {
 
 /// A line on the road.
 #[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct Line {
+pub(crate) struct Line {
     pub edge: bool,
     pub points: Vec<[f32; 2]>,
 }
 
 #[derive(Debug, Clone, Default, PartialEq, Serialize)]
-pub struct Birdseye {
+pub(crate) struct Birdseye {
     pub vehicles: Vec<Footprint>,
     pub road: Vec<Line>,
 }
@@ -92,7 +92,7 @@ impl EgoFrame {
 
 /// The scene around `ego`: its footprint first, then every vehicle the ground truth has, and
 /// the road's lines when known.
-pub fn birdseye(
+pub(crate) fn birdseye(
     ego: &VehicleState,
     ego_params: &VehicleParams,
     truth: Option<&GroundTruthObjects>,

@@ -28,7 +28,7 @@ pub(crate) enum Camera {
 }
 
 impl Camera {
-    pub fn parse(name: &str) -> Option<Camera> {
+    pub(crate) fn parse(name: &str) -> Option<Camera> {
         match name {
             "front" => Some(Camera::Front),
             "narrow" => Some(Camera::Narrow),
@@ -50,7 +50,7 @@ pub(crate) struct Kept {
 /// What a box on the image is.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
 #[serde(rename_all = "lowercase")]
-pub enum BoxKind {
+pub(crate) enum BoxKind {
     /// A vehicle the camera sees, as the simulator knows it.
     Truth,
     /// A track the detector reported.
@@ -61,7 +61,7 @@ pub enum BoxKind {
 
 /// A box in the front camera's pixels.
 #[derive(Debug, Clone, PartialEq, Serialize)]
-pub struct ImageBox {
+pub(crate) struct ImageBox {
     pub kind: BoxKind,
     /// Ground-truth id or track id.
     pub id: u32,
@@ -82,7 +82,7 @@ struct Pairing {
 /// The frame a snapshot names, with its boxes. Stamps go to the page as strings: nanoseconds
 /// since the epoch do not fit a JavaScript number exactly.
 #[derive(Debug, Clone, Serialize)]
-pub struct Shot {
+pub(crate) struct Shot {
     #[serde(serialize_with = "as_string")]
     pub stamp: u64,
     pub seq: u64,
@@ -95,7 +95,7 @@ pub struct Shot {
 
 /// The narrow camera's newest frame, when it has one.
 #[derive(Debug, Clone, Serialize)]
-pub struct Other {
+pub(crate) struct Other {
     #[serde(serialize_with = "as_string")]
     pub stamp: u64,
     pub seq: u64,
@@ -105,7 +105,7 @@ pub struct Other {
 
 /// What the page draws, from one lock of the board.
 #[derive(Debug, Clone, Serialize)]
-pub struct Snapshot {
+pub(crate) struct Snapshot {
     pub front: Option<Shot>,
     pub narrow: Option<Other>,
     /// The series after the time the page asked from.
@@ -125,7 +125,7 @@ pub(crate) struct Board {
 }
 
 impl Board {
-    pub fn on_frame(&mut self, camera: Camera, sample: FrameSample) {
+    pub(crate) fn on_frame(&mut self, camera: Camera, sample: FrameSample) {
         let (stamp, width, height) = {
             let f = sample.frame();
             (f.header.stamp_pub_ns, f.msg.width, f.msg.height)
@@ -139,7 +139,7 @@ impl Board {
         }
     }
 
-    pub fn on_truth(&mut self, truth: &GroundTruthObjects) {
+    pub(crate) fn on_truth(&mut self, truth: &GroundTruthObjects) {
         self.truth = truth
             .objects
             .iter()
@@ -156,7 +156,7 @@ impl Board {
             .collect();
     }
 
-    pub fn on_detections(&mut self, d: &Detections) {
+    pub(crate) fn on_detections(&mut self, d: &Detections) {
         let lead = self.lead_track;
         let boxes = d
             .detections
@@ -177,12 +177,12 @@ impl Board {
     }
 
     /// The track the ACC follows now (its status), marked on the detections that follow.
-    pub fn on_lead(&mut self, track: Option<u32>) {
+    pub(crate) fn on_lead(&mut self, track: Option<u32>) {
         self.lead_track = track;
     }
 
     /// A sample of the series; a sample earlier than the last starts a new run's.
-    pub fn on_series(&mut self, sample: AccSeries) {
+    pub(crate) fn on_series(&mut self, sample: AccSeries) {
         if self.series.back().is_some_and(|last| sample.t_s < last.t_s) {
             self.series.clear();
         }
@@ -193,12 +193,12 @@ impl Board {
         }
     }
 
-    pub fn on_scene(&mut self, scene: Birdseye) {
+    pub(crate) fn on_scene(&mut self, scene: Birdseye) {
         self.scene = Some(scene);
     }
 
     /// The frame of `camera` stamped `stamp`, or its newest when `stamp` is none.
-    pub fn frame(&self, camera: Camera, stamp: Option<u64>) -> Option<Kept> {
+    pub(crate) fn frame(&self, camera: Camera, stamp: Option<u64>) -> Option<Kept> {
         let kept = &self.frames[camera as usize];
         match stamp {
             Some(s) => kept.iter().rev().find(|k| k.stamp == s).cloned(),
@@ -208,7 +208,7 @@ impl Board {
 
     /// The page's next picture: the series after `since_s` (all kept when it is none or
     /// later than the newest, as after a restart).
-    pub fn snapshot(&self, since_s: Option<f64>) -> Snapshot {
+    pub(crate) fn snapshot(&self, since_s: Option<f64>) -> Snapshot {
         let newest = self.series.back().map_or(f64::NEG_INFINITY, |s| s.t_s);
         let from = since_s.filter(|s| *s <= newest).unwrap_or(f64::NEG_INFINITY);
         Snapshot {

@@ -26,17 +26,17 @@ pub(crate) struct Request {
 
 impl Request {
     /// The value of header `name` (case-insensitive).
-    pub fn header(&self, name: &str) -> Option<&str> {
+    pub(crate) fn header(&self, name: &str) -> Option<&str> {
         self.headers.iter().find(|(n, _)| n.eq_ignore_ascii_case(name)).and_then(|(_, v)| std::str::from_utf8(v).ok())
     }
 
     /// Whether the client asks to switch this connection to a WebSocket.
-    pub fn is_websocket(&self) -> bool {
+    pub(crate) fn is_websocket(&self) -> bool {
         self.header("upgrade").is_some_and(|u| u.trim().eq_ignore_ascii_case("websocket"))
     }
 
     /// The value of query parameter `name`, when given.
-    pub fn param(&self, name: &str) -> Option<&str> {
+    pub(crate) fn param(&self, name: &str) -> Option<&str> {
         self.query.iter().find(|(k, _)| k == name).map(|(_, v)| v.as_str())
     }
 }
@@ -198,7 +198,7 @@ pub(crate) enum Body {
 }
 
 impl Body {
-    pub fn as_slice(&self) -> &[u8] {
+    pub(crate) fn as_slice(&self) -> &[u8] {
         match self {
             Body::Static(b) => b,
             Body::Owned(b) => b,
@@ -207,16 +207,16 @@ impl Body {
 }
 
 impl Response {
-    pub fn new(status: u16, content_type: &'static str, body: Body) -> Response {
+    pub(crate) fn new(status: u16, content_type: &'static str, body: Body) -> Response {
         Response { status, content_type, headers: Vec::new(), body }
     }
 
     /// A short plain-text answer (errors).
-    pub fn text(status: u16, text: &str) -> Response {
+    pub(crate) fn text(status: u16, text: &str) -> Response {
         Response::new(status, "text/plain; charset=utf-8", Body::Owned(std::sync::Arc::new(text.into())))
     }
 
-    pub fn with_header(mut self, name: &'static str, value: String) -> Response {
+    pub(crate) fn with_header(mut self, name: &'static str, value: String) -> Response {
         self.headers.push((name, value));
         self
     }

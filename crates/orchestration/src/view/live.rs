@@ -37,17 +37,17 @@ pub const DEFAULT_PORT: u16 = 8765;
 /// Updates per second at most: the camera's default rate.
 pub const DEFAULT_RATE_HZ: f64 = 20.0;
 /// Messages queued per viewer before the server drops the oldest (about 0.3 s of updates).
-pub const BACKLOG: usize = 32;
+pub(crate) const BACKLOG: usize = 32;
 
 /// The viewer's topics (Foxglove's names, fixed whatever the bus's namespace and remapping:
 /// the layout in config/foxglove-layout.json refers to them).
-pub const TOPIC_CAMERA: &str = "/camera/front";
-pub const TOPIC_ANNOTATIONS: &str = "/camera/front/annotations";
-pub const TOPIC_CALIBRATION: &str = "/camera/front/calibration";
-pub const TOPIC_VEHICLES: &str = "/scene/vehicles";
-pub const TOPIC_ROAD: &str = "/scene/road";
-pub const TOPIC_TF: &str = "/tf";
-pub const TOPIC_ACC: &str = "/acc";
+pub(crate) const TOPIC_CAMERA: &str = "/camera/front";
+pub(crate) const TOPIC_ANNOTATIONS: &str = "/camera/front/annotations";
+pub(crate) const TOPIC_CALIBRATION: &str = "/camera/front/calibration";
+pub(crate) const TOPIC_VEHICLES: &str = "/scene/vehicles";
+pub(crate) const TOPIC_ROAD: &str = "/scene/road";
+pub(crate) const TOPIC_TF: &str = "/tf";
+pub(crate) const TOPIC_ACC: &str = "/acc";
 
 /// What the server serves and where.
 #[derive(Clone)]

@@ -15,7 +15,8 @@ pub(crate) mod page;
 pub(crate) mod scene;
 pub(crate) mod timeline;
 
-pub use copies::Copies;
+pub use copies::{Copies, ViewableCopy};
 pub use live::{LiveView, ViewOptions, ViewStats, DEFAULT_HOST, DEFAULT_PORT, DEFAULT_RATE_HZ};
 pub use page::PageStats;
+pub use scene::SceneContext;
 pub use timeline::{Position, Timeline};

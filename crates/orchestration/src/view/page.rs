@@ -48,18 +48,18 @@ pub(crate) struct Counters {
 
 impl Counters {
     /// A request this server does not take: counted, logged (rate-limited).
-    pub fn bad_request(&self, why: &str) {
+    pub(crate) fn bad_request(&self, why: &str) {
         self.bad.fetch_add(1, Ordering::Relaxed);
         self.log_limited(why);
     }
 
     /// A connection over the limit, closed at once.
-    pub fn refused(&self, why: &str) {
+    pub(crate) fn refused(&self, why: &str) {
         self.refused.fetch_add(1, Ordering::Relaxed);
         self.log_limited(why);
     }
 
-    pub fn websocket(&self) {
+    pub(crate) fn websocket(&self) {
         self.websockets.fetch_add(1, Ordering::Relaxed);
     }
 
@@ -124,7 +124,7 @@ pub(crate) struct Page {
 }
 
 impl Page {
-    pub fn new(
+    pub(crate) fn new(
         board: Arc<Mutex<Board>>,
         watcher: Watcher,
         latency: LatencyWatch,
@@ -141,7 +141,7 @@ impl Page {
         }
     }
 
-    pub fn stats(&self) -> PageStats {
+    pub(crate) fn stats(&self) -> PageStats {
         let c = &self.counters;
         PageStats {
             states: c.states.load(Ordering::Relaxed),
@@ -154,7 +154,7 @@ impl Page {
     }
 
     /// The answer to a plain HTTP request.
-    pub async fn answer(&self, req: &Request) -> Response {
+    pub(crate) async fn answer(&self, req: &Request) -> Response {
         if req.method != "GET" && req.method != "HEAD" {
             self.counters.bad_request("a method other than GET or HEAD");
             return Response::text(405, "the view answers GET and HEAD only");

@@ -21,10 +21,10 @@ use slipstream_model::vehicle::VehicleParams;
 use slipstream_sim::Scenario;
 
 /// The fixed frame of the scene (the simulator's world), and the ego's, which follows it.
-pub const FRAME_WORLD: &str = "world";
-pub const FRAME_EGO: &str = "ego";
+pub(crate) const FRAME_WORLD: &str = "world";
+pub(crate) const FRAME_EGO: &str = "ego";
 /// The camera image's frame.
-pub const FRAME_CAMERA: &str = "camera_front";
+pub(crate) const FRAME_CAMERA: &str = "camera_front";
 
 /// How much road the scene draws behind and ahead of the ego, and its sample spacing.
 const ROAD_BEHIND_M: f64 = 50.0;
@@ -44,12 +44,12 @@ const fn rgba(r: f64, g: f64, b: f64, a: f64) -> Color {
 }
 
 /// A wall-clock or simulated time in nanoseconds as Foxglove's timestamp.
-pub fn timestamp(ns: u64) -> Timestamp {
+pub(crate) fn timestamp(ns: u64) -> Timestamp {
     Timestamp::new((ns / 1_000_000_000) as u32, (ns % 1_000_000_000) as u32)
 }
 
 /// The camera frame in the schema Foxglove's Image panel shows.
-pub enum Image {
+pub(crate) enum Image {
     Raw(RawImage),
     Compressed(CompressedImage),
 }
@@ -66,7 +66,7 @@ impl AsRef<[u8]> for Payload {
 
 /// The frame as an image message, its pixels borrowed from the payload (LZ4 frames decoded);
 /// None for a frame that does not decode.
-pub fn image(sample: FrameSample) -> Option<Image> {
+pub(crate) fn image(sample: FrameSample) -> Option<Image> {
     let frame = sample.frame();
     let (stamp, f) = (frame.header.stamp_pub_ns, frame.msg);
     let offset = f.data.as_ptr() as usize - sample.bytes().as_ptr() as usize;
@@ -78,7 +78,13 @@ pub fn image(sample: FrameSample) -> Option<Image> {
 /// A frame of `width` x `height` in `encoding`, its pixels `data`, as an image message: raw
 /// pixels as RawImage, JPEG and PNG as CompressedImage, LZ4 decoded into a RawImage (Foxglove
 /// does not read LZ4). None when an LZ4 frame does not decode.
-pub fn frame_image(stamp_ns: u64, width: u32, height: u32, encoding: ImageEncoding, data: Bytes) -> Option<Image> {
+pub(crate) fn frame_image(
+    stamp_ns: u64,
+    width: u32,
+    height: u32,
+    encoding: ImageEncoding,
+    data: Bytes,
+) -> Option<Image> {
     let stamp = Some(timestamp(stamp_ns));
     let frame_id = FRAME_CAMERA.to_string();
     Some(match encoding {
@@ -112,7 +118,7 @@ pub fn frame_image(stamp_ns: u64, width: u32, height: u32, encoding: ImageEncodi
 
 /// The camera's intrinsics (a pinhole without distortion, as rendered), so the Image panel
 /// knows the image's geometry.
-pub fn calibration(stamp_ns: u64, info: &CameraInfo) -> CameraCalibration {
+pub(crate) fn calibration(stamp_ns: u64, info: &CameraInfo) -> CameraCalibration {
     let (fx, fy, cx, cy) = (info.fx_px, info.fy_px, info.cx_px, info.cy_px);
     CameraCalibration {
         timestamp: Some(timestamp(stamp_ns)),
@@ -146,7 +152,7 @@ fn box_outline(b: &slipstream_contract::msg::BoundingBox2d, color: Color, thickn
 /// Boxes on the camera image: ground truth thin and cyan, detections green with their track
 /// and distance, the ACC's lead (a track id in camera perception) thick and orange.
 /// Stamped with the frame the detections came from, so the Image panel pairs them.
-pub fn annotations(
+pub(crate) fn annotations(
     stamp_ns: u64,
     detections: Option<&Detections>,
     truth: Option<&GroundTruthObjects>,
@@ -208,7 +214,7 @@ fn entity(stamp_ns: u64, id: String, cube: CubePrimitive) -> SceneEntity {
 
 /// The vehicles: the ego blue, the true lead (nearest ahead in the ego's lane) orange, the
 /// others grey. Replaces the previous update whole, so vehicles that left are gone.
-pub fn vehicles(
+pub(crate) fn vehicles(
     stamp_ns: u64,
     ego: &VehicleState,
     ego_params: &VehicleParams,
@@ -238,7 +244,7 @@ pub fn vehicles(
 
 /// One line painted on the road, in world coordinates.
 #[derive(Debug, Clone, PartialEq)]
-pub struct RoadLine {
+pub(crate) struct RoadLine {
     /// The road's edge (solid white), or a lane divider (grey).
     pub edge: bool,
     pub points: Vec<Vector2<f64>>,
@@ -246,7 +252,7 @@ pub struct RoadLine {
 
 /// The road around `s_m` (the ego's distance along it): the lane boundaries as lines, the
 /// road's edges moving in over a lane's taper where it ends.
-pub fn road_lines(road: &Road, s_m: f64) -> Vec<RoadLine> {
+pub(crate) fn road_lines(road: &Road, s_m: f64) -> Vec<RoadLine> {
     let n = ((ROAD_BEHIND_M + ROAD_AHEAD_M) / ROAD_STEP_M) as usize + 1;
     let lanes = road.lanes();
     (0..=lanes)
@@ -272,7 +278,7 @@ pub fn road_lines(road: &Road, s_m: f64) -> Vec<RoadLine> {
 }
 
 /// The road's lines for the 3D panel: edges solid white, lane dividers grey.
-pub fn road_update(stamp_ns: u64, lines: &[RoadLine]) -> SceneUpdate {
+pub(crate) fn road_update(stamp_ns: u64, lines: &[RoadLine]) -> SceneUpdate {
     let lines = lines
         .iter()
         .map(|line| LinePrimitive {
@@ -333,7 +339,7 @@ impl SceneContext {
 
     /// The road's lines around the ego (none without a scenario); the ego's place along it is
     /// searched near the last one.
-    pub fn road_around(&mut self, ego: &VehicleState) -> Option<Vec<RoadLine>> {
+    pub(crate) fn road_around(&mut self, ego: &VehicleState) -> Option<Vec<RoadLine>> {
         let road = self.road.as_ref()?;
         let p = Vector2::new(ego.position_in_world_m[0], ego.position_in_world_m[1]);
         let s_m = match self.road_s {
@@ -346,7 +352,7 @@ impl SceneContext {
 }
 
 /// world -> ego: lets the 3D panel follow the ego (display frame `ego`).
-pub fn ego_frame(stamp_ns: u64, ego: &VehicleState) -> FrameTransforms {
+pub(crate) fn ego_frame(stamp_ns: u64, ego: &VehicleState) -> FrameTransforms {
     let p = ego.position_in_world_m;
     FrameTransforms {
         transforms: vec![FrameTransform {
@@ -362,7 +368,7 @@ pub fn ego_frame(stamp_ns: u64, ego: &VehicleState) -> FrameTransforms {
 /// One sample of the ACC's series for the Plot and Raw Message panels (JSON): what it sees,
 /// wants and does, on simulated time.
 #[derive(Debug, Clone, PartialEq, Serialize, schemars::JsonSchema)]
-pub struct AccSeries {
+pub(crate) struct AccSeries {
     pub t_s: f64,
     pub speed_mps: f64,
     pub accel_mps2: f64,
@@ -380,7 +386,7 @@ pub struct AccSeries {
 }
 
 /// The series sample from the latest state, status and ground truth.
-pub fn acc_series(
+pub(crate) fn acc_series(
     ego: &VehicleState,
     stamp_sim_ns: u64,
     ego_params: &VehicleParams,
@@ -408,7 +414,7 @@ pub fn acc_series(
 /// (draft 7, definitions inline: Foxglove resolves no references), with an optional field's
 /// type the value's own (`"number"`, not `["number", "null"]`): Foxglove's and Lichtblick's
 /// schema readers take one type per field, and an absent sample is null either way.
-pub fn acc_series_schema() -> Schema {
+pub(crate) fn acc_series_schema() -> Schema {
     let settings = schemars::generate::SchemaSettings::draft07().with(|s| s.inline_subschemas = true);
     let schema = settings.into_generator().into_root_schema_for::<AccSeries>();
     let mut json = serde_json::to_value(&schema).unwrap_or_default();
@@ -434,7 +440,7 @@ fn single_types(v: &mut serde_json::Value) {
 }
 
 /// The name of [`acc_series_schema`].
-pub const ACC_SERIES_SCHEMA: &str = "slipstream.view.AccSeries";
+pub(crate) const ACC_SERIES_SCHEMA: &str = "slipstream.view.AccSeries";
 
 #[cfg(test)]
 mod tests {

@@ -28,7 +28,7 @@ mod segment;
 
 use lamps::lit_pixels;
 pub(crate) use measure::part_of;
-pub use rejection::Rejection;
+pub(crate) use rejection::Rejection;
 use segment::{luma_noise, road_luma, smooth_rows};
 
 use super::geometry::CameraModel;

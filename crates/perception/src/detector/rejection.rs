@@ -6,7 +6,7 @@ use std::fmt;
 
 /// Why a component is no vehicle, with the measure that ruled it out.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Rejection {
+pub(crate) enum Rejection {
     /// It runs off the image's bottom: its contact line is not seen.
     OffTheBottom,
     /// Its contact line is above the horizon.

@@ -35,7 +35,7 @@ pub struct ObjectVisibility {
 /// Visibility over two cameras: the first camera's boxes (its image is the one boxes refer
 /// to), each vehicle's visible fraction the larger of the two (a vehicle 150 m ahead is a few
 /// pixels in a wide camera, whole in a narrow one).
-pub fn seen_by_either(mut first: Vec<ObjectVisibility>, second: &[ObjectVisibility]) -> Vec<ObjectVisibility> {
+pub(crate) fn seen_by_either(mut first: Vec<ObjectVisibility>, second: &[ObjectVisibility]) -> Vec<ObjectVisibility> {
     for v in &mut first {
         if let Some(o) = second.iter().find(|o| o.id == v.id) {
             v.visible_fraction = v.visible_fraction.max(o.visible_fraction);
@@ -149,7 +149,7 @@ impl Renderer {
 
     /// The narrow camera of a run with `seed`: seeded like [`Renderer::seeded`], with noise of
     /// its own.
-    pub fn seeded_narrow(info: &CameraInfo, noise_stddev: f64, seed: u64) -> (Renderer, SimRng) {
+    pub(crate) fn seeded_narrow(info: &CameraInfo, noise_stddev: f64, seed: u64) -> (Renderer, SimRng) {
         Renderer::seeded(info, noise_stddev, seed ^ 0x4E52_0000_0000)
     }
 

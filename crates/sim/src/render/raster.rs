@@ -7,18 +7,18 @@
 use nalgebra::Point3;
 
 /// Closest distance in front of the camera that is drawn.
-pub const NEAR_M: f64 = 0.1;
+pub(super) const NEAR_M: f64 = 0.1;
 
 /// A projected vertex: pixel coordinates and inverse depth.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct ScreenVertex {
+pub(super) struct ScreenVertex {
     pub u: f32,
     pub v: f32,
     pub inv_depth: f32,
 }
 
 /// The buffers one frame is drawn into.
-pub struct Target<'a> {
+pub(super) struct Target<'a> {
     pub width: usize,
     pub height: usize,
     pub rgb: &'a mut [u8],
@@ -31,7 +31,7 @@ pub struct Target<'a> {
 }
 
 /// How a triangle is drawn.
-pub enum Layer<'c> {
+pub(super) enum Layer<'c> {
     /// Painted over whatever is there (sky, grass, road, markings: all on the ground, drawn
     /// back to front before any object).
     Ground,
@@ -41,7 +41,7 @@ pub enum Layer<'c> {
 
 /// Pinhole projection of camera-frame points (x forward, y left, z up).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Projection {
+pub(super) struct Projection {
     pub fx: f64,
     pub fy: f64,
     pub cx: f64,
@@ -50,11 +50,11 @@ pub struct Projection {
 
 impl Projection {
     /// Pixel coordinates (u, v) of a point in front of the camera.
-    pub fn uv(&self, p: &Point3<f64>) -> (f64, f64) {
+    pub(super) fn uv(&self, p: &Point3<f64>) -> (f64, f64) {
         (self.cx - self.fx * p.y / p.x, self.cy - self.fy * p.z / p.x)
     }
 
-    pub fn project(&self, p: &Point3<f64>) -> ScreenVertex {
+    pub(super) fn project(&self, p: &Point3<f64>) -> ScreenVertex {
         let (u, v) = self.uv(p);
         ScreenVertex { u: u as f32, v: v as f32, inv_depth: (1.0 / p.x) as f32 }
     }
@@ -62,7 +62,7 @@ impl Projection {
 
 /// Clips a convex polygon (camera frame) to the half-space in front of the near plane.
 /// Returns the number of vertices written to `out` (0 when all is behind).
-pub fn clip_near(polygon: &[Point3<f64>], out: &mut [Point3<f64>; 8]) -> usize {
+pub(super) fn clip_near(polygon: &[Point3<f64>], out: &mut [Point3<f64>; 8]) -> usize {
     let mut n = 0;
     for i in 0..polygon.len() {
         let a = polygon[i];
@@ -83,7 +83,7 @@ pub fn clip_near(polygon: &[Point3<f64>], out: &mut [Point3<f64>; 8]) -> usize {
 
 /// Draws a convex polygon given in the camera frame: clipped, projected, fanned into triangles.
 /// Returns the projected vertices' bounding box (u_min, v_min, u_max, v_max), if any.
-pub fn fill_polygon(
+pub(super) fn fill_polygon(
     target: &mut Target<'_>,
     projection: &Projection,
     polygon: &[Point3<f64>],
@@ -160,7 +160,7 @@ fn span_at(poly: &[(f64, f64)], at: f64) -> Option<(f64, f64)> {
 /// covers. No depth, no owner: for ground detail (shadows, markings), whose edges then fall
 /// between pixel rows as a real camera's do, so a consumer can locate them to a fraction of
 /// a pixel. Returns the projected bounding box like `fill_polygon`.
-pub fn fill_polygon_smooth(
+pub(super) fn fill_polygon_smooth(
     target: &mut Target<'_>,
     projection: &Projection,
     polygon: &[Point3<f64>],
@@ -231,7 +231,12 @@ fn edge_u(a: &ScreenVertex, b: &ScreenVertex, v: f32) -> f32 {
 }
 
 /// Fills one triangle.
-pub fn fill_triangle(target: &mut Target<'_>, mut tri: [ScreenVertex; 3], color: [u8; 3], layer: &mut Layer<'_>) {
+pub(super) fn fill_triangle(
+    target: &mut Target<'_>,
+    mut tri: [ScreenVertex; 3],
+    color: [u8; 3],
+    layer: &mut Layer<'_>,
+) {
     tri.sort_by(|a, b| a.v.total_cmp(&b.v));
     let [p0, p1, p2] = tri;
     let (du1, dv1, dw1) = (p1.u - p0.u, p1.v - p0.v, p1.inv_depth - p0.inv_depth);

@@ -10,13 +10,13 @@ use slipstream_model::road::Road;
 const GRASS: [u8; 3] = [78, 118, 62];
 const ASPHALT: [u8; 3] = [84, 84, 88];
 const MARKING: [u8; 3] = [228, 228, 222];
-pub const SHADOW: [u8; 3] = [42, 42, 46];
+pub(super) const SHADOW: [u8; 3] = [42, 42, 46];
 const GLASS: [u8; 3] = [38, 50, 62];
 const TYRE: [u8; 3] = [22, 22, 22];
 const TAIL_LIGHT: [u8; 3] = [205, 25, 25];
 /// Tail lights when braking: they emit, so the sun's shading does not dim them (no lit body
 /// face reaches this red: its red is at most 255 x the light, with green and blue far below).
-pub const BRAKE_LIGHT: [u8; 3] = [255, 42, 30];
+pub(super) const BRAKE_LIGHT: [u8; 3] = [255, 42, 30];
 /// A rider's clothing.
 const RIDER: [u8; 3] = [48, 50, 58];
 const TRIM: [u8; 3] = [35, 35, 38];
@@ -30,7 +30,7 @@ const MARKING_WIDTH_M: f64 = 0.15;
 const SHOULDER_M: f64 = 0.6;
 
 /// A polygon on the ground, in the world frame.
-pub struct GroundQuad {
+pub(super) struct GroundQuad {
     pub corners: [Point3<f64>; 4],
     pub color: [u8; 3],
     /// Drawn with anti-aliased edges (detail a consumer locates to a fraction of a pixel:
@@ -40,7 +40,7 @@ pub struct GroundQuad {
 }
 
 /// Ground polygons in the world frame, in drawing order (back to front within each kind).
-pub fn ground(road: &Road, ego: &VehicleView) -> Vec<GroundQuad> {
+pub(super) fn ground(road: &Road, ego: &VehicleView) -> Vec<GroundQuad> {
     let mut quads = Vec::with_capacity(256);
     let (ex, ey) = (ego.rear_axle.x, ego.rear_axle.y);
     let g = 2000.0;
@@ -111,7 +111,7 @@ pub fn ground(road: &Road, ego: &VehicleView) -> Vec<GroundQuad> {
 }
 
 /// The dark patch under a vehicle, in the world frame.
-pub fn shadow(v: &VehicleView) -> [Point3<f64>; 4] {
+pub(super) fn shadow(v: &VehicleView) -> [Point3<f64>; 4] {
     let p = &v.params;
     let (x0, x1) = (-p.rear_overhang_m - 0.1, p.size_m[0] - p.rear_overhang_m + 0.1);
     let y = p.size_m[1] / 2.0 + 0.1;
@@ -122,7 +122,7 @@ pub fn shadow(v: &VehicleView) -> [Point3<f64>; 4] {
 
 /// One face of a vehicle's box, in its body frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Face {
+pub(super) struct Face {
     pub corners: [Point3<f64>; 4],
     pub normal: Vector3<f64>,
     pub color: [u8; 3],
@@ -132,12 +132,12 @@ pub struct Face {
 
 impl Face {
     /// Whether the face points toward a viewer at `eye` (body frame).
-    pub fn faces(&self, eye: &Point3<f64>) -> bool {
+    pub(super) fn faces(&self, eye: &Point3<f64>) -> bool {
         (eye - self.corners[0]).dot(&self.normal) > 0.0
     }
 
     /// The colour lit by a fixed sun, for a body turned by `yaw_rad`.
-    pub fn shaded(&self, yaw_rad: f64) -> [u8; 3] {
+    pub(super) fn shaded(&self, yaw_rad: f64) -> [u8; 3] {
         if self.emissive {
             return self.color;
         }
@@ -183,7 +183,7 @@ fn cuboid(out: &mut Vec<Face>, min: [f64; 3], max: [f64; 3], colors: BoxColors) 
 }
 
 /// A vehicle as boxes: body, cabin (glass sides), wheels, tail lights; a truck gets a cargo box.
-pub fn vehicle_faces(v: &VehicleView) -> Vec<Face> {
+pub(super) fn vehicle_faces(v: &VehicleView) -> Vec<Face> {
     if v.class == ObjectClass::Motorcycle {
         return motorcycle_faces(v);
     }

@@ -42,7 +42,12 @@ pub struct StringFigures {
 
 /// Figures of `leader` and `followers` (in their order along the string) from `from_s`, the
 /// simulated time the leader's disturbance begins; speeds before it set each car's reference.
-pub fn string_figures(time_gap_s: f64, leader: &CarSeries, followers: &[CarSeries], from_s: f64) -> StringFigures {
+pub(crate) fn string_figures(
+    time_gap_s: f64,
+    leader: &CarSeries,
+    followers: &[CarSeries],
+    from_s: f64,
+) -> StringFigures {
     let mut cars: Vec<CarFigures> = Vec::with_capacity(followers.len() + 1);
     for series in std::iter::once(leader).chain(followers) {
         let (error, decel) = peaks(series, from_s);

@@ -32,7 +32,7 @@ pub enum Links {
 impl Links {
     /// `--router`: absent, direct; given with no value (`""`), a `slipstream router` of our own
     /// on a free loopback port, its log in `log`; given an endpoint, a router already there.
-    pub fn from_arg(router: Option<&str>, log: &std::path::Path) -> Result<Links> {
+    pub(crate) fn from_arg(router: Option<&str>, log: &std::path::Path) -> Result<Links> {
         match router {
             None => Ok(Links::Direct),
             Some("") => start_router(log),
@@ -63,7 +63,7 @@ impl Links {
     }
 
     /// A node's connection flags: dialling the observer at `here` when direct.
-    pub fn node_args(&self, here: &str) -> Vec<String> {
+    pub(crate) fn node_args(&self, here: &str) -> Vec<String> {
         let args: Vec<&str> = match self.router() {
             None => vec!["-e", here, "-l", "tcp/127.0.0.1:0", "--no-multicast-scouting"],
             Some(r) => vec!["-m", "client", "-e", r, "--no-multicast-scouting", "--cfg", NO_SHARED_MEMORY],

@@ -41,7 +41,7 @@ pub struct PlatoonRun {
 }
 
 /// A platoon scenario as JSON: a built-in one by name, or a file.
-pub fn scenario_value(name_or_path: &str) -> Result<Value> {
+pub(crate) fn scenario_value(name_or_path: &str) -> Result<Value> {
     let text = match SEVERAL_EGOS.iter().find(|(n, _)| *n == name_or_path) {
         Some((_, text)) => text.to_string(),
         None => std::fs::read_to_string(name_or_path).map_err(|e| {
@@ -59,7 +59,7 @@ pub fn scenario_value(name_or_path: &str) -> Result<Value> {
 /// apart bumper to bumper, each ego's controller set to `time_gap_s` (and its duration
 /// `duration_s` when given): every run starts in the equilibrium of the gap it measures, so the
 /// only disturbance is the leader's. Returns the scenario and its text for slipstream-sim.
-pub fn at_time_gap(
+pub(crate) fn at_time_gap(
     mut value: Value,
     time_gap_s: f64,
     standstill_m: f64,

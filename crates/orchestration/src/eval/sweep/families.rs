@@ -10,8 +10,8 @@ use serde_json::{json, Value};
 use super::warrant::{needed_decel, seen_from_m, warranted_for, warranted_for_braking_lead, Target, AVOIDABLE_MPS2};
 use slipstream_contract::msg::ObjectClass;
 use slipstream_model::vehicle::VehicleParams;
-use slipstream_sim::rng::SimRng;
 use slipstream_sim::scenario::Warranted;
+use slipstream_sim::SimRng;
 
 /// A family of generated scenarios.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord, clap::ValueEnum, Serialize, serde::Deserialize)]

@@ -11,7 +11,7 @@ pub mod families;
 pub mod plot;
 pub mod rates;
 pub mod shard;
-pub mod warrant;
+pub(crate) mod warrant;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;

@@ -94,7 +94,7 @@ impl Rates {
 
     /// The bar: no collision, no unwarranted emergency, phantom braking at most
     /// one event per 1,000 km, and every run finished.
-    pub fn meets_the_bar(&self) -> bool {
+    pub(crate) fn meets_the_bar(&self) -> bool {
         self.errors == 0
             && self.collisions == 0
             && self.unwarranted_emergencies == 0
@@ -113,7 +113,7 @@ fn median(v: &mut [f64]) -> Option<f64> {
 
 /// How bad a run was, for naming the worst: a collision outweighs any number of unwarranted
 /// emergencies, which outweigh phantom braking, which outweighs comfort; 0 for a clean run.
-pub fn badness(run: &SweepRun) -> f64 {
+pub(crate) fn badness(run: &SweepRun) -> f64 {
     let Some(m) = run.result.as_ref().map(|r| &r.metrics) else {
         return 1e9;
     };
@@ -125,7 +125,7 @@ pub fn badness(run: &SweepRun) -> f64 {
 }
 
 /// What went wrong in a run, in a few words.
-pub fn faults_of(run: &SweepRun) -> String {
+pub(crate) fn faults_of(run: &SweepRun) -> String {
     let Some(r) = &run.result else {
         return format!("did not finish: {}", run.error.as_deref().unwrap_or("?"));
     };

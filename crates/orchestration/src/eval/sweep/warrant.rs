@@ -12,21 +12,21 @@ use slipstream_sim::scenario::Warranted;
 /// confirmation, the lead estimate settling, the jerk-limited ramp (2.2 m/s3 to 3 m/s2 is
 /// 1.4 s; half of it counts as dead time). Taken generously, so that what is declared
 /// `comfort` leaves the ACC room.
-pub const REACTION_S: f64 = 0.8;
+pub(crate) const REACTION_S: f64 = 0.8;
 /// The gap kept when stopped behind a target in these calculations (below the ACC's standstill
 /// distance of 5 m: the judge's own margin).
-pub const STOP_MARGIN_M: f64 = 3.0;
+pub(crate) const STOP_MARGIN_M: f64 = 3.0;
 /// A share of the comfort limit: needs up to this are declared `comfort`; beyond, an
 /// emergency may be needed (the borderline is given to the ACC).
-pub const COMFORT_SHARE: f64 = 0.8;
+pub(crate) const COMFORT_SHARE: f64 = 0.8;
 /// The most deceleration a scenario may need and still be generated: two thirds of the
 /// vehicle's 9 m/s2 brakes. Beyond it a collision is the physics', not the ACC's.
-pub const AVOIDABLE_MPS2: f64 = 6.0;
+pub(crate) const AVOIDABLE_MPS2: f64 = 6.0;
 
 /// Where the camera perception is taken to see a vehicle in the ego's lane, by class: below
 /// what the detector's unit tests find through the narrow camera (cars to 150 m, trucks to
 /// 200 m; docs/perception.md), a narrow motorcycle nearer.
-pub fn seen_from_m(class: ObjectClass) -> f64 {
+pub(crate) fn seen_from_m(class: ObjectClass) -> f64 {
     match class {
         ObjectClass::Truck => 160.0,
         ObjectClass::Motorcycle => 90.0,
@@ -37,7 +37,7 @@ pub fn seen_from_m(class: ObjectClass) -> f64 {
 /// A vehicle in the ego's lane when it is first seen: its gap (bumper to bumper), speed, and
 /// deceleration down to `floor_mps` (0: to a stop).
 #[derive(Debug, Clone, Copy)]
-pub struct Target {
+pub(crate) struct Target {
     pub gap_m: f64,
     pub speed_mps: f64,
     pub decel_mps2: f64,
@@ -47,7 +47,7 @@ pub struct Target {
 /// The constant deceleration the ego at `ego_mps` needs, starting after [`REACTION_S`], to
 /// stay [`STOP_MARGIN_M`] behind `target` (0 when it never closes in). Found by bisection over
 /// a kinematic rollout, so braking targets, slow targets and standing ones are one case.
-pub fn needed_decel(ego_mps: f64, target: Target) -> f64 {
+pub(crate) fn needed_decel(ego_mps: f64, target: Target) -> f64 {
     if !keeps_clear(ego_mps, target, 30.0) {
         return f64::INFINITY;
     }
@@ -103,7 +103,7 @@ fn rollout(ego_mps: f64, t: Target, decel: impl Fn(f64, f64) -> f64) -> bool {
 /// decision to brake harder had to come while the lead was still braking. Otherwise (and for
 /// braking that ends within the reaction, known to have ended before anyone answers it), what
 /// its whole braking needs ([`needed_decel`]) decides.
-pub fn warranted_for_braking_lead(ego_mps: f64, lead: Target) -> Warranted {
+pub(crate) fn warranted_for_braking_lead(ego_mps: f64, lead: Target) -> Warranted {
     let hindsight = warranted_for(needed_decel(ego_mps, lead), ego_mps);
     if lead.decel_mps2 <= 0.0 || lead.speed_mps <= lead.floor_mps {
         return hindsight;
@@ -133,7 +133,7 @@ fn waiting_keeps_clear(ego_mps: f64, t: Target, wait_s: f64) -> bool {
 
 /// The most braking a need declares: within [`COMFORT_SHARE`] of the comfort limit at the
 /// ego's speed, comfort; beyond, an emergency may be needed.
-pub fn warranted_for(need_mps2: f64, ego_mps: f64) -> Warranted {
+pub(crate) fn warranted_for(need_mps2: f64, ego_mps: f64) -> Warranted {
     let limit = comfort_decel_at(ego_mps, aims::MAX_DECEL_MPS2, aims::MAX_DECEL_LOW_SPEED_MPS2);
     if need_mps2 <= COMFORT_SHARE * limit {
         Warranted::Comfort
@@ -143,7 +143,7 @@ pub fn warranted_for(need_mps2: f64, ego_mps: f64) -> Warranted {
 }
 
 /// The more of two declarations.
-pub fn most(a: Warranted, b: Warranted) -> Warranted {
+pub(crate) fn most(a: Warranted, b: Warranted) -> Warranted {
     let rank = |w: Warranted| match w {
         Warranted::None => 0,
         Warranted::Comfort => 1,
