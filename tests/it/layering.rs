@@ -44,6 +44,20 @@ fn violation(from: &str, to: &str, dev: bool) -> Option<String> {
     None
 }
 
+/// `cargo metadata` of the workspace (its own packages, no dependencies), read once.
+fn metadata() -> &'static serde_json::Value {
+    static META: std::sync::OnceLock<serde_json::Value> = std::sync::OnceLock::new();
+    META.get_or_init(|| {
+        let out = std::process::Command::new(env!("CARGO"))
+            .args(["metadata", "--offline", "--no-deps", "--format-version", "1"])
+            .current_dir(env!("CARGO_MANIFEST_DIR"))
+            .output()
+            .expect("run cargo metadata");
+        assert!(out.status.success(), "cargo metadata: {}", String::from_utf8_lossy(&out.stderr));
+        serde_json::from_slice(&out.stdout).unwrap()
+    })
+}
+
 /// Each workspace crate and its dependencies on other workspace crates (name, is-dev), read
 /// once for every test here.
 fn workspace_edges() -> &'static BTreeMap<String, Vec<(String, bool)>> {
@@ -52,14 +66,7 @@ fn workspace_edges() -> &'static BTreeMap<String, Vec<(String, bool)>> {
 }
 
 fn read_workspace_edges() -> BTreeMap<String, Vec<(String, bool)>> {
-    let out = std::process::Command::new(env!("CARGO"))
-        .args(["metadata", "--offline", "--no-deps", "--format-version", "1"])
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .expect("run cargo metadata");
-    assert!(out.status.success(), "cargo metadata: {}", String::from_utf8_lossy(&out.stderr));
-    let meta: serde_json::Value = serde_json::from_slice(&out.stdout).unwrap();
-    let packages = meta["packages"].as_array().unwrap();
+    let packages = metadata()["packages"].as_array().unwrap();
     let ours: Vec<&str> = packages.iter().filter_map(|p| p["name"].as_str()).collect();
     let mut edges = BTreeMap::new();
     for p in packages {
@@ -72,6 +79,28 @@ fn read_workspace_edges() -> BTreeMap<String, Vec<(String, bool)>> {
         edges.insert(p["name"].as_str().unwrap().to_string(), inner);
     }
     edges
+}
+
+/// Whether a manifest's text has a `[lints]` table saying `workspace = true`.
+fn takes_workspace_lints(manifest: &str) -> bool {
+    let table = manifest.split("\n[").find(|t| t.trim_start_matches('[').starts_with("lints]"));
+    table.is_some_and(|t| t.lines().skip(1).any(|l| l.replace(' ', "") == "workspace=true"))
+}
+
+#[test]
+fn every_crate_keeps_the_workspaces_public_surface_lints() {
+    let root = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/Cargo.toml")).unwrap();
+    for lint in ["unreachable_pub", "unnameable_types"] {
+        assert!(root.lines().any(|l| l.replace(' ', "") == format!("{lint}=\"deny\"")), "{lint} is not denied");
+    }
+    let packages = metadata()["packages"].as_array().unwrap();
+    assert!(packages.len() >= 8);
+    for p in packages {
+        let manifest = std::fs::read_to_string(p["manifest_path"].as_str().unwrap()).unwrap();
+        assert!(takes_workspace_lints(&manifest), "{} has no `[lints] workspace = true`", p["name"]);
+    }
+    assert!(!takes_workspace_lints("[package]\nname = \"x\"\n\n[dependencies]\nworkspace = true\n"));
+    assert!(takes_workspace_lints("[package]\nname = \"x\"\n\n[lints]\nworkspace = true\n"));
 }
 
 #[test]

@@ -409,3 +409,69 @@ fn docs_architecture_lists_every_source_file_and_no_other() {
     assert!(sources.len() > 100, "only {} sources read", sources.len());
     assert!(problems.is_empty(), "{}", problems.join("\n"));
 }
+
+/// The names a crate root exports: its `pub mod`s, `pub use`s (the name after `as` where
+/// renamed) and items defined there.
+fn exported_names(lib_rs: &str) -> Vec<String> {
+    let code = String::from_utf8(without_test_modules(&code_only(lib_rs))).unwrap();
+    let ident = |s: &str| s.chars().take_while(|c| c.is_alphanumeric() || *c == '_').collect::<String>();
+    let mut names = Vec::new();
+    let mut lines = code.lines();
+    while let Some(line) = lines.next() {
+        if let Some(rest) = line.strip_prefix("pub use ") {
+            let mut stmt = rest.to_string();
+            while !stmt.contains(';') {
+                stmt.push_str(lines.next().unwrap_or(";"));
+            }
+            let stmt = stmt.split(';').next().unwrap();
+            let list = stmt.rsplit_once("::{").map_or(stmt.rsplit("::").next().unwrap_or(stmt), |(_, l)| l);
+            for part in list.trim_end_matches('}').split(',').map(str::trim).filter(|p| !p.is_empty()) {
+                let name = part.rsplit(" as ").next().unwrap().rsplit("::").next().unwrap().trim();
+                if name != "self" {
+                    names.push(name.to_string());
+                }
+            }
+        } else if let Some(item) = ["pub mod ", "pub fn ", "pub struct ", "pub enum ", "pub trait ", "pub const "]
+            .iter()
+            .find_map(|k| line.strip_prefix(k))
+        {
+            names.push(ident(item));
+        }
+    }
+    names
+}
+
+#[test]
+fn the_export_reader_reads_uses_renames_and_items() {
+    let lib = "pub mod a;\nmod b;\npub use b::{C, D as E};\npub use f::G;\npub use h as i;\n\
+               pub(crate) use j::K;\npub struct L {\n}\npub fn m() {}\n#[cfg(test)]\nmod tests {}\n";
+    assert_eq!(exported_names(lib), ["a", "C", "E", "G", "i", "L", "m"]);
+}
+
+#[test]
+fn docs_architecture_names_what_each_crate_root_exports() {
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let doc = std::fs::read_to_string(repo.join("docs/architecture.md")).unwrap();
+    let section =
+        doc.split("## Public surface").nth(1).expect("a Public surface section").split("\n## ").next().unwrap();
+    let mut roots: Vec<(String, std::path::PathBuf)> = std::fs::read_dir(repo.join("crates"))
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .map(|p| (p.file_name().unwrap().to_string_lossy().into_owned(), p.join("src/lib.rs")))
+        .collect();
+    roots.push(("the root".to_string(), repo.join("src/lib.rs")));
+    let mut problems = Vec::new();
+    for (name, lib) in &roots {
+        let Some(row) = section.lines().find(|l| l.starts_with(&format!("| {name} "))) else {
+            problems.push(format!("no row for crate {name}"));
+            continue;
+        };
+        let exported = exported_names(&std::fs::read_to_string(lib).unwrap());
+        assert!(exported.len() >= 2, "{name}: only {exported:?} read from {}", lib.display());
+        for e in exported.iter().filter(|e| !row.contains(&format!("`{e}`"))) {
+            problems.push(format!("{name} exports `{e}`: name it in its row of the Public surface section"));
+        }
+    }
+    assert!(roots.len() >= 8, "{roots:?}");
+    assert!(problems.is_empty(), "{}", problems.join("\n"));
+}
