@@ -1,5 +1,6 @@
 //! The bench's child processes: the two peers of a case (`slipstream bench-peer`, or the
-//! seed's Python script), a `slipstream router` between them, and what /proc says of them.
+//! seed's Python script), directly or through a router (`launch::LocalRouter`, which growth.rs
+//! starts), and what /proc says of them.
 
 use std::io::{BufRead, BufReader, Write};
 use std::process::{Child, Command, Stdio};
@@ -182,42 +183,6 @@ pub(super) fn run_groups(specs: &[CaseSpec], router: Option<&str>) -> Result<Vec
         out.push((s, reports));
     }
     Ok(out)
-}
-
-/// A `slipstream router` on a free loopback port, stopped when dropped; its endpoint.
-pub(super) struct RouterProcess {
-    process: Peer,
-    pub(super) endpoint: String,
-}
-
-impl RouterProcess {
-    pub(super) fn start() -> Result<RouterProcess> {
-        let mut cmd = Command::new(std::env::current_exe().context("find the slipstream binary")?);
-        cmd.args(["router", "-l", "tcp/127.0.0.1:0", "--no-multicast-scouting"]);
-        // The router's own thread layout (`slipstream router` as users run it).
-        cmd.env_remove("ZENOH_RUNTIME");
-        cmd.env("RUST_LOG", child_log_filter());
-        cmd.stdin(Stdio::null()).stdout(Stdio::piped()).stderr(Stdio::inherit());
-        let mut process = Peer(cmd.spawn().context("start slipstream router")?);
-        let mut out = BufReader::new(process.0.stdout.take().context("router stdout")?);
-        let line = read_tagged(&mut out, "router", Duration::from_secs(20))?;
-        let endpoint = line
-            .split_once("listening on ")
-            .and_then(|(_, eps)| eps.split(", ").find(|e| e.starts_with("tcp/")))
-            .with_context(|| format!("the router printed no tcp endpoint: {line}"))?
-            .to_string();
-        Ok(RouterProcess { process, endpoint })
-    }
-
-    /// CPU seconds (user + system) the router has used so far.
-    pub(super) fn cpu_s(&self) -> f64 {
-        process_cpu_s(self.process.0.id()).unwrap_or(0.0)
-    }
-
-    /// The most memory the router has held so far, MiB.
-    pub(super) fn peak_rss_mib(&self) -> Option<f64> {
-        process_peak_rss_mib(self.process.0.id())
-    }
 }
 
 /// The peak resident memory of a running process (VmHWM in /proc/PID/status), MiB.

@@ -9,11 +9,15 @@
 //!   router; messages/s forwarded, latency each way, what the router adds against the same
 //!   pair connected directly, and the router's CPU.
 
+use std::process::Stdio;
+
 use anyhow::{Context, Result};
 use serde::Serialize;
 
+use super::child::{child_log_filter, process_cpu_s, process_peak_rss_mib};
 use super::spec::{CaseSpec, RecvReport, SendReport, Transport};
-use super::{median, run_groups, RouterProcess};
+use super::{median, run_groups};
+use slipstream_orchestration::launch::LocalRouter;
 
 /// The frame size of the fan-out suite (the default camera's).
 const FANOUT_FRAME: (u32, u32) = (640, 480);
@@ -121,14 +125,15 @@ type Run = (Vec<(SendReport, Vec<RecvReport>)>, Option<RouterUse>);
 
 fn run_once(specs: &[CaseSpec]) -> Result<Run> {
     if specs.iter().any(|s| s.via_router) {
-        let router = RouterProcess::start()?;
-        let cpu_before = router.cpu_s();
-        let out = run_groups(specs, Some(&router.endpoint))?;
+        let router = LocalRouter::start(&[], &[("RUST_LOG", child_log_filter())], Stdio::inherit())?;
+        let cpu_s = || process_cpu_s(router.pid()).unwrap_or(0.0);
+        let cpu_before = cpu_s();
+        let out = run_groups(specs, Some(router.endpoint()))?;
         // The router's CPU over the senders' time (side by side, so the longest, session
         // opening included): what forwarding and connecting took together.
         let busy_s = out.iter().map(|(s, _)| s.elapsed_s).fold(0.0, f64::max);
-        let cpu = (router.cpu_s() - cpu_before) / busy_s.max(1e-3);
-        Ok((out, Some(RouterUse { cpu_percent: cpu * 100.0, peak_rss_mib: router.peak_rss_mib() })))
+        let cpu = (cpu_s() - cpu_before) / busy_s.max(1e-3);
+        Ok((out, Some(RouterUse { cpu_percent: cpu * 100.0, peak_rss_mib: process_peak_rss_mib(router.pid()) })))
     } else {
         Ok((run_groups(specs, None)?, None))
     }

@@ -32,7 +32,7 @@ use anyhow::{Context, Result};
 
 pub use cases::{CaseId, FrameSize, Path, Phase, Table};
 pub(crate) use child::{process_cpu_s, process_peak_rss_mib};
-use child::{python_available, remove_seed_script, run_case, run_groups, RouterProcess, PYTHON};
+use child::{python_available, remove_seed_script, run_case, run_groups, PYTHON};
 use figures::Latencies;
 pub use figures::{median, Row};
 pub use fleet::{FleetRow, RouterLoad};

@@ -126,6 +126,11 @@ impl Child {
         self.child.id()
     }
 
+    /// The process's standard output, when it was piped and is not taken yet.
+    pub fn take_stdout(&mut self) -> Option<std::process::ChildStdout> {
+        self.child.stdout.take()
+    }
+
     /// The exit status once the process has ended (reaped), else None.
     pub fn exited(&mut self) -> Option<ExitStatus> {
         if self.status.is_none() {

@@ -14,6 +14,7 @@
 //! - [`own_args`]: `--loop`, `--controller`, `--detector`, merged into the loop's own nodes.
 //! - [`loop_file`]: `--loop FILE`, every role's node (ours or any command) and how it runs.
 //! - [`ready`]: when a node counts as ready (its token, or a first sample).
+//! - `router`: a `slipstream router` of a run's own on loopback ([`LocalRouter`]).
 //! - [`supervise`]: a node process under its restart policy.
 //! - [`external`]: a simulator started elsewhere (`up --sim external`), known by its messages:
 //!   there once vehicle/speed arrives, over when it ends the scenario, runs the time asked
@@ -38,6 +39,7 @@ pub(crate) mod namespace;
 pub(crate) mod nodes;
 pub(crate) mod own_args;
 pub(crate) mod ready;
+mod router;
 pub(crate) mod supervise;
 
 pub use child::{free_ports, sibling_binary, Child};
@@ -48,6 +50,7 @@ pub use nodes::{
     Network, NodeEnd, NodeInput, Progress,
 };
 pub use own_args::OwnNodeArgs;
+pub use router::LocalRouter;
 
 /// How long the controllers may take to appear on the bus.
 pub(crate) const NODE_START_TIMEOUT: Duration = Duration::from_secs(30);

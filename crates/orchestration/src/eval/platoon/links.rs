@@ -5,20 +5,13 @@
 //! not depend on the links; the wall time a run takes does, and the router path is where a
 //! deployment's routers show up first (a queue, a filter, a router of another build).
 
-use std::net::{SocketAddr, TcpStream};
-use std::process::{Command, Stdio};
-use std::time::{Duration, Instant};
-
 use crate::error::{Error, Result};
-use crate::launch::child::{free_ports, sibling_binary, Child};
+use crate::launch::LocalRouter;
 use slipstream_contract::config::{ConnectArgs, ModeArg};
 
 /// Zenoh's setting that keeps large payloads off the router: with shared memory on, processes
 /// on one machine would hand each other references and the router would carry only those.
 const NO_SHARED_MEMORY: &str = "transport/shared_memory/enabled:false";
-
-/// How long a router started here may take to listen.
-const ROUTER_START: Duration = Duration::from_secs(20);
 
 /// The links of every run of one measurement.
 pub enum Links {
@@ -26,7 +19,7 @@ pub enum Links {
     Direct,
     /// Every node (the observer too) a client of the router at `endpoint`; `started` is the
     /// router this measurement runs itself, stopped with it.
-    Router { endpoint: String, started: Option<Child> },
+    Router { endpoint: String, started: Option<LocalRouter> },
 }
 
 impl Links {
@@ -72,28 +65,13 @@ impl Links {
     }
 }
 
-/// Starts `slipstream router` on a free loopback port and waits until it accepts connections
-/// (a client opened before that would fail at once).
+/// Starts `slipstream router` on a free loopback port, its log in `log`, and waits until it
+/// listens (a client opened before that would fail at once).
 fn start_router(log: &std::path::Path) -> Result<Links> {
-    let [port] = free_ports::<1>()?;
-    let endpoint = format!("tcp/127.0.0.1:{port}");
-    let file =
-        std::fs::File::create(log).map_err(|source| Error::File { action: "create", path: log.into(), source })?;
-    let mut cmd = Command::new(sibling_binary("slipstream")?);
-    cmd.args(["router", "-l", &endpoint, "--no-multicast-scouting", "--cfg", NO_SHARED_MEMORY]);
-    cmd.stdout(Stdio::null()).stderr(file);
-    let mut router = Child::spawn("slipstream router", &mut cmd)?;
-    let addr = SocketAddr::from(([127, 0, 0, 1], port));
-    let deadline = Instant::now() + ROUTER_START;
-    while TcpStream::connect_timeout(&addr, Duration::from_millis(200)).is_err() {
-        if router.exited().is_some() || Instant::now() > deadline {
-            let problem = format!("did not listen on {endpoint} within {ROUTER_START:?} (log {})", log.display());
-            return Err(Error::Node { node: "slipstream router".into(), problem });
-        }
-        std::thread::sleep(Duration::from_millis(50));
-    }
-    tracing::info!(%endpoint, "router up: every node of the runs goes through it");
-    Ok(Links::Router { endpoint, started: Some(router) })
+    let file = std::fs::File::create(log).map_err(Error::file("create", log))?;
+    let router = LocalRouter::start(&["--cfg", NO_SHARED_MEMORY], &[], file.into())?;
+    tracing::info!(endpoint = router.endpoint(), "every node of the runs goes through the router");
+    Ok(Links::Router { endpoint: router.endpoint().to_string(), started: Some(router) })
 }
 
 #[cfg(test)]
