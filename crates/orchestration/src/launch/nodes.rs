@@ -17,7 +17,6 @@
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, ExitStatus};
-use std::time::Instant;
 
 use crate::error::{Error, Result};
 use serde::Serialize;
@@ -25,7 +24,7 @@ use serde::Serialize;
 use super::child::{free_ports, sibling_binary};
 use super::foreign::{ForeignNode, NodeRun, OwnNodes, RestartPolicy, Role};
 use super::supervise::{State, Supervised};
-use super::{NODE_POLL, SETTLE, STOP_GRACE};
+use super::{SETTLE, STOP_GRACE};
 use slipstream_acc::node::AccStats;
 use slipstream_acc::{PerceptionSource, VehicleClass};
 use slipstream_contract::config::{ConnectArgs, FaultProfile, DEFAULT_ZENOH_CONFIG};
@@ -639,31 +638,18 @@ impl LoopRun {
     /// The simulator's first frame must find every node ready (listening).
     async fn await_ready(&mut self, waits: Vec<super::ready::Watch>) -> Result<()> {
         let seen = self.watch_all_nodes().await?;
-        let start = Instant::now();
-        loop {
-            let alive = seen.names();
-            let pending: Vec<&super::ready::Watch> = waits.iter().filter(|w| !w.ready(&alive)).collect();
-            if pending.is_empty() {
-                return Ok(());
-            }
-            for n in &mut self.nodes {
+        let nodes = &mut self.nodes;
+        let ended = || {
+            for n in nodes.iter_mut() {
                 if let State::Ended(status) = n.poll() {
                     let why = last_words(&n.log).map_or(String::new(), |e| format!(": {e}"));
                     let problem = format!("exited at start ({status}){why}\n(its log: {})", n.log.display());
                     return Err(Error::node(n.name(), problem));
                 }
             }
-            if let Some(w) = pending.iter().find(|w| start.elapsed() >= w.timeout()) {
-                let problem = format!(
-                    "not ready after {:?}: {} (seen on the bus: {alive:?}); see the logs in {}",
-                    w.timeout(),
-                    w.awaited(),
-                    self.logs.display()
-                );
-                return Err(Error::node(&w.process, problem));
-            }
-            tokio::time::sleep(NODE_POLL).await;
-        }
+            Ok(())
+        };
+        super::ready::until_ready(&waits, || seen.names(), ended, &self.logs).await
     }
 
     /// The flags of one node: the shared ones, then its own endpoint and the ones it dials

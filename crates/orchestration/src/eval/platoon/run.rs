@@ -18,6 +18,9 @@ use super::links::Links;
 use crate::error::{Error, Result};
 use crate::eval::latency::{LatencyWatch, WHOLE_LOOP};
 use crate::launch::child::{free_ports, sibling_binary, Child};
+use crate::launch::foreign::Ready;
+use crate::launch::ready::{until_ready, Watch};
+use crate::launch::AllNodes;
 use slipstream_acc::PerceptionSource;
 use slipstream_contract::config::{parse_json5_value, FaultArgs};
 use slipstream_contract::msg::{GroundTruthObjects, VehicleState};
@@ -111,9 +114,6 @@ pub struct Nodes<'a> {
     pub realtime: bool,
 }
 
-/// How long every car's nodes may take to be up before a realtime run starts without them.
-const NODES_UP: Duration = Duration::from_secs(30);
-
 /// Runs `scenario` (written to `file`) once with every ego's nodes; records the speeds.
 pub async fn run(scenario: &Scenario, file: &Path, nodes_of: &Nodes<'_>, dir: &Path) -> Result<PlatoonRun> {
     let (perception, faults, realtime) = (nodes_of.perception, nodes_of.faults, nodes_of.realtime);
@@ -137,19 +137,18 @@ pub async fn run(scenario: &Scenario, file: &Path, nodes_of: &Nodes<'_>, dir: &P
             .arg(ego.controller_set_speed_mps().to_string())
             .arg("--time-gap")
             .arg(ego.time_gap_s.unwrap_or(1.8).to_string());
-        nodes.push(Child::spawn("slipstream-acc", &mut acc)?);
+        let car = ego.namespace.as_deref().unwrap_or("ego");
+        nodes.push(Child::spawn(&format!("{car}-acc"), &mut acc)?);
         if perception == PerceptionSource::Camera {
-            nodes.push(Child::spawn(
-                "slipstream-detect",
-                &mut node("slipstream-detect", &car_ns, &links, &log("detect"), faults)?,
-            )?);
+            let mut detect = node("slipstream-detect", &car_ns, &links, &log("detect"), faults)?;
+            nodes.push(Child::spawn(&format!("{car}-detect"), &mut detect)?);
         }
     }
     let mut latency = None;
     if realtime {
         let first = observer.scoped(scenario.egos()[0].namespace.as_deref().unwrap_or_default())?;
         latency = Some(LatencyWatch::start(&first, perception == PerceptionSource::Camera).await?);
-        nodes_up(&observer, scenario, perception, dir).await?;
+        nodes_up(&observer, scenario, perception, &mut nodes, dir).await?;
     }
     let report = dir.join("sim.json");
     let mut sim = node("slipstream-sim", &ns, &links, &dir.join("sim.log"), faults)?;
@@ -182,34 +181,34 @@ pub async fn run(scenario: &Scenario, file: &Path, nodes_of: &Nodes<'_>, dir: &P
     Ok(PlatoonRun { leader, cars, sim, loop_p99_s })
 }
 
-/// Waits until every car's ACC (and detector with the camera) is up: in realtime the
-/// simulator does not wait for them, and a car without its controller for the first seconds
-/// would be a disturbance of its own.
-async fn nodes_up(observer: &Bus, scenario: &Scenario, perception: PerceptionSource, dir: &Path) -> Result<()> {
-    let mut watches = Vec::new();
-    for ego in scenario.egos() {
-        let ns = ego.namespace.clone().unwrap_or_default();
-        watches.push((observer.scoped(&ns)?.watch_nodes().await?, ns));
-    }
+/// Waits until every car's ACC (and detector with the camera) is up, as `up` waits for its
+/// nodes (each one's token within the launch layer's start timeout; a node that ends first is
+/// named at once): in realtime the simulator does not wait for them, and a car without its
+/// controller for the first seconds would be a disturbance of its own.
+async fn nodes_up(
+    observer: &Bus,
+    scenario: &Scenario,
+    perception: PerceptionSource,
+    nodes: &mut [Child],
+    dir: &Path,
+) -> Result<()> {
+    let namespaces: Vec<String> = scenario.egos().iter().map(|e| e.namespace.clone().unwrap_or_default()).collect();
+    let seen = AllNodes::watch(observer, &namespaces).await?;
     let wanted: &[&str] = if perception == PerceptionSource::Camera { &["acc", "detect"] } else { &["acc"] };
-    let deadline = tokio::time::Instant::now() + NODES_UP;
-    loop {
-        let missing: Vec<String> = watches
-            .iter()
-            .flat_map(|(w, ns)| {
-                let names = w.names();
-                wanted.iter().filter(move |n| !names.iter().any(|m| m == *n)).map(move |n| format!("{ns}/{n}"))
-            })
-            .collect();
-        if missing.is_empty() {
-            return Ok(());
+    let mut waits = Vec::new();
+    for ns in &namespaces {
+        for node in wanted {
+            waits
+                .push(Watch::new(observer, &format!("{ns}/{node}"), &format!("{ns}-{node}"), &Ready::default()).await?);
         }
-        if tokio::time::Instant::now() > deadline {
-            let problem = format!("not up within {NODES_UP:?}: {} (logs in {})", missing.join(", "), dir.display());
-            return Err(Error::Node { node: "the cars' nodes".into(), problem });
-        }
-        tokio::time::sleep(Duration::from_millis(100)).await;
     }
+    let ended = || match nodes.iter_mut().find_map(|n| n.exited().map(|s| (n.name.clone(), s))) {
+        Some((name, status)) => {
+            Err(Error::node(name, format!("exited at start ({status}); its log is in {}", dir.display())))
+        }
+        None => Ok(()),
+    };
+    until_ready(&waits, || seen.names(), ended, dir).await
 }
 
 /// A node's command: in `ns`, with the connection flags `links`, its log to `log`, injecting

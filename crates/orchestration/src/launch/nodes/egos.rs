@@ -57,6 +57,15 @@ pub struct AllNodes {
 }
 
 impl AllNodes {
+    /// Watches `bus`'s namespace and each of `namespaces` under it.
+    pub(crate) async fn watch(bus: &Bus, namespaces: &[String]) -> Result<AllNodes> {
+        let mut watches = vec![(String::new(), bus.watch_nodes().await?)];
+        for ns in namespaces {
+            watches.push((ns.clone(), bus.scoped(ns)?.watch_nodes().await?));
+        }
+        Ok(AllNodes { watches })
+    }
+
     pub fn names(&self) -> Vec<String> {
         let mut names = Vec::new();
         for (prefix, w) in &self.watches {
@@ -69,11 +78,8 @@ impl AllNodes {
 impl LoopRun {
     /// Watches the run's namespace and every ego's.
     pub async fn watch_all_nodes(&self) -> Result<AllNodes> {
-        let mut watches = vec![(String::new(), self.bus.watch_nodes().await?)];
-        for ego in &self.spec.egos {
-            watches.push((ego.namespace.clone(), self.bus.scoped(&ego.namespace)?.watch_nodes().await?));
-        }
-        Ok(AllNodes { watches })
+        let namespaces: Vec<String> = self.spec.egos.iter().map(|e| e.namespace.clone()).collect();
+        AllNodes::watch(&self.bus, &namespaces).await
     }
 
     /// Starts every ego's controller (and detector with camera perception) in its namespace:
