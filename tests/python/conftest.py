@@ -26,11 +26,38 @@ def slipstream_bin():
     return str(path)
 
 
+# The ports tests give the listeners they start come from below the kernel's ephemeral range
+# (ip_local_port_range, 32768 and up by default), where no port-0 listener and no outgoing
+# connection of another process can take one between the test choosing it and its process
+# binding it, and from a block of its own for each pytest-xdist worker, so two tests running at
+# once never share a port. Sharing one, a test's node would dial the other test's loop, and two
+# loops in the default namespace would drive each other's cars.
+PORT_BLOCK = 2000
+FIRST_PORT = 20000
+_ports_given = {}
+
+
+def reserve_port():
+    """A loopback TCP port free now, never given to another test of this run."""
+    worker = os.environ.get("PYTEST_XDIST_WORKER", "gw0")
+    index = int(worker[2:]) % 6 if worker[2:].isdigit() else 0
+    low = FIRST_PORT + index * PORT_BLOCK
+    for _ in range(PORT_BLOCK):
+        offset = _ports_given.get(low, 0)
+        _ports_given[low] = (offset + 1) % PORT_BLOCK
+        port = low + offset
+        with socket.socket() as s:
+            try:
+                s.bind(("127.0.0.1", port))
+            except OSError:
+                continue  # in use, or still closing after an earlier run
+        return port
+    pytest.fail(f"no free port in {low}-{low + PORT_BLOCK - 1}")
+
+
 @pytest.fixture
 def free_port():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+    return reserve_port()
 
 
 @pytest.fixture(scope="session")

@@ -12,7 +12,7 @@ import sys
 import time
 
 import pytest
-from conftest import ROOT
+from conftest import ROOT, reserve_port
 from test_conform import Running, assert_keeps_the_contract, conform
 
 HERE = ROOT / "tests" / "python"
@@ -41,9 +41,7 @@ def coppelia_server(port, env=None):
 def other_free_port(taken):
     """A free loopback port other than `taken` (the next port up may be in use)."""
     while True:
-        with socket.socket() as s:
-            s.bind(("127.0.0.1", 0))
-            port = s.getsockname()[1]
+        port = reserve_port()
         if port != taken:
             return port
 

@@ -2,11 +2,10 @@
 (Python's json keeps the last of two, losing the first without a word; so do most readers)."""
 
 import json
-import socket
 import subprocess
 import time
 
-from conftest import ROOT
+from conftest import ROOT, reserve_port
 from test_conform import Running
 
 
@@ -36,9 +35,7 @@ def test_every_json_output_has_each_key_once(slipstream_bin, sim_bin, free_port,
     strict(run(slipstream_bin, "eval", "detect", "--scenario", "cut-in", "--duration", "2", "--json"))
     strict(run(slipstream_bin, "eval", "acc", "--scenario", "steady-follow", "--perception", "ground-truth",
                "--duration", "3", "--json", timeout=300))
-    with socket.socket() as sock:
-        sock.bind(("127.0.0.1", 0))
-        demo = f"tcp/127.0.0.1:{sock.getsockname()[1]}"
+    demo = f"tcp/127.0.0.1:{reserve_port()}"
     strict(run(slipstream_bin, "-l", demo, "-e", demo, "-n", "json-demo", "demo", "--duration", "2", "--json"))
     with Running([sim_bin, "--scenario", "steady-follow", "--mode", "realtime", "--duration", "600", "-l", endpoint,
                   "-e", endpoint, "-n", ns]):

@@ -4,13 +4,12 @@ encodings as docs/recording.md says, and account for every sequence number."""
 
 import json
 import os
-import socket
 import subprocess
 import sys
 from collections import defaultdict
 
 import pytest
-from conftest import ROOT
+from conftest import ROOT, reserve_port
 
 from slipstream_client import decode
 from slipstream_client.wire import WIRE_VERSION
@@ -79,9 +78,7 @@ def lockstep_run(slipstream_bin, tmp_path_factory):
     """One recorded lockstep run of `up` (6 s simulated), shared by the tests of this module:
     (report dir, the finished process)."""
     report = tmp_path_factory.mktemp("lockstep") / "report"
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
+    port = reserve_port()
     run = subprocess.run(
         [slipstream_bin, "-l", f"tcp/127.0.0.1:{port}", "up", "--mode", "lockstep", "--duration", "6",
          "--record", "--plain", "--report", str(report)],

@@ -11,7 +11,7 @@ import subprocess
 import time
 
 import pytest
-from conftest import ROOT
+from conftest import ROOT, reserve_port
 
 ws_sync = pytest.importorskip("websockets.sync.client", reason="scripts/test.sh installs the websockets package")
 
@@ -130,9 +130,7 @@ def ready(topic, messages):
 
 
 def test_up_view_serves_camera_boxes_scene_and_series(slipstream_bin, free_port, tmp_path):
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        view_port = s.getsockname()[1]
+    view_port = reserve_port()
     report = tmp_path / "report"
     up = subprocess.Popen(
         [slipstream_bin, "-l", f"tcp/127.0.0.1:{free_port}", "up", "--scenario", "cut-in", "--duration", "40",
@@ -211,9 +209,7 @@ def test_a_client_offering_only_the_old_subprotocol_gets_in_under_its_name(slips
     foxglove.websocket.v1, which the Foxglove SDK's server alone refuses; through the view's
     port they get in, are answered with the name they offered and get the server's info and
     channels as a foxglove.sdk.v1 client does."""
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        port = s.getsockname()[1]
+    port = reserve_port()
     view = subprocess.Popen(
         [slipstream_bin, "-l", f"tcp/127.0.0.1:{free_port}", "view", "--view-port", str(port), "--duration", "30"],
         stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True, cwd=ROOT)

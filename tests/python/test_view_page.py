@@ -25,7 +25,7 @@ import urllib.request
 import numpy as np
 import pytest
 import zenoh
-from conftest import ROOT, peer_config
+from conftest import ROOT, peer_config, reserve_port
 
 from slipstream_client import decode
 from slipstream_client.image import frame_array
@@ -109,9 +109,7 @@ def start_up(slipstream_bin, endpoint, view_port):
 
 
 def free_tcp_port():
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+    return reserve_port()
 
 
 def canvas_pixels(driver, element_id):
