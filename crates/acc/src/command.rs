@@ -1,12 +1,11 @@
 //! The comfort command: Speed or Follow mode within the comfort limits. The lower of the
-//! cruise law and the time-gap law, never less braking than the planned threat needs once
-//! that matters (eased off for a threat far ahead that is not closing fast), moved toward from
-//! the last command at the jerk limit; braking whose target has gone, and an ended
-//! emergency's braking beyond the comfort limit, are released at the release jerk.
+//! cruise law and the time-gap law, never less braking than the decision table's comfort
+//! column asks (`super::decision::comfort_brake_mps2`), moved toward from the last command at
+//! the jerk limit; braking whose target has gone, and an ended emergency's braking beyond the
+//! comfort limit, are released at the release jerk.
 
 use super::belief::LeadBelief;
 use super::settings::AccSettings;
-use super::threat::{Threat, MIN_ROOM_M};
 use slipstream_contract::msg::AccMode;
 
 /// A command above this (m/s2) brakes for nothing the release need track.
@@ -29,8 +28,8 @@ pub(super) struct Inputs<'a> {
     pub(super) set_speed_mps: f64,
     pub(super) time_gap_s: f64,
     pub(super) lead: Option<LeadBelief>,
-    /// What comfort braking plans for (`super::decision::comfort_plan`).
-    pub(super) plan: Option<Threat>,
+    /// The least braking the table's comfort column asks (m/s2; None: the law alone).
+    pub(super) brake_at_least_mps2: Option<f64>,
     pub(super) dt: f64,
 }
 
@@ -82,50 +81,18 @@ impl Command {
     }
 
     /// The time-gap law for `l`: a = gap gain x (gap - desired) + speed gain x (lead speed -
-    /// speed), never less braking than the plan needs once that is more than
-    /// `needed_guard_mps2` (below it the law alone answers: a lead easing off a little, or
-    /// noise in its deceleration, made the car dip for nothing); at standstill, staying until
-    /// the lead has moved off.
+    /// speed), never less braking than the decision asks; at standstill, staying until the
+    /// lead has moved off.
     fn follow(&self, x: &Inputs, l: &LeadBelief) -> f64 {
         let (s, v) = (x.s, x.v);
         let desired_gap = s.standstill_m + x.time_gap_s * v;
         let law = s.gains.gap_per_s2 * (l.gap_m - desired_gap) + s.gains.speed_per_s * (l.speed_mps - v);
-        let needed = x.plan.map_or(0.0, |t| t.needed_decel_mps2);
-        let mut a = match x.plan {
-            Some(t) if needed > s.tuning.decision.needed_guard_mps2.get() => {
-                law.min(-needed.min(far_cap_mps2(s, &t, v, x.time_gap_s, l)))
-            }
-            _ => law,
-        };
+        let mut a = x.brake_at_least_mps2.map_or(law, |b| law.min(-b));
         let c = &s.tuning.command;
         let driven_off = l.gap_m > s.standstill_m + c.drive_off_gap_m.get() && l.speed_mps > c.drive_off_lead_mps.get();
         if v < s.tuning.low_level.standstill_mps.get() && !driven_off {
             a = a.min(-c.standstill_hold_mps2.get());
         }
         a
-    }
-}
-
-/// The most the command brakes for a threat: a vehicle beyond `far_time_gaps` time gaps that
-/// the ego is not closing on fast (matching its speed short of the standstill distance needs
-/// less than `far_closing_mps2`) is answered by easing off, at most `far_decel_mps2`, unless
-/// `lead` is seen braking harder than `far_braking_mps2` with its lamps lit. A lead braking
-/// for a moment several time gaps ahead (following its own lead) is no reason to brake and
-/// then accelerate again; one that keeps braking is soon near or closing fast, and braked for
-/// in full.
-fn far_cap_mps2(s: &AccSettings, t: &Threat, v: f64, time_gap_s: f64, lead: &LeadBelief) -> f64 {
-    let c = &s.tuning.command;
-    let gap = t.room_m + s.tuning.threat.margin_m.get();
-    let room = (gap - s.standstill_m).max(MIN_ROOM_M);
-    let closing = (v - t.lead_speed_mps).max(0.0);
-    let far = gap > s.standstill_m + c.far_time_gaps.get() * time_gap_s * v;
-    // The lead as estimated, not as comfort braking may plan for it (braking at the comfort
-    // limit while its lamps are new): planned for that far ahead, a touch of the lead's pedal
-    // would brake the ego hard for nothing.
-    let easing = !lead.seen_braking(c.far_braking_mps2.get());
-    if far && easing && closing * closing / (2.0 * room) < c.far_closing_mps2.get() {
-        c.far_decel_mps2.get()
-    } else {
-        f64::INFINITY
     }
 }

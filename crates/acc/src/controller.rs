@@ -13,7 +13,7 @@
 
 use super::belief::{Around, Hypotheses, LeadBelief};
 use super::command::{Command, Inputs};
-use super::decision::{comfort_plan, warns, Decision, Now};
+use super::decision::{comfort_brake_mps2, warns, Decision, Now};
 use super::ego::EgoNow;
 use super::lead_filter::Noise;
 use super::low_level::LowLevel;
@@ -196,9 +196,10 @@ impl Controller {
         if let Some(h) = h.filter(|_| self.decision.emergency) {
             return (AccMode::Emergency, -self.decision.decel(&self.s, &h.threat(), v));
         }
-        let plan = h.and_then(|h| comfort_plan(&h, &self.s, v));
         let time_gap_s = self.time_gap_s;
-        let inputs = Inputs { s: &self.s, v, set_speed_mps: self.set_speed_mps, time_gap_s, lead, plan, dt };
+        let brake_at_least_mps2 = h.zip(lead).and_then(|(h, l)| comfort_brake_mps2(&h, &l, &self.s, v, time_gap_s));
+        let set_speed_mps = self.set_speed_mps;
+        let inputs = Inputs { s: &self.s, v, set_speed_mps, time_gap_s, lead, brake_at_least_mps2, dt };
         self.command.comfort(&inputs)
     }
 

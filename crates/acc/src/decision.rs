@@ -6,7 +6,7 @@
 //!
 //! | hypothesis | comfort command plans for it | an emergency starts when | an emergency holds while |
 //! |---|---|---|---|
-//! | mildest (or the revealed, the worse) | always (the law answers alone below `needed_guard_mps2`) | - | its TTC <= `release_ttc_s` or its need >= `release_share` of the comfort limit |
+//! | mildest (or the revealed, the worse) | always (the law answers alone below `needed_guard_mps2`; far ahead, not closing fast and the lead not seen braking hard: eased to `far_decel_mps2`) | - | its TTC <= `release_ttc_s` or its need >= `release_share` of the comfort limit |
 //! | confirmed (the same, measured over `confirm_s`) | - | *beyond comfort*: TTC < `release_ttc_s`, need above this speed's comfort limit, comfort braking does not keep clear, and it cannot wait; or *closing fast*: TTC < `brake_ttc_s` while braking less than the need by `under_braking_s` of jerk | - |
 //! | likely (while the lead brakes beyond comfort) | - | *lead braking hard*: its need (or the mildest's, the worse) > `emergency_factor` x `needed_guard_mps2` and it cannot wait | the mildest's need >= `needed_guard_mps2` |
 //! | hardest (a new lead's slowest speed; lamps just lit: the comfort limit) | with the mildest, the worse, where comfort braking copes with it; else the mildest alone | - | - |
@@ -18,9 +18,9 @@
 //! before it stops, and then comfort braking was enough. At standstill an emergency ends. Only
 //! what has been measured in more than one frame starts one.
 
-use super::belief::{Hardest, Hypotheses};
+use super::belief::{Hardest, Hypotheses, LeadBelief};
 use super::settings::AccSettings;
-use super::threat::{threat, Threat};
+use super::threat::{threat, Threat, MIN_ROOM_M};
 
 /// Emergency or not, and the lead last found braking beyond the comfort limit.
 #[derive(Debug, Clone, Default)]
@@ -39,9 +39,27 @@ pub(super) struct Now<'a> {
     pub(super) t_s: f64,
 }
 
-/// What comfort braking plans for (the table's second column): the threat, or a worse one
-/// while the lead is not yet measured, where comfort braking copes with that.
-pub(super) fn comfort_plan(h: &Hypotheses, s: &AccSettings, v: f64) -> Option<Threat> {
+/// The least braking the comfort command gives (the table's second column, m/s2; None: the
+/// time-gap law alone): what the plan needs once that is more than `needed_guard_mps2` (below
+/// it, a lead easing off a little or the noise of its deceleration would make the car dip for
+/// nothing), eased off for a plan far ahead that the ego is not closing on fast
+/// ([`far_cap_mps2`]).
+pub(super) fn comfort_brake_mps2(
+    h: &Hypotheses,
+    lead: &LeadBelief,
+    s: &AccSettings,
+    v: f64,
+    time_gap_s: f64,
+) -> Option<f64> {
+    let plan = comfort_plan(h, s, v)?;
+    let needed = plan.needed_decel_mps2;
+    (needed > s.tuning.decision.needed_guard_mps2.get())
+        .then(|| needed.min(far_cap_mps2(s, &plan, v, time_gap_s, lead)))
+}
+
+/// What comfort braking plans for: the threat, or a worse one while the lead is not yet
+/// measured, where comfort braking copes with that.
+fn comfort_plan(h: &Hypotheses, s: &AccSettings, v: f64) -> Option<Threat> {
     let threat = h.threat();
     match h.hardest {
         Hardest::NotYet => h.revealed,
@@ -96,6 +114,30 @@ impl Decision {
         let need =
             (s.tuning.decision.emergency_factor.get() * t.needed_decel_mps2).max(standstill_need.needed_decel_mps2);
         need.clamp(floor, vehicle_max)
+    }
+}
+
+/// The most the command brakes for a threat: a vehicle beyond `far_time_gaps` time gaps that
+/// the ego is not closing on fast (matching its speed short of the standstill distance needs
+/// less than `far_closing_mps2`) is answered by easing off, at most `far_decel_mps2`, unless
+/// `lead` is seen braking harder than `far_braking_mps2` with its lamps lit. A lead braking
+/// for a moment several time gaps ahead (following its own lead) is no reason to brake and
+/// then accelerate again; one that keeps braking is soon near or closing fast, and braked for
+/// in full.
+fn far_cap_mps2(s: &AccSettings, t: &Threat, v: f64, time_gap_s: f64, lead: &LeadBelief) -> f64 {
+    let c = &s.tuning.command;
+    let gap = t.room_m + s.tuning.threat.margin_m.get();
+    let room = (gap - s.standstill_m).max(MIN_ROOM_M);
+    let closing = (v - t.lead_speed_mps).max(0.0);
+    let far = gap > s.standstill_m + c.far_time_gaps.get() * time_gap_s * v;
+    // The lead as estimated, not as comfort braking may plan for it (braking at the comfort
+    // limit while its lamps are new): planned for that far ahead, a touch of the lead's pedal
+    // would brake the ego hard for nothing.
+    let easing = !lead.seen_braking(c.far_braking_mps2.get());
+    if far && easing && closing * closing / (2.0 * room) < c.far_closing_mps2.get() {
+        c.far_decel_mps2.get()
+    } else {
+        f64::INFINITY
     }
 }
 
