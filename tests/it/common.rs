@@ -115,9 +115,30 @@ pub(crate) fn bin(name: &str) -> std::process::Command {
     c
 }
 
-/// A loopback port free at the time of asking.
+/// A loopback port free at the time of asking, never given to another test of this process.
+/// Taken from below the kernel's ephemeral range (32768 and up by default), where no port-0
+/// listener and no outgoing connection of a process started meanwhile can take it before the
+/// test's own process binds it (a test's node would then dial another test's loop). The Python
+/// tests take theirs from 20000 up (tests/python/conftest.py).
 pub(crate) fn free_port() -> u16 {
-    std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
+    use std::sync::atomic::{AtomicU16, Ordering};
+    const FIRST: u16 = 12_000;
+    const COUNT: u16 = 8_000;
+    static NEXT: AtomicU16 = AtomicU16::new(0);
+    for _ in 0..COUNT {
+        let port = FIRST + NEXT.fetch_add(1, Ordering::Relaxed) % COUNT;
+        if std::net::TcpListener::bind(("127.0.0.1", port)).is_ok() {
+            return port;
+        }
+    }
+    panic!("no free loopback port in {FIRST}..{}", FIRST + COUNT)
+}
+
+#[test]
+fn the_ports_given_are_distinct_and_below_the_ephemeral_range() {
+    let ports: std::collections::BTreeSet<u16> = (0..50).map(|_| free_port()).collect();
+    assert_eq!(ports.len(), 50);
+    assert!(ports.iter().all(|p| (12_000..32_768).contains(p)), "{ports:?}");
 }
 
 /// The Zenoh endpoint of a loopback port.
