@@ -137,11 +137,11 @@ pub async fn run(scenario: &Scenario, file: &Path, nodes_of: &Nodes<'_>, dir: &P
             .arg(ego.controller_set_speed_mps().to_string())
             .arg("--time-gap")
             .arg(ego.time_gap_s.unwrap_or(1.8).to_string());
-        let car = ego.namespace.as_deref().unwrap_or("ego");
-        nodes.push(Child::spawn(&format!("{car}-acc"), &mut acc)?);
+        let car = ego.namespace.as_deref().map_or(String::new(), |ns| format!("{ns}-"));
+        nodes.push(Child::spawn(&format!("{car}acc"), &mut acc)?);
         if perception == PerceptionSource::Camera {
             let mut detect = node("slipstream-detect", &car_ns, &links, &log("detect"), faults)?;
-            nodes.push(Child::spawn(&format!("{car}-detect"), &mut detect)?);
+            nodes.push(Child::spawn(&format!("{car}detect"), &mut detect)?);
         }
     }
     let mut latency = None;
@@ -192,14 +192,18 @@ async fn nodes_up(
     nodes: &mut [Child],
     dir: &Path,
 ) -> Result<()> {
-    let namespaces: Vec<String> = scenario.egos().iter().map(|e| e.namespace.clone().unwrap_or_default()).collect();
+    // A platoon of one ego may leave it in the run's own namespace: its nodes are `acc`, `detect`.
+    let namespaces: Vec<String> = scenario.egos().iter().filter_map(|e| e.namespace.clone()).collect();
     let seen = AllNodes::watch(observer, &namespaces).await?;
     let wanted: &[&str] = if perception == PerceptionSource::Camera { &["acc", "detect"] } else { &["acc"] };
     let mut waits = Vec::new();
-    for ns in &namespaces {
+    for ego in scenario.egos() {
         for node in wanted {
-            waits
-                .push(Watch::new(observer, &format!("{ns}/{node}"), &format!("{ns}-{node}"), &Ready::default()).await?);
+            let (name, process) = match &ego.namespace {
+                Some(ns) => (format!("{ns}/{node}"), format!("{ns}-{node}")),
+                None => (node.to_string(), node.to_string()),
+            };
+            waits.push(Watch::new(observer, &name, &process, &Ready::default()).await?);
         }
     }
     let ended = || match nodes.iter_mut().find_map(|n| n.exited().map(|s| (n.name.clone(), s))) {
