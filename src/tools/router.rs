@@ -16,7 +16,7 @@ pub fn run(connect: &ConnectArgs) -> Result<()> {
         let session = zenoh::open(config).await.map_err(|e| anyhow!("start the router: {e}"))?;
         let locators: Vec<String> = session.info().locators().await.iter().map(|l| l.to_string()).collect();
         tracing::info!(zid = %session.zid(), ?locators, "router up (Ctrl-C to stop)");
-        println!("router {} listening on {}", session.zid(), locators.join(", "));
+        println!("{}", crate::launch::listening_line(&session.zid().to_string(), &locators));
         crate::cli::stop_requested().await;
         session.close().await.map_err(|e| anyhow!("close the router: {e}"))?;
         Ok(())

@@ -50,7 +50,7 @@ pub use nodes::{
     Network, NodeEnd, NodeInput, Progress,
 };
 pub use own_args::OwnNodeArgs;
-pub use router::LocalRouter;
+pub use router::{listening_line, LocalRouter};
 
 /// How long the controllers may take to appear on the bus.
 pub(crate) const NODE_START_TIMEOUT: Duration = Duration::from_secs(30);

@@ -66,7 +66,13 @@ impl LocalRouter {
     }
 }
 
-/// The TCP endpoint in `slipstream router`'s "router ZID listening on EP, EP" line.
+/// The line `slipstream router` prints once it listens: its id and every locator. Written and
+/// read here, so the tools that start a router and the router agree on it.
+pub fn listening_line(zid: &str, locators: &[String]) -> String {
+    format!("router {zid} listening on {}", locators.join(", "))
+}
+
+/// The TCP endpoint in a [`listening_line`].
 fn listening_endpoint(line: &str) -> Option<String> {
     let (_, endpoints) = line.strip_prefix("router ")?.split_once("listening on ")?;
     endpoints.split(", ").find(|e| e.starts_with("tcp/")).map(str::to_string)
@@ -78,8 +84,8 @@ mod tests {
 
     #[test]
     fn the_endpoint_is_read_from_the_routers_line_and_only_from_it() {
-        let line = "router 1f2e listening on udp/127.0.0.1:7000, tcp/127.0.0.1:41234";
-        assert_eq!(listening_endpoint(line).as_deref(), Some("tcp/127.0.0.1:41234"));
+        let line = listening_line("1f2e", &["udp/127.0.0.1:7000".into(), "tcp/127.0.0.1:41234".into()]);
+        assert_eq!(listening_endpoint(&line).as_deref(), Some("tcp/127.0.0.1:41234"));
         assert_eq!(listening_endpoint("router 1f2e listening on udp/127.0.0.1:7000"), None);
         assert_eq!(listening_endpoint("INFO listening on tcp/127.0.0.1:1"), None);
     }
