@@ -3,10 +3,21 @@
 
 /// Zenoh's thread layout for slipstream processes: rx, acceptor, app and net work all hand
 /// over to the tx pool instead of each having its own. Fewer thread wake-ups per message: on
-/// the 2-core machines of docs/performance.md the 100 Hz speed message's median one-way
-/// latency drops from ~215 to ~175 us and its p99 from ~1.1 ms to ~0.3 ms.
+/// the 2-core machines of docs/performance.md Zenoh's own layout takes the 100 Hz speed
+/// message's median one-way latency from 161 to 259 us (`bench speed`, 2026-11-29).
+///
+/// The pool has four workers, not Zenoh's one. Zenoh sends what may not be dropped (a query's
+/// reply, a new node's declarations told to the others) from the receive task that caused it,
+/// and when the queue towards a peer that stopped reading is full, that send blocks its worker
+/// until the transmit task drains the queue. With one worker the blocked thread was the only one
+/// that could run the transmit task or poll the sockets: the process's Zenoh stood still, and
+/// after 5 s Zenoh closed the link ("Unable to push non droppable network message"). A node slow
+/// to read while another joined did that to the simulator (tests/python/test_slow_reader.py).
+/// Each blocked send holds one worker; the spare ones drain the queue once the reader reads.
+/// Zenoh's own layout (a pool per role) has no such stall but doubles the speed message's
+/// latency (docs/performance.md).
 pub const ZENOH_RUNTIME_DEFAULT: &str =
-    "(rx: (handover: tx), acc: (handover: tx), app: (handover: tx), net: (handover: tx))";
+    "(rx: (handover: tx), acc: (handover: tx), app: (handover: tx), net: (handover: tx), tx: (worker_threads: 4))";
 
 /// Sets ZENOH_RUNTIME to [`ZENOH_RUNTIME_DEFAULT`] unless the user set it (`ZENOH_RUNTIME='()'`
 /// restores Zenoh's own layout). Call early in `main`, before any thread or Zenoh starts:
