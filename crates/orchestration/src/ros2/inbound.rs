@@ -2,7 +2,8 @@
 //! through the [`CommandGate`]. In realtime and fast runs a vehicle/speed subscription sends
 //! the gate's control on the bus once per speed message while a command is fresh; in
 //! lockstep each accepted command answers the vehicle/state its stamp names
-//! ([`super::lockstep`]) at once, so the simulator's step waits for the ROS controller itself.
+//! ([`super::lockstep`]) at once, or when that state reaches the bridge if the command came
+//! first, so the simulator's step waits for the ROS controller itself.
 
 use std::sync::Arc;
 
@@ -14,7 +15,7 @@ use zenoh::sample::Sample;
 use super::command::{acceleration, control, CommandGate, CommandStats};
 use super::error::Ros2Error;
 use super::graph::Attachment;
-use super::lockstep::{Awaited, StepAnswers};
+use super::lockstep::{Answer, Awaited, StepAnswers};
 use super::mapping::Entry;
 use super::messages::{from_cdr, AckermannDriveStamped};
 use super::node::RosNode;
@@ -45,7 +46,7 @@ impl CommandPath {
         let (key, token) = node.subscription(&entry.name, &entry.type_name, entry.qos).await?;
         let gate: Arc<Mutex<CommandGate>> = Arc::default();
         let control: Arc<Publisher<ControlCommand>> = Arc::new(bus.publisher(topics::VEHICLE_CONTROL).await?);
-        let answers: Arc<Mutex<StepAnswers>> = Arc::default();
+        let answers: Arc<Mutex<StepAnswers<AckermannDriveStamped>>> = Arc::default();
         let status = Arc::new(StatusOut::start(bus).await?);
         let (g, a, c, st) = (gate.clone(), answers.clone(), control.clone(), status.clone());
         let subscriber = node
@@ -59,13 +60,14 @@ impl CommandPath {
                     Err(why) => return g.lock().refuse(now, &why),
                 };
                 if lockstep {
-                    answer(&g, &a, (&c, &st), &cmd, &vehicle, now);
+                    let verdict = a.lock().answer(cmd.header.stamp, cmd);
+                    send(&g, (&c, &st), &vehicle, now, verdict);
                 }
             })
             .await
             .map_err(Error::zenoh(format!("subscribe to ROS 2 commands on {key}")))?;
         let loop_side = match lockstep {
-            true => await_states(bus, answers).await?,
+            true => await_states(bus, answers, (gate.clone(), control, status), vehicle).await?,
             false => per_speed(bus, gate.clone(), (control, status), vehicle).await?,
         };
         tracing::info!(topic = %node.id.resolve(&entry.name), %key, lockstep, "ROS 2 commands drive the ego");
@@ -99,29 +101,38 @@ async fn per_speed(
         .await?)
 }
 
-/// Lockstep: every vehicle/state awaits the command stamped with its time.
-async fn await_states(bus: &Bus, answers: Arc<Mutex<StepAnswers>>) -> Result<CallbackSubscriber> {
+/// Lockstep: every vehicle/state awaits the command stamped with its time, or is answered by
+/// one that came before it.
+async fn await_states(
+    bus: &Bus,
+    answers: Arc<Mutex<StepAnswers<AckermannDriveStamped>>>,
+    (gate, control, status): (Arc<Mutex<CommandGate>>, Arc<Publisher<ControlCommand>>, Arc<StatusOut>),
+    vehicle: VehicleParams,
+) -> Result<CallbackSubscriber> {
     Ok(bus
         .subscribe_with(topics::VEHICLE_STATE, move |s: Received<VehicleState>| {
             let (step, stamp_sim_ns, speed_mps) = (s.msg.step, s.header.stamp_sim_ns, s.msg.speed_mps);
-            answers.lock().state(Awaited { step, stamp_sim_ns, speed_mps });
+            let verdicts = answers.lock().state(Awaited { step, stamp_sim_ns, speed_mps });
+            for verdict in verdicts {
+                send(&gate, (&control, &status), &vehicle, wall_clock_ns(), verdict);
+            }
         })
         .await?)
 }
 
-/// Lockstep: an accepted command sent on as the answer to the state its stamp names, or
-/// refused when it names none.
-fn answer(
+/// Lockstep: a command that answers a state sent on as vehicle/control naming it; one that
+/// answers none refused; one held for its state waits.
+fn send(
     gate: &Mutex<CommandGate>,
-    answers: &Mutex<StepAnswers>,
     (control_out, status): (&Publisher<ControlCommand>, &StatusOut),
-    cmd: &AckermannDriveStamped,
     vehicle: &VehicleParams,
     now: u64,
+    verdict: Answer<AckermannDriveStamped>,
 ) {
-    let state = match answers.lock().answer(cmd.header.stamp) {
-        Ok(state) => state,
-        Err(none) => return gate.lock().refuse(now, &none),
+    let (state, cmd) = match verdict {
+        Answer::Now(state, cmd) => (state, cmd),
+        Answer::Held => return,
+        Answer::Refused(none) => return gate.lock().refuse(now, &none),
     };
     let mut c = control(&cmd.drive, state.speed_mps, vehicle);
     c.answers_step = Some(state.step);
