@@ -137,11 +137,10 @@ pub async fn run(scenario: &Scenario, file: &Path, nodes_of: &Nodes<'_>, dir: &P
             .arg(ego.controller_set_speed_mps().to_string())
             .arg("--time-gap")
             .arg(ego.time_gap_s.unwrap_or(1.8).to_string());
-        let car = ego.namespace.as_deref().map_or(String::new(), |ns| format!("{ns}-"));
-        nodes.push(Child::spawn(&format!("{car}acc"), &mut acc)?);
+        nodes.push(Child::spawn(&car_node(ego.namespace.as_deref(), "acc").1, &mut acc)?);
         if perception == PerceptionSource::Camera {
             let mut detect = node("slipstream-detect", &car_ns, &links, &log("detect"), faults)?;
-            nodes.push(Child::spawn(&format!("{car}detect"), &mut detect)?);
+            nodes.push(Child::spawn(&car_node(ego.namespace.as_deref(), "detect").1, &mut detect)?);
         }
     }
     let mut latency = None;
@@ -199,10 +198,7 @@ async fn nodes_up(
     let mut waits = Vec::new();
     for ego in scenario.egos() {
         for node in wanted {
-            let (name, process) = match &ego.namespace {
-                Some(ns) => (format!("{ns}/{node}"), format!("{ns}-{node}")),
-                None => (node.to_string(), node.to_string()),
-            };
+            let (name, process) = car_node(ego.namespace.as_deref(), node);
             waits.push(Watch::new(observer, &name, &process, &Ready::default()).await?);
         }
     }
@@ -217,6 +213,15 @@ async fn nodes_up(
 
 /// A node's command: in `ns`, with the connection flags `links`, its log to `log`, injecting
 /// the faults of the profile file `faults`.
+/// A car's node as the bus knows it (`car1/acc`) and its process (`car1-acc`); a platoon of
+/// one ego may leave it in the run's own namespace, where both are the plain name (`acc`).
+fn car_node(namespace: Option<&str>, node: &str) -> (String, String) {
+    match namespace {
+        Some(ns) => (format!("{ns}/{node}"), format!("{ns}-{node}")),
+        None => (node.to_string(), node.to_string()),
+    }
+}
+
 fn node(binary: &str, ns: &str, links: &[String], log: &Path, faults: Option<&Path>) -> Result<Command> {
     let mut cmd = Command::new(sibling_binary(binary)?);
     cmd.args(["-n", ns]).args(links);
