@@ -19,9 +19,13 @@ const PROGRESS_EVERY: Duration = Duration::from_secs(1);
     slipstream record camera/front perception/objects\n  slipstream record 'vehicle/**' -o vehicle.mcap")]
 pub struct RecordArgs {
     /// Topics (vehicle/speed, camera/front, ...) or key expressions under the namespace
-    /// [default: every key of the namespace, and topics remapped outside it]
+    /// [default: every key of the namespace, and topics remapped outside it; in the default
+    /// namespace, the root loop's topics and nodes, not the namespaces beneath it]
     #[arg(value_name = "KEY_EXPR")]
     pub keys: Vec<String>,
+    /// Every key of every namespace (other loops, anyone's keys) instead
+    #[arg(long, conflicts_with = "keys")]
+    pub all_namespaces: bool,
     /// The MCAP file [default: recording-<UTC date>-<time>.mcap]
     #[arg(short = 'o', long, value_name = "FILE")]
     pub output: Option<PathBuf>,
@@ -153,7 +157,7 @@ pub async fn run(bus: &Bus, args: &RecordArgs) -> Result<RecordingSummary> {
         Some(p) => p.clone(),
         None => super::fresh_recording()?,
     };
-    let selectors = selectors(bus, &args.keys)?;
+    let selectors = if args.all_namespaces { bus.topics().every_namespace_key() } else { selectors(bus, &args.keys)? };
     let viewable = match (args.viewable, &args.scenario) {
         (false, _) => None,
         (true, None) => Some(Copies::new(None)),

@@ -1,7 +1,9 @@
 //! `slipstream top`: every key seen in the namespace, with its rate, bandwidth, latency from
 //! the header stamps, losses (sequence gaps), malformed payloads and the age of its last
 //! message; the nodes alive; the simulator's clock and real-time factor. A live table on a
-//! terminal, one JSON object per refresh otherwise (or with --json).
+//! terminal, one JSON object per refresh otherwise (or with --json). The namespace is the
+//! bus's (-n); the default one is the root loop's topics, not the other namespaces beneath it
+//! (`--all-namespaces` watches the whole bus).
 
 use std::io::{IsTerminal, Write};
 use std::time::{Duration, Instant};
@@ -24,6 +26,10 @@ pub struct TopArgs {
     /// Stop after this many seconds [default: until Ctrl-C]
     #[arg(long, value_parser = positive)]
     pub duration: Option<f64>,
+    /// Every key of every namespace (other loops, anyone's keys), not only this namespace's
+    /// loop; in the default namespace `top` shows the root loop's topics and nodes alone
+    #[arg(long)]
+    pub all_namespaces: bool,
 }
 
 pub(crate) fn positive(s: &str) -> Result<f64, String> {
@@ -42,8 +48,12 @@ pub fn render(view: &TopView) -> String {
     );
     match &view.sim {
         Some(c) => s.push_str(&format!(
-            "sim: {:.1} s simulated, step {}, real-time factor {:.2} ({})\n\n",
-            c.sim_time_s, c.step, c.real_time_factor, c.mode
+            "sim{}: {:.1} s simulated, step {}, real-time factor {:.2} ({})\n\n",
+            if c.replayed { " (a replay, not live)" } else { "" },
+            c.sim_time_s,
+            c.step,
+            c.real_time_factor,
+            c.mode
         )),
         None => s.push_str("sim: no sim/clock seen\n\n"),
     }
@@ -102,7 +112,9 @@ fn bandwidth(bps: f64) -> String {
 
 /// Runs until Ctrl-C or `--duration`.
 pub async fn run(bus: &Bus, args: &TopArgs) -> Result<()> {
-    let watcher = Watcher::start(bus, &bus.topics().every_key()).await?;
+    let topics = bus.topics();
+    let keys = if args.all_namespaces { topics.every_namespace_key() } else { topics.every_key() };
+    let watcher = Watcher::start(bus, &keys).await?;
     let json = args.json || !std::io::stdout().is_terminal();
     let deadline = args.duration.map(|d| Instant::now() + Duration::from_secs_f64(d));
     let mut tick = tokio::time::interval(Duration::from_secs_f64(args.interval));

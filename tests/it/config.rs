@@ -165,7 +165,7 @@ fn a_node_reading_a_link_copy_watches_every_topic_at_its_read_key_not_the_whole_
 
 #[test]
 fn a_loop_in_the_default_namespace_watches_its_own_keys_not_the_other_loops() {
-    let keys = |m: &TopicMap| m.loop_keys().iter().map(|k| k.to_string()).collect::<Vec<_>>();
+    let keys = |m: &TopicMap| m.every_key().iter().map(|k| k.to_string()).collect::<Vec<_>>();
     let default = keys(&crate::common::map("{}"));
     assert!(default.contains(&"vehicle/speed".to_string()) && default.contains(&"nodes/**".to_string()), "{default:?}");
     for k in &default {
@@ -175,4 +175,18 @@ fn a_loop_in_the_default_namespace_watches_its_own_keys_not_the_other_loops() {
     }
     // In a namespace of its own, the whole namespace is the loop's.
     assert_eq!(keys(&crate::common::map("{ namespace: \"car1\" }")), vec!["car1/**"]);
+}
+
+#[test]
+fn an_ip_endpoint_without_its_port_is_refused_with_the_fix() {
+    for (connect, listen) in [(vec!["tcp/127.0.0.1".to_string()], vec![]), (vec![], vec!["tcp/[::1]".to_string()])] {
+        let flag = if connect.is_empty() { "-l/--listen" } else { "-e/--connect" };
+        let args = ConnectArgs { connect, listen, ..Default::default() };
+        let e = args.zenoh_config().unwrap_err().to_string();
+        assert!(e.contains(flag) && e.contains("no port") && e.contains(":7447"), "{e}");
+    }
+    for fine in ["tcp/127.0.0.1:7447", "tcp/[::1]:0", "udp/localhost:7447", "unixsock-stream//tmp/slipstream.sock"] {
+        let args = ConnectArgs { connect: vec![fine.into()], ..Default::default() };
+        assert!(args.zenoh_config().is_ok(), "{fine}");
+    }
 }

@@ -37,6 +37,8 @@ pub struct SimView {
     pub step: u64,
     pub real_time_factor: f64,
     pub mode: String,
+    /// The clock is a recording's, played back (`slipstream play`), not a live simulator's.
+    pub replayed: bool,
 }
 
 /// One refresh.
@@ -73,7 +75,8 @@ pub struct Watcher {
 }
 
 impl Watcher {
-    /// Watches `selectors` (`TopicMap::every_key` for `top`, `TopicMap::loop_keys` for `up`).
+    /// Watches `selectors` (`TopicMap::every_key`, or `TopicMap::every_namespace_key` for
+    /// `top --all-namespaces`).
     pub async fn start(bus: &Bus, selectors: &[zenoh::key_expr::OwnedKeyExpr]) -> Result<Watcher, BusError> {
         let seen = Arc::new(Mutex::new(Seen::default()));
         let topics = bus.topics();
@@ -151,14 +154,18 @@ fn record(seen: &Mutex<Seen>, topics: &TopicMap, sample: &zenoh::sample::Sample)
         Some(kind) if kind != d.0 => Err(msg::DecodeError::WrongKind { expected: kind.name(), found: d.0.name() }),
         _ => Ok(d),
     });
+    let replayed = bus::is_replayed(from.as_deref());
     let mut seen = seen.lock();
-    let entry = seen.keys.entry((key.clone(), from)).or_insert_with(|| (Arc::new(TopicStats::new(key.clone())), None));
+    let entry =
+        seen.keys.entry((key.clone(), from.clone())).or_insert_with(|| (Arc::new(TopicStats::new(key.clone())), None));
     match decoded {
         Ok((kind, header, body)) => {
-            entry.0.on_message(&header, payload.len(), msg::wall_clock_ns());
+            entry.0.on_message_from(from.as_deref(), &header, payload.len(), msg::wall_clock_ns());
             entry.1 = Some(kind);
-            if kind == MessageKind::SimClock {
+            // A live clock is shown over a replayed one.
+            if kind == MessageKind::SimClock && (!replayed || seen.sim.as_ref().is_none_or(|c| c.replayed)) {
                 seen.sim = Some(SimView {
+                    replayed,
                     sim_time_s: header.stamp_sim_ns as f64 / 1e9,
                     step: body["step"].as_u64().unwrap_or(0),
                     real_time_factor: body["real_time_factor"].as_f64().unwrap_or(0.0),

@@ -6,8 +6,15 @@
 //! one source of truth. This is no security (anyone can put a name in an attachment: that is
 //! what access control is for, docs/deployment.md); it keeps stray traffic on a key from
 //! steering the loop.
+//!
+//! A replayed publisher (its name marked by [`super::replay`]) is followed only while no live
+//! one is: a live publisher takes the input over from a replay at once, and a replay never
+//! takes it over from a live one, however long the live one is silent. So a `slipstream play`
+//! beside a running loop cannot steer it, and a loop started beside a replay drives itself.
 
 use std::time::{Duration, Instant};
+
+use super::replay::is_replayed;
 
 /// How long the followed publisher may be silent before the next named one is followed (a
 /// simulator restarted under another name).
@@ -60,7 +67,17 @@ impl Following {
                 self.name = Some(s.to_string());
                 true
             }
-            (Some(_), Some(s)) if silent => {
+            (Some(n), Some(s)) if is_replayed(Some(n)) && !is_replayed(Some(s)) => {
+                tracing::warn!(
+                    input = self.input,
+                    publisher = s,
+                    replay = n.as_str(),
+                    "a live publisher took this input over from a replay"
+                );
+                self.name = Some(s.to_string());
+                true
+            }
+            (Some(n), Some(s)) if silent && (is_replayed(Some(n)) || !is_replayed(Some(s))) => {
                 tracing::warn!(
                     input = self.input,
                     publisher = s,
@@ -119,6 +136,24 @@ mod tests {
         let later = t0 + Duration::from_secs(1) + FOLLOW_SWITCH_AFTER + Duration::from_millis(1);
         assert!(f.accept(Some("sim-2"), later));
         assert!(!f.accept(Some("sim"), later));
+    }
+
+    #[test]
+    fn a_replay_never_takes_an_input_from_a_live_publisher_and_a_live_one_takes_it_from_a_replay() {
+        let t0 = Instant::now();
+        let mut live_first = Following::new("vehicle/speed");
+        assert!(live_first.accept(Some("sim"), t0));
+        assert!(!live_first.accept(Some("sim@replay"), t0), "a replay beside the live loop is not used");
+        let long_after = t0 + FOLLOW_SWITCH_AFTER * 10;
+        assert!(!live_first.accept(Some("sim@replay"), long_after), "not even while the live one is silent");
+        assert_eq!(live_first.name(), Some("sim"));
+        assert_eq!(live_first.rejected(), 2);
+
+        let mut replay_first = Following::new("vehicle/speed");
+        assert!(replay_first.accept(Some("sim@replay"), t0), "a replay alone drives (re-simulation)");
+        assert!(replay_first.accept(Some("sim"), t0 + Duration::from_millis(10)), "the live one takes over at once");
+        assert!(!replay_first.accept(Some("sim@replay"), t0 + Duration::from_millis(20)));
+        assert_eq!(replay_first.name(), Some("sim"));
     }
 
     #[test]

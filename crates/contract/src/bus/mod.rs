@@ -11,7 +11,9 @@ pub mod faults;
 mod follow;
 mod frame_copies;
 mod frame_publisher;
+mod open;
 mod publisher;
+mod replay;
 mod stats;
 mod subscriber;
 
@@ -22,7 +24,9 @@ pub use error::{without_source_locations, zenoh_message, BusError};
 pub use faults::NodeClock;
 pub use follow::{Following, FOLLOW_SWITCH_AFTER};
 pub use frame_publisher::{FramePublisher, FrameSent};
+pub use open::{open_session, SLOW_OPEN};
 pub use publisher::{is_foreign, Publisher};
+pub use replay::{is_replayed, replayed_name, REPLAY_SUFFIX};
 pub use stats::{StatsSnapshot, TopicStats};
 pub use subscriber::{
     Arrivals, CallbackSubscriber, Declared, FrameSample, FrameSubscriber, Received, Subscriber, Subscription,
@@ -58,7 +62,7 @@ pub struct Bus {
 impl Bus {
     /// Opens a Zenoh session with `config` and joins as `node`.
     pub async fn open(config: zenoh::Config, topics: TopicMap, node: &str) -> Result<Bus, BusError> {
-        let session = zenoh::open(config).await.map_err(zerr("open session"))?;
+        let session = open_session(config, "open session").await?;
         Bus::from_session(session, topics, node).await
     }
 
@@ -101,12 +105,12 @@ impl Bus {
         topics: TopicMap,
         node: &str,
     ) -> Result<Bus, BusError> {
-        let session = zenoh::open(main).await.map_err(zerr("open session"))?;
+        let session = open_session(main, "open session").await?;
         let low_latency = match low_latency {
             Some(mut c) => {
                 let own: Vec<String> = session.info().locators().await.iter().map(|l| l.to_string()).collect();
                 crate::config::dial_own_main(&mut c, &own)?;
-                Some(zenoh::open(c).await.map_err(zerr("open the low-latency session"))?)
+                Some(open_session(c, "open the low-latency session").await?)
             }
             None => None,
         };

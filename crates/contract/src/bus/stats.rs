@@ -14,6 +14,10 @@ const LATENCY_WINDOW: usize = 4096;
 const RATE_WINDOW: Duration = Duration::from_secs(2);
 /// At most one warning per subscription per this period for malformed payloads.
 const LOG_PERIOD: Duration = Duration::from_secs(5);
+/// Publishers whose sequence numbers one subscription follows apart (a live simulator and a
+/// replay beside it, two controllers for one vehicle); past this, the longest silent one is
+/// forgotten.
+const SOURCES: usize = 8;
 
 /// Counters and recent samples of one subscription. Shared between Zenoh's callback and
 /// readers; a snapshot is cheap.
@@ -34,7 +38,9 @@ struct Inner {
     injected_dropped: u64,
     injected_delayed: u64,
     injected_duplicated: u64,
-    last_seq: Option<u64>,
+    /// The last sequence number per publisher (its attachment): gaps and restarts are counted
+    /// within one publisher's sequence, never across two.
+    last_seqs: Vec<(Option<String>, u64)>,
     last_arrival: Option<Instant>,
     latencies_ns: VecDeque<i64>,
     arrivals: VecDeque<(Instant, usize)>,
@@ -79,23 +85,52 @@ impl TopicStats {
         TopicStats { name: name.into(), inner: Mutex::new(Inner::default()) }
     }
 
-    /// A well-formed header arrived: count it, its latency and any sequence gap.
+    /// A well-formed header arrived from an unnamed publisher: count it, its latency and any
+    /// sequence gap.
     pub fn on_message(&self, header: &Header, len: usize, now_wall_ns: u64) {
+        self.on_message_from(None, header, len, now_wall_ns);
+    }
+
+    /// A well-formed header arrived from `source` (the sample's attachment): count it, any gap
+    /// in that publisher's sequence, and its latency unless it is a replay's
+    /// ([`super::is_replayed`]: its publish stamp is the recording's).
+    pub fn on_message_from(&self, source: Option<&str>, header: &Header, len: usize, now_wall_ns: u64) {
+        let latency = (!super::is_replayed(source)).then(|| now_wall_ns as i64 - header.stamp_pub_ns as i64);
+        self.count(source, header, len, latency);
+    }
+
+    fn count(&self, source: Option<&str>, header: &Header, len: usize, latency_ns: Option<i64>) {
         let now = Instant::now();
         let mut s = self.inner.lock();
         s.received += 1;
         s.bytes += len as u64;
-        match s.last_seq {
-            Some(last) if header.seq > last + 1 => s.lost += header.seq - last - 1,
-            Some(last) if header.seq <= last => s.restarts += 1,
-            _ => {}
+        match s.last_seqs.iter().position(|(from, _)| from.as_deref() == source) {
+            Some(i) => {
+                let last = s.last_seqs[i].1;
+                if header.seq > last + 1 {
+                    s.lost += header.seq - last - 1;
+                } else if header.seq <= last {
+                    s.restarts += 1;
+                }
+                // The most recent publisher last: the one forgotten first is the longest silent.
+                let mut entry = s.last_seqs.remove(i);
+                entry.1 = header.seq;
+                s.last_seqs.push(entry);
+            }
+            None => {
+                if s.last_seqs.len() == SOURCES {
+                    s.last_seqs.remove(0);
+                }
+                s.last_seqs.push((source.map(str::to_string), header.seq));
+            }
         }
-        s.last_seq = Some(header.seq);
         s.last_arrival = Some(now);
-        if s.latencies_ns.len() == LATENCY_WINDOW {
-            s.latencies_ns.pop_front();
+        if let Some(latency) = latency_ns {
+            if s.latencies_ns.len() == LATENCY_WINDOW {
+                s.latencies_ns.pop_front();
+            }
+            s.latencies_ns.push_back(latency);
         }
-        s.latencies_ns.push_back(now_wall_ns as i64 - header.stamp_pub_ns as i64);
         s.arrivals.push_back((now, len));
         while s.arrivals.front().is_some_and(|(t, _)| now.duration_since(*t) > RATE_WINDOW) {
             s.arrivals.pop_front();
@@ -184,6 +219,32 @@ mod tests {
 
     fn h(seq: u64) -> Header {
         Header { seq, stamp_sim_ns: 0, stamp_pub_ns: 1_000 }
+    }
+
+    #[test]
+    fn a_replayed_message_is_counted_without_a_latency() {
+        let s = TopicStats::new("t");
+        s.on_message_from(Some("sim@replay"), &h(0), 10, 51_000);
+        s.on_message_from(Some("sim@replay"), &h(2), 10, 51_000);
+        let snap = s.snapshot();
+        assert_eq!((snap.received, snap.lost), (2, 1));
+        assert_eq!(snap.latency_p50_us, None, "a recorded stamp is no latency");
+        s.on_message_from(Some("sim"), &h(3), 10, 51_000);
+        assert_eq!(s.snapshot().latency_p50_us, Some(50.0));
+    }
+
+    #[test]
+    fn two_publishers_on_one_subscription_are_each_counted_in_their_own_sequence() {
+        let s = TopicStats::new("vehicle/speed");
+        // A live simulator at 1000.. and a replay at 0.., interleaved: no gap, no restart.
+        for k in 0..50 {
+            s.on_message_from(Some("sim"), &h(1000 + k), 10, 51_000);
+            s.on_message_from(Some("sim@replay"), &h(k), 10, 51_000);
+        }
+        let snap = s.snapshot();
+        assert_eq!((snap.received, snap.lost, snap.restarts), (100, 0, 0));
+        s.on_message_from(Some("sim"), &h(1052), 10, 51_000);
+        assert_eq!(s.snapshot().lost, 2, "a gap in one publisher's own sequence");
     }
 
     #[test]

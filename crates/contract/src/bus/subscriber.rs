@@ -241,13 +241,16 @@ where
     let latched = inlet.qos.latched;
     match inlet.faults {
         None => {
-            declare_callback(session, key, latched, move |sample: Sample| match accept(sample) {
-                Ok((header, len, item)) => {
-                    stats.on_message(&header, len, msg::wall_clock_ns());
-                    deliver(item);
-                    arrivals.note(header.stamp_sim_ns, None);
+            declare_callback(session, key, latched, move |sample: Sample| {
+                let source = sample.attachment().and_then(|a| a.try_to_string().ok()).map(|s| s.into_owned());
+                match accept(sample) {
+                    Ok((header, len, item)) => {
+                        stats.on_message_from(source.as_deref(), &header, len, msg::wall_clock_ns());
+                        deliver(item);
+                        arrivals.note(header.stamp_sim_ns, None);
+                    }
+                    Err(e) => stats.on_decode_error(&e),
                 }
-                Err(e) => stats.on_decode_error(&e),
             })
             .await
         }
@@ -257,7 +260,7 @@ where
                 let source = sample.attachment().and_then(|a| a.try_to_string().ok()).map(|s| s.into_owned());
                 match accept(sample) {
                     Ok((header, len, item)) => {
-                        stats.on_message(&header, len, msg::wall_clock_ns());
+                        stats.on_message_from(source.as_deref(), &header, len, msg::wall_clock_ns());
                         gate.arrive(&header, len, item);
                         arrivals.note(header.stamp_sim_ns, source);
                     }

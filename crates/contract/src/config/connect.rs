@@ -143,9 +143,11 @@ impl ConnectArgs {
             set(&mut config, "mode", format!("\"{m}\""), "-m/--zenoh-mode")?;
         }
         if !self.connect.is_empty() {
+            check_endpoints(&self.connect, "-e/--connect")?;
             set(&mut config, "connect/endpoints", json_list(&self.connect), "--connect")?;
         }
         if !self.listen.is_empty() {
+            check_endpoints(&self.listen, "-l/--listen")?;
             set(&mut config, "listen/endpoints", json_list(&self.listen), "--listen")?;
         }
         if self.no_multicast_scouting {
@@ -206,6 +208,30 @@ fn load_zenoh_file(path: &Path) -> Result<zenoh::Config, ConfigError> {
         let text = std::fs::read_to_string(path).unwrap_or_default();
         super::zenoh_error::file_error(&origin, &text, &e)
     })
+}
+
+/// Refuses an IP endpoint without its port (`tcp/127.0.0.1`), which Zenoh takes and then
+/// never connects with: the flag, the endpoint and the fix.
+fn check_endpoints(endpoints: &[String], flag: &str) -> Result<(), ConfigError> {
+    const IP_LINKS: [&str; 6] = ["tcp", "udp", "tls", "quic", "ws", "wss"];
+    for e in endpoints {
+        let Some((proto, address)) = e.split_once('/') else { continue };
+        if !IP_LINKS.contains(&proto) {
+            continue;
+        }
+        let address = address.split('#').next().unwrap_or(address);
+        // `host:port` or `[v6]:port`: the last `:` starts the port.
+        let port = address.rsplit_once(':').map(|(_, port)| port);
+        if !port.is_some_and(|p| !p.is_empty() && p.chars().all(|c| c.is_ascii_digit())) {
+            return Err(ConfigError::new(
+                flag,
+                e,
+                "no port",
+                format!("give the port, e.g. {proto}/{address}:7447 (7447: Zenoh's and slipstream's default)"),
+            ));
+        }
+    }
+    Ok(())
 }
 
 fn json_list(items: &[String]) -> String {

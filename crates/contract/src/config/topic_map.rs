@@ -432,13 +432,19 @@ impl TopicMap {
     }
 
     /// Key expressions that cover every key of this map, for tools that watch all topics
-    /// (`top`, `record`): the namespace, and any topic remapped to an absolute key outside it.
+    /// (`top`, `record`, the view): the namespace, and any topic remapped to an absolute key
+    /// outside it. The default namespace is the root of every other: there the map's own
+    /// keys are each topic's key and the nodes' keys, so that a tool at the root sees the root
+    /// loop and not `loop-2/...` or `car1/...` ([`Self::every_namespace_key`] is for that).
     /// A node that reads a frame link copy (`camera.read`) gets every topic at the key it reads
     /// it from, and the nodes' keys, instead of the whole namespace: a `**` would pull the raw
     /// frames across the link that the copy is there to spare.
     pub fn every_key(&self) -> Vec<OwnedKeyExpr> {
         if self.camera.read.is_some() {
             return self.nodes_and_each_topic(|t| self.read_key(t));
+        }
+        if self.namespace.is_empty() {
+            return self.nodes_and_each_topic(|t| self.key(t));
         }
         let all = self.all_selector();
         let mut selectors = vec![all.clone()];
@@ -451,15 +457,10 @@ impl TopicMap {
         selectors
     }
 
-    /// The keys of this map's own loop, for `up`'s report and recording: [`Self::every_key`]
-    /// in a namespace; in the default one, every topic's key and the nodes' keys. A `**` there
-    /// would also take every other loop on the machine (`loop-2/...`, their frames included)
-    /// into this loop's report.
-    pub fn loop_keys(&self) -> Vec<OwnedKeyExpr> {
-        if !self.namespace.is_empty() || self.camera.read.is_some() {
-            return self.every_key();
-        }
-        self.nodes_and_each_topic(|t| self.key(t))
+    /// Every key of every namespace (`top --all-namespaces`, `record --all-namespaces`): the
+    /// whole bus, other loops and anyone's keys included.
+    pub fn every_namespace_key(&self) -> Vec<OwnedKeyExpr> {
+        vec![key_expr("**").expect("valid")]
     }
 
     /// The nodes' keys and each topic's key as `key_of` gives it, once each.

@@ -154,7 +154,8 @@ fn insert_bounded(map: &mut HashMap<u64, u64>, key: u64, value: u64) {
 
 /// The loop's latency, fed from a session's subscriptions to the messages that carry its
 /// stamps (detections, control, state; ground truth as the perception without the camera):
-/// what `up` shows and `bench scale` measures per loop.
+/// what `up` shows and `bench scale` measures per loop. Replayed messages (`slipstream play`
+/// beside the loop) carry a recording's stamps and are left out.
 pub struct LatencyWatch {
     pub latency: std::sync::Arc<parking_lot::Mutex<LoopLatency>>,
     _subs: [slipstream_contract::bus::CallbackSubscriber; 4],
@@ -181,24 +182,29 @@ impl LatencyWatch {
         camera: bool,
         latency: LoopLatency,
     ) -> Result<LatencyWatch, slipstream_contract::BusError> {
+        use slipstream_contract::bus::is_replayed;
         use slipstream_contract::topics;
         let latency = std::sync::Arc::new(parking_lot::Mutex::new(latency));
         let l = latency.clone();
         let detections = bus
             .subscribe_with(topics::PERCEPTION_OBJECTS, move |d| {
-                l.lock().on_detections(d.header.stamp_pub_ns, d.msg.frame_stamp_pub_ns)
+                if !is_replayed(d.source.as_deref()) {
+                    l.lock().on_detections(d.header.stamp_pub_ns, d.msg.frame_stamp_pub_ns)
+                }
             })
             .await?;
         let l = latency.clone();
         let control = bus
             .subscribe_with(topics::VEHICLE_CONTROL, move |c| {
-                l.lock().on_command(c.header.stamp_pub_ns, c.msg.perception_stamp_pub_ns)
+                if !is_replayed(c.source.as_deref()) {
+                    l.lock().on_command(c.header.stamp_pub_ns, c.msg.perception_stamp_pub_ns)
+                }
             })
             .await?;
         let l = latency.clone();
         let state = bus
             .subscribe_with(topics::VEHICLE_STATE, move |s| {
-                if let Some(t) = s.msg.control_timing {
+                if let Some(t) = s.msg.control_timing.filter(|_| !is_replayed(s.source.as_deref())) {
                     l.lock().on_applied(t.command_stamp_pub_ns, t.applied_ns);
                 }
             })
@@ -206,7 +212,7 @@ impl LatencyWatch {
         let l = latency.clone();
         let truth = bus
             .subscribe_with(topics::OBJECTS, move |o| {
-                if !camera {
+                if !camera && !is_replayed(o.source.as_deref()) {
                     l.lock().on_ground_truth(o.header.stamp_pub_ns)
                 }
             })

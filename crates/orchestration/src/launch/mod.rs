@@ -45,6 +45,7 @@ pub(crate) mod supervise;
 pub use child::{free_ports, sibling_binary, Child};
 pub use external::ExternalSim;
 pub use foreign::{ForeignNode, OwnNodes};
+pub use namespace::{nodes_alive_in, PLAYER};
 pub use nodes::{
     last_error, last_words, log_of, refuse_in_lockstep, AllNodes, ClockMode, EgoNodes, LinkKind, LoopRun, LoopSpec,
     Network, NodeEnd, NodeInput, Progress,

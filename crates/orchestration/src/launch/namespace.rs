@@ -58,10 +58,15 @@ pub(crate) async fn claim(
     settle(session).await;
     let alive = nodes_by_namespace(session).await?;
     let taken_by = |ns: &str| -> Result<Attempt> {
+        let alive_here = alive.get(ns);
         let here: Vec<&str> =
-            alive.get(ns).map_or(Vec::new(), |n| n.iter().map(String::as_str).filter(|n| ours.contains(n)).collect());
+            alive_here.map_or(Vec::new(), |n| n.iter().map(String::as_str).filter(|n| ours.contains(n)).collect());
         if !here.is_empty() {
             return Ok(Attempt::TakenBy(format!("its nodes {} are alive", here.join(", "))));
+        }
+        // A replay plays a recorded loop's topics there: a live loop beside it would read them.
+        if let Some(player) = alive_here.and_then(|n| n.iter().find(|n| is_player(n))) {
+            return Ok(Attempt::TakenBy(format!("a recording is playing there (`{player}`)")));
         }
         Ok(match super::hold::take(ns)? {
             Attempt::TakenBy(holder) => Attempt::TakenBy(format!("`up` ({holder}) holds it")),
@@ -90,6 +95,21 @@ pub(crate) async fn claim(
     Err(Error::Refused(format!(
         "loop-2 to loop-{MAX_LOOPS} all hold loops (fix: give this run a namespace of its own with -n NAME)"
     )))
+}
+
+/// The node name of `slipstream play` (`play-<pid>`), which a loop must not share a namespace
+/// with.
+pub const PLAYER: &str = "play";
+
+fn is_player(node: &str) -> bool {
+    node.strip_prefix(PLAYER).is_some_and(|rest| rest.starts_with('-'))
+}
+
+/// The nodes alive in `namespace` ("" for the default one), once gossip has linked this
+/// session to the peers it learned of.
+pub async fn nodes_alive_in(session: &zenoh::Session, namespace: &str) -> Result<BTreeSet<String>> {
+    settle(session).await;
+    Ok(nodes_by_namespace(session).await?.remove(namespace).unwrap_or_default())
 }
 
 /// Lets gossip link this session to the peers it learned of when it opened, so that the
@@ -145,7 +165,13 @@ fn split_node_key(key: &str) -> Option<(&str, &str)> {
 
 #[cfg(test)]
 mod tests {
-    use super::split_node_key;
+    use super::{is_player, split_node_key};
+
+    #[test]
+    fn a_player_is_known_by_its_name() {
+        assert!(is_player("play-4242"));
+        assert!(!is_player("player") && !is_player("play") && !is_player("sim"));
+    }
 
     #[test]
     fn a_token_key_splits_into_namespace_and_node() {

@@ -405,7 +405,7 @@ impl LoopRun {
                 (config, map, flags, Vec::new(), true)
             }
         };
-        let session = zenoh::open(config).await.map_err(Error::zenoh("join the bus"))?;
+        let session = slipstream_contract::bus::open_session(config, "join the bus").await?;
         let claimed = match isolated {
             true => super::namespace::Claimed { map: topic_map, moved_to: None, beside: String::new(), hold: None },
             false => {

@@ -22,7 +22,9 @@ pub(crate) mod play;
 pub(crate) mod recorder;
 pub(crate) mod replay;
 
-pub use play::{each_message, each_message_until, play, Pace, PlayOptions, PlayReport};
+pub use play::{
+    each_message, each_message_until, play, play_until, recorded_publishers, Pace, PlayOptions, PlayReport,
+};
 pub use recorder::{ChannelSummary, Recording, RecordingSummary};
 pub use replay::{private_bus, Replay};
 

@@ -8,14 +8,12 @@
 //! the recorded pace while the control says play. Pausing holds it between two messages.
 
 use std::collections::HashMap;
-use std::fs::File;
-use std::io::{Read, Seek};
 use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use super::play::{each_message_until, output_for, Output};
+use super::play::{each_message_until, output_for, summary_of, Output};
 use crate::error::{Error, Result};
 use crate::view::{Position, Timeline};
 use parking_lot::{Condvar, Mutex};
@@ -204,23 +202,7 @@ pub async fn private_bus(node: &str) -> Result<Bus> {
 
 /// The recording's length from its summary (statistics), none when it has none.
 fn duration_of(path: &Path) -> Result<Option<f64>> {
-    use mcap::sans_io::summary_reader::{SummaryReadEvent, SummaryReader};
-    let mut file = File::open(path).map_err(Error::file("open", path))?;
-    let mut reader = SummaryReader::new();
-    while let Some(event) = reader.next_event() {
-        let Ok(event) = event else { return Ok(None) };
-        match event {
-            SummaryReadEvent::ReadRequest(n) => {
-                let read = file.read(reader.insert(n)).map_err(Error::file("read", path))?;
-                reader.notify_read(read);
-            }
-            SummaryReadEvent::SeekRequest(to) => {
-                reader.notify_seeked(file.seek(to).map_err(Error::file("read", path))?);
-            }
-        }
-    }
-    Ok(reader
-        .finish()
+    Ok(summary_of(path)?
         .and_then(|s| s.stats)
         .map(|st| st.message_end_time.saturating_sub(st.message_start_time) as f64 / 1e9))
 }
