@@ -150,10 +150,12 @@ pub fn command(command: &EvalCommand, connect: &ConnectArgs) -> Result<ExitCode>
             let report = acc::run(args, connect)?;
             print_report(args.json, &report, acc::markdown)?;
             let failed = report.results.iter().filter(|r| !r.passed()).count();
-            if failed > 0 {
-                anyhow::bail!("{failed} of {} scenarios missed an aim", report.results.len());
+            let total = report.results.len() + report.unfinished.len();
+            match (failed, report.unfinished.len()) {
+                (0, 0) => Ok(ExitCode::SUCCESS),
+                (f, 0) => anyhow::bail!("{f} of {total} scenarios missed an aim"),
+                (f, u) => anyhow::bail!("{u} of {total} scenarios did not finish, {f} missed an aim"),
             }
-            Ok(ExitCode::SUCCESS)
         }
         EvalCommand::Sweep(args) => sweep(args, connect),
         EvalCommand::Platoon(args) => platoon(args),

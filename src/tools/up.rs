@@ -238,11 +238,12 @@ pub fn run_from(path: &Path, args: &UpArgs, connect: &ConnectArgs) -> Result<u8>
         path.display()
     );
     let stem = path.file_stem().map_or("recording".into(), |s| s.to_string_lossy().into_owned());
-    let (dir, fresh) = match &args.report {
-        Some(d) => (d.clone(), !d.exists()),
-        None => (super::fresh_report_dir(&format!("resim-{stem}"))?, true),
+    let dir = match &args.report {
+        Some(d) => d.clone(),
+        None => super::fresh_report_dir(&format!("resim-{stem}"))?,
     };
-    // The directory comes with the nodes' logs, once the recording has been read.
+    // The directory comes with the nodes' logs, once the recording has been read, and holds
+    // report.json however the replay ends.
     eprintln!(
         "slipstream up --from {}: today's detector and ACC answer the recording; report in {}",
         path.display(),
@@ -255,23 +256,33 @@ pub fn run_from(path: &Path, args: &UpArgs, connect: &ConnectArgs) -> Result<u8>
     // A signal ends the replay early; the nodes are stopped and the report still written.
     let stop = Arc::new(std::sync::atomic::AtomicBool::new(false));
     let signal = Arc::new(Mutex::new(None::<&'static str>));
-    let mut report = rt
-        .block_on(async {
-            let (stop2, signal2) = (stop.clone(), signal.clone());
-            let watcher = tokio::spawn(async move {
-                *signal2.lock() = Some(crate::cli::stop_requested().await);
-                stop2.store(true, std::sync::atomic::Ordering::Relaxed);
-            });
-            let report = crate::eval::resim::run(path, connect, &dir, own, &mut progress, &stop).await;
-            watcher.abort();
-            report
-        })
-        .inspect_err(|_| {
-            if fresh {
-                remove_if_empty(&dir);
-            }
-        })?;
+    let result = rt.block_on(async {
+        let (stop2, signal2) = (stop.clone(), signal.clone());
+        let watcher = tokio::spawn(async move {
+            *signal2.lock() = Some(crate::cli::stop_requested().await);
+            stop2.store(true, std::sync::atomic::Ordering::Relaxed);
+        });
+        let report = crate::eval::resim::run(path, connect, &dir, own, &mut progress, &stop).await;
+        watcher.abort();
+        report
+    });
     shown.finish();
+    // The report was announced: a replay that could not run still leaves one, saying why.
+    let mut report = match result {
+        Ok(r) => r,
+        Err(e) => {
+            let file = dir.join("report.json");
+            let failed = serde_json::json!({ "recording": path, "error": e.to_string(), "complete": false });
+            std::fs::create_dir_all(&dir)
+                .and_then(|()| std::fs::write(&file, serde_json::to_string_pretty(&failed).unwrap_or_default()))
+                .with_context(|| format!("write {}", file.display()))?;
+            return Err(anyhow::Error::new(e).context(format!(
+                "re-simulation of {} (report in {})",
+                path.display(),
+                file.display()
+            )));
+        }
+    };
     report.stopped_by = signal.lock().map(str::to_string);
     let file = dir.join("report.json");
     std::fs::write(&file, serde_json::to_string_pretty(&report)?)
@@ -389,7 +400,7 @@ impl Watch {
             .await?;
         Ok(Watch {
             recorder: Recorder::start(bus).await?,
-            keys: Watcher::start(bus, &bus.topics().loop_keys()).await?,
+            keys: Watcher::start(bus, &bus.topics().every_key()).await?,
             latency: watch.latency.clone(),
             _latency: watch,
             clock,
@@ -521,7 +532,7 @@ impl Extras {
         let recording = match args.record {
             true => {
                 let viewable = args.viewable.then(|| crate::view::Copies::new(Some(scenario)));
-                Some(Recording::start_with(bus, &bus.topics().loop_keys(), &dir.join(RECORDING), viewable).await?)
+                Some(Recording::start_with(bus, &bus.topics().every_key(), &dir.join(RECORDING), viewable).await?)
             }
             false => None,
         };

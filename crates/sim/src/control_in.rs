@@ -130,6 +130,26 @@ pub(crate) struct Answers {
     /// Senders of answers to this step that lockstep does not wait for ("(unnamed)": no
     /// attachment): usually a controller started under another name.
     pub(crate) strangers: BTreeSet<String>,
+    /// Awaited nodes whose commands answered another step than this one, with the step the
+    /// last of them named (None: a command naming no step): why a node is late when it did
+    /// send something.
+    pub(crate) off_step: BTreeMap<String, Option<u64>>,
+}
+
+impl Answers {
+    /// Why awaited node `name` did not answer, as far as the step saw: the step its commands
+    /// named instead, or who answered in its place. None when nothing came.
+    pub(crate) fn why_late(&self, name: &str, k: u64) -> Option<String> {
+        match self.off_step.get(name) {
+            Some(Some(step)) => Some(format!("its commands answered step {step}, not {k}")),
+            Some(None) => Some("its commands name no step (answers_step is missing)".to_string()),
+            None if !self.strangers.is_empty() => Some(format!(
+                "step {k} was answered by {}, which lockstep.wait_for does not list: a controller attaches its node name",
+                self.strangers.iter().cloned().collect::<Vec<_>>().join(", ")
+            )),
+            None => None,
+        }
+    }
 }
 
 /// Collects the answers to step `k` (stamped `t_ns`) until every awaited node answered or the
@@ -150,6 +170,7 @@ pub(crate) async fn await_answers(
     let mut answers: BTreeMap<&str, Received<ControlCommand>> = BTreeMap::new();
     let mut earlier = Vec::new();
     let mut strangers = BTreeSet::new();
+    let mut off_step = BTreeMap::new();
     let arrived = |n: &String| faulted && arrivals.since_from(n, t_ns);
     loop {
         // Arrivals first: an answer seen arrived was handed on before, so the drain gets it.
@@ -163,6 +184,10 @@ pub(crate) async fn await_answers(
                 (Some(_), Some(step)) if faulted && step < k => earlier.push(r),
                 (None, Some(step)) if step == k => {
                     strangers.insert(r.source.clone().unwrap_or_else(|| "(unnamed)".into()));
+                }
+                (Some(name), step) if !faulted || step.is_none_or(|s| s > k) => {
+                    tracing::debug!(source = %name, ?step, waiting_for = k, "vehicle/control answers another step");
+                    off_step.insert(name.clone(), step);
                 }
                 (_, step) => {
                     tracing::debug!(source = ?r.source, ?step, waiting_for = k, "vehicle/control ignored in lockstep")
@@ -183,7 +208,7 @@ pub(crate) async fn await_answers(
     }
     let answered = |n: &&String| answers.contains_key(n.as_str()) || arrived(n);
     let late = wait_for.iter().filter(|n| !answered(n)).cloned().collect();
-    Answers { command: wait_for.iter().find_map(|n| answers.remove(n.as_str())), earlier, late, strangers }
+    Answers { command: wait_for.iter().find_map(|n| answers.remove(n.as_str())), earlier, late, strangers, off_step }
 }
 
 #[cfg(test)]

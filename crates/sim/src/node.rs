@@ -18,7 +18,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use super::port::{awaits, on_late, EgoPort, EgoRun};
+use super::port::{awaits, on_late, EgoPort, EgoRun, Late};
 use super::settings::{Mode, SimSettings};
 use super::world::{End, World};
 use slipstream_contract::bus::{Bus, NodeClock, StatsSnapshot};
@@ -275,9 +275,9 @@ impl<'a> Node<'a> {
             let missing = port.take_answers(k, t_ns, self.settings, left, stop).await?;
             // Names are qualified only when a node was late: nothing is formatted on a step
             // every ego answered.
-            late.extend(missing.into_iter().map(|n| match port.ego_namespace() {
-                Some(ns) => format!("{ns}/{n}"),
-                None => n,
+            late.extend(missing.into_iter().map(|l| match port.ego_namespace() {
+                Some(ns) => Late { name: format!("{ns}/{}", l.name), why: l.why },
+                None => l,
             }));
         }
         self.lockstep_timeouts += !late.is_empty() as u64;

@@ -7,7 +7,7 @@ use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 use std::time::Instant;
 
-use super::control_in::{await_answers, Answers, ControlInbox, Policy};
+use super::control_in::{await_answers, ControlInbox, Policy};
 use super::error::SimError;
 use super::ground_truth::ground_truth_of;
 use super::render::{seen_by_either, ObjectVisibility, Renderer};
@@ -284,30 +284,33 @@ impl EgoPort {
         settings: &SimSettings,
         timeout_ms: u64,
         stop: &AtomicBool,
-    ) -> Result<Vec<String>, SimError> {
+    ) -> Result<Vec<Late>, SimError> {
         let wait_for = &settings.lockstep.wait_for;
         let arrivals = self.control_sub.arrivals();
-        let Answers { command, earlier, late, strangers } =
-            await_answers(&self.inbox, arrivals, self.faulted, wait_for, step, t_ns, timeout_ms, stop).await;
-        for cmd in earlier.iter().chain(&command) {
+        let answers = await_answers(&self.inbox, arrivals, self.faulted, wait_for, step, t_ns, timeout_ms, stop).await;
+        for cmd in answers.earlier.iter().chain(&answers.command) {
             self.policy.on_command(cmd, t_ns);
         }
-        if late.is_empty() || stop.load(std::sync::atomic::Ordering::SeqCst) {
+        if answers.late.is_empty() || stop.load(std::sync::atomic::Ordering::SeqCst) {
             return Ok(Vec::new());
         }
         self.lockstep_timeouts += 1;
-        let hint = if strangers.is_empty() {
-            String::new()
-        } else {
-            format!(
-                "; this step was answered by {}, which lockstep.wait_for does not list (a controller must attach its node name)",
-                strangers.iter().cloned().collect::<Vec<_>>().join(", ")
-            )
-        };
+        let undecodable = self.control_sub.stats().snapshot().decode_errors;
+        let late: Vec<Late> = answers
+            .late
+            .iter()
+            .map(|name| {
+                let why = answers.why_late(name, step).or_else(|| {
+                    (undecodable > 0).then(|| format!("{undecodable} vehicle/control payloads did not decode so far"))
+                });
+                Late { name: name.clone(), why }
+            })
+            .collect();
+        let said: Vec<String> = late.iter().map(Late::to_string).collect();
         let ns = self.bus.topics().namespace().to_string();
-        tracing::warn!(step, ?late, namespace = %ns, timeout_ms = settings.lockstep.step_timeout_ms,
-            "lockstep: no answer to this step from {}{hint}", late.join(", "));
-        self.event(t_ns, SimEventKind::ControlTimeout { late: late.clone() })?;
+        tracing::warn!(step, namespace = %ns, timeout_ms = settings.lockstep.step_timeout_ms,
+            "lockstep: no answer to this step from {}", said.join(", "));
+        self.event(t_ns, SimEventKind::ControlTimeout { late: answers.late.clone() })?;
         Ok(late)
     }
 
@@ -343,10 +346,30 @@ impl EgoPort {
     }
 }
 
-/// Lockstep's policy for a step with late nodes: Some(end) when it stops the run.
-pub(crate) fn on_late(settings: &SimSettings, step: u64, late: &[String]) -> Option<End> {
+/// A node lockstep waited for in vain, and why as far as the step saw (the step its commands
+/// answered instead, a stranger answering in its place, payloads that did not decode).
+pub(crate) struct Late {
+    pub(crate) name: String,
+    pub(crate) why: Option<String>,
+}
+
+impl std::fmt::Display for Late {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match &self.why {
+            Some(why) => write!(f, "{} ({why})", self.name),
+            None => write!(f, "{}", self.name),
+        }
+    }
+}
+
+/// Lockstep's policy for a step with late nodes: Some(end) when it stops the run, naming each
+/// late node and why.
+pub(crate) fn on_late(settings: &SimSettings, step: u64, late: &[Late]) -> Option<End> {
     (settings.lockstep.on_timeout == OnTimeout::Stop && !late.is_empty()).then(|| End {
-        reason: format!("lockstep timeout at step {step} waiting for {}", late.join(", ")),
+        reason: format!(
+            "lockstep timeout at step {step} waiting for {}",
+            late.iter().map(Late::to_string).collect::<Vec<_>>().join(", ")
+        ),
         success: false,
     })
 }

@@ -66,6 +66,8 @@ struct Seen {
     frames: Vec<Received<GroundTruthObjects>>,
     detections: Vec<Received<Detections>>,
     statuses: usize,
+    /// Payloads on the node's output that did not decode (garbage, another message type).
+    undecodable: u64,
 }
 
 /// Runs the node in its role (started from its command, or the one already running on
@@ -97,7 +99,7 @@ pub async fn run_node(
     };
     let mut lp = LoopRun::open(spec, network, &logs, "conform").await?;
     let namespace = lp.bus().topics().namespace().to_string();
-    let (seen, _subs) = watch(&lp).await?;
+    let (seen, subs) = watch(&lp).await?;
     let tokens = lp.bus().watch_nodes().await?;
     let started = lp.start().await;
     let (timeouts, ended) = match &started {
@@ -105,10 +107,18 @@ pub async fn run_node(
         Err(_) => (0, None),
     };
     let kept = tokens.names().iter().any(|n| n == role.node());
-    let seen = std::mem::take(&mut *seen.lock());
-    lp.stop().await;
+    let mut seen = std::mem::take(&mut *seen.lock());
+    let output = match role {
+        Role::Controller => &subs[1],
+        Role::Detector => &subs[3],
+    };
+    seen.undecodable = output.stats().snapshot().decode_errors;
+    let ends = lp.stop().await;
     lp.close().await;
     let mut verdicts = vec![token(role, &started, kept)];
+    if let Some(died) = ends.iter().find(|e| e.died) {
+        verdicts.push(died_verdict(died));
+    }
     if started.is_ok() {
         verdicts.extend(match role {
             Role::Controller => judge_controller(&seen, timeouts, ended.as_deref()),
@@ -220,6 +230,28 @@ fn token(role: Role, started: &Result<(), slipstream_orchestration::Error>, kept
     }
 }
 
+/// The node under test ended before the run: its exit and its last words (a traceback's last
+/// line, an error), where its log is.
+fn died_verdict(end: &slipstream_orchestration::launch::NodeEnd) -> Verdict {
+    let code = end.exit_code.map_or("killed by a signal".to_string(), |c| format!("exit code {c}"));
+    let said = slipstream_orchestration::launch::last_words(&end.log).map_or(String::new(), |w| format!(": {w}"));
+    verdict(
+        "kept_running",
+        false,
+        format!("{} ended before the run was over ({code}){said} (its log: {})", end.node, end.log.display()),
+    )
+}
+
+/// Rules that judge the node's answers, when it gave none that decoded: failed, saying so,
+/// never passed on zero evidence.
+fn without_answers(rules: &[&'static str], output: &str, undecodable: u64) -> Vec<Verdict> {
+    let detail = match undecodable {
+        0 => format!("no answer on {output}: nothing to judge"),
+        n => format!("no decodable answer on {output} ({n} payloads did not decode): nothing to judge"),
+    };
+    rules.iter().map(|rule| verdict(rule, false, detail.clone())).collect()
+}
+
 /// The controller's rules: one answer per state, naming its step, stamped with its stamp,
 /// under the node's name, pedals in range, acc/status published.
 fn judge_controller(seen: &Seen, timeouts: u64, ended: Option<&str>) -> Vec<Verdict> {
@@ -252,12 +284,25 @@ fn judge_controller(seen: &Seen, timeouts: u64, ended: Option<&str>) -> Vec<Verd
     let all = steps.len();
     let once = steps.keys().filter(|k| answered.get(k) == Some(&1)).count();
     let ended = ended.unwrap_or("not at all");
+    let every_step = verdict(
+        "every_step_answered",
+        once == all && all > 0 && timeouts == 0,
+        format!("{once} of {all} steps answered once; {timeouts} lockstep timeouts; the run ended: {ended}"),
+    );
+    let status =
+        verdict("status", seen.statuses > 0, format!("{} acc/status messages (what the judge reads)", seen.statuses));
+    if seen.answers.is_empty() {
+        let mut v = vec![every_step];
+        v.extend(without_answers(
+            &["answers_step", "stamp_copied", "attachment", "pedals"],
+            "vehicle/control",
+            seen.undecodable,
+        ));
+        v.push(status);
+        return v;
+    }
     vec![
-        verdict(
-            "every_step_answered",
-            once == all && all > 0 && timeouts == 0,
-            format!("{once} of {all} steps answered once; {timeouts} lockstep timeouts; the run ended: {ended}"),
-        ),
+        every_step,
         verdict(
             "answers_step",
             wrong_step.is_none(),
@@ -274,7 +319,7 @@ fn judge_controller(seen: &Seen, timeouts: u64, ended: Option<&str>) -> Vec<Verd
             out_of_range.is_none(),
             out_of_range.unwrap_or_else(|| "throttle and brake within 0..1".into()),
         ),
-        verdict("status", seen.statuses > 0, format!("{} acc/status messages (what the judge reads)", seen.statuses)),
+        status,
     ]
 }
 
@@ -299,12 +344,18 @@ fn judge_detector(seen: &Seen) -> Vec<Verdict> {
     by_stamp.sort_by_key(|d| d.header.stamp_sim_ns);
     let in_order = by_stamp.windows(2).all(|w| w[0].msg.frame_seq < w[1].msg.frame_seq);
     let strangers = seen.detections.iter().find(|d| d.source.as_deref() != Some("detect"));
+    let every_frame = verdict(
+        "every_frame_answered",
+        once == frames.len() && !frames.is_empty(),
+        format!("{once} of {} frames answered once", frames.len()),
+    );
+    if seen.detections.is_empty() {
+        let mut v = vec![every_frame];
+        v.extend(without_answers(&["stamp_copied", "frame_seq", "attachment"], "perception/objects", seen.undecodable));
+        return v;
+    }
     vec![
-        verdict(
-            "every_frame_answered",
-            once == frames.len() && !frames.is_empty(),
-            format!("{once} of {} frames answered once", frames.len()),
-        ),
+        every_frame,
         verdict(
             "stamp_copied",
             stray.is_none(),

@@ -167,11 +167,23 @@ pub struct AccReport {
     /// The nodes of the user's own it judged (their command and files by content); empty: ours.
     pub own: OwnNodes,
     pub results: Vec<ScenarioResult>,
+    /// Scenarios that did not finish (a node died, a timeout, too little to judge): not
+    /// judged, and the suite does not pass.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub unfinished: Vec<Unfinished>,
     pub pass: bool,
     /// Scenarios run at once.
     pub jobs: usize,
     /// The suite's wall time, seconds.
     pub wall_s: f64,
+}
+
+/// A scenario of the suite that did not finish, and why: the node that died with its exit
+/// and last words, a timeout, a run too short to judge.
+#[derive(Debug, Clone, Serialize)]
+pub struct Unfinished {
+    pub scenario: String,
+    pub error: String,
 }
 
 /// Runs at once: `--jobs`, else one per CPU core, at most [`MAX_DEFAULT_JOBS`].
@@ -213,27 +225,59 @@ pub fn run(args: &EvalAccArgs, connect: &slipstream_contract::config::ConnectArg
     let total = runs.len();
     let perception = args.perception;
     let under = Under { faults, own: own.clone() };
-    let results = run_all(runs, args, &under, connect.topics.clone(), &logs, jobs, |done, name, result| {
-        if let Ok(r) = result {
-            eprintln!(
+    let results =
+        run_all(runs, args, &under, connect.topics.clone(), &logs, jobs, |done, name, result| match result {
+            Ok(r) => eprintln!(
                 "[{done}/{total}] {name} ({} perception): {} in {:.1} s ({:.0} s simulated){}",
                 perception.name(),
                 if r.passed() { "pass" } else { "FAIL" },
                 r.time.wall_s,
                 r.time.simulated_s,
                 r.plot.as_ref().map_or(String::new(), |p| format!(", plot {}", p.display()))
-            );
-        }
-    })?;
-    let results = results.into_iter().collect::<Result<Vec<_>>>()?;
+            ),
+            Err(e) => {
+                eprintln!("[{done}/{total}] {name} ({} perception): did not finish: {}", perception.name(), e.chain())
+            }
+        })?;
+    let (results, unfinished) = finished_or_not(results)?;
     let wall_s = suite_started.elapsed().as_secs_f64();
-    let pass = results.iter().all(ScenarioResult::passed);
+    let pass = unfinished.is_empty() && results.iter().all(ScenarioResult::passed);
     if pass && args.logs.is_none() {
         let _ = std::fs::remove_dir_all(&logs);
     } else {
         eprintln!("node logs: {}", logs.display());
     }
-    Ok(AccReport { command: std::env::args().collect::<Vec<_>>().join(" "), own, results, pass, jobs, wall_s })
+    Ok(AccReport {
+        command: std::env::args().collect::<Vec<_>>().join(" "),
+        own,
+        results,
+        unfinished,
+        pass,
+        jobs,
+        wall_s,
+    })
+}
+
+/// The runs that finished, and those that did not with their reasons. A suite none of whose
+/// runs finished is an error of its own (a controller that never starts, a bad settings file):
+/// the first run's error, as it is.
+fn finished_or_not(results: Vec<Result<ScenarioResult>>) -> Result<(Vec<ScenarioResult>, Vec<Unfinished>)> {
+    if !results.is_empty() && results.iter().all(Result::is_err) {
+        return Err(results.into_iter().find_map(Result::err).expect("every result is an error"));
+    }
+    let (mut finished, mut unfinished) = (Vec::new(), Vec::new());
+    for r in results {
+        match r {
+            Ok(r) => finished.push(r),
+            Err(Error::Run { run, source, logs }) => {
+                let scenario = run.strip_prefix("scenario ").unwrap_or(&run).to_string();
+                let error = format!("{} (node logs in {})", source.chain(), logs.display());
+                unfinished.push(Unfinished { scenario, error });
+            }
+            Err(e) => return Err(e),
+        }
+    }
+    Ok((finished, unfinished))
 }
 
 /// Runs each of `runs` (the simulator's `--scenario` argument: a built-in name or a file, and
@@ -298,11 +342,25 @@ fn ended_in_time(progress: &crate::launch::Progress, ends: &[crate::launch::Node
     Ok(())
 }
 
-/// A run too short to judge, and how the simulator ended it.
-fn unjudged(states: usize, sim: &slipstream_sim::SimReport) -> Error {
+/// A run too short to judge: what the observer received of each topic the judge reads (a
+/// controller that answers every step but publishes no acc/status shows as such), and how
+/// the simulator ended it.
+fn unjudged(states: usize, sim: &slipstream_sim::SimReport, inputs: &[NodeInput]) -> Error {
     let ended = sim.end.as_ref().filter(|e| !e.success);
     let ended = ended.map_or(String::new(), |e| format!("; the simulator ended: {}", e.reason));
-    Error::Unjudged(format!("recorded only {states} states (did the nodes connect?){ended}"))
+    let seen: Vec<String> = inputs
+        .iter()
+        .filter(|i| i.node == "observer")
+        .map(|i| format!("{} {}", i.stats.received, i.stats.topic))
+        .collect();
+    let seen = match seen.is_empty() {
+        true => "(did the nodes connect?)".to_string(),
+        false => format!(
+            "(the observer received {}; a run is judged on vehicle/state and the controller's acc/status, docs/node-contract.md)",
+            seen.join(", ")
+        ),
+    };
+    Error::Unjudged(format!("recorded only {states} states to judge {seen}{ended}"))
 }
 
 /// What every run of a suite puts under test besides the scenario, parsed once for the suite:
@@ -387,7 +445,7 @@ pub(crate) async fn run_one(
     let egos = super::egos::results(&recorded, &judged, &sim)?;
     let judged = judged.swap_remove(0);
     let trace = judged.trace;
-    let metrics = judged.metrics.ok_or_else(|| unjudged(trace.samples.len(), &sim))?;
+    let metrics = judged.metrics.ok_or_else(|| unjudged(trace.samples.len(), &sim, &inputs))?;
     let plot = match &args.plots {
         Some(dir) => {
             let path = dir.join(format!("{name}-{}.png", args.perception.name()));
@@ -462,6 +520,14 @@ pub fn markdown(report: &AccReport) -> String {
             let verdict = with_restarts(verdict(e.passed(), &e.metrics, e.lockstep_timeouts));
             out.push_str(&row(&format!("{} {}", r.scenario, e.namespace), r.perception, &e.metrics, &verdict));
         }
+    }
+    for u in &report.unfinished {
+        out.push_str(&format!(
+            "| {} |{} did not finish: {} |\n",
+            u.scenario,
+            " - |".repeat(14),
+            u.error.replace('|', "/")
+        ));
     }
     out.push_str(&format!(
         "\nAims: no collision; in steady following time-gap RMS error <= {} s and acceleration within {} m/s2 of the lead's; a scenario's own minimum gap (expect.min_gap_m); accel <= {}, decel <= {} m/s2 at {} m/s and above rising to {} at {} m/s and below (+{:.0}% tolerance) and jerk <= {} m/s3 outside emergencies, at speed; no unwarranted emergency, no phantom braking (beyond 1 m/s2 with nothing in the lane within twice the time gap), no standstill with nothing ahead. Traffic collisions and the answer to a lead braking beyond the comfort limit (until the ACC asks for 90% of what stopping behind it needs; aim {} s) are reported, not judged.\n",

@@ -9,6 +9,14 @@
 //! frame is skipped however slow the node, and with a lockstep recording the nodes see their
 //! inputs in the recorded order: the same nodes give the same bytes.
 //!
+//! A recording made in realtime or fast mode may lack messages (its recorder counted them as
+//! lost). The rule: a step is played with what the recording has of it; a recorded command
+//! whose speed message the recording lacks answers nothing that is played, so it is not
+//! waited for and is counted (`commands_without_input`), as are the recording's own sequence
+//! gaps per input key (`lost_in_recording`). When today's nodes stop answering, the replay
+//! ends, the nodes are stopped and the report is written all the same, naming the steps and
+//! the recording's gaps.
+//!
 //! Outputs are paired by what they answer (detections by frame sequence number, commands by
 //! the simulated time of the speed message) and compared on their bodies, byte for byte,
 //! without the wall-clock fields: the header (its publish stamp) and a command's
@@ -25,7 +33,7 @@ use parking_lot::{Condvar, Mutex};
 use serde::Serialize;
 
 use crate::launch::{ClockMode, LoopRun, LoopSpec, Network, NodeEnd, OwnNodes};
-use crate::record::play::{each_message, output_for, Output};
+use crate::record::play::{each_message, is_viewable_copy, output_for, Output};
 use slipstream_acc::PerceptionSource;
 use slipstream_contract::bus::{Bus, Declared};
 use slipstream_contract::config::ConnectArgs;
@@ -114,12 +122,34 @@ struct Recorded {
     inputs: u64,
     /// The keys (relative to the recording's namespace) that hold at least one message.
     keys: std::collections::BTreeSet<String>,
+    /// Sequence gaps of the simulator's messages, per key: lost before they were recorded.
+    lost: Gaps,
+}
+
+/// Sequence gaps per key and publisher, as the recording holds them.
+#[derive(Debug, Default)]
+struct Gaps {
+    last: BTreeMap<(String, Option<String>), u64>,
+    per_key: BTreeMap<String, u64>,
+}
+
+impl Gaps {
+    fn see(&mut self, key: &str, publisher: Option<&String>, seq: u64) {
+        let last = self.last.entry((key.to_string(), publisher.cloned())).or_insert(seq);
+        if seq > *last + 1 {
+            *self.per_key.entry(key.to_string()).or_default() += seq - *last - 1;
+        }
+        *last = (*last).max(seq);
+    }
 }
 
 impl Recorded {
     fn scan(path: &Path) -> Result<Recorded> {
         let mut rec = Recorded::default();
         each_message(path, |m| {
+            if is_viewable_copy(&m.channel) {
+                return Ok(());
+            }
             let ns = m.channel.metadata.get("namespace").map_or("", String::as_str);
             let key = m.channel.topic.strip_prefix(ns).unwrap_or(&m.channel.topic).trim_start_matches('/');
             if !rec.keys.contains(key) {
@@ -127,6 +157,11 @@ impl Recorded {
             }
             let bytes = m.data.into_owned();
             let Ok(kind) = msg::peek_kind(&bytes) else { return Ok(()) };
+            if role(kind) == Role::Input {
+                if let Ok((h, _)) = msg::decode_header(&bytes, kind) {
+                    rec.lost.see(key, m.channel.metadata.get("publisher"), h.seq);
+                }
+            }
             match kind {
                 MessageKind::SimEvent => {
                     if let Ok(e) = msg::decode::<SimEvent>(&bytes) {
@@ -264,6 +299,8 @@ impl Inbox {
 struct Step {
     stamp_sim_ns: Option<u64>,
     frames: Vec<u64>,
+    /// The step's speed message was played (a command answers it).
+    speed: bool,
 }
 
 /// How the replay went.
@@ -276,6 +313,14 @@ pub struct ReplayStats {
     /// Inputs that came in the file after a later step's (beyond the reorder window) and
     /// were played late.
     pub late_inputs: u64,
+    /// Recorded commands answering a speed message the recording lacks (lost while
+    /// recording): nothing played asks for them, so they are not waited for.
+    pub commands_without_input: u64,
+    /// Sequence gaps of the simulator's messages in the recording, per key (relative to the
+    /// recording's namespace): what its recorder reported as lost.
+    pub lost_in_recording: BTreeMap<String, u64>,
+    /// Why the replay ended before the recording's end, when today's nodes stopped answering.
+    pub gave_up: Option<String>,
     pub wall_s: f64,
     /// Stopped before the end of the recording (a signal).
     pub interrupted: bool,
@@ -315,15 +360,17 @@ impl Replayer<'_> {
             Some(s) if stamp_sim_ns == s => {}
             _ => {
                 self.finish_step()?;
-                self.step = Step { stamp_sim_ns: Some(stamp_sim_ns), frames: Vec::new() };
+                self.step = Step { stamp_sim_ns: Some(stamp_sim_ns), ..Step::default() };
                 if self.last_progress.elapsed() >= Duration::from_secs(1) {
                     progress(stamp_sim_ns as f64 / 1e9);
                     self.last_progress = Instant::now();
                 }
             }
         }
-        if p.kind == MessageKind::CameraFrame {
-            self.step.frames.push(p.seq);
+        match p.kind {
+            MessageKind::CameraFrame => self.step.frames.push(p.seq),
+            MessageKind::Speed => self.step.speed = true,
+            _ => {}
         }
         let output = match self.outputs.get(&p.channel.id) {
             Some(o) => o,
@@ -345,7 +392,11 @@ impl Replayer<'_> {
         let recorded = self.recorded;
         let frames: Vec<u64> =
             self.step.frames.iter().copied().filter(|f| recorded.detections.contains_key(f)).collect();
-        let command = recorded.commands.contains_key(&stamp).then_some(stamp);
+        let recorded_command = recorded.commands.contains_key(&stamp);
+        if recorded_command && !self.step.speed {
+            self.stats.commands_without_input += 1;
+        }
+        let command = (recorded_command && self.step.speed).then_some(stamp);
         self.stats.steps += 1;
         if self.inbox.wait(&frames, command, OUTPUT_WAIT, self.stop) {
             self.in_a_row = 0;
@@ -357,12 +408,12 @@ impl Replayer<'_> {
         self.stats.steps_timed_out += 1;
         self.in_a_row += 1;
         if self.in_a_row >= GIVE_UP_AFTER {
-            let problem = format!(
-                "stopped answering: {} steps in a row without their outputs (at {:.2} s simulated); see their logs",
+            self.stats.gave_up = Some(format!(
+                "today's nodes stopped answering: {} steps in a row without their outputs (at {:.2} s simulated); see their logs",
                 self.in_a_row,
                 stamp as f64 / 1e9
-            );
-            return Err(Error::node("today's nodes", problem));
+            ));
+            return Err(Error::Interrupted);
         }
         Ok(())
     }
@@ -419,6 +470,7 @@ fn replay(
         r.finish_step()
     });
     match rest {
+        Err(Error::Interrupted) if r.stats.gave_up.is_some() => {}
         Err(Error::Interrupted) => r.stats.interrupted = true,
         other => other?,
     }
@@ -537,7 +589,7 @@ impl ResimReport {
     /// Everything recorded was answered and no node died (differences are findings, not
     /// failures).
     pub fn complete(&self) -> bool {
-        self.replay.steps_timed_out == 0 && !self.nodes.iter().any(|n| n.died)
+        self.replay.steps_timed_out == 0 && self.replay.gave_up.is_none() && !self.nodes.iter().any(|n| n.died)
     }
 }
 
@@ -553,7 +605,7 @@ pub async fn run(
     progress: &mut dyn FnMut(f64),
     stop: &AtomicBool,
 ) -> Result<ResimReport> {
-    let recorded = tokio::task::block_in_place(|| Recorded::scan(path))?;
+    let mut recorded = tokio::task::block_in_place(|| Recorded::scan(path))?;
     recorded.check(path)?;
     // The scenario's own time gap and vehicle, as `up` gave them; otherwise today's ACC
     // settings decide (a changed settings file is what a re-simulation compares).
@@ -587,7 +639,8 @@ pub async fn run(
     let nodes = lp.stop().await;
     drop(subs);
     lp.close().await;
-    let replay = replayed?;
+    let mut replay = replayed?;
+    replay.lost_in_recording = std::mem::take(&mut recorded.lost.per_key);
     let today = std::mem::take(&mut *inbox.outputs.lock());
     let o = &recorded.outputs;
     Ok(ResimReport {
@@ -649,6 +702,18 @@ pub fn summary(r: &ResimReport) -> String {
             "  {} steps waited {:?} in vain for today's outputs\n",
             r.replay.steps_timed_out, OUTPUT_WAIT
         ));
+    }
+    let lost: u64 = r.replay.lost_in_recording.values().sum();
+    if lost > 0 || r.replay.commands_without_input > 0 {
+        let keys: Vec<String> = r.replay.lost_in_recording.iter().map(|(k, n)| format!("{k} {n}")).collect();
+        s.push_str(&format!(
+            "  the recording lacks {lost} of the simulator's messages ({}); {} recorded commands answer a speed it lacks: not waited for\n",
+            if keys.is_empty() { "-".to_string() } else { keys.join(", ") },
+            r.replay.commands_without_input
+        ));
+    }
+    if let Some(why) = &r.replay.gave_up {
+        s.push_str(&format!("  the replay ended early: {why}\n"));
     }
     let stopped;
     let verdict = match (r.detections.same() && r.commands.same(), r.complete(), &r.stopped_by) {
