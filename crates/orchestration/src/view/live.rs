@@ -25,7 +25,7 @@ use crate::eval::latency::LatencyWatch;
 use crate::watch::Watcher;
 use slipstream_contract::bus::{Bus, CallbackSubscriber, FrameSample, Received};
 use slipstream_contract::msg::{
-    AccStatus, CameraInfo, Detections, GroundTruthObjects, SimEvent, SimEventKind, VehicleState,
+    AccStatus, CameraInfo, Detections, GroundTruthObjects, RoadSpec, SimEvent, SimEventKind, VehicleState,
 };
 use slipstream_contract::topics;
 use slipstream_sim::Scenario;
@@ -105,6 +105,9 @@ struct Latest {
     fresh_state: bool,
     status: Option<AccStatus>,
     scenario: Option<String>,
+    /// The road the simulator publishes (sim/road, latched: a view started beside a running
+    /// loop gets it too).
+    road: Option<RoadSpec>,
 }
 
 #[derive(Default)]
@@ -186,14 +189,17 @@ struct Painter {
 impl Painter {
     /// One update: whatever changed since the last, to the channels viewers subscribed to.
     fn tick(&mut self, latest: &Mutex<Latest>) {
-        let (frame, info, detections, truth, state, status, scenario) = {
+        let (frame, info, detections, truth, state, status, scenario, road) = {
             let mut l = latest.lock();
             let detections = std::mem::take(&mut l.fresh_detections).then(|| l.detections.clone()).flatten();
             let state = std::mem::take(&mut l.fresh_state).then_some(l.state.clone()).flatten();
             let frame = l.frame.take();
             let info = frame.as_ref().and(l.camera_info.clone());
-            (frame, info, detections, l.truth.clone(), state, l.status.clone(), l.scenario.take())
+            (frame, info, detections, l.truth.clone(), state, l.status.clone(), l.scenario.take(), l.road.take())
         };
+        if let Some(road) = road {
+            self.context.published(road);
+        }
         if let Some(name) = scenario {
             self.context.announced(&name);
         }
@@ -424,5 +430,7 @@ async fn subscribe_state(
             }
         })
         .await?;
-    Ok(vec![state, status, events])
+    let l = latest.clone();
+    let road = bus.subscribe_with(topics::SIM_ROAD, move |r: Received<RoadSpec>| l.lock().road = Some(r.msg)).await?;
+    Ok(vec![state, status, events, road])
 }

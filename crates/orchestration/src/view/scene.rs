@@ -322,6 +322,15 @@ impl SceneContext {
         }
     }
 
+    /// The road the simulator publishes (sim/road), taken when none is known yet: any
+    /// simulator's, a scenario file's, a running loop's that the view joined late.
+    pub fn published(&mut self, road: slipstream_contract::msg::RoadSpec) {
+        if self.road.is_none() {
+            self.road = Some(Road::new(road));
+            self.road_s = None;
+        }
+    }
+
     /// The scenario the simulator announced (sim/events), taken when none is known yet and
     /// it is a built-in one.
     pub fn announced(&mut self, name: &str) {
