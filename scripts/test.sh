@@ -69,6 +69,28 @@ SECONDS=0
 # and Zenoh compiles again.
 cargo build --release --workspace
 echo "build: ${SECONDS} s"
+
+step "a loop beside the tests (default namespace, default config, as a developer leaves one running)"
+# Every test runs in a network or a rendezvous of its own (tests/it/common.rs and
+# tests/python/conftest.py hand every process a config without the machine's rendezvous; the
+# commands typed as a user types them run on hosts of their own), so the tests pass with a
+# loop running on the machine. This one checks it on every run: it holds the default
+# rendezvous (tcp/127.0.0.1:7447) and namespace for the whole run, and at the end it must
+# still be there, in the default namespace, with no command from any test applied.
+beside_dir=target/test-reports/beside-loop
+rm -rf "$beside_dir" && mkdir -p target/test-reports
+target/release/slipstream up --perception ground-truth --scenario steady-follow --duration 36000 \
+  --report "$beside_dir" --plain >target/test-reports/beside-loop.out 2>&1 &
+beside=$!
+trap 'kill -INT "$beside" 2>/dev/null || true' EXIT
+for _ in $(seq 600); do
+  grep -q "nodes alive: acc, sim, up" target/test-reports/beside-loop.out && break
+  kill -0 "$beside" 2>/dev/null || { cat target/test-reports/beside-loop.out; exit 1; }
+  sleep 0.1
+done
+grep -q "nodes alive: acc, sim, up" target/test-reports/beside-loop.out || { echo "the beside loop never came up"; exit 1; }
+echo "running (pid $beside, report in $beside_dir)"
+
 SECONDS=0
 cargo test --release --workspace
 echo "rust tests (compile included): ${SECONDS} s"
@@ -91,6 +113,14 @@ SLIPSTREAM_BIN="$PWD/target/release/slipstream" .venv/bin/python -m pytest -q -r
   --durations=8 --ignore tests/python/test_docs_commands.py tests/python
 SLIPSTREAM_BIN="$PWD/target/release/slipstream" .venv/bin/python -m pytest -q -rs --durations=5 \
   tests/python/test_docs_commands.py
+
+step "the loop beside the tests"
+kill -0 "$beside" 2>/dev/null || { echo "the beside loop ended during the tests:"; tail -20 target/test-reports/beside-loop.out; exit 1; }
+kill -INT "$beside"
+beside_code=0
+wait "$beside" || beside_code=$?
+trap - EXIT
+.venv/bin/python scripts/check-beside-loop.py "$beside_dir" "$beside_code"
 
 for f in target/test-reports/scenario-sample.txt target/test-reports/sweep-40.txt; do
   if [ -f "$f" ]; then

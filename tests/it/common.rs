@@ -95,8 +95,30 @@ pub(crate) fn rust_files(dir: &std::path::Path, out: &mut Vec<std::path::PathBuf
     }
 }
 
+/// The default Zenoh config (config/zenoh.json5) without its rendezvous: it dials nothing and
+/// listens on a port the kernel picks, so a test's processes meet only whom the test connects
+/// them to (`-e`, `-l`, or `up`'s own links to its nodes), never a loop a developer left
+/// running on the machine's rendezvous port. Written once per test process.
+pub(crate) fn hermetic_zenoh_config() -> &'static std::path::Path {
+    static PATH: std::sync::OnceLock<std::path::PathBuf> = std::sync::OnceLock::new();
+    PATH.get_or_init(|| {
+        let default = slipstream::config::DEFAULT_ZENOH_CONFIG;
+        let (dial, listen) =
+            (r#"endpoints: ["tcp/127.0.0.1:7447"],"#, r#"endpoints: ["tcp/127.0.0.1:7447", "tcp/127.0.0.1:0"],"#);
+        assert!(
+            default.contains(dial) && default.contains(listen),
+            "config/zenoh.json5's rendezvous moved: update this"
+        );
+        let own = default.replace(listen, r#"endpoints: ["tcp/127.0.0.1:0"],"#).replace(dial, "endpoints: [],");
+        let path = std::env::temp_dir().join(format!("slipstream-it-{}-zenoh.json5", std::process::id()));
+        std::fs::write(&path, own).unwrap();
+        path
+    })
+}
+
 /// A binary of this build (`slipstream`, `slipstream-sim`, `slipstream-detect`,
-/// `slipstream-acc`), with none of the caller's settings: no RUST_LOG, no SLIPSTREAM_*.
+/// `slipstream-acc`), with none of the caller's settings (no RUST_LOG, no SLIPSTREAM_*) and
+/// the [`hermetic_zenoh_config`] in their place, which `-c` overrides.
 pub(crate) fn bin(name: &str) -> std::process::Command {
     let path = match name {
         "slipstream" => env!("CARGO_BIN_EXE_slipstream"),
@@ -112,6 +134,7 @@ pub(crate) fn bin(name: &str) -> std::process::Command {
             c.env_remove(var);
         }
     }
+    c.env("SLIPSTREAM_ZENOH_CONFIG", hermetic_zenoh_config());
     c
 }
 

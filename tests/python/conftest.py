@@ -5,6 +5,7 @@ import os
 import pathlib
 import signal
 import socket
+import tempfile
 
 import pytest
 
@@ -16,6 +17,25 @@ ROOT = pathlib.Path(__file__).resolve().parents[2]
 # in this process each child starts with the default action instead.
 if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
     signal.signal(signal.SIGINT, signal.default_int_handler)
+
+
+def hermetic_zenoh_config():
+    """config/zenoh.json5 without its rendezvous (tcp/127.0.0.1:7447): it dials nothing and
+    listens on a port the kernel picks. Every process a test starts gets it through
+    SLIPSTREAM_ZENOH_CONFIG unless the test names another (`-c`, its own environment), so the
+    tests' nodes meet only whom a test connects them to, never a loop a developer left running
+    on the machine (the test command keeps one running beside them). The commands typed as a
+    user types them run on hosts of their own with the default config (user_host.py)."""
+    default = (ROOT / "config" / "zenoh.json5").read_text()
+    dial, listen = 'endpoints: ["tcp/127.0.0.1:7447"],', 'endpoints: ["tcp/127.0.0.1:7447", "tcp/127.0.0.1:0"],'
+    assert dial in default and listen in default, "config/zenoh.json5's rendezvous moved: update conftest.py"
+    own = default.replace(listen, 'endpoints: ["tcp/127.0.0.1:0"],').replace(dial, "endpoints: [],")
+    path = pathlib.Path(tempfile.gettempdir()) / f"slipstream-pytest-{os.getpid()}-zenoh.json5"
+    path.write_text(own)
+    return path
+
+
+os.environ["SLIPSTREAM_ZENOH_CONFIG"] = str(hermetic_zenoh_config())
 
 
 @pytest.fixture(scope="session")

@@ -7,14 +7,36 @@ import os
 import signal
 import subprocess
 import sys
+import threading
 import time
 
-from conftest import ROOT
+import zenoh
+from conftest import ROOT, peer_config
+
+from slipstream_client import decode
 
 
 def pid_of(pattern):
     found = subprocess.run(["pgrep", "-f", pattern], capture_output=True, text=True).stdout.split()
     return int(found[0]) if found else None
+
+
+def wait_for_clock(endpoint, key, sim_s, up, timeout_s=90):
+    """Returns once `key` (a sim/clock) says `sim_s` simulated; fails if `up` ends first."""
+    reached = threading.Event()
+
+    def on_clock(sample):
+        _, header, _ = decode(sample.payload.to_bytes(), expected="SimClock")
+        if header["stamp_sim_ns"] >= sim_s * 1e9:
+            reached.set()
+
+    with zenoh.open(peer_config(endpoint)) as session:
+        sub = session.declare_subscriber(key, on_clock)
+        deadline = time.monotonic() + timeout_s
+        while not reached.wait(0.2):
+            assert up.poll() is None, f"the run ended before {sim_s} s simulated"
+            assert time.monotonic() < deadline, f"{key} never reached {sim_s} s simulated"
+        sub.undeclare()
 
 
 def test_a_cars_acc_killed_mid_run_is_named_and_the_other_cars_are_still_judged(slipstream_bin, free_port, tmp_path):
@@ -25,15 +47,12 @@ def test_a_cars_acc_killed_mid_run_is_named_and_the_other_cars_are_still_judged(
          "--perception", "ground-truth", "--mode", "lockstep", "--duration", "60", "--report", str(report),
          "--plain"], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     try:
-        # The simulator starts after every car's ACC is ready: then car 3's is killed.
-        deadline = time.monotonic() + 60
-        victim = None
-        while victim is None:
-            assert up.poll() is None and time.monotonic() < deadline, "the platoon never started"
-            if (report / "logs" / "slipstream-sim.log").exists():
-                time.sleep(2)
-                victim = pid_of(f"slipstream-acc .*-n {ns}/car3 ")
-            time.sleep(0.2)
+        # Car 3's ACC is killed once the platoon drives: its clock past 2 s simulated (every car
+        # then has a run to judge), not after a fixed sleep, which on a slow machine came
+        # while the simulator still waited for the cars' ACCs.
+        wait_for_clock(f"tcp/127.0.0.1:{free_port}", f"{ns}/car1/sim/clock", 2.0, up)
+        victim = pid_of(f"slipstream-acc .*-n {ns}/car3 ")
+        assert victim, "car 3's ACC is not running"
         os.kill(victim, signal.SIGKILL)
         out, err = up.communicate(timeout=60)
     finally:
