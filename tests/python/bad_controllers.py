@@ -7,6 +7,8 @@
     python3 bad_controllers.py wrong-step # the example, each answer naming the next step
     python3 bad_controllers.py wall-stamp # the example, each answer stamped with the wall clock
     python3 bad_controllers.py no-token   # the example, its liveliness token withdrawn
+    python3 bad_controllers.py garbage    # the example, each answer's payload replaced by bytes
+                                          # that decode as nothing
 """
 
 import os
@@ -48,6 +50,9 @@ def broken(mode):
     put, start = ControllerNode._put, ControllerNode.start
 
     def bad_put(self, key, kind, t_ns, body):
+        if key == "vehicle/control" and mode == "garbage":
+            self.pubs[key].put(b"\xde\xad\xbe\xef not a message", attachment=self.name.encode())
+            return
         if key == "vehicle/control" and mode == "wrong-step":
             body = dict(body, answers_step=body["answers_step"] + 1)
         if key == "vehicle/control" and mode == "wall-stamp":
@@ -80,7 +85,7 @@ if __name__ == "__main__":
         silent()
     elif mode == "crash-once":
         crash_once(sys.argv.pop(1))
-    elif mode in ("wrong-step", "wall-stamp", "no-token"):
+    elif mode in ("wrong-step", "wall-stamp", "no-token", "garbage"):
         broken(mode)
     else:
         run_controller(crash)

@@ -54,6 +54,22 @@ def test_a_broken_controller_fails_naming_the_rule(slipstream_bin, mode, rule):
     assert not report["pass"] and rule in failed(report), report["verdicts"]
 
 
+def test_a_controller_whose_answers_never_decode_passes_no_rule_on_zero_evidence(slipstream_bin):
+    report = conform(slipstream_bin, "controller", f"{PY} tests/python/bad_controllers.py garbage")
+    verdicts = {v["rule"]: v for v in report["verdicts"]}
+    for rule in ("answers_step", "stamp_copied", "attachment", "pedals"):
+        assert verdicts[rule]["outcome"] == "FAIL", verdicts[rule]
+        assert "no decodable answer on vehicle/control" in verdicts[rule]["detail"], verdicts[rule]
+        assert "payloads did not decode" in verdicts[rule]["detail"], verdicts[rule]
+
+
+def test_a_controller_that_crashes_is_named_with_its_exit_and_last_words(slipstream_bin):
+    report = conform(slipstream_bin, "controller", f"{PY} tests/python/bad_controllers.py crash")
+    died = next(v for v in report["verdicts"] if v["rule"] == "kept_running")
+    assert died["outcome"] == "FAIL" and "exit code 1" in died["detail"], died
+    assert "the model diverged" in died["detail"], died
+
+
 @pytest.mark.parametrize("mode,rule", [("example", None), ("wall-stamp", "stamp_copied")])
 def test_a_controller_already_running_is_checked_where_it_runs(slipstream_bin, free_port, mode, rule):
     """No --command: the node started by hand (as on another PC) is awaited by its token in the

@@ -54,6 +54,8 @@ ELSEWHERE = {
         "tests/python/test_loop_file.py runs a sweep over the same loop file with --count 2: a thousand runs take an hour",
     "slipstream eval platoon --scenario platoon-8-hard-brake --time-gaps 1.0,1.8":
         "tests/it/platoon.rs runs `eval platoon` on a three-car platoon at two time gaps: eight cars for 70 s twice take minutes",
+    "slipstream top --all-namespaces":
+        "tests/python/test_pairs.py runs it beside two loops and a stranger's publisher, which it must show and `top` must not",
     "slipstream eval faults --scenario cut-in --plot envelope.png":
         "tests/it/faults.rs runs `eval faults --scenario steady-follow ... --duration 4`: the envelope takes minutes",
 }
