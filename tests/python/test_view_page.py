@@ -11,6 +11,7 @@ recording in the same page (`view FILE.mcap`: play, pause, the slider), and the 
 another PC (`--view-host 0.0.0.0`, network namespaces)."""
 
 import base64
+import json
 import os
 import pathlib
 import signal
@@ -173,7 +174,7 @@ def test_the_page_shows_the_loop_in_a_real_browser(slipstream_bin, free_port):
                            "s.drawn && s.drawn.boxes.some(b => b.kind !== 'truth')", 120, "showed the loop")
         # Freeze the page, let an update on its way land, stop keeping the bus's messages, then
         # read what the page shows.
-        driver.find_element("id", "pause").click()
+        driver.find_element("id", "freeze").click()
         time.sleep(0.3)
         with bus.lock:
             bus.frozen = True
@@ -183,10 +184,15 @@ def test_the_page_shows_the_loop_in_a_real_browser(slipstream_bin, free_port):
             check_camera(driver, bus, seen["shown"])
             check_boxes(driver, bus, seen["shown"], seen["drawn"])
             check_series(bus, seen["series"])
+        labels = driver.execute_script("return window.slipstream.drawn.labels")
+        for i, a in enumerate(labels):
+            for b in labels[i + 1:]:
+                apart = a["x"] + a["w"] <= b["x"] or b["x"] + b["w"] <= a["x"] or abs(a["y"] - b["y"]) >= 14
+                assert apart, f"two labels print over each other: {a} {b}"
         rows = driver.execute_script("return document.querySelectorAll('#topics tbody tr').length")
         hops = driver.execute_script("return [...document.querySelectorAll('#hops tbody td')].map(td => td.textContent)")
         assert rows >= 8 and "frame -> applied" in hops, (rows, hops)
-        driver.find_element("id", "pause").click()
+        driver.find_element("id", "freeze").click()
         time.sleep(1.5)
         REPORTS.mkdir(parents=True, exist_ok=True)
         height = driver.execute_script("return document.documentElement.scrollHeight")
@@ -293,6 +299,10 @@ def test_a_recording_in_the_page_plays_pauses_and_moves(slipstream_bin, free_por
     driver = None
     try:
         url = wait_for_url(view)
+        # Nothing plays until a page asks: a state fetched without one finds it at its start.
+        _, body = http_get(port, "/state")
+        before = json.loads(body)["replay"]
+        assert before["playing"] is False and before["t_s"] == 0 and before["rate"] == 1, before
         driver = chrome()
         driver.get(url)
         wait_until(driver, "const s = window.slipstream; return s.frames >= 3 && s.series.length > 20 && "
@@ -316,6 +326,9 @@ def test_a_recording_in_the_page_plays_pauses_and_moves(slipstream_bin, free_por
         driver.find_element("id", "replay-play").click()  # play
         wait_until(driver, f"const r = window.slipstream.last.replay; return r && r.playing && r.t_s > {target} + 0.2",
                    20, "played on from there")
+        driver.execute_script("const r = document.getElementById('replay-rate'); r.value = '4';"
+                              "r.dispatchEvent(new Event('change'))")
+        wait_until(driver, "const r = window.slipstream.last.replay; return r && r.rate === 4", 10, "took the speed")
         errors = [e for e in driver.get_log("browser") if e["level"] == "SEVERE"]
         assert not errors, errors
     finally:

@@ -77,6 +77,15 @@ impl Message for GroundTruthObjects {
     const KIND: MessageKind = MessageKind::GroundTruthObjects;
 }
 
+impl GroundTruthObject {
+    /// The box the camera shows of it: none when it is outside the image or wholly hidden by
+    /// nearer objects (`visible_fraction` 0), where a ground-truth box drawn over the image
+    /// would read as a vehicle the detector missed.
+    pub fn image_box(&self) -> Option<&BoundingBox2d> {
+        self.bbox.as_ref().filter(|_| self.visible_fraction > 0.0)
+    }
+}
+
 impl GroundTruthObjects {
     /// The nearest vehicle ahead of the ego whose centre is in `lane` (none off the road).
     pub fn nearest_ahead_in_lane(&self, lane: i32) -> Option<&GroundTruthObject> {

@@ -5,7 +5,11 @@
 //!
 //! One thread plays: it reads the file from the start to the time asked (MCAP is read in file
 //! order, so a move back reads from the start again, a move ahead reads on), then publishes at
-//! the recorded pace while the control says play. Pausing holds it between two messages.
+//! the pace of the simulated time the messages carry (their headers' stamp_sim_ns), times the
+//! rate the page asks, while the control says play. Simulated time, not the recorder's clock:
+//! a lockstep run of 60 s simulated may have been recorded in 10 s of wall time, and a person
+//! watches the 60 s. The replay waits for the page: it starts paused, and the page's first
+//! request plays it. Pausing holds it between two messages; a new rate goes on from where it is.
 
 use std::collections::HashMap;
 use std::ops::ControlFlow;
@@ -13,7 +17,7 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use super::play::{each_message_until, output_for, summary_of, Output};
+use super::play::{each_message_until, output_for, Output};
 use crate::error::{Error, Result};
 use crate::view::{Position, Timeline};
 use parking_lot::{Condvar, Mutex};
@@ -22,7 +26,10 @@ use slipstream_contract::bus::Bus;
 #[derive(Debug)]
 struct Control {
     playing: bool,
+    /// Simulated seconds played to.
     t_s: f64,
+    /// Simulated seconds per second of wall time.
+    rate: f64,
     /// A move asked for and not yet made.
     seek_s: Option<f64>,
     stop: bool,
@@ -37,13 +44,13 @@ pub struct Replay {
 }
 
 impl Replay {
-    /// Starts playing `path` onto `bus` from its start.
+    /// Readies `path` for playing onto `bus` from its start, paused until asked to play.
     pub fn start(bus: Arc<Bus>, path: &Path) -> Result<Arc<Replay>> {
         let duration_s = duration_of(path)?;
         let replay = Arc::new(Replay {
             path: path.to_path_buf(),
             duration_s,
-            control: Mutex::new(Control { playing: true, t_s: 0.0, seek_s: Some(0.0), stop: false }),
+            control: Mutex::new(Control { playing: false, t_s: 0.0, rate: 1.0, seek_s: Some(0.0), stop: false }),
             changed: Condvar::new(),
         });
         let r = replay.clone();
@@ -93,17 +100,19 @@ impl Replay {
     /// One pass from `from_s`: true when it reached the end of the file. `outputs` (a
     /// publisher per recorded channel) outlive the pass.
     fn pass(&self, bus: &Bus, from_s: f64, outputs: &mut HashMap<u16, Option<Output>>) -> Result<bool> {
-        let mut first: Option<u64> = None;
-        // Wall time at which recorded time `from_s` plays; moved on by pauses.
+        let rate = self.control.lock().rate;
+        // Simulated time of the messages so far: it never goes back (the recorder receives each
+        // key on its own path, so a message can sit in the file a little behind another key's).
+        let mut t_s = 0.0f64;
+        // Wall time at which simulated time `from_s` plays; moved on by pauses.
         let mut origin = Instant::now();
         let mut reached_end = true;
         each_message_until(&self.path, |message| {
-            let t0 = *first.get_or_insert(message.log_time);
-            let t_s = message.log_time.saturating_sub(t0) as f64 / 1e9;
+            t_s = sim_time_s(&message.data).map_or(t_s, |t| t.max(t_s));
             if t_s < from_s {
                 return Ok(ControlFlow::Continue(()));
             }
-            match self.wait_due(origin + Duration::from_secs_f64(t_s - from_s)) {
+            match self.wait_due(origin + Duration::from_secs_f64((t_s - from_s) / rate)) {
                 Due::Now => {}
                 Due::Resumed(paused) => origin += paused,
                 Due::Leave => {
@@ -157,7 +166,18 @@ enum Due {
 impl Timeline for Replay {
     fn position(&self) -> Position {
         let c = self.control.lock();
-        Position { t_s: c.seek_s.unwrap_or(c.t_s), duration_s: self.duration_s, playing: c.playing }
+        Position { t_s: c.seek_s.unwrap_or(c.t_s), duration_s: self.duration_s, playing: c.playing, rate: c.rate }
+    }
+
+    fn set_rate(&self, rate: f64) {
+        let mut c = self.control.lock();
+        if rate.is_finite() && rate > 0.0 && rate != c.rate {
+            c.rate = rate.clamp(MIN_RATE, MAX_RATE);
+            // The pass paces at the rate it started with: go on from here at the new one.
+            let here = c.t_s;
+            c.seek_s.get_or_insert(here);
+            self.changed.notify_all();
+        }
     }
 
     fn play(&self, playing: bool) {
@@ -200,9 +220,27 @@ pub async fn private_bus(node: &str) -> Result<Bus> {
     Ok(Bus::open(config, slipstream_contract::TopicMap::default(), node).await?)
 }
 
-/// The recording's length from its summary (statistics), none when it has none.
+/// The slowest and fastest rate the page may ask.
+const MIN_RATE: f64 = 0.1;
+const MAX_RATE: f64 = 16.0;
+
+/// The simulated time a payload carries (its header's stamp), seconds; none for a payload that
+/// is no message of slipstream's.
+fn sim_time_s(payload: &[u8]) -> Option<f64> {
+    let kind = slipstream_contract::msg::peek_kind(payload).ok()?;
+    let (header, _) = slipstream_contract::msg::decode_header(payload, kind).ok()?;
+    Some(header.stamp_sim_ns as f64 / 1e9)
+}
+
+/// The recording's length in simulated time: the latest stamp its payloads carry (the file is
+/// read once, headers only); none when it holds none.
 fn duration_of(path: &Path) -> Result<Option<f64>> {
-    Ok(summary_of(path)?
-        .and_then(|s| s.stats)
-        .map(|st| st.message_end_time.saturating_sub(st.message_start_time) as f64 / 1e9))
+    let mut latest: Option<f64> = None;
+    each_message_until(path, |m| {
+        if let Some(t) = sim_time_s(&m.data) {
+            latest = Some(latest.map_or(t, |l| l.max(t)));
+        }
+        Ok(ControlFlow::Continue(()))
+    })?;
+    Ok(latest)
 }

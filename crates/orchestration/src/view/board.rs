@@ -111,6 +111,9 @@ pub(crate) struct Snapshot {
     /// The series after the time the page asked from.
     pub series: Vec<AccSeries>,
     pub scene: Option<Birdseye>,
+    /// How the run ended, once the simulator said so (sim/events ScenarioEnd); none while it
+    /// runs, and again when a scenario starts.
+    pub ended: Option<String>,
 }
 
 #[derive(Default)]
@@ -122,9 +125,15 @@ pub(crate) struct Board {
     lead_track: Option<u32>,
     series: VecDeque<AccSeries>,
     scene: Option<Birdseye>,
+    ended: Option<String>,
 }
 
 impl Board {
+    /// The simulator started a scenario (`None`) or ended one with `reason`.
+    pub(crate) fn on_run(&mut self, ended: Option<String>) {
+        self.ended = ended;
+    }
+
     pub(crate) fn on_frame(&mut self, camera: Camera, sample: FrameSample) {
         let (stamp, width, height) = {
             let f = sample.frame();
@@ -143,7 +152,7 @@ impl Board {
         self.truth = truth
             .objects
             .iter()
-            .filter_map(|o| o.bbox.as_ref().map(|b| (o, b)))
+            .filter_map(|o| o.image_box().map(|b| (o, b)))
             .map(|(o, b)| ImageBox {
                 kind: BoxKind::Truth,
                 id: o.id,
@@ -221,6 +230,7 @@ impl Board {
             }),
             series: self.series.iter().filter(|s| s.t_s > from).cloned().collect(),
             scene: self.scene.clone(),
+            ended: self.ended.clone(),
         }
     }
 

@@ -422,12 +422,15 @@ async fn subscribe_state(
             l.lock().status = Some(s.msg);
         })
         .await?;
-    let l = latest.clone();
+    let (l, b) = (latest.clone(), board.clone());
     let events = bus
-        .subscribe_with(topics::SIM_EVENTS, move |e: Received<SimEvent>| {
-            if let SimEventKind::ScenarioStart { name, .. } = e.msg.kind {
+        .subscribe_with(topics::SIM_EVENTS, move |e: Received<SimEvent>| match e.msg.kind {
+            SimEventKind::ScenarioStart { name, .. } => {
+                b.lock().on_run(None);
                 l.lock().scenario = Some(name);
             }
+            SimEventKind::ScenarioEnd { reason, .. } => b.lock().on_run(Some(reason)),
+            _ => {}
         })
         .await?;
     let l = latest.clone();

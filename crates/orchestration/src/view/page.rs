@@ -190,7 +190,8 @@ impl Page {
         }
     }
 
-    /// `/replay?play=1|0` and `/replay?seek=SECONDS`: the replay moved as asked; where it is.
+    /// `/replay?play=1|0`, `/replay?seek=SECONDS` (simulated) and `/replay?rate=X`: the replay
+    /// moved as asked; where it is.
     fn replay(&self, req: &Request) -> Response {
         let Some(timeline) = &self.timeline else { return Response::text(404, "no recording is replayed here") };
         if let Some(p) = req.param("play") {
@@ -198,6 +199,9 @@ impl Page {
         }
         if let Some(t) = req.param("seek").and_then(|t| t.parse::<f64>().ok()).filter(|t| t.is_finite()) {
             timeline.seek(t);
+        }
+        if let Some(r) = req.param("rate").and_then(|r| r.parse::<f64>().ok()).filter(|r| r.is_finite() && *r > 0.0) {
+            timeline.set_rate(r);
         }
         match serde_json::to_vec(&timeline.position()) {
             Ok(json) => Response::new(200, "application/json", Body::Owned(Arc::new(json))),

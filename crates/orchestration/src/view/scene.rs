@@ -160,7 +160,7 @@ pub(crate) fn annotations(
 ) -> ImageAnnotations {
     let mut a = ImageAnnotations { timestamp: Some(timestamp(stamp_ns)), ..Default::default() };
     for o in truth.iter().flat_map(|t| &t.objects) {
-        if let Some(b) = &o.bbox {
+        if let Some(b) = o.image_box() {
             a.points.push(box_outline(b, CYAN, 1.0));
         }
     }
@@ -501,13 +501,15 @@ mod tests {
         };
         let detections =
             Detections { frame_seq: 3, frame_stamp_pub_ns: 5_250_000_000, detections: vec![det(1), det(2)] };
+        let hidden = GroundTruthObject { visible_fraction: 0.0, ..object(9, 80.0, 30.0, 1, Some(BOX)) };
         let truth = GroundTruthObjects {
             step: 9,
-            objects: vec![object(7, 60.0, 30.0, 1, Some(BOX)), object(8, 90.0, 60.0, 0, None)],
+            objects: vec![object(7, 60.0, 30.0, 1, Some(BOX)), object(8, 90.0, 60.0, 0, None), hidden],
         };
         let a = annotations(5_250_000_000, Some(&detections), Some(&truth), Some(2));
         assert_eq!(a.timestamp, Some(Timestamp::new(5, 250_000_000)));
-        // One ground-truth box (the other has no box in the image), two detections.
+        // One ground-truth box (one has no box in the image, one is wholly hidden behind a
+        // nearer car: no miss to draw), two detections.
         assert_eq!(a.points.len(), 3);
         assert!(a.points.iter().all(|p| p.points.len() == 4 && p.r#type == points_annotation::Type::LineLoop as i32));
         assert_eq!(a.points[0].outline_color, Some(CYAN));

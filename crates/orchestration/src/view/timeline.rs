@@ -7,11 +7,13 @@ use serde::Serialize;
 /// Where a replay is, as the page shows it.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize)]
 pub struct Position {
-    /// Seconds since the recording's first message.
+    /// Simulated seconds (the messages' stamps) played to.
     pub t_s: f64,
-    /// The recording's length (from its summary; none for a file cut short, which has none).
+    /// The recording's length in simulated seconds (none when no payload carries a stamp).
     pub duration_s: Option<f64>,
     pub playing: bool,
+    /// Simulated seconds played per second.
+    pub rate: f64,
 }
 
 /// A replay under the page's control.
@@ -19,6 +21,8 @@ pub trait Timeline: Send + Sync {
     fn position(&self) -> Position;
     /// Play (true) or pause (false).
     fn play(&self, playing: bool);
-    /// Move to `t_s` seconds from the start (clamped to the recording).
+    /// Move to `t_s` simulated seconds (clamped to the recording).
     fn seek(&self, t_s: f64);
+    /// Play `rate` simulated seconds per second (clamped to what the replay takes).
+    fn set_rate(&self, rate: f64);
 }

@@ -19,9 +19,11 @@ const $ = (id) => document.getElementById(id);
 const sleep = (ms) => new Promise((r) => setTimeout(r, ms));
 const fmt = (v, digits, unit) => (v === null || v === undefined || !isFinite(v) ? "–" : v.toFixed(digits) + (unit || ""));
 
-// A recording (`slipstream view FILE.mcap`): play, pause and move it; the slider follows the
-// replay except while it is being dragged.
-let dragging = false;
+// A recording (`slipstream view FILE.mcap`): play, pause, move it in simulated time and set
+// its speed; the slider follows the replay except while it is being dragged. The replay waits
+// for a page: the first page that sees it paused at its start plays it.
+let dragging = false, asked = false;
+$("replay-rate").addEventListener("change", (e) => fetch("replay?rate=" + e.target.value));
 $("replay-play").addEventListener("click", () => {
   const playing = view.last && view.last.replay && view.last.replay.playing;
   fetch("replay?play=" + (playing ? 0 : 1));
@@ -35,17 +37,24 @@ $("replay-slider").addEventListener("change", (e) => {
 function drawReplay(replay) {
   $("replay").hidden = !replay;
   if (!replay) return;
+  if (!asked) {
+    asked = true;
+    if (!replay.playing && replay.t_s === 0) fetch("replay?play=1");
+  }
+  const rate = $("replay-rate");
+  if (document.activeElement !== rate && rate.value !== String(replay.rate)) rate.value = String(replay.rate);
   const end = replay.duration_s === null ? Math.max(replay.t_s, 1) : replay.duration_s;
   const slider = $("replay-slider");
   slider.max = end.toFixed(1);
   if (!dragging) slider.value = replay.t_s.toFixed(1);
   $("replay-play").textContent = replay.playing ? "pause" : "play";
-  $("replay-time").textContent = `${replay.t_s.toFixed(1)} / ${replay.duration_s === null ? "?" : end.toFixed(1)} s`;
+  $("replay-time").textContent = `${replay.t_s.toFixed(1)} / ${replay.duration_s === null ? "?" : end.toFixed(1)} s simulated`;
 }
 
-$("pause").addEventListener("click", () => {
+// Freezing the page is not pausing the loop or the replay: a word of its own.
+$("freeze").addEventListener("click", () => {
   view.paused = !view.paused;
-  $("pause").textContent = view.paused ? "resume" : "pause";
+  $("freeze").textContent = view.paused ? "unfreeze" : "freeze";
 });
 
 async function update() {
@@ -109,10 +118,21 @@ async function showFront(shot) {
     (shot.detected ? "" : " (no detections for this frame)");
 }
 
+const LABEL_H = 14;
+
+// Where a label goes: above its box, moved up (then below the box) past the labels already
+// placed, so that two boxes side by side or nested never print over each other.
+function labelSlot(placed, x, y, w, below) {
+  const overlaps = (top) => placed.some((r) => x < r.x + r.w && r.x < x + w && top < r.y + LABEL_H && r.y < top + LABEL_H);
+  for (let top = y - LABEL_H - 1; top >= 0; top -= LABEL_H) if (!overlaps(top)) return top;
+  for (let top = below; ; top += LABEL_H) if (!overlaps(top)) return top;
+}
+
 function drawBoxes(overlay, boxes, scale) {
   const g = overlay.getContext("2d");
   g.clearRect(0, 0, overlay.width, overlay.height);
-  const drawn = [];
+  g.font = "12px system-ui, sans-serif";
+  const drawn = [], labels = [];
   for (const b of boxes) {
     const x0 = b.u0 * scale, y0 = b.v0 * scale, x1 = b.u1 * scale, y1 = b.v1 * scale;
     g.strokeStyle = COLORS[b.kind];
@@ -120,15 +140,17 @@ function drawBoxes(overlay, boxes, scale) {
     g.strokeRect(x0, y0, x1 - x0, y1 - y0);
     if (b.kind !== "truth") {
       const label = `#${b.id} ${fmt(b.distance_m, 0, " m")}${b.kind === "lead" ? " lead" : ""}`;
-      g.font = "12px system-ui, sans-serif";
+      const w = g.measureText(label).width + 6;
+      const top = labelSlot(labels, x0, y0, w, y1 + 1);
+      labels.push({ x: x0, y: top, w, text: label });
       g.fillStyle = "rgba(0,0,0,0.6)";
-      g.fillRect(x0, Math.max(0, y0 - 15), g.measureText(label).width + 6, 14);
+      g.fillRect(x0, top, w, LABEL_H);
       g.fillStyle = COLORS[b.kind];
-      g.fillText(label, x0 + 3, Math.max(11, y0 - 4));
+      g.fillText(label, x0 + 3, top + LABEL_H - 3);
     }
     drawn.push({ kind: b.kind, id: b.id, x0, y0, x1, y1 });
   }
-  view.drawn = { scale, boxes: drawn };
+  view.drawn = { scale, boxes: drawn, labels };
 }
 
 async function showNarrow(other) {
@@ -147,8 +169,8 @@ function drawFigures(state) {
   const s = view.series.length ? view.series[view.series.length - 1] : null;
   $("mode").textContent = s && s.mode ? s.mode : "–";
   $("warnings").textContent = s && s.warnings.length ? s.warnings.join(", ") : "";
-  $("speed").textContent = s ? fmt(s.speed_mps * 3.6, 1, " km/h") : "–";
-  $("set-speed").textContent = s ? fmt(s.set_speed_mps * 3.6, 1, " km/h") : "–";
+  $("speed").textContent = s ? fmt(s.speed_mps, 1, " m/s") : "–";
+  $("set-speed").textContent = s ? fmt(s.set_speed_mps, 1, " m/s") : "–";
   $("gap").textContent = s ? fmt(s.gap_m, 1, " m") : "–";
   $("desired-gap").textContent = s ? fmt(s.desired_gap_m, 1, " m") : "–";
   $("time-gap").textContent = s ? fmt(s.time_gap_s, 1, " s") : "–";
@@ -161,7 +183,7 @@ function drawFigures(state) {
 /// Lines over the last minute: `lines` are [label, colour, value of a sample or null].
 function plot(canvas, title, unit, lines) {
   const g = canvas.getContext("2d"), w = canvas.width, h = canvas.height;
-  const pad = { l: 44, r: 8, t: 16, b: 16 };
+  const pad = { l: 44, r: 8, t: 16, b: 24 };
   g.clearRect(0, 0, w, h);
   const data = view.series;
   if (!data.length) return;
@@ -179,6 +201,14 @@ function plot(canvas, title, unit, lines) {
     g.beginPath(); g.moveTo(pad.l, y(v)); g.lineTo(w - pad.r, y(v)); g.stroke();
     g.fillText(v.toFixed(Math.abs(hi - lo) < 10 ? 1 : 0), 4, y(v) + 3);
   }
+  // The time axis: simulated seconds, a tick every 10 s.
+  g.fillStyle = COLORS.dim; g.strokeStyle = COLORS.grid;
+  for (let t = Math.ceil(t0 / 10) * 10; t <= t1; t += 10) {
+    if (t < 0) continue;
+    g.beginPath(); g.moveTo(x(t), pad.t); g.lineTo(x(t), h - pad.b); g.stroke();
+    g.fillText(`${t.toFixed(0)} s`, x(t) - 8, h - pad.b + 11);
+  }
+  g.font = "11px system-ui, sans-serif";
   g.fillText(`${title} (${unit})`, pad.l, 11);
   let legendX = pad.l + g.measureText(`${title} (${unit})`).width + 14;
   for (const [label, color, f] of lines) {
@@ -195,9 +225,9 @@ function plot(canvas, title, unit, lines) {
   }
 }
 
+// One unit system on the page: SI (m, s, m/s, m/s²), as every topic carries it.
 function drawPlots() {
-  const kmh = (v) => (v === null || v === undefined ? null : v * 3.6);
-  plot($("plot-speed"), "speed", "km/h", [["speed", COLORS.ego, (s) => kmh(s.speed_mps)], ["set", COLORS.dim, (s) => kmh(s.set_speed_mps)]]);
+  plot($("plot-speed"), "speed", "m/s", [["speed", COLORS.ego, (s) => s.speed_mps], ["set", COLORS.dim, (s) => s.set_speed_mps]]);
   plot($("plot-gap"), "gap", "m", [["measured", COLORS.detection, (s) => s.gap_m], ["wanted", COLORS.lead, (s) => s.desired_gap_m], ["true", COLORS.truth, (s) => s.truth_gap_m]]);
   plot($("plot-accel"), "acceleration", "m/s²", [["ego", COLORS.violet, (s) => s.accel_mps2]]);
   plot($("plot-timegap"), "time gap", "s", [["set", COLORS.dim, (s) => s.time_gap_s], ["actual", COLORS.detection,
@@ -257,6 +287,20 @@ function drawTables(state) {
     `${v.bad_requests} bad requests · this page: ${view.updates} updates`;
 }
 
+// What the page shows: a replay or the live loop, running, ended (the simulator said so) or
+// silent.
+function statusOf(state) {
+  const age = state.top.keys.reduce((a, k) => Math.min(a, k.age_s === null ? Infinity : k.age_s), Infinity);
+  if (state.replay) {
+    if (state.replay.playing) return ["replay", "ok"];
+    const atEnd = state.replay.duration_s !== null && state.replay.t_s >= state.replay.duration_s - 0.05;
+    return [atEnd ? "replay at its end" : "replay paused", "stale"];
+  }
+  if (state.ended && age >= 2) return ["run ended: " + state.ended, "ended"];
+  if (age < 2) return ["live", "ok"];
+  return ["no message for " + fmt(age, 0, " s"), "stale"];
+}
+
 function setStatus(text, cls) {
   const el = $("status");
   el.textContent = text; el.className = "status " + cls;
@@ -268,8 +312,7 @@ async function run() {
     if (!view.paused) {
       try {
         await update();
-        const age = view.last.top.keys.reduce((a, k) => Math.min(a, k.age_s === null ? Infinity : k.age_s), Infinity);
-        if (age < 2) setStatus("live", "ok"); else setStatus("no message for " + fmt(age, 0, " s"), "stale");
+        setStatus(...statusOf(view.last));
       } catch (e) {
         view.failures += 1;
         setStatus("view unreachable: " + e.message, "down");
