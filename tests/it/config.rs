@@ -178,6 +178,14 @@ fn a_loop_in_the_default_namespace_watches_its_own_keys_not_the_other_loops() {
 }
 
 #[test]
+fn an_unknown_cfg_key_is_named_as_a_key_with_the_fix() {
+    let args = ConnectArgs { cfg: vec!["nosuch/key:1".into()], ..Default::default() };
+    let e = args.zenoh_config().unwrap_err().to_string();
+    assert!(e.contains("nosuch/key") && e.contains("no such Zenoh config key") && e.contains("--cfg '"), "{e}");
+    assert!(!e.contains("Str("), "{e}");
+}
+
+#[test]
 fn an_ip_endpoint_without_its_port_is_refused_with_the_fix() {
     for (connect, listen) in [(vec!["tcp/127.0.0.1".to_string()], vec![]), (vec![], vec!["tcp/[::1]".to_string()])] {
         let flag = if connect.is_empty() { "-l/--listen" } else { "-e/--connect" };

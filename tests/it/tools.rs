@@ -373,6 +373,40 @@ fn nodes_in_client_mode_meet_through_slipstream_router() {
 }
 
 #[test]
+fn a_router_whose_port_is_taken_says_so_with_the_fix_and_no_dependency_paths() {
+    let held = std::net::TcpListener::bind(("127.0.0.1", free_port())).unwrap();
+    let endpoint = ep(held.local_addr().unwrap().port());
+    let mut router = bin("slipstream");
+    router.args(["router", "-l", &endpoint]);
+    let out = common::run_with_limit(router, Duration::from_secs(30));
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!out.status.success(), "{stderr}");
+    assert!(stderr.contains("is taken") && stderr.contains("slipstream router -l tcp/0.0.0.0:7448"), "{stderr}");
+    assert!(!stderr.contains(".cargo/registry"), "{stderr}");
+}
+
+#[test]
+fn a_client_whose_router_is_not_there_says_what_it_waits_for_within_seconds() {
+    let nobody = ep(free_port());
+    let mut top = bin("slipstream");
+    top.args(["top", "--json", "--duration", "1", "-m", "client", "-e", &nobody, "--cfg", "listen/endpoints:[]"]);
+    top.stdout(Stdio::null()).stderr(Stdio::piped());
+    let mut child = common::Killed(top.spawn().unwrap());
+    let stderr = child.0.stderr.take().unwrap();
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        use std::io::BufRead;
+        for line in std::io::BufReader::new(stderr).lines().map_while(Result::ok) {
+            let _ = tx.send(line);
+        }
+    });
+    // Said after SLOW_OPEN (2 s); the bound leaves a loaded machine room, far below Zenoh's own
+    // give-up.
+    let said = rx.recv_timeout(Duration::from_secs(20)).expect("a word about the wait");
+    assert!(said.contains(&nobody) && said.contains("no router answers"), "{said}");
+}
+
+#[test]
 fn soak_samples_every_process_and_judges_growth_after_the_warm_up() {
     let _serial = common::serial();
     let dir = temp_dir("soak");

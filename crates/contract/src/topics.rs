@@ -83,12 +83,8 @@ impl Topic {
         if let [one] = by_suffix[..] {
             return Some(one);
         }
-        Topic::ALL
-            .into_iter()
-            .map(|t| (strsim::levenshtein(name, t.name()), t))
-            .filter(|(d, _)| *d <= MAX_TYPO)
-            .min_by_key(|(d, _)| *d)
-            .map(|(_, t)| t)
+        let typo = crate::config::closest(name, Topic::ALL.into_iter().map(Topic::name))?;
+        Topic::from_name(typo)
     }
 
     /// The message type this topic carries.
@@ -194,9 +190,6 @@ pub const SIM_EGO: TopicDef<msg::EgoInfo> = TopicDef::new(Topic::SimEgo);
 /// The key prefix (under the namespace) where nodes declare liveliness tokens:
 /// `<namespace>/nodes/<node name>`.
 pub const NODES_PREFIX: &str = "nodes";
-
-/// The most letters a name may be off a topic's to be taken for a typo of it ([`Topic::nearest`]).
-const MAX_TYPO: usize = 2;
 
 #[cfg(test)]
 mod tests {

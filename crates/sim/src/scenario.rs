@@ -331,16 +331,17 @@ impl Scenario {
         if name_or_path.contains('/') || name_or_path.ends_with(".json5") {
             return Scenario::load(Path::new(name_or_path));
         }
+        let names = || BUILT_IN.iter().chain(SEVERAL_EGOS).map(|(n, _)| *n);
         match BUILT_IN.iter().chain(SEVERAL_EGOS).find(|(name, _)| *name == name_or_path) {
             Some((name, text)) => Scenario::parse(text, &format!("scenarios/{name}.json5")),
             None => Err(ConfigError::new(
                 "--scenario",
                 "",
-                format!("no built-in scenario named `{name_or_path}`"),
-                format!(
-                    "use one of: {} (or a path to a .json5 file)",
-                    BUILT_IN.iter().chain(SEVERAL_EGOS).map(|(n, _)| *n).collect::<Vec<_>>().join(", ")
-                ),
+                match slipstream_contract::config::closest(name_or_path, names()) {
+                    Some(meant) => format!("no built-in scenario named `{name_or_path}`: did you mean `{meant}`?"),
+                    None => format!("no built-in scenario named `{name_or_path}`"),
+                },
+                format!("use one of: {} (or a path to a .json5 file)", names().collect::<Vec<_>>().join(", ")),
             )),
         }
     }
@@ -720,6 +721,14 @@ fn bumper_gap_m(a: &EgoSpec, b: &EgoSpec) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_mistyped_scenario_name_is_answered_with_the_one_meant() {
+        let e = Scenario::find("cutin").unwrap_err().to_string();
+        assert!(e.contains("did you mean `cut-in`?") && e.contains("steady-follow"), "{e}");
+        let e = Scenario::find("motorway").unwrap_err().to_string();
+        assert!(!e.contains("did you mean"), "{e}");
+    }
 
     #[test]
     fn every_built_in_scenario_parses_and_is_named_after_its_file() {

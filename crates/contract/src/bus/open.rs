@@ -12,7 +12,10 @@
 //! holds no rendezvous it listens for and has met no peer, that is said once, with the fix.
 
 use std::future::IntoFuture;
+use std::sync::Arc;
 use std::time::Duration;
+
+use parking_lot::{Condvar, Mutex};
 
 use super::{zerr, BusError};
 
@@ -22,20 +25,25 @@ pub const SLOW_OPEN: Duration = Duration::from_secs(2);
 /// How long after opening a session looks whether its rendezvous is held by a stranger.
 const RENDEZVOUS_CHECK: Duration = Duration::from_secs(1);
 
-/// Opens a session with `config`; `what` names it in errors and in the slow-open warning.
+/// Opens a session with `config`; `what` names it in errors and in the slow-open warning. The
+/// warning comes from a thread of its own: Zenoh's open may hold the task's thread while it
+/// dials, so a timer beside it on the same runtime would not fire.
 pub async fn open_session(config: zenoh::Config, what: &str) -> Result<zenoh::Session, BusError> {
-    let waiting_for = waiting_for(&config);
+    let waiting_for = format!("{what}: {}; still trying, as the config says (Ctrl-C stops)", waiting_for(&config));
     let rendezvous = rendezvous(&config);
-    let open = zenoh::open(config).into_future();
-    tokio::pin!(open);
-    let session = tokio::select! {
-        opened = &mut open => opened,
-        () = tokio::time::sleep(SLOW_OPEN) => {
-            tracing::warn!("{what}: {waiting_for}; still trying, as the config says (Ctrl-C stops)");
-            open.await
+    let opened = Arc::new((Mutex::new(false), Condvar::new()));
+    let watch = opened.clone();
+    let _ = std::thread::Builder::new().name("slow-open".into()).spawn(move || {
+        let (done, changed) = &*watch;
+        let mut done = done.lock();
+        if !*done && changed.wait_for(&mut done, SLOW_OPEN).timed_out() && !*done {
+            tracing::warn!("{waiting_for}");
         }
-    }
-    .map_err(zerr(what.to_string()))?;
+    });
+    let session = zenoh::open(config).into_future().await;
+    *opened.0.lock() = true;
+    opened.1.notify_all();
+    let session = session.map_err(zerr(what.to_string()))?;
     if !rendezvous.is_empty() {
         tokio::spawn(check_rendezvous(session.clone(), rendezvous));
     }

@@ -126,10 +126,19 @@ impl ConnectArgs {
         };
         let set = |config: &mut zenoh::Config, key: &str, value: String, flag: &str| {
             config.insert_json5(key, &value).map_err(|e| {
+                let message = super::zenoh_error::message(&e);
+                if message.contains("unknown key") {
+                    return ConfigError::new(
+                        flag,
+                        key,
+                        "no such Zenoh config key",
+                        "the keys are config/zenoh.json5's and those of Zenoh's DEFAULT_CONFIG.json5, written with `/`, e.g. --cfg 'scouting/multicast/enabled:false'",
+                    );
+                }
                 ConfigError::new(
                     flag,
                     key,
-                    format!("`{value}` rejected: {}", super::zenoh_error::message(&e)),
+                    format!("`{value}` rejected: {message}"),
                     format!("check the value given to {flag} (config from {origin})"),
                 )
             })
