@@ -9,7 +9,7 @@ use crate::common;
 use slipstream::acc::node::AccStats;
 use slipstream::acc::{AccSettings, PerceptionSource};
 use slipstream::msg::{
-    AccMode, AccStatus, AccWarning, BoundingBox2d, ControlCommand, Detection, Detections, GroundTruthObject,
+    AccMode, AccStatus, AccWarning, BoundingBox2d, ControlCommand, Detection, Detections, EgoInfo, GroundTruthObject,
     GroundTruthObjects, ObjectClass, Speed, VehicleState,
 };
 use slipstream::{topics, Bus, TopicMap};
@@ -273,6 +273,62 @@ async fn stale_speed_makes_the_watchdog_brake_until_speed_returns() {
         let status = drain(&statuses).last().unwrap().msg.clone();
         assert_ne!(status.mode, AccMode::Stale, "{status:?}");
 
+        stop.send(()).unwrap();
+        task.await.unwrap();
+    });
+}
+
+/// A latched sim/ego as a simulator publishes it: a car, with the driver's settings given.
+async fn publish_ego(
+    sim_bus: &Bus,
+    set_speed_mps: f64,
+    time_gap_s: Option<f64>,
+) -> slipstream::bus::Publisher<EgoInfo> {
+    let p = slipstream::vehicle::VehicleParams::CAR;
+    let ego = EgoInfo {
+        class: ObjectClass::Car,
+        size_m: p.size_m,
+        rear_overhang_m: p.rear_overhang_m,
+        wheelbase_m: p.wheelbase_m,
+        mass_kg: p.mass_kg,
+        max_power_w: p.max_power_w,
+        max_drive_force_n: p.max_drive_force_n,
+        max_brake_decel_mps2: p.max_brake_decel_mps2,
+        drag_area_m2: p.drag_area_m2,
+        rolling_coeff: p.rolling_coeff,
+        actuator_lag_s: p.actuator_lag_s,
+        set_speed_mps,
+        time_gap_s,
+    };
+    let publisher = sim_bus.publisher(topics::SIM_EGO).await.unwrap();
+    publisher.put(0, &ego).unwrap();
+    publisher
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_acc_started_without_set_speed_flags_drives_the_scenarios_settings_from_sim_ego() {
+    within!(async {
+        // The settings' 30 m/s and 1.8 s, nothing given by a flag: sim/ego's 22 m/s and 2.4 s win.
+        let (task, stop, sim_bus, _) = acc_and_sim(truth_settings()).await;
+        let statuses = Collect::new(&sim_bus, topics::ACC_STATUS).await;
+        let _ego = publish_ego(&sim_bus, 22.0, Some(2.4)).await;
+        let mut sim = FakeSim::new(&sim_bus).await;
+        sim.run(100, true).await;
+        until(&statuses, |got| got.last().is_some_and(|s| s.msg.set_speed_mps == 22.0)).await;
+        assert_eq!(drain(&statuses).last().unwrap().msg.time_gap_s, 2.4);
+        stop.send(()).unwrap();
+        task.await.unwrap();
+
+        // --set-speed given: it stands; the time gap no flag gave still comes from sim/ego.
+        let mut flagged = truth_settings();
+        flagged.from_scenario.set_speed = false;
+        let (task, stop, sim_bus, _) = acc_and_sim(flagged).await;
+        let statuses = Collect::new(&sim_bus, topics::ACC_STATUS).await;
+        let _ego = publish_ego(&sim_bus, 22.0, Some(2.4)).await;
+        let mut sim = FakeSim::new(&sim_bus).await;
+        sim.run(100, true).await;
+        until(&statuses, |got| got.last().is_some_and(|s| s.msg.time_gap_s == 2.4)).await;
+        assert_eq!(drain(&statuses).last().unwrap().msg.set_speed_mps, 30.0);
         stop.send(()).unwrap();
         task.await.unwrap();
     });

@@ -59,10 +59,12 @@ pub struct AccArgs {
     /// changes are needed [default: config/acc.json5 when present, else built-in]
     #[arg(long, value_name = "FILE", env = "SLIPSTREAM_ACC_CONFIG")]
     pub settings: Option<PathBuf>,
-    /// Cruise speed with no vehicle ahead, m/s (settings key set_speed_mps)
+    /// Cruise speed with no vehicle ahead, m/s (settings key set_speed_mps) [default: the
+    /// scenario's, from sim/ego, once the simulator publishes it; until then the settings']
     #[arg(long, value_name = "M/S")]
     pub set_speed: Option<f64>,
-    /// Time gap to the lead, seconds, 0.8 to 3.0 (settings key time_gap_s)
+    /// Time gap to the lead, seconds, 0.8 to 3.0 (settings key time_gap_s) [default: the
+    /// scenario's from sim/ego when it names one, else the settings']
     #[arg(long, value_name = "S")]
     pub time_gap: Option<f64>,
     /// Where the vehicles ahead come from: camera (perception/objects from slipstream-detect)
@@ -94,9 +96,11 @@ impl AccArgs {
         let mut s = AccSettings::load_or_default(path.as_deref())?;
         if let Some(v) = self.set_speed {
             s.set_speed_mps = v;
+            s.from_scenario.set_speed = false;
         }
         if let Some(h) = self.time_gap {
             s.time_gap_s = h;
+            s.from_scenario.time_gap = false;
         }
         if let Some(p) = self.perception {
             s.perception = p;

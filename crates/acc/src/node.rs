@@ -20,12 +20,12 @@ use serde::Serialize;
 use super::controller::{Controller, Output};
 use super::ego::{EgoNow, EgoSpeedFilter, Pose};
 use super::objects::PerceptionFrame;
-use super::settings::{AccSettings, PerceptionSource};
+use super::settings::{AccSettings, FromScenario, PerceptionSource};
 use slipstream_contract::bus::{Arrivals, Bus, BusError, Following, NodeWatch, Received, StatsSnapshot, Subscriber};
 use slipstream_contract::config::ConfigError;
 use slipstream_contract::msg::{
-    AccCommand, AccMode, AccStatus, AccWarning, CameraInfo, ControlCommand, Detections, GroundTruthObjects, Message,
-    RoadSpec, Speed, VehicleState,
+    AccCommand, AccMode, AccStatus, AccWarning, CameraInfo, ControlCommand, Detections, EgoInfo, GroundTruthObjects,
+    Message, RoadSpec, Speed, VehicleState,
 };
 use slipstream_contract::topics;
 
@@ -141,6 +141,8 @@ struct State {
     perception_pub_ns: Option<u64>,
     camera_rate_hz: Option<f64>,
     latched_waited: bool,
+    /// sim/ego came (the scenario's driver settings taken, where no flag gave them).
+    ego_known: bool,
     /// Lockstep: a wait for a frame's perception ran out and none has come since. The next
     /// frames are not waited for until perception comes again: a detector that publishes
     /// nothing (no camera info, a stuck process) must not cost every frame step
@@ -181,6 +183,8 @@ struct Inputs {
     info: Subscriber<CameraInfo>,
     /// The road's map (latched): the lane ahead.
     road: Subscriber<RoadSpec>,
+    /// The ego's vehicle and the scenario's driver settings (latched).
+    ego: Subscriber<EgoInfo>,
     perception: PerceptionSub,
     /// The detector's liveliness (camera perception only).
     detector: Option<NodeWatch>,
@@ -202,6 +206,7 @@ impl Inputs {
             command: bus.subscriber(topics::ACC_COMMAND).await?,
             info: bus.subscriber(topics::CAMERA_FRONT_INFO).await?,
             road: bus.subscriber(topics::SIM_ROAD).await?,
+            ego: bus.subscriber(topics::SIM_EGO).await?,
             perception,
             detector,
         })
@@ -376,6 +381,18 @@ async fn await_state(
 /// The camera's rate (camera/front/info) and the road's map (sim/road), both latched. In
 /// lockstep the answers follow from them (which steps bring a frame, where the lane goes): wait
 /// for the missing ones once, together, or one taken a step late makes the run differ.
+/// The scenario's driver settings from sim/ego, where no flag gave them
+/// ([`AccSettings::from_scenario`]).
+fn take_ego(st: &mut State, ego: &EgoInfo, settings: &AccSettings) {
+    st.ego_known = true;
+    if let Some(cmd) = settings.from_scenario.command(ego) {
+        tracing::info!(set_speed_mps = ?cmd.set_speed_mps, time_gap_s = ?cmd.time_gap_s, "sim/ego: the scenario's driver settings");
+        if let Some(note) = st.ctl.command(&cmd) {
+            tracing::warn!("sim/ego: {note}");
+        }
+    }
+}
+
 async fn take_latched(st: &mut State, inputs: &Inputs, settings: &AccSettings) {
     while let Some(info) = inputs.info.try_recv() {
         st.camera_rate_hz = Some(info.msg.rate_hz);
@@ -383,15 +400,23 @@ async fn take_latched(st: &mut State, inputs: &Inputs, settings: &AccSettings) {
     while let Some(road) = inputs.road.try_recv() {
         st.ctl.set_road(&road.msg);
     }
+    while let Some(ego) = inputs.ego.try_recv() {
+        take_ego(st, &ego.msg, settings);
+    }
     if !settings.lockstep || st.latched_waited {
         return;
     }
     st.latched_waited = true;
     let wait = Duration::from_millis(settings.lockstep_wait_ms);
-    let (info, road) = tokio::join!(
+    let wants_ego = !st.ego_known && settings.from_scenario != FromScenario { set_speed: false, time_gap: false };
+    let (info, road, ego) = tokio::join!(
         awaited(st.camera_rate_hz.is_none(), &inputs.info, wait),
-        awaited(!st.ctl.has_road(), &inputs.road, wait)
+        awaited(!st.ctl.has_road(), &inputs.road, wait),
+        awaited(wants_ego, &inputs.ego, wait)
     );
+    if let Awaited::Came(ego) = ego {
+        take_ego(st, &ego.msg, settings);
+    }
     match info {
         Awaited::Came(info) => st.camera_rate_hz = Some(info.msg.rate_hz),
         Awaited::Missing => tracing::warn!(
@@ -484,6 +509,7 @@ impl State {
             perception_pub_ns: None,
             camera_rate_hz: None,
             latched_waited: false,
+            ego_known: false,
             perception_overdue: false,
             last_speed_at: None,
             mode: None,

@@ -59,6 +59,38 @@ pub struct AccSettings {
     pub vehicle: Vehicle,
     pub status_hz: f64,
     pub tuning: Tuning,
+    /// Which of the driver's settings the scenario's sim/ego sets when it comes: the ones no
+    /// flag gave (`--set-speed`, `--time-gap`), so a slipstream-acc started by hand beside a
+    /// simulator drives the scenario's set speed and time gap, as `up` hands them to its nodes.
+    #[serde(skip)]
+    pub from_scenario: FromScenario,
+}
+
+/// The driver's settings the scenario's sim/ego may set ([`AccSettings::from_scenario`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct FromScenario {
+    pub set_speed: bool,
+    pub time_gap: bool,
+}
+
+impl Default for FromScenario {
+    fn default() -> Self {
+        FromScenario { set_speed: true, time_gap: true }
+    }
+}
+
+impl FromScenario {
+    /// The command sim/ego's settings make of `ego`, keeping what a flag gave; None when it
+    /// changes nothing.
+    pub fn command(self, ego: &slipstream_contract::msg::EgoInfo) -> Option<slipstream_contract::msg::AccCommand> {
+        let set_speed_mps = self.set_speed.then_some(ego.set_speed_mps);
+        let time_gap_s = if self.time_gap { ego.time_gap_s } else { None };
+        (set_speed_mps.is_some() || time_gap_s.is_some()).then_some(slipstream_contract::msg::AccCommand {
+            enable: None,
+            set_speed_mps,
+            time_gap_s,
+        })
+    }
 }
 
 #[derive(Debug, Clone, PartialEq, Deserialize)]
