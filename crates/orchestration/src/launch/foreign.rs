@@ -345,6 +345,18 @@ impl ForeignNode {
             let path = from(arg);
             if path.is_file() {
                 files.push(read(&path)?);
+                match source_tree(&path) {
+                    Some(Ok(Some(tree))) => files.push(tree),
+                    Some(Ok(None)) => tracing::warn!(
+                        "{}: more than {TREE_ENTRIES} files beside it; the report hashes the script alone, not the modules it may import",
+                        path.display()
+                    ),
+                    Some(Err(e)) => tracing::warn!(
+                        "{}: the sources beside it could not all be read ({e}); the report hashes the script alone",
+                        path.display()
+                    ),
+                    None => {}
+                }
             }
         }
         Ok(ForeignNode { role, name, command, files, run, elsewhere: false, ros2: false })
@@ -444,9 +456,98 @@ fn find_program(name: &str, from: &dyn Fn(&str) -> PathBuf) -> Option<PathBuf> {
     std::env::split_paths(&path).map(|d| d.join(name)).find(|p| p.is_file())
 }
 
+/// Endings of the scripts whose neighbours a node may import: a script's hash alone would
+/// miss a change to a module beside it.
+const SCRIPT_ENDINGS: [&str; 8] = ["py", "js", "mjs", "ts", "rb", "lua", "jl", "m"];
+/// A source tree of more entries than this is not hashed (a script at the root of a large
+/// tree, a home directory): reading it would cost more than the run, and a walk cut short
+/// would hash a different part each time. The script's own hash stands alone then, said so.
+const TREE_ENTRIES: usize = 20_000;
+/// Folders a source tree's hash passes over: caches, builds and environments, not sources.
+const NOT_SOURCES: [&str; 5] = ["__pycache__", "target", "node_modules", "site-packages", "dist"];
+
+/// For a script (`my_acc.py`), every file of its ending under its directory, hashed as one:
+/// `<dir>/**/*.py` with the SHA-256 over each file's relative path and content, in path order
+/// (hidden folders, caches and builds left out). What the script imports from beside it is
+/// then part of what a report says it judged; what it imports from elsewhere (an installed
+/// package) is not. None for a file that is no script.
+fn source_tree(script: &Path) -> Option<std::io::Result<Option<HashedFile>>> {
+    let ending = script.extension()?.to_str()?.to_ascii_lowercase();
+    if !SCRIPT_ENDINGS.contains(&ending.as_str()) {
+        return None;
+    }
+    let dir = script.parent().filter(|d| !d.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    Some(tree_hash(dir, &ending))
+}
+
+/// The hash of [`source_tree`]; none past [`TREE_ENTRIES`].
+fn tree_hash(dir: &Path, ending: &str) -> std::io::Result<Option<HashedFile>> {
+    let mut files = Vec::new();
+    let mut pending = vec![dir.to_path_buf()];
+    let mut entries = 0usize;
+    while let Some(d) = pending.pop() {
+        for entry in std::fs::read_dir(&d)? {
+            entries += 1;
+            if entries > TREE_ENTRIES {
+                return Ok(None);
+            }
+            let path = entry?.path();
+            let name = path.file_name().and_then(|n| n.to_str()).unwrap_or("");
+            if name.starts_with('.') || NOT_SOURCES.contains(&name) {
+                continue;
+            }
+            if path.is_dir() {
+                pending.push(path);
+            } else if path.extension().and_then(|e| e.to_str()).is_some_and(|e| e.eq_ignore_ascii_case(ending)) {
+                files.push(path);
+            }
+        }
+    }
+    files.sort();
+    let mut digest = Sha256::new();
+    for f in &files {
+        digest.update(f.strip_prefix(dir).unwrap_or(f).to_string_lossy().as_bytes());
+        digest.update([0]);
+        digest.update(Sha256::digest(std::fs::read(f)?));
+    }
+    let sha256 = digest.finalize().iter().map(|b| format!("{b:02x}")).collect();
+    Ok(Some(HashedFile { path: dir.join("**").join(format!("*.{ending}")), sha256 }))
+}
+
 pub(crate) fn hashed(path: &Path) -> std::io::Result<HashedFile> {
     let bytes = std::fs::read(path)?;
     let digest = Sha256::digest(&bytes);
     let sha256 = digest.iter().map(|b| format!("{b:02x}")).collect();
     Ok(HashedFile { path: path.to_path_buf(), sha256 })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_scripts_hash_covers_the_modules_beside_it_and_nothing_else() {
+        let dir = std::env::temp_dir().join(format!("slipstream-source-tree-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        for sub in ["helper", "__pycache__", ".venv"] {
+            std::fs::create_dir_all(dir.join(sub)).unwrap();
+        }
+        let write = |p: &str, text: &str| std::fs::write(dir.join(p), text).unwrap();
+        write("acc.py", "import helper.law");
+        write("helper/law.py", "GAIN = 0.5");
+        write("notes.txt", "a");
+        write("__pycache__/law.py", "cache");
+        write(".venv/zenoh.py", "installed");
+        let hash = || source_tree(&dir.join("acc.py")).expect("a script").unwrap().expect("a small tree");
+        let before = hash();
+        assert!(before.path.ends_with("**/*.py"), "{:?}", before.path);
+        write("notes.txt", "b");
+        write("__pycache__/law.py", "other cache");
+        write(".venv/zenoh.py", "another version");
+        assert_eq!(hash(), before, "data, caches and environments are not the node's sources");
+        write("helper/law.py", "GAIN = 0.6");
+        assert_ne!(hash().sha256, before.sha256, "a module beside the script is");
+        assert!(source_tree(&dir.join("notes.txt")).is_none(), "a data file has no source tree");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }

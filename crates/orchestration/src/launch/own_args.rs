@@ -110,10 +110,11 @@ mod tests {
         assert_eq!(c.command[1], script.display().to_string());
         assert_eq!(c.command[2..], ["--gain", "0.4"]);
         assert_eq!(c.node(), "acc");
-        // The program found on PATH, and the script by its content.
-        assert_eq!(c.files.len(), 2);
+        // The program found on PATH, the script by its content, and the sources beside it.
+        assert_eq!(c.files.len(), 3);
         assert!(c.files[0].path.ends_with("sh"));
         assert_eq!(c.files[1].sha256, "caf026f25d7140209f98072605307a438914b9ce6f3c14b23d15d9667241de52");
+        assert!(c.files[2].path.ends_with("**/*.py"), "{:?}", c.files[2].path);
         assert!(nodes.detector.is_none());
         std::fs::remove_dir_all(&dir).unwrap();
     }
