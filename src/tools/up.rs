@@ -171,6 +171,9 @@ pub struct UpReport {
     pub sim_wall_time_s: f64,
     /// Simulated seconds per second of the simulator's own run (`sim_wall_time_s`).
     pub real_time_factor: f64,
+    /// In lockstep: the steps the simulator waited out without every awaited answer (none
+    /// when the simulator wrote no report, or is someone else's).
+    pub lockstep_timeouts: Option<u64>,
     pub nodes: Vec<NodeEnd>,
     /// The nodes of the user's own in the loop (their command and files by content), and what
     /// a loop file said of ours; empty: ours, as always.
@@ -315,7 +318,7 @@ pub fn run(args: &UpArgs, connect: &ConnectArgs) -> Result<Outcome> {
     };
     let several = scenario.egos().len() > 1;
     if several {
-        egos::check_args(args, &scenario)?;
+        egos::check_args(args, &scenario, &connect.topic_map()?)?;
     }
     let rt = tokio::runtime::Runtime::new()?;
     let report = rt
@@ -688,6 +691,7 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
         wall_time_s: wall,
         sim_wall_time_s,
         real_time_factor: sim_time_s / sim_wall_time_s.max(1e-9),
+        lockstep_timeouts: lockstep_timeouts(args, sim.as_ref()),
         nodes,
         own: lp.spec().own.clone(),
         latency: latency_report(&latency, args, rec.statuses.last().map(|s| s.msg.time_gap_s), lag_s),
@@ -707,6 +711,11 @@ async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, dir:
         report_dir: dir.to_path_buf(),
     };
     written(report, lp, dir).await
+}
+
+/// The simulator's lockstep timeouts, in lockstep with a report of its own.
+pub(super) fn lockstep_timeouts(args: &UpArgs, sim: Option<&slipstream_sim::SimReport>) -> Option<u64> {
+    (args.mode == ClockMode::Lockstep).then_some(sim).flatten().map(|s| s.lockstep_timeouts)
 }
 
 /// Writes report.json, then leaves the bus. The report is on disk before the session closes:
@@ -813,12 +822,14 @@ pub fn summary(r: &UpReport) -> String {
         r.collisions,
         r.traffic_collisions
     );
-    if let Some(m) = &r.metrics {
-        let [gap, ttc, time_gap, speed, accel, decel, jerk] = m.headline();
-        let verdict = if m.pass { "meets the ACC aims" } else { "misses an ACC aim" };
+    if r.mode == ClockMode::Realtime && r.sim_time_s > 1.0 && r.real_time_factor < MIN_REALTIME_FACTOR {
         s.push_str(&format!(
-            "  min gap {gap} m, min TTC {ttc} s, time-gap RMS error {time_gap} s, speed RMSE {speed} m/s, max accel {accel} / decel {decel} m/s2, max jerk {jerk} m/s3 ({verdict})\n"
+            "  WARNING: this realtime run did not keep real time (real-time factor {:.2} < {MIN_REALTIME_FACTOR}): the machine could not run the loop at the wall clock's pace, so its latencies and what the ACC felt are a slowed loop's (fix: free the cores, or --mode lockstep, which does not depend on the machine's speed)\n",
+            r.real_time_factor
         ));
+    }
+    if let Some(m) = &r.metrics {
+        s.push_str(&acc_figures(m));
     }
     s.push_str("\n  loop latency            count    p50 ms    p99 ms    max ms\n");
     for h in &r.latency.hops {
@@ -859,13 +870,17 @@ pub fn summary(r: &UpReport) -> String {
             s.push_str(&format!("    {}\n", i.line()));
         }
     }
+    if let Some(k) = r.lockstep_timeouts {
+        s.push_str(&format!("  lockstep timeouts: {k} (steps the simulator waited out without every answer)\n"));
+    }
     for n in &r.nodes {
         s.push_str(&format!(
-            "  {:<18} pid {:>7}  exit {:<5} {}log {}\n",
+            "  {:<18} pid {:>7}  exit {:<5} {}{}log {}\n",
             n.node,
             n.pid,
             n.exit_code.map_or("signal".into(), |c| c.to_string()),
             if n.died { "DIED  " } else { "" },
+            if n.restarts > 0 { format!("restarted {}x  ", n.restarts) } else { String::new() },
             n.log.display()
         ));
     }
@@ -882,6 +897,33 @@ pub fn summary(r: &UpReport) -> String {
     }
     s
 }
+
+/// The ACC's figures of the summary: the aims missed by name, and why a figure is "-".
+fn acc_figures(m: &Metrics) -> String {
+    let [gap, ttc, time_gap, speed, accel, decel, jerk] = m.headline();
+    let missed: Vec<&str> = m.checks.iter().filter(|c| !c.pass).map(|c| c.name.as_str()).collect();
+    let verdict = match missed.is_empty() {
+        true => "meets the ACC aims".to_string(),
+        false => format!("misses the ACC aims: {}", missed.join(", ")),
+    };
+    let mut s = format!(
+        "  min gap {gap} m, min TTC {ttc} s, time-gap RMS error {time_gap} s, speed RMSE {speed} m/s, max accel {accel} / decel {decel} m/s2, max jerk {jerk} m/s3 ({verdict})\n"
+    );
+    let mut why = Vec::new();
+    if m.time_gap_rms_error_s.is_none() {
+        why.push("time-gap RMS: the ego never followed a lead steadily (judged only then)");
+    }
+    if m.speed_rmse_mps.is_none() {
+        why.push("speed RMSE: the ego never cruised at its set speed for a while with nothing to follow");
+    }
+    if !why.is_empty() {
+        s.push_str(&format!("  (- : {})\n", why.join("; ")));
+    }
+    s
+}
+
+/// A realtime run below this real-time factor did not keep real time: the summary says so.
+const MIN_REALTIME_FACTOR: f64 = 0.95;
 
 /// `slipstream up`: the loop (or `--from` a recording); exit 1 on a collision or a dead node.
 pub fn command(args: &UpArgs, connect: &ConnectArgs) -> Result<std::process::ExitCode> {

@@ -57,7 +57,7 @@ fn a_platoon_is_measured_car_by_car_at_each_time_gap() {
     }
     let bound = r["bound_s"].as_f64().unwrap();
     assert!(bound > 0.0 && bound < 1.0, "2 x (one state period + a car's lag): {bound}");
-    for f in ["platoon.json", "platoon.png", "gap-1/scenario.json5", "gap-2/sim.json", "gap-2/acc-2.log"] {
+    for f in ["platoon.json", "platoon.png", "gap-1/scenario.json5", "gap-2/sim.json", "gap-2/c-acc.log"] {
         assert!(dir.join("report").join(f).is_file(), "{f}");
     }
 
@@ -81,8 +81,8 @@ fn a_platoon_on_camera_perception_runs_a_detector_per_car() {
     let peak = |k: usize| cars[k]["peak_speed_error_mps"].as_f64().unwrap();
     assert!((peak(0) - 4.0).abs() < 0.3, "the leader dips 4 m/s: {}", peak(0));
     assert!((1..4).all(|k| peak(k) > 1.0), "every car follows the dip on its detections: {run}");
-    for k in 0..3 {
-        assert!(dir.join("report").join(format!("gap-1.8/detect-{k}.log")).is_file(), "car {k}'s detector log");
+    for car in ["a", "b", "c"] {
+        assert!(dir.join("report").join(format!("gap-1.8/{car}-detect.log")).is_file(), "car {car}'s detector log");
     }
 }
 
@@ -101,9 +101,9 @@ fn a_platoon_with_faults_on_every_cars_links_is_measured_and_says_so() {
         serde_json::from_str(&std::fs::read_to_string(dir.join("report/gap-1.8/sim.json")).unwrap()).unwrap();
     let control = &sim["control_input"];
     assert!(control["injected_delayed"].as_u64().unwrap() > 0, "the simulator delayed commands: {control}");
-    for k in 0..3 {
-        let log = std::fs::read_to_string(dir.join(format!("report/gap-1.8/acc-{k}.log"))).unwrap();
-        assert!(log.contains("injecting faults"), "car {k}'s ACC injects: {log}");
+    for car in ["a", "b", "c"] {
+        let log = std::fs::read_to_string(dir.join(format!("report/gap-1.8/{car}-acc.log"))).unwrap();
+        assert!(log.contains("injecting faults"), "car {car}'s ACC injects: {log}");
     }
 
     let speed = dir.join("speed.json5");
@@ -163,6 +163,6 @@ fn a_realtime_platoon_takes_the_measured_loop_latency_into_the_bound() {
     );
     let sim = std::fs::read_to_string(dir.join("report/gap-1.8/sim.log")).unwrap();
     assert!(sim.contains("mode=Realtime"), "{sim}");
-    let acc = std::fs::read_to_string(dir.join("report/gap-1.8/acc-0.log")).unwrap();
+    let acc = std::fs::read_to_string(dir.join("report/gap-1.8/a-acc.log")).unwrap();
     assert!(acc.contains("lockstep=false"), "{acc}");
 }

@@ -528,7 +528,7 @@ async fn lockstep_explains_answers_from_a_controller_that_does_not_name_itself()
     assert!(out.status.success(), "{stderr}");
     assert!(
         stderr.contains(
-            "answered by (unnamed), which lockstep.wait_for does not list (a controller must attach its node name)"
+            "waiting for ctl (step 0 was answered by (unnamed), which lockstep.wait_for does not list: a controller attaches its node name)"
         ),
         "{stderr}"
     );

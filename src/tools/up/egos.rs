@@ -36,19 +36,26 @@ pub struct EgoReport {
 }
 
 /// What `up` refuses with several egos, and what to do instead.
-pub fn check_args(args: &UpArgs, scenario: &Scenario) -> Result<()> {
+/// `topics`: the run's topic map, whose namespace the hints put the first car under (`-n
+/// lab/car1` for a run under `lab`).
+pub fn check_args(args: &UpArgs, scenario: &Scenario, topics: &crate::TopicMap) -> Result<()> {
     let n = scenario.egos().len();
     let refuse = |flag: &str, fix: &str| {
         anyhow::bail!("{flag}: {} has {n} controlled vehicles, and {flag} follows one (fix: {fix})", scenario.name)
     };
+    let first = scenario.egos().first().and_then(|e| e.namespace.clone()).unwrap_or_else(|| "car1".into());
+    let car = match topics.namespace() {
+        "" => first,
+        ns => format!("{ns}/{first}"),
+    };
     if args.record {
-        refuse("--record", "record one car's topics beside the run: `slipstream -n car1 record`")?;
+        refuse("--record", &format!("record one car's topics beside the run: `slipstream -n {car} record`"))?;
     }
     if args.view {
-        refuse("--view", "watch one car beside the run: `slipstream -n car1 view`")?;
+        refuse("--view", &format!("watch one car beside the run: `slipstream -n {car} view`"))?;
     }
     if args.ros2 {
-        refuse("--ros2", "bridge one car beside the run: `slipstream -n car1 ros2`")?;
+        refuse("--ros2", &format!("bridge one car beside the run: `slipstream -n {car} ros2`"))?;
     }
     if args.set_speed.is_some() {
         refuse("--set-speed", "set each car's speed in the scenario: `egos[k].set_speed_mps`")?;
@@ -128,6 +135,7 @@ pub async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, 
         wall_time_s: started.elapsed().as_secs_f64(),
         sim_wall_time_s,
         real_time_factor: sim_time_s / sim_wall_time_s.max(1e-9),
+        lockstep_timeouts: super::lockstep_timeouts(args, sim.as_ref()),
         nodes,
         own: lp.spec().own.clone(),
         latency: super::latency_report(&latency, args, time_gap, lag_s),

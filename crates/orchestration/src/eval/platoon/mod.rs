@@ -205,13 +205,13 @@ pub fn markdown(r: &PlatoonReport) -> String {
         let f = &run.figures;
         let verdict = if f.stable && run.collisions == 0 { "string-stable" } else { "NOT string-stable" };
         s.push_str(&format!(
-            "\n## time gap {:.2} s: {verdict} (largest speed-error ratio {:.2}; collisions {}, lockstep timeouts {}; real-time factor {:.2}{})\n\n",
-            f.time_gap_s, f.max_speed_ratio, run.collisions, run.lockstep_timeouts, run.real_time_factor,
+            "\n## time gap {:.2} s: {verdict} (largest speed-error ratio {}; collisions {}, lockstep timeouts {}; real-time factor {:.2}{})\n\n",
+            f.time_gap_s, ratio_text(f.max_speed_ratio), run.collisions, run.lockstep_timeouts, run.real_time_factor,
             run.loop_p99_ms.map_or(String::new(), |ms| format!("; car 1's loop p99 {ms:.1} ms"))
         ));
         s.push_str("| car | peak speed error m/s | ratio | peak decel m/s2 | ratio |\n|---|---|---|---|---|\n");
         for c in &f.cars {
-            let ratio = |x: Option<f64>| x.map_or("-".to_string(), |x| format!("{x:.2}"));
+            let ratio = |x: Option<f64>| x.map_or("-".to_string(), ratio_text);
             s.push_str(&format!(
                 "| {} | {:.2} | {} | {:.2} | {} |\n",
                 c.car,
@@ -254,6 +254,16 @@ pub fn plot(r: &PlatoonReport, path: &Path) -> Result<()> {
             .y_desc("peak speed error (m/s)")
             .label_style(("sans-serif", 14))
             .draw()?;
+        // The bound: no car's error above the car ahead's, so none above the leader's.
+        if let Some(leader) =
+            r.runs.iter().filter_map(|x| x.figures.cars.first()).map(|c| c.peak_speed_error_mps).reduce(f64::max)
+        {
+            let grey = RGBColor(120, 120, 120);
+            chart
+                .draw_series(LineSeries::new(vec![(-0.2, leader), (n + 0.2, leader)], grey.stroke_width(1)))?
+                .label("the leader's peak: a string-stable platoon stays at or below it")
+                .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], grey.stroke_width(1)));
+        }
         for (i, run) in r.runs.iter().enumerate() {
             let color = Palette99::pick(i).to_rgba();
             let points: Vec<(f64, f64)> =
@@ -268,4 +278,27 @@ pub fn plot(r: &PlatoonReport, path: &Path) -> Result<()> {
         draw_legend(&mut chart)?;
         Ok(())
     })
+}
+
+/// A ratio to 1 with the digits that show which side of 1 it is on, the criterion being
+/// "at most 1": three decimals, more where three would round it to 1.000.
+fn ratio_text(x: f64) -> String {
+    (3..=9)
+        .map(|digits| format!("{x:.digits$}"))
+        .find(|t| x == 1.0 || t.parse::<f64>().is_ok_and(|r| r != 1.0))
+        .unwrap_or_else(|| format!("{x}"))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::ratio_text;
+
+    #[test]
+    fn a_ratio_shows_which_side_of_one_it_is_on() {
+        assert_eq!(ratio_text(0.987), "0.987");
+        assert_eq!(ratio_text(1.011), "1.011");
+        assert_eq!(ratio_text(1.0004), "1.0004", "three decimals would say 1.000: not stable");
+        assert_eq!(ratio_text(0.99996), "0.99996");
+        assert_eq!(ratio_text(1.0), "1.000");
+    }
 }

@@ -126,9 +126,10 @@ pub async fn run(scenario: &Scenario, file: &Path, nodes_of: &Nodes<'_>, dir: &P
     let observer = Bus::open_node(&connect, &FaultArgs::default(), "platoon-eval").await?;
     let (cars, leader, _subs) = record(&observer, scenario).await?;
     let mut nodes = Vec::new();
-    for (k, ego) in scenario.egos().iter().enumerate() {
+    for ego in scenario.egos() {
         let car_ns = format!("{ns}/{}", ego.namespace.as_deref().unwrap_or_default());
-        let log = |what: &str| dir.join(format!("{what}-{k}.log"));
+        // Named as the car's processes are (car1-acc.log), so a log names its car.
+        let log = |what: &str| dir.join(format!("{}.log", car_node(ego.namespace.as_deref(), what).1));
         let mut acc = node("slipstream-acc", &car_ns, &links, &log("acc"), faults)?;
         if !realtime {
             acc.arg("--lockstep");
