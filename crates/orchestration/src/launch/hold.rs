@@ -6,7 +6,10 @@
 //! take `<namespace>.lock` holds it until its process ends (the kernel drops the lock even on
 //! SIGKILL). Loops meet only within one network namespace (loopback), so the lock directory
 //! is per network namespace and per user: loops in another network namespace (a test host, a
-//! container) never block each other.
+//! container) never block each other. Nor do loops that cannot meet in one network namespace:
+//! the lock is per meeting point too (the endpoints the config dials and listens on, besides
+//! ports the kernel picks), so a loop on a rendezvous of its own (`-l`/`-e` elsewhere, a test)
+//! takes the default namespace beside a loop on the machine's rendezvous.
 
 use std::io::{Read, Seek, Write};
 use std::os::fd::AsRawFd;
@@ -17,7 +20,7 @@ use crate::error::{Error, Result};
 /// A held namespace: the lock goes with this value (or with the process).
 #[derive(Debug)]
 pub(crate) struct Hold {
-    _file: std::fs::File,
+    _file: Option<std::fs::File>,
 }
 
 /// What an attempt at a namespace's hold got.
@@ -29,11 +32,35 @@ pub(crate) enum Attempt {
     TakenBy(String),
 }
 
-/// Takes the hold of `namespace` ("" for the default one), or says who has it.
-pub(crate) fn take(namespace: &str) -> Result<Attempt> {
+/// Where sessions with `config` meet others: the endpoints it dials and listens on, sorted,
+/// leaving out `own` (a listener of the run's own) and ports the kernel picks (`:0`).
+pub(crate) fn meeting_point(config: &zenoh::Config, own: &str) -> Vec<String> {
+    let list = |key: &str| -> Vec<String> {
+        config.get_json(key).ok().and_then(|v| serde_json::from_str::<Vec<String>>(&v).ok()).unwrap_or_default()
+    };
+    let mut all: Vec<String> = list("connect/endpoints").into_iter().chain(list("listen/endpoints")).collect();
+    all.retain(|e| e != own && !e.ends_with(":0"));
+    // Peers that scout by multicast meet without an endpoint.
+    if config.get_json("scouting/multicast/enabled").is_ok_and(|v| v.trim() == "true") {
+        let group = config.get_json("scouting/multicast/address").unwrap_or_default();
+        all.push(format!("multicast {}", group.trim_matches('"')));
+    }
+    all.sort();
+    all.dedup();
+    all
+}
+
+/// Takes the hold of `namespace` ("" for the default one) at `meeting` ([`meeting_point`]),
+/// or says who has it.
+pub(crate) fn take(namespace: &str, meeting: &[String]) -> Result<Attempt> {
+    // Dialling nothing, listening on kernel-picked ports only, scouting by no multicast: no
+    // other loop can meet this one, and it needs no hold.
+    if meeting.is_empty() {
+        return Ok(Attempt::Held(Hold { _file: None }));
+    }
     let dir = lock_dir();
     std::fs::create_dir_all(&dir).map_err(Error::file("create", &dir))?;
-    let path = dir.join(file_name(namespace));
+    let path = dir.join(file_name(namespace, meeting));
     let mut file = std::fs::OpenOptions::new()
         .read(true)
         .write(true)
@@ -50,7 +77,7 @@ pub(crate) fn take(namespace: &str) -> Result<Attempt> {
     let me = format!("pid {}: {}", std::process::id(), std::env::args().collect::<Vec<_>>().join(" "));
     let written = file.set_len(0).and_then(|()| file.rewind()).and_then(|_| file.write_all(me.as_bytes()));
     written.map_err(Error::file("write", &path))?;
-    Ok(Attempt::Held(Hold { _file: file }))
+    Ok(Attempt::Held(Hold { _file: Some(file) }))
 }
 
 /// `<temp>/slipstream-<uid>/net-<network namespace inode>`.
@@ -62,11 +89,15 @@ fn lock_dir() -> PathBuf {
     std::env::temp_dir().join(format!("slipstream-{uid}")).join(format!("net-{net}")).join("namespaces")
 }
 
-/// The lock file of a namespace: `_default.lock`, `car1.lock`, `lab%rig2.lock`.
-fn file_name(namespace: &str) -> String {
+/// The lock file of a namespace at a meeting point: `_default@<hash>.lock`, `car1@<hash>.lock`,
+/// `lab%rig2@<hash>.lock` (the hash names the endpoints; a file name holds no `/`).
+fn file_name(namespace: &str, meeting: &[String]) -> String {
+    use sha2::Digest;
+    let at: String =
+        sha2::Sha256::digest(meeting.join(" ").as_bytes()).iter().take(6).map(|b| format!("{b:02x}")).collect();
     match namespace {
-        "" => "_default.lock".to_string(),
-        ns => format!("{}.lock", ns.replace('/', "%")),
+        "" => format!("_default@{at}.lock"),
+        ns => format!("{}@{at}.lock", ns.replace('/', "%")),
     }
 }
 
@@ -77,12 +108,29 @@ mod tests {
     #[test]
     fn a_namespace_is_held_once_and_free_again_when_its_hold_goes() {
         let ns = format!("hold-test-{}", std::process::id());
-        let Attempt::Held(first) = take(&ns).unwrap() else { panic!("free at first") };
-        let Attempt::TakenBy(holder) = take(&ns).unwrap() else { panic!("held by the first") };
+        let here = ["tcp/127.0.0.1:7447".to_string()];
+        let Attempt::Held(first) = take(&ns, &here).unwrap() else { panic!("free at first") };
+        let elsewhere = ["tcp/127.0.0.1:17447".to_string()];
+        let Attempt::Held(_beside) = take(&ns, &elsewhere).unwrap() else { panic!("another meeting point is free") };
+        let Attempt::TakenBy(holder) = take(&ns, &here).unwrap() else { panic!("held by the first") };
         assert!(holder.starts_with(&format!("pid {}: ", std::process::id())), "{holder}");
         drop(first);
-        assert!(matches!(take(&ns).unwrap(), Attempt::Held(_)), "free once the hold is dropped");
-        assert_eq!(file_name("lab/rig2"), "lab%rig2.lock");
-        assert_eq!(file_name(""), "_default.lock");
+        assert!(matches!(take(&ns, &here).unwrap(), Attempt::Held(_)), "free once the hold is dropped");
+        assert!(file_name("lab/rig2", &here).starts_with("lab%rig2@"), "{}", file_name("lab/rig2", &here));
+        assert!(file_name("", &here).starts_with("_default@") && file_name("", &here).ends_with(".lock"));
+        assert!(
+            matches!(take(&ns, &[]).unwrap(), Attempt::Held(_)) && matches!(take(&ns, &[]).unwrap(), Attempt::Held(_))
+        );
+    }
+
+    #[test]
+    fn the_meeting_point_is_what_others_can_dial_not_what_the_kernel_picks() {
+        let mut c = zenoh::Config::from_json5(slipstream_contract::config::DEFAULT_ZENOH_CONFIG).unwrap();
+        assert_eq!(meeting_point(&c, "tcp/127.0.0.1:12001"), ["tcp/127.0.0.1:7447"]);
+        c.insert_json5("connect/endpoints", "[]").unwrap();
+        c.insert_json5("listen/endpoints", r#"["tcp/127.0.0.1:0", "tcp/127.0.0.1:12001"]"#).unwrap();
+        assert!(meeting_point(&c, "tcp/127.0.0.1:12001").is_empty(), "a loop of its own meets nobody");
+        c.insert_json5("scouting/multicast/enabled", "true").unwrap();
+        assert_eq!(meeting_point(&c, "tcp/127.0.0.1:12001").len(), 1, "multicast scouting meets others");
     }
 }

@@ -47,13 +47,14 @@ pub(crate) struct Claimed {
 }
 
 /// Claims `map`'s namespace for a run that brings the nodes `ours`, or moves (see the module
-/// doc). `expected_here`: a node not ours (the simulator with `--sim external`, a node of a
+/// doc); `meeting` is where the run's sessions meet others ([`super::hold::meeting_point`]). `expected_here`: a node not ours (the simulator with `--sim external`, a node of a
 /// loop file started elsewhere) waits in the namespace, so the run cannot move.
 pub(crate) async fn claim(
     session: &zenoh::Session,
     map: TopicMap,
     ours: &[&str],
     expected_here: bool,
+    meeting: &[String],
 ) -> Result<Claimed> {
     settle(session).await;
     let alive = nodes_by_namespace(session).await?;
@@ -68,7 +69,7 @@ pub(crate) async fn claim(
         if let Some(player) = alive_here.and_then(|n| n.iter().find(|n| is_player(n))) {
             return Ok(Attempt::TakenBy(format!("a recording is playing there (`{player}`)")));
         }
-        Ok(match super::hold::take(ns)? {
+        Ok(match super::hold::take(ns, meeting)? {
             Attempt::TakenBy(holder) => Attempt::TakenBy(format!("`up` ({holder}) holds it")),
             held => held,
         })

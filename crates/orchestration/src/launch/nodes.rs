@@ -405,6 +405,7 @@ impl LoopRun {
                 (config, map, flags, Vec::new(), true)
             }
         };
+        let meeting = super::hold::meeting_point(&config, &endpoints.observer);
         let session = slipstream_contract::bus::open_session(config, "join the bus").await?;
         let claimed = match isolated {
             true => super::namespace::Claimed { map: topic_map, moved_to: None, beside: String::new(), hold: None },
@@ -415,7 +416,7 @@ impl LoopRun {
                     .into_iter()
                     .filter(|n| !(theirs.contains(n) || sim_elsewhere && *n == SIM_NODE))
                     .collect();
-                super::namespace::claim(&session, topic_map, &ours, expected_here).await?
+                super::namespace::claim(&session, topic_map, &ours, expected_here, &meeting).await?
             }
         };
         if let Some(ns) = &claimed.moved_to {
