@@ -87,16 +87,23 @@ def test_a_recording_made_of_a_replay_plays_again(host):
     assert "played replayed.mcap" in again.stderr()
 
 
+def fetch(host, port, path):
+    """GET `path` of the view on `port`, from inside the host."""
+    return host.run(f"python3 -c \"import urllib.request as u; print(u.urlopen("
+                    f"'http://127.0.0.1:{port}{path}', timeout=5).read().decode())\"", 20)
+
+
 def view_shows(host, command, port):
-    """`view FILE` serves a page whose state has the recording's messages."""
+    """`view FILE` serves a page whose state has the recording's messages, once a page asks it
+    to play (it waits for one)."""
     view = host.start(command)
     deadline = time.monotonic() + 60
-    seen = {}
+    seen, asked = {}, False
     while time.monotonic() < deadline and not seen.get("vehicle/state"):
         time.sleep(0.5)
         try:
-            state = host.run(f"python3 -c \"import urllib.request as u; print(u.urlopen("
-                             f"'http://127.0.0.1:{port}/state', timeout=5).read().decode())\"", 20)
+            asked = asked or fetch(host, port, "/replay?play=1").code == 0
+            state = fetch(host, port, "/state")
         except AssertionError:
             continue
         if state.code == 0:
