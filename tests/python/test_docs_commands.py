@@ -641,9 +641,17 @@ def test_loops_with_a_view_a_ros2_face_and_other_settings_side_by_side(host):
     assert host.finish(gt, 120) == 0, gt.stderr()[-3000:]
     assert report(host, "reports/gt")["perception"] == "ground-truth"
     for proc in (viewed, ros):
-        assert host.finish(proc, 120) == 0, proc.stderr()[-3000:]
+        assert host.finish(proc, 120) in (0, 1), proc.stderr()[-3000:]
     views = [json.loads(p.read_text()) for p in (host.dir / "reports").glob("*/report.json")]
-    assert any(r.get("view") and r.get("recording") for r in views), "the viewed run's report names its view and file"
+    recorded = [r for r in views if r.get("view") and r.get("recording")]
+    assert recorded, "the viewed run's report names its view and file"
+    # Exit 1 is the documented verdict of a recording that lost messages (four realtime loops
+    # on two cores may), and only of that: no collision, no node died.
+    rec = recorded[0]
+    lost = rec["recording"]["lost_upstream"] + rec["recording"]["dropped_by_recorder"]
+    assert rec["collisions"] == 0 and not any(n["died"] for n in rec["nodes"]), rec["nodes"]
+    assert viewed.code == (1 if lost else 0), (viewed.code, lost, viewed.stderr()[-2000:])
+    assert ros.code == 0, ros.stderr()[-3000:]
     assert any(r.get("ros2") and r["namespace"] == "loop-2" for r in views), "the ROS 2 run's report counts its routes"
 
 
