@@ -89,7 +89,7 @@ impl Ros2Summary {
 pub fn command(args: &RecordArgs, connect: &crate::config::ConnectArgs) -> Result<std::process::ExitCode> {
     let rt = tokio::runtime::Runtime::new()?;
     let clean = rt.block_on(async {
-        let bus = Bus::open(connect.zenoh_config()?, connect.topic_map()?, "record").await?;
+        let bus = Bus::open(connect.zenoh_config()?, connect.topic_map()?, &crate::cli::own_name("record")).await?;
         let clean = match args.profile {
             Profile::Ros2 => run_ros2(&bus, args).await.map(|s| !s.lost_anything()),
             Profile::Slipstream => run(&bus, args).await.map(|s| !s.lost_anything()),

@@ -284,22 +284,7 @@ async fn publish_ego(
     set_speed_mps: f64,
     time_gap_s: Option<f64>,
 ) -> slipstream::bus::Publisher<EgoInfo> {
-    let p = slipstream::vehicle::VehicleParams::CAR;
-    let ego = EgoInfo {
-        class: ObjectClass::Car,
-        size_m: p.size_m,
-        rear_overhang_m: p.rear_overhang_m,
-        wheelbase_m: p.wheelbase_m,
-        mass_kg: p.mass_kg,
-        max_power_w: p.max_power_w,
-        max_drive_force_n: p.max_drive_force_n,
-        max_brake_decel_mps2: p.max_brake_decel_mps2,
-        drag_area_m2: p.drag_area_m2,
-        rolling_coeff: p.rolling_coeff,
-        actuator_lag_s: p.actuator_lag_s,
-        set_speed_mps,
-        time_gap_s,
-    };
+    let ego = slipstream::vehicle::VehicleParams::CAR.ego_info(ObjectClass::Car, set_speed_mps, time_gap_s);
     let publisher = sim_bus.publisher(topics::SIM_EGO).await.unwrap();
     publisher.put(0, &ego).unwrap();
     publisher
@@ -585,4 +570,63 @@ fn eval_acc_runs_every_scenario_as_separate_processes_without_a_collision() {
         assert!(results.iter().any(|r| r["metrics"]["speed_rmse_mps"].as_f64().is_some()));
     }
     let _ = std::fs::remove_dir_all(&plots);
+}
+
+/// Two controllers started by hand under one name in one namespace, meeting as the default
+/// config has nodes on one machine meet: the second says that the name is taken and how to
+/// mend it; the first, alone when it started, says nothing of it.
+#[tokio::test(flavor = "multi_thread")]
+async fn a_second_node_under_a_taken_name_says_so() {
+    let _one = common::serial();
+    // The default config's way to meet on one machine, on a rendezvous of the test's own.
+    let rendezvous = common::ep(common::free_port());
+    let config = common::temp_dir("namesake").join("zenoh.json5");
+    std::fs::write(&config, slipstream::config::DEFAULT_ZENOH_CONFIG.replace("tcp/127.0.0.1:7447", &rendezvous))
+        .unwrap();
+    let session = common::connected_session(&rendezvous).await;
+    let start = || {
+        let mut c = acc_bin();
+        c.args(["--perception", "ground-truth", "-c"])
+            .arg(&config)
+            .stdout(std::process::Stdio::null())
+            .stderr(std::process::Stdio::piped());
+        c.spawn().unwrap()
+    };
+    let mut first = start();
+    let deadline = Instant::now() + Duration::from_secs(30);
+    while session.liveliness().get("nodes/acc").await.unwrap().recv_async().await.is_err() {
+        if Instant::now() > deadline {
+            let _ = first.kill();
+            let out = first.wait_with_output().unwrap();
+            panic!("the first controller never declared nodes/acc: {}", String::from_utf8_lossy(&out.stderr));
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+    let mut second = start();
+    let said = first_line_with(second.stderr.take().unwrap(), "another node named acc", Duration::from_secs(30));
+    for child in [&mut first, &mut second] {
+        let _ = child.kill();
+        let _ = child.wait();
+    }
+    let said = said.expect("the second controller did not say its name was taken");
+    assert!(said.contains("--name NAME") && said.contains("root namespace"), "{said}");
+    let mut first_err = String::new();
+    std::io::Read::read_to_string(&mut first.stderr.take().unwrap(), &mut first_err).unwrap();
+    assert!(!first_err.contains("another node named"), "the first controller was alone: {first_err}");
+}
+
+/// The first line of `stream` containing `needle`, read for at most `limit` (in a thread, so
+/// a quiet process cannot hold the test).
+fn first_line_with(stream: impl std::io::Read + Send + 'static, needle: &str, limit: Duration) -> Option<String> {
+    let (tx, rx) = std::sync::mpsc::channel();
+    let needle = needle.to_string();
+    std::thread::spawn(move || {
+        for line in std::io::BufRead::lines(std::io::BufReader::new(stream)).map_while(Result::ok) {
+            if line.contains(&needle) {
+                let _ = tx.send(line);
+                return;
+            }
+        }
+    });
+    rx.recv_timeout(limit).ok()
 }

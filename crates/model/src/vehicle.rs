@@ -16,7 +16,7 @@
 use serde::{Deserialize, Serialize};
 
 use slipstream_contract::longitudinal::Longitudinal;
-use slipstream_contract::msg::ObjectClass;
+use slipstream_contract::msg::{EgoInfo, ObjectClass};
 
 /// The longitudinal formulas are the contract's (what sim/ego declares to any controller).
 pub use slipstream_contract::longitudinal::{AIR_DENSITY_KGPM3, GRAVITY_MPS2};
@@ -132,6 +132,26 @@ impl VehicleParams {
             max_brake_decel_mps2: self.max_brake_decel_mps2,
             drag_area_m2: self.drag_area_m2,
             rolling_coeff: self.rolling_coeff,
+        }
+    }
+
+    /// What sim/ego announces of a `class` vehicle with these parameters and the driver's
+    /// starting settings: the one place a vehicle's numbers become the contract's message.
+    pub fn ego_info(&self, class: ObjectClass, set_speed_mps: f64, time_gap_s: Option<f64>) -> EgoInfo {
+        EgoInfo {
+            class,
+            size_m: self.size_m,
+            rear_overhang_m: self.rear_overhang_m,
+            wheelbase_m: self.wheelbase_m,
+            mass_kg: self.mass_kg,
+            max_power_w: self.max_power_w,
+            max_drive_force_n: self.max_drive_force_n,
+            max_brake_decel_mps2: self.max_brake_decel_mps2,
+            drag_area_m2: self.drag_area_m2,
+            rolling_coeff: self.rolling_coeff,
+            actuator_lag_s: self.actuator_lag_s,
+            set_speed_mps,
+            time_gap_s,
         }
     }
 

@@ -382,20 +382,5 @@ pub(crate) fn awaits(settings: &SimSettings, published: &Published) -> bool {
 /// Ego `k`'s vehicle and its driver's settings, as the scenario gives them.
 fn ego_info(world: &World, k: usize) -> EgoInfo {
     let (ego, spec) = (world.ego_at(k), &world.scenario().egos()[k]);
-    let p = &ego.params;
-    EgoInfo {
-        class: ego.class,
-        size_m: p.size_m,
-        rear_overhang_m: p.rear_overhang_m,
-        wheelbase_m: p.wheelbase_m,
-        mass_kg: p.mass_kg,
-        max_power_w: p.max_power_w,
-        max_drive_force_n: p.max_drive_force_n,
-        max_brake_decel_mps2: p.max_brake_decel_mps2,
-        drag_area_m2: p.drag_area_m2,
-        rolling_coeff: p.rolling_coeff,
-        actuator_lag_s: p.actuator_lag_s,
-        set_speed_mps: spec.controller_set_speed_mps(),
-        time_gap_s: spec.time_gap_s,
-    }
+    ego.params.ego_info(ego.class, spec.controller_set_speed_mps(), spec.time_gap_s)
 }

@@ -11,6 +11,7 @@ pub mod faults;
 mod follow;
 mod frame_copies;
 mod frame_publisher;
+mod namesake;
 mod open;
 mod publisher;
 mod replay;
@@ -158,6 +159,7 @@ impl Bus {
     }
 
     /// Declares the node's liveliness token (`nodes/<name>`), once; later calls do nothing.
+    /// A token of the same name already alive in the namespace is warned of (see `namesake`).
     /// Call it once the node's subscriptions are declared: it is how `slipstream top` lists
     /// the node and how the simulator in lockstep knows the node listens. Declarations from
     /// one session travel in order, so whoever sees the token has seen those subscriptions.
@@ -165,6 +167,9 @@ impl Bus {
         let mut token = self.token.lock().await;
         if token.is_none() {
             let key = self.topics.node_key(&self.node)?;
+            if namesake::namesakes(&self.session, &key).await > 0 {
+                tracing::warn!("{}", namesake::taken(&self.node, self.topics.namespace()));
+            }
             let declared = self.session.liveliness().declare_token(key.clone()).await;
             *token = Some(declared.map_err(zerr(format!("declare liveliness token {key}")))?);
         }

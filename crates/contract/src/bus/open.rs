@@ -63,17 +63,23 @@ fn rendezvous(config: &zenoh::Config) -> Vec<String> {
 /// doc).
 async fn check_rendezvous(session: zenoh::Session, rendezvous: Vec<String>) {
     tokio::time::sleep(RENDEZVOUS_CHECK).await;
+    if let Some(said) = held_by_a_stranger(&session, &rendezvous).await {
+        tracing::warn!("{said}");
+    }
+}
+
+/// What to say when `session` met nobody and holds none of `rendezvous` itself: one of them is
+/// held by a program that is no Zenoh node. None while it has met a peer or a router.
+async fn held_by_a_stranger(session: &zenoh::Session, rendezvous: &[String]) -> Option<String> {
     let info = session.info();
     if session.is_closed() || info.peers_zid().await.next().is_some() || info.routers_zid().await.next().is_some() {
-        return;
+        return None;
     }
     let own: Vec<String> = info.locators().await.iter().map(|l| l.to_string()).collect();
-    let held: Vec<&String> = rendezvous.iter().filter(|r| !own.contains(r)).collect();
-    if let Some(endpoint) = held.first() {
-        tracing::warn!(
-            "{endpoint}, where nodes on this machine meet, is held by a program that answers no Zenoh peer: tools started elsewhere (top, echo, another node) will not find this one (fix: stop that program, or run every command with -c FILE, a copy of config/zenoh.json5 with another rendezvous port in its connect and listen lists)"
-        );
-    }
+    let endpoint = rendezvous.iter().find(|r| !own.contains(r))?;
+    Some(format!(
+        "{endpoint}, where nodes on this machine meet, is held by a program that answers no Zenoh peer: tools started elsewhere (top, echo, another node) will not find this one (fix: stop that program, or run every command with -c FILE, a copy of config/zenoh.json5 with another rendezvous port in its connect and listen lists)"
+    ))
 }
 
 /// What a session with `config` waits for while it opens, for a person.
@@ -111,5 +117,46 @@ mod tests {
         );
         c.insert_json5("mode", "\"peer\"").unwrap();
         assert!(waiting_for(&c).contains("peer mode"));
+    }
+
+    /// A peer config whose rendezvous is `endpoint` (listened on and dialled), meeting nobody
+    /// else: no scouting, as config/zenoh.json5 with its port replaced.
+    fn rendezvous_config(endpoint: &str) -> zenoh::Config {
+        let mut c = zenoh::Config::default();
+        let list = format!(r#"["{endpoint}"]"#);
+        for (k, v) in [
+            ("mode", "\"peer\""),
+            ("listen/endpoints", list.as_str()),
+            ("listen/timeout_ms", "0"),
+            ("listen/exit_on_failure", "false"),
+            ("connect/endpoints", list.as_str()),
+            ("connect/exit_on_failure", "false"),
+            ("scouting/multicast/enabled", "false"),
+        ] {
+            c.insert_json5(k, v).unwrap();
+        }
+        c
+    }
+
+    #[tokio::test(flavor = "multi_thread")]
+    async fn a_rendezvous_held_by_a_plain_listener_is_named_and_a_free_one_is_not() {
+        let stranger = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+        let held = format!("tcp/{}", stranger.local_addr().unwrap());
+        std::thread::spawn(move || {
+            for conn in stranger.incoming() {
+                drop(conn);
+            }
+        });
+        let session = open_session(rendezvous_config(&held), "test").await.unwrap();
+        let said = held_by_a_stranger(&session, std::slice::from_ref(&held)).await;
+        assert!(said.as_deref().is_some_and(|s| s.contains(&held) && s.contains("fix:")), "{said:?}");
+        session.close().await.unwrap();
+
+        let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+        let free = format!("tcp/127.0.0.1:{port}");
+        let session = open_session(rendezvous_config(&free), "test").await.unwrap();
+        let said = held_by_a_stranger(&session, std::slice::from_ref(&free)).await;
+        assert!(said.is_none(), "the session holds its rendezvous itself: {said:?}");
+        session.close().await.unwrap();
     }
 }
