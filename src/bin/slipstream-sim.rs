@@ -21,9 +21,7 @@ fn run() -> Result<()> {
     let seed = cli.sim.seed.unwrap_or(scenario.seed);
     let world = slipstream::sim::World::new(scenario, seed, settings.physics_hz);
     if let Some(path) = &cli.sim.preview {
-        let (png, truth) = slipstream::sim::preview(world, &settings, cli.sim.at, true)
-            .map_err(anyhow::Error::msg)
-            .context("sim: preview")?;
+        let (png, truth) = slipstream::sim::preview(world, &settings, cli.sim.at, true).context("sim: preview")?;
         std::fs::write(path, png).with_context(|| format!("write {}", path.display()))?;
         let in_view = truth.objects.iter().filter(|o| o.bbox.is_some()).count();
         println!("{}: step {}, {} vehicles, {in_view} in view", path.display(), truth.step, truth.objects.len());

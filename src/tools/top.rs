@@ -12,7 +12,7 @@ use anyhow::Result;
 
 use crate::bus::Bus;
 use crate::eval::fmt_opt;
-pub use crate::watch::{KeyRow, SimView, TopView, Watcher};
+pub use crate::observe::watch::{KeyRow, SimView, TopView, Watcher};
 
 #[derive(Debug, Clone, clap::Args)]
 pub struct TopArgs {

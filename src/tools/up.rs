@@ -23,10 +23,11 @@ use crate::acc::PerceptionSource;
 use crate::bus::{CallbackSubscriber, Received};
 use crate::config::{ConnectArgs, FaultArgs};
 use crate::eval::judge::judge;
-use crate::eval::latency::{self, HopStats, LatencyWatch, LoopLatency, HOPS_SHORT, WHOLE_LOOP};
+use crate::observe::latency::{self, HopStats, LatencyWatch, LoopLatency, HOPS_SHORT, WHOLE_LOOP};
 use crate::eval::trace::Recorder;
 use crate::eval::{fmt_opt, plot, Metrics};
-use crate::launch::{ClockMode, LoopRun, LoopSpec, Network, NodeEnd, NodeInput, NODE_POLL};
+use crate::launch::{ClockMode, LoopRun, LoopSpec, Network, NodeEnd, NODE_POLL};
+use crate::observe::NodeInput;
 use crate::msg::{AccStatus, SimClock, SimEvent, SimEventKind};
 use crate::record::{Recording, RecordingSummary};
 use crate::sim::Scenario;
@@ -116,7 +117,7 @@ pub struct UpArgs {
     #[command(flatten)]
     pub faults: FaultArgs,
     #[command(flatten)]
-    pub own: slipstream_orchestration::launch::OwnNodeArgs,
+    pub own: slipstream_launch::OwnNodeArgs,
     /// Re-simulate: a recording (`up --record`, `slipstream record`) drives today's detector
     /// and ACC in place of the simulator, step by step, and the report compares their outputs
     /// with the recorded ones (docs/recording.md). Scenario, clock, perception and set speed
@@ -177,7 +178,7 @@ pub struct UpReport {
     pub nodes: Vec<NodeEnd>,
     /// The nodes of the user's own in the loop (their command and files by content), and what
     /// a loop file said of ours; empty: ours, as always.
-    pub own: slipstream_orchestration::launch::OwnNodes,
+    pub own: slipstream_launch::OwnNodes,
     pub latency: LatencyReport,
     pub metrics: Option<Metrics>,
     /// The simulator: builtin or external.

@@ -16,7 +16,7 @@
 //! It knows the vehicle it drives through the shared model ([`slipstream_model::vehicle`]) and the
 //! simulator only through the bus: no simulator code is linked into these decisions, so the
 //! same controller can drive another simulator or a car. Its scenario suite lives in the eval
-//! layer (`slipstream eval acc`: crates/orchestration/src/eval/acc.rs).
+//! layer (`slipstream eval acc`: crates/eval/src/acc.rs).
 //!
 //! The control law and its numbers: docs/control.md.
 

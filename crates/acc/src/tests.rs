@@ -1,5 +1,5 @@
 //! Controller tests: its decisions on hand-made perception and a point-mass ego. The closed
-//! loop with the simulator is tested in the eval layer (crates/orchestration/src/eval/offline.rs).
+//! loop with the simulator is tested in the eval layer (crates/eval/src/offline.rs).
 
 use super::controller::*;
 use super::ego::*;

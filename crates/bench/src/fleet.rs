@@ -17,7 +17,7 @@ use serde::Serialize;
 
 use super::fleet_watch::VehicleSeen;
 use super::netns::Lan;
-use slipstream_orchestration::launch::{sibling_binary, Child};
+use slipstream_launch::{sibling_binary, Child};
 
 /// The scenario every vehicle drives: a lead to follow the whole time.
 const SCENARIO: &str = "steady-follow";

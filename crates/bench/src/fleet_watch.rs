@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 use slipstream_contract::bus::{Bus, CallbackSubscriber};
 use slipstream_contract::config::ConnectArgs;
 use slipstream_contract::topics;
-use slipstream_orchestration::eval::latency::{LatencyWatch, WHOLE_LOOP};
+use slipstream_observe::latency::{LatencyWatch, WHOLE_LOOP};
 
 #[derive(Debug, Clone, clap::Args)]
 pub struct FleetWatchArgs {

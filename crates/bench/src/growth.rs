@@ -17,7 +17,7 @@ use serde::Serialize;
 use super::child::{child_log_filter, process_cpu_s, process_peak_rss_mib};
 use super::spec::{CaseSpec, RecvReport, SendReport, Transport};
 use super::{median, run_groups};
-use slipstream_orchestration::launch::LocalRouter;
+use slipstream_launch::LocalRouter;
 
 /// The frame size of the fan-out suite (the default camera's).
 const FANOUT_FRAME: (u32, u32) = (640, 480);
@@ -162,8 +162,8 @@ pub(crate) fn fanout(counts: &[usize], quick: bool, repeat: usize) -> Result<Vec
                 let l = latency_figures(&sent, &recvs);
                 eprintln!(
                     "{} frames/s each (slowest), p50 {} us",
-                    slipstream_orchestration::eval::fmt_opt(throughput.last().and_then(|t: &Throughput| t.min), 0),
-                    slipstream_orchestration::eval::fmt_opt(l.p50, 0)
+                    slipstream_eval::fmt_opt(throughput.last().and_then(|t: &Throughput| t.min), 0),
+                    slipstream_eval::fmt_opt(l.p50, 0)
                 );
                 latency.push(l);
             }
@@ -260,7 +260,7 @@ pub(crate) fn router(counts: &[usize], quick: bool, repeat: usize) -> Result<Vec
             eprintln!(
                 "{:.0} messages/s, speed p50 {} us, {} lost",
                 r.messages_per_s,
-                slipstream_orchestration::eval::fmt_opt(r.speed_p50_us, 0),
+                slipstream_eval::fmt_opt(r.speed_p50_us, 0),
                 r.lost
             );
             runs.push(r);
@@ -323,7 +323,7 @@ fn vehicle_figures(groups: &[(SendReport, Vec<RecvReport>)], router: Option<Rout
 
 /// Both tables as markdown (either may be empty).
 pub(crate) fn markdown(fanout: &[FanoutRow], router: &[RouterRow]) -> String {
-    use slipstream_orchestration::eval::fmt_opt;
+    use slipstream_eval::fmt_opt;
     let mut s = String::new();
     if !fanout.is_empty() {
         s.push_str(&format!(

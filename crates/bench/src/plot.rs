@@ -8,7 +8,7 @@ use anyhow::Result;
 
 use super::growth::FanoutPath;
 use super::BenchReport;
-use slipstream_orchestration::eval::plot::{png, Canvas};
+use slipstream_eval::plot::{png, Canvas};
 
 /// One line of a panel: its name, colour and points (count, value).
 type Line = (String, plotters::style::RGBColor, Vec<(f64, f64)>);

@@ -5,7 +5,7 @@ use serde::Serialize;
 use super::figures::Row;
 use super::ratios::Ratio;
 use super::{fleet, growth, nodes, scale, sim};
-use slipstream_orchestration::eval::fmt_opt;
+use slipstream_eval::fmt_opt;
 
 #[derive(Debug, Clone, Serialize)]
 pub struct BenchReport {

@@ -10,7 +10,7 @@
 //!   [`args`]: its command line.
 //!
 //! It reads pixels and the camera's calibration only, never the simulator: scoring against the
-//! simulator's ground truth is the eval layer's (`slipstream eval detect`: crates/orchestration/src/eval/detect.rs).
+//! simulator's ground truth is the eval layer's (`slipstream eval detect`: crates/eval/src/detect.rs).
 //!
 //! docs/perception.md describes the method, its limits and its measured scores.
 

@@ -5,7 +5,7 @@ use super::ground_truth::ground_truth;
 use super::render::Renderer;
 use super::settings::SimSettings;
 use super::world::{EgoInput, World};
-use slipstream_contract::msg::{GroundTruthObjects, ImageEncoding};
+use slipstream_contract::msg::{encode_pixels, GroundTruthObjects, ImageEncoding, PixelError};
 
 /// Steps `world` to `at_s` (the ego cruising, as before any controller) and renders the
 /// front camera; ground-truth boxes are outlined in yellow when `outline_boxes`.
@@ -14,7 +14,7 @@ pub fn preview(
     settings: &SimSettings,
     at_s: f64,
     outline_boxes: bool,
-) -> Result<(Vec<u8>, GroundTruthObjects), String> {
+) -> Result<(Vec<u8>, GroundTruthObjects), PixelError> {
     let steps = (at_s * settings.physics_hz as f64).round() as u64;
     while world.step_count() < steps && world.ended().is_none() {
         world.step(EgoInput::Cruise);
@@ -44,11 +44,5 @@ pub fn preview(
             }
         }
     }
-    let mut png = Vec::new();
-    image::codecs::png::PngEncoder::new(&mut png)
-        .write_image(&rgb, info.width, info.height, image::ExtendedColorType::Rgb8)
-        .map_err(|e| format!("encode PNG: {e}"))?;
-    Ok((png, truth))
+    Ok((encode_pixels(&rgb, info.width, info.height, ImageEncoding::Png, 0)?, truth))
 }
-
-use image::ImageEncoder;

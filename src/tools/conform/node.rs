@@ -215,7 +215,7 @@ impl Role {
 
 /// The node became ready, its liveliness token seen before the first step, and `kept` it to
 /// the end of the run.
-fn token(role: Role, started: &Result<(), slipstream_orchestration::Error>, kept: bool) -> Verdict {
+fn token(role: Role, started: &Result<(), slipstream_launch::Error>, kept: bool) -> Verdict {
     let name = role.node();
     match started {
         Ok(()) if kept => {
@@ -232,9 +232,9 @@ fn token(role: Role, started: &Result<(), slipstream_orchestration::Error>, kept
 
 /// The node under test ended before the run: its exit and its last words (a traceback's last
 /// line, an error), where its log is.
-fn died_verdict(end: &slipstream_orchestration::launch::NodeEnd) -> Verdict {
+fn died_verdict(end: &slipstream_launch::NodeEnd) -> Verdict {
     let code = end.exit_code.map_or("killed by a signal".to_string(), |c| format!("exit code {c}"));
-    let said = slipstream_orchestration::launch::last_words(&end.log).map_or(String::new(), |w| format!(": {w}"));
+    let said = slipstream_launch::last_words(&end.log).map_or(String::new(), |w| format!(": {w}"));
     verdict(
         "kept_running",
         false,

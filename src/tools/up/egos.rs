@@ -100,7 +100,7 @@ pub async fn run_loop(args: &UpArgs, connect: &ConnectArgs, scenario: Scenario, 
             plot::plot(&judged.trace, &title, &dir.join(format!("{ns}.png")))?;
         }
         let latency = std::mem::take(&mut *watch.latency.lock());
-        let loop_p99_ms = latency.stats(false)[crate::eval::latency::WHOLE_LOOP].p99_ms;
+        let loop_p99_ms = latency.stats(false)[crate::observe::latency::WHOLE_LOOP].p99_ms;
         let control = sim.as_ref().and_then(|s| s.egos.get(k).cloned());
         let collisions = judged.trace.collisions;
         egos.push(EgoReport {
@@ -168,7 +168,7 @@ fn view_lines(
     let Some((_, first)) = watches.first() else { return Vec::new() };
     let mut lines = vec![first.progress_line(name, args.mode, Some(duration_s))];
     for (ns, w) in watches {
-        let p99 = w.latency.lock().stats(true)[crate::eval::latency::WHOLE_LOOP].p99_ms;
+        let p99 = w.latency.lock().stats(true)[crate::observe::latency::WHOLE_LOOP].p99_ms;
         lines.push(format!("{ns:<6} {}  loop p99 {} ms", w.ego_line(), fmt_opt(p99, 1)));
     }
     let per_car = if args.perception == PerceptionSource::Camera { 2 } else { 1 };

@@ -1,8 +1,11 @@
-use std::fmt;
+//! What a bad configuration value says: which file, which key, what is wrong and how to fix
+//! it ([`ConfigError`]), and the same before the file is known ([`Invalid`]).
+
 use std::path::PathBuf;
 
 /// A configuration problem: which file, which key, what is wrong and how to fix it.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{origin}: {}{problem}{}", keyed(.key), fixed(.fix))]
 pub struct ConfigError {
     /// The file, or a description of where the value came from (`--cfg`, `built-in defaults`).
     pub origin: String,
@@ -10,6 +13,24 @@ pub struct ConfigError {
     pub key: String,
     pub problem: String,
     pub fix: String,
+}
+
+/// "key `a.b`: ", or nothing for a problem of the whole file.
+fn keyed(key: &str) -> String {
+    if key.is_empty() {
+        String::new()
+    } else {
+        format!("key `{key}`: ")
+    }
+}
+
+/// " (fix: ...)", or nothing when there is no fix to give.
+fn fixed(fix: &str) -> String {
+    if fix.is_empty() {
+        String::new()
+    } else {
+        format!(" (fix: {fix})")
+    }
 }
 
 impl ConfigError {
@@ -26,22 +47,6 @@ impl ConfigError {
         PathBuf::from(path).display().to_string()
     }
 }
-
-impl fmt::Display for ConfigError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        if self.key.is_empty() {
-            write!(f, "{}: {}", self.origin, self.problem)?;
-        } else {
-            write!(f, "{}: key `{}`: {}", self.origin, self.key, self.problem)?;
-        }
-        if !self.fix.is_empty() {
-            write!(f, " (fix: {})", self.fix)?;
-        }
-        Ok(())
-    }
-}
-
-impl std::error::Error for ConfigError {}
 
 /// A value that breaks a rule, found where the file it came from is not known: the dotted
 /// key, what is wrong and how to fix it. [`Invalid::at`] names the file and makes it the

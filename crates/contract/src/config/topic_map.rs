@@ -126,7 +126,7 @@ pub struct TopicMap {
     pub camera: CameraSettings,
     /// The file it was read from, for messages.
     pub origin: String,
-    /// The `ros2` block as written (the ROS 2 bridge reads and checks it: crates/orchestration/src/ros2/mapping.rs);
+    /// The `ros2` block as written (the ROS 2 bridge reads and checks it: crates/ros2/src/mapping.rs);
     /// None when the file has none.
     pub ros2: Option<serde_json::Value>,
 }
@@ -226,7 +226,7 @@ impl TopicMap {
     fn from_raw(raw: RawFile, origin: &str) -> Result<TopicMap, ConfigError> {
         let mut map = TopicMap { origin: origin.to_string(), ros2: raw.ros2, ..TopicMap::default() };
         map.set_namespace(&raw.namespace)
-            .map_err(|(problem, fix)| ConfigError::new(origin, "namespace", problem, fix))?;
+            .map_err(|e| e.at(origin, "namespace"))?;
 
         let cam = raw.camera;
         if let Some(q) = cam.jpeg_quality {
@@ -290,7 +290,7 @@ impl TopicMap {
         let entry = self.entries.get_mut(&topic).expect("every topic has an entry");
         if let Some(k) = over.key {
             let (key, absolute) =
-                remapped_key(&k).map_err(|(p, f)| ConfigError::new(origin, format!("{key_path}.key"), p, f))?;
+                remapped_key(&k).map_err(|e| e.at(origin, format!("{key_path}.key")))?;
             entry.key = key;
             entry.absolute = absolute;
         }
@@ -346,18 +346,18 @@ impl TopicMap {
 
     /// Replaces the namespace (the `--namespace` flag does this after loading).
     pub fn with_namespace(mut self, namespace: &str) -> Result<TopicMap, ConfigError> {
-        self.set_namespace(namespace).map_err(|(p, f)| ConfigError::new("--namespace", "namespace", p, f))?;
+        self.set_namespace(namespace).map_err(|e| e.at("--namespace", "namespace"))?;
         Ok(self)
     }
 
-    fn set_namespace(&mut self, namespace: &str) -> Result<(), (String, String)> {
+    fn set_namespace(&mut self, namespace: &str) -> Result<(), BadKey> {
         let ns = namespace.trim_matches('/');
         if !ns.is_empty() {
             let ke = key_expr(ns)?;
             if ke.as_str().contains('*') || ke.as_str().contains('$') {
-                return Err((
+                return Err(BadKey::new(
                     format!("`{ns}` has a wildcard"),
-                    "a namespace is a plain key such as `car1` or `lab/rig2`".into(),
+                    "a namespace is a plain key such as `car1` or `lab/rig2`",
                 ));
             }
         }
@@ -408,14 +408,14 @@ impl TopicMap {
     /// Liveliness key of a node: `<namespace>/nodes/<name>`.
     pub fn node_key(&self, node: &str) -> Result<OwnedKeyExpr, ConfigError> {
         let rel =
-            key_expr(&format!("{NODES_PREFIX}/{node}")).map_err(|(p, f)| ConfigError::new("node name", "", p, f))?;
+            key_expr(&format!("{NODES_PREFIX}/{node}")).map_err(|e| e.at("node name", ""))?;
         Ok(self.full_key(&rel))
     }
 
     /// Where a node that injects faults reports its inputs' statistics (JSON, once a second).
     pub fn node_inputs_key(&self, node: &str) -> Result<OwnedKeyExpr, ConfigError> {
         let rel = key_expr(&format!("{NODES_PREFIX}/{node}/{INPUTS_SUFFIX}"))
-            .map_err(|(p, f)| ConfigError::new("node name", "", p, f))?;
+            .map_err(|e| e.at("node name", ""))?;
         Ok(self.full_key(&rel))
     }
 
@@ -497,23 +497,41 @@ impl TopicMap {
     }
 }
 
-fn key_expr(s: &str) -> Result<OwnedKeyExpr, (String, String)> {
+/// A key that is no valid key, before it is known which file and key it came from: what is
+/// wrong and how to fix it ([`BadKey::at`] names them).
+#[derive(Debug)]
+struct BadKey {
+    problem: String,
+    fix: String,
+}
+
+impl BadKey {
+    fn new(problem: impl Into<String>, fix: impl Into<String>) -> BadKey {
+        BadKey { problem: problem.into(), fix: fix.into() }
+    }
+
+    fn at(self, origin: impl Into<String>, key: impl Into<String>) -> ConfigError {
+        ConfigError::new(origin, key, self.problem, self.fix)
+    }
+}
+
+fn key_expr(s: &str) -> Result<OwnedKeyExpr, BadKey> {
     OwnedKeyExpr::autocanonize(s.to_string()).map_err(|e| {
-        (
+        BadKey::new(
             format!("`{s}` is not a valid Zenoh key: {e}"),
-            "use chunks of letters, digits, `-` and `_` separated by `/`".into(),
+            "use chunks of letters, digits, `-` and `_` separated by `/`",
         )
     })
 }
 
 /// A remapped key: relative (`car/speed`, namespace applies) or absolute (`/fleet/speed`).
-fn remapped_key(s: &str) -> Result<(OwnedKeyExpr, bool), (String, String)> {
+fn remapped_key(s: &str) -> Result<(OwnedKeyExpr, bool), BadKey> {
     let (absolute, body) = match s.strip_prefix('/') {
         Some(rest) => (true, rest),
         None => (false, s),
     };
     if body.is_empty() {
-        return Err(("an empty key".into(), "give a key such as `vehicle/speed`, or leave the key out".into()));
+        return Err(BadKey::new("an empty key", "give a key such as `vehicle/speed`, or leave the key out"));
     }
     let ke = key_expr(body)?;
     if ke.as_str().contains('*')
@@ -521,9 +539,9 @@ fn remapped_key(s: &str) -> Result<(OwnedKeyExpr, bool), (String, String)> {
         || ke.as_str().starts_with('@')
         || ke.as_str().contains("/@")
     {
-        return Err((
+        return Err(BadKey::new(
             format!("`{s}` has a wildcard or a verbatim (@) chunk"),
-            "publish keys are plain: chunks of letters, digits, `-` and `_`".into(),
+            "publish keys are plain: chunks of letters, digits, `-` and `_`",
         ));
     }
     Ok((ke, absolute))

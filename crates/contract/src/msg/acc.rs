@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{Message, MessageKind};
+use super::{Message, MessageKind, Unsound};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub enum AccMode {
@@ -61,15 +61,15 @@ pub struct AccCommand {
 
 impl Message for AccCommand {
     const KIND: MessageKind = MessageKind::AccCommand;
-    fn check(&self) -> Result<(), String> {
+    fn check(&self) -> Result<(), Unsound> {
         if let Some(v) = self.set_speed_mps {
             if !(v.is_finite() && v >= 0.0) {
-                return Err(format!("set_speed_mps {v} must be a finite value >= 0"));
+                return Err(Unsound(format!("set_speed_mps {v} must be a finite value >= 0")));
             }
         }
         if let Some(h) = self.time_gap_s {
             if !(h.is_finite() && h > 0.0) {
-                return Err(format!("time_gap_s {h} must be a finite value > 0"));
+                return Err(Unsound(format!("time_gap_s {h} must be a finite value > 0")));
             }
         }
         Ok(())

@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 
 use super::codec::write_postcard;
 use super::image_encoding::ImageEncoding;
-use super::{DecodeError, Header, Message, MessageKind, Vec3, PREAMBLE_LEN, WIRE_VERSION};
+use super::{DecodeError, Header, Message, MessageKind, PREAMBLE_LEN, Unsound, Vec3, WIRE_VERSION};
 
 /// camera/front: one image, owned.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -31,20 +31,20 @@ pub struct CameraFrameRef<'a> {
     pub data: &'a [u8],
 }
 
-fn check_frame(width: u32, height: u32, encoding: ImageEncoding, len: usize) -> Result<(), String> {
-    super::pixels::check_size(width, height, encoding, len)
+fn check_frame(width: u32, height: u32, encoding: ImageEncoding, len: usize) -> Result<(), Unsound> {
+    super::pixels::check_size(width, height, encoding, len).map_err(|e| Unsound(e.to_string()))
 }
 
 impl Message for CameraFrame {
     const KIND: MessageKind = MessageKind::CameraFrame;
-    fn check(&self) -> Result<(), String> {
+    fn check(&self) -> Result<(), Unsound> {
         check_frame(self.width, self.height, self.encoding, self.data.len())
     }
 }
 
 impl Message for CameraFrameRef<'_> {
     const KIND: MessageKind = MessageKind::CameraFrame;
-    fn check(&self) -> Result<(), String> {
+    fn check(&self) -> Result<(), Unsound> {
         check_frame(self.width, self.height, self.encoding, self.data.len())
     }
 }
@@ -59,7 +59,7 @@ impl<'a> CameraFrameRef<'a> {
     /// the others decoded (and must have the size the frame states; crates/contract/src/msg/pixels.rs).
     pub fn to_rgb8(&self) -> Result<std::borrow::Cow<'a, [u8]>, DecodeError> {
         super::pixels::decode(self.data, self.width, self.height, self.encoding)
-            .map_err(|reason| DecodeError::Invalid { expected: "CameraFrame", reason })
+            .map_err(|e| DecodeError::Invalid { expected: "CameraFrame", reason: e.to_string() })
     }
 }
 
@@ -133,12 +133,12 @@ impl CameraInfo {
 
 impl Message for CameraInfo {
     const KIND: MessageKind = MessageKind::CameraInfo;
-    fn check(&self) -> Result<(), String> {
+    fn check(&self) -> Result<(), Unsound> {
         if self.width == 0 || self.height == 0 {
-            return Err(format!("image size {}x{} is empty", self.width, self.height));
+            return Err(Unsound(format!("image size {}x{} is empty", self.width, self.height)));
         }
         if !(self.fx_px > 0.0 && self.fy_px > 0.0) {
-            return Err(format!("focal lengths must be positive, got fx={} fy={}", self.fx_px, self.fy_px));
+            return Err(Unsound(format!("focal lengths must be positive, got fx={} fy={}", self.fx_px, self.fy_px)));
         }
         Ok(())
     }

@@ -91,7 +91,7 @@ where
     if !rest.is_empty() {
         return Err(DecodeError::TrailingBytes { expected: exp, count: rest.len() });
     }
-    msg.check().map_err(|reason| DecodeError::Invalid { expected: exp, reason })?;
+    msg.check().map_err(|e| DecodeError::Invalid { expected: exp, reason: e.0 })?;
     Ok(Stamped { header, msg })
 }
 

@@ -4,7 +4,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{Message, MessageKind, ObjectClass};
+use super::{Message, MessageKind, ObjectClass, Unsound};
 use crate::longitudinal::Longitudinal;
 
 /// The ego vehicle (the simulator's model of it) and its driver's starting settings.
@@ -55,7 +55,7 @@ impl EgoInfo {
 
 impl Message for EgoInfo {
     const KIND: MessageKind = MessageKind::EgoInfo;
-    fn check(&self) -> Result<(), String> {
+    fn check(&self) -> Result<(), Unsound> {
         let positive = [
             ("length", self.size_m[0]),
             ("width", self.size_m[1]),
@@ -67,7 +67,7 @@ impl Message for EgoInfo {
             ("max_brake_decel_mps2", self.max_brake_decel_mps2),
         ];
         if let Some((name, v)) = positive.iter().find(|(_, v)| !(v.is_finite() && *v > 0.0)) {
-            return Err(format!("{name} {v} must be a finite value > 0"));
+            return Err(Unsound(format!("{name} {v} must be a finite value > 0")));
         }
         let at_least_zero = [
             ("rear_overhang_m", self.rear_overhang_m),
@@ -77,10 +77,10 @@ impl Message for EgoInfo {
             ("set_speed_mps", self.set_speed_mps),
         ];
         if let Some((name, v)) = at_least_zero.iter().find(|(_, v)| !(v.is_finite() && *v >= 0.0)) {
-            return Err(format!("{name} {v} must be a finite value >= 0"));
+            return Err(Unsound(format!("{name} {v} must be a finite value >= 0")));
         }
         if let Some(h) = self.time_gap_s.filter(|h| !(h.is_finite() && *h > 0.0)) {
-            return Err(format!("time_gap_s {h} must be a finite value > 0"));
+            return Err(Unsound(format!("time_gap_s {h} must be a finite value > 0")));
         }
         Ok(())
     }

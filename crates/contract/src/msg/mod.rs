@@ -35,7 +35,9 @@ pub use codec::{decode, decode_header, encode, encode_into, DecodeError, Stamped
 pub use ego::EgoInfo;
 pub use image_encoding::ImageEncoding;
 pub use objects::{BoundingBox2d, Detection, Detections, GroundTruthObject, GroundTruthObjects, ObjectClass};
-pub use pixels::{check_size as check_frame_size, decode as decode_pixels, encode as encode_pixels, MAX_FRAME_PIXELS};
+pub use pixels::{
+    check_size as check_frame_size, decode as decode_pixels, encode as encode_pixels, PixelError, MAX_FRAME_PIXELS,
+};
 pub use road::{Curve, LaneEnd, RoadSpec};
 pub use sim::{due, SimClock, SimEvent, SimEventKind, SimMode};
 pub use vehicle::{ControlCommand, ControlTiming, Speed, VehicleState};
@@ -132,12 +134,18 @@ impl MessageKind {
     }
 }
 
+/// What a decoded message breaks (a size that must agree, a value out of its range), said
+/// for the person reading the receiver's log: the field, its value and the rule.
+#[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
+#[error("{0}")]
+pub struct Unsound(pub String);
+
 /// A message type that travels on the bus.
 pub trait Message: Serialize + std::fmt::Debug {
     const KIND: MessageKind;
 
     /// A semantic check run after a successful decode (sizes that must agree, ranges).
-    fn check(&self) -> Result<(), String> {
+    fn check(&self) -> Result<(), Unsound> {
         Ok(())
     }
 }

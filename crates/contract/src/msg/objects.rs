@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{Message, MessageKind, Vec3};
+use super::{Message, MessageKind, Unsound, Vec3};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 pub enum ObjectClass {
@@ -131,16 +131,16 @@ pub struct Detections {
 
 impl Message for Detections {
     const KIND: MessageKind = MessageKind::Detections;
-    fn check(&self) -> Result<(), String> {
+    fn check(&self) -> Result<(), Unsound> {
         for d in &self.detections {
             if !(0.0..=1.0).contains(&d.confidence) {
-                return Err(format!("track {}: confidence {} is outside 0..1", d.track_id, d.confidence));
+                return Err(Unsound(format!("track {}: confidence {} is outside 0..1", d.track_id, d.confidence)));
             }
             if !(d.distance_sigma_m >= 0.0 && d.relative_speed_sigma_mps >= 0.0) {
-                return Err(format!(
+                return Err(Unsound(format!(
                     "track {}: standard deviations must be 0 or more (distance {}, relative speed {})",
                     d.track_id, d.distance_sigma_m, d.relative_speed_sigma_mps
-                ));
+                )));
             }
         }
         Ok(())

@@ -20,29 +20,66 @@ pub const MAX_FRAME_PIXELS: u64 = 8192 * 8192;
 /// honest frame of that size.
 pub(super) const LZ4_MAX_RATIO: usize = 255;
 
+/// Why a frame's pixels cannot be encoded or decoded: each says the sizes and the encoding, so
+/// a reader's log names what the sender got wrong.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PixelError {
+    #[error("frame size {width}x{height} is empty")]
+    Empty { width: u32, height: u32 },
+    #[error("{width}x{height} is more than {MAX_FRAME_PIXELS} pixels")]
+    TooLarge { width: u32, height: u32 },
+    #[error("{width}x{height} Rgb8 needs {needed} bytes, got {got}")]
+    RawLength { width: u32, height: u32, needed: usize, got: usize },
+    /// An LZ4 block too short to expand to the frame's size (at most [`LZ4_MAX_RATIO`] to 1).
+    #[error("{got} bytes of LZ4 cannot expand to {width}x{height} Rgb8 ({needed} bytes; at most {LZ4_MAX_RATIO}x)")]
+    Lz4TooShort { width: u32, height: u32, needed: usize, got: usize },
+    #[error("Lz4 block does not decode: {0}")]
+    Lz4(String),
+    #[error("Lz4 block expands to {got} bytes, {width}x{height} Rgb8 is {needed}")]
+    Lz4Length { width: u32, height: u32, needed: usize, got: usize },
+    #[error("empty {0:?} frame")]
+    EmptyCompressed(ImageEncoding),
+    /// A JPEG or PNG header that states another size than the frame.
+    #[error("{encoding:?} image is {got_width}x{got_height}, the frame says {width}x{height}")]
+    HeaderSize { encoding: ImageEncoding, width: u32, height: u32, got_width: u32, got_height: u32 },
+    /// The image codec refused the pixels or the bytes (`what`: "encoding failed", "header
+    /// does not decode", "image does not decode").
+    #[error("{encoding:?} {what}: {message}")]
+    Codec { encoding: ImageEncoding, what: &'static str, message: String },
+    /// A JPEG or PNG frame in a build without an image codec.
+    #[error("{0:?} frames need the contract crate's `images` feature (raw and Lz4 frames do not)")]
+    NoCodec(ImageEncoding),
+}
+
 /// Whether a frame's stated size and byte count are acceptable for its encoding, checked
 /// before any decoding (what a decoder needs to trust the size it allocates).
-pub fn check_size(width: u32, height: u32, encoding: ImageEncoding, len: usize) -> Result<(), String> {
+pub fn check_size(width: u32, height: u32, encoding: ImageEncoding, len: usize) -> Result<(), PixelError> {
     if width == 0 || height == 0 {
-        return Err(format!("frame size {width}x{height} is empty"));
+        return Err(PixelError::Empty { width, height });
     }
     let pixels = width as u64 * height as u64;
     if pixels > MAX_FRAME_PIXELS {
-        return Err(format!("{width}x{height} is more than {MAX_FRAME_PIXELS} pixels"));
+        return Err(PixelError::TooLarge { width, height });
     }
-    let rgb_len = pixels as usize * 3;
+    let needed = pixels as usize * 3;
     match encoding {
-        ImageEncoding::Rgb8 if len != rgb_len => Err(format!("{width}x{height} Rgb8 needs {rgb_len} bytes, got {len}")),
-        ImageEncoding::Lz4 if len == 0 || len.saturating_mul(LZ4_MAX_RATIO) + 16 < rgb_len => Err(format!(
-            "{len} bytes of LZ4 cannot expand to {width}x{height} Rgb8 ({rgb_len} bytes; at most {LZ4_MAX_RATIO}x)"
-        )),
-        ImageEncoding::Jpeg | ImageEncoding::Png if len == 0 => Err(format!("empty {encoding:?} frame")),
+        ImageEncoding::Rgb8 if len != needed => Err(PixelError::RawLength { width, height, needed, got: len }),
+        ImageEncoding::Lz4 if len == 0 || len.saturating_mul(LZ4_MAX_RATIO) + 16 < needed => {
+            Err(PixelError::Lz4TooShort { width, height, needed, got: len })
+        }
+        ImageEncoding::Jpeg | ImageEncoding::Png if len == 0 => Err(PixelError::EmptyCompressed(encoding)),
         _ => Ok(()),
     }
 }
 
 /// RGB8 pixels in `encoding`; `quality` (1..=100) applies to JPEG only.
-pub fn encode(rgb: &[u8], width: u32, height: u32, encoding: ImageEncoding, quality: u8) -> Result<Vec<u8>, String> {
+pub fn encode(
+    rgb: &[u8],
+    width: u32,
+    height: u32,
+    encoding: ImageEncoding,
+    quality: u8,
+) -> Result<Vec<u8>, PixelError> {
     check_size(width, height, ImageEncoding::Rgb8, rgb.len())?;
     match encoding {
         ImageEncoding::Rgb8 => Ok(rgb.to_vec()),
@@ -53,18 +90,22 @@ pub fn encode(rgb: &[u8], width: u32, height: u32, encoding: ImageEncoding, qual
 
 /// The frame's pixels as RGB8 (width x height x 3): raw frames borrowed as they are, the others
 /// decoded. Checks [`check_size`] first; a decoded image of another size is an error.
-pub fn decode<'a>(data: &'a [u8], width: u32, height: u32, encoding: ImageEncoding) -> Result<Cow<'a, [u8]>, String> {
+pub fn decode<'a>(
+    data: &'a [u8],
+    width: u32,
+    height: u32,
+    encoding: ImageEncoding,
+) -> Result<Cow<'a, [u8]>, PixelError> {
     check_size(width, height, encoding, data.len())?;
-    let rgb_len = width as usize * height as usize * 3;
+    let needed = width as usize * height as usize * 3;
     match encoding {
         ImageEncoding::Rgb8 => Ok(Cow::Borrowed(data)),
         ImageEncoding::Lz4 => {
             // The output is allocated at the size the frame states (bounded above), never at
             // a size the block claims.
-            let rgb =
-                lz4_flex::block::decompress(data, rgb_len).map_err(|e| format!("Lz4 block does not decode: {e}"))?;
-            if rgb.len() != rgb_len {
-                return Err(format!("Lz4 block expands to {} bytes, {width}x{height} Rgb8 is {rgb_len}", rgb.len()));
+            let rgb = lz4_flex::block::decompress(data, needed).map_err(|e| PixelError::Lz4(e.to_string()))?;
+            if rgb.len() != needed {
+                return Err(PixelError::Lz4Length { width, height, needed, got: rgb.len() });
             }
             Ok(Cow::Owned(rgb))
         }
@@ -124,9 +165,10 @@ mod tests {
     fn an_lz4_bomb_is_refused_before_it_is_expanded() {
         // 100 bytes cannot honestly expand to 8000x8000 RGB8 (192 MB).
         let err = decode(&[0u8; 100], 8000, 8000, ImageEncoding::Lz4).unwrap_err();
-        assert!(err.contains("cannot expand"), "{err}");
+        assert!(matches!(err, PixelError::Lz4TooShort { got: 100, .. }), "{err}");
+        assert!(err.to_string().contains("cannot expand"), "{err}");
         let err = decode(&[0u8; 100], 9000, 9000, ImageEncoding::Lz4).unwrap_err();
-        assert!(err.contains("more than"), "{err}");
+        assert_eq!(err, PixelError::TooLarge { width: 9000, height: 9000 });
     }
 
     #[test]
@@ -151,8 +193,8 @@ mod tests {
     fn jpeg_and_png_without_the_images_feature_are_errors_that_name_it() {
         for enc in [ImageEncoding::Jpeg, ImageEncoding::Png] {
             let err = encode(&scene(8, 8), 8, 8, enc, 85).unwrap_err();
-            assert!(err.contains("`images` feature"), "{err}");
-            assert!(decode(&[0xff, 0xd8, 0xff], 8, 8, enc).unwrap_err().contains("`images` feature"));
+            assert!(err.to_string().contains("`images` feature"), "{err}");
+            assert_eq!(decode(&[0xff, 0xd8, 0xff], 8, 8, enc).unwrap_err(), PixelError::NoCodec(enc));
         }
     }
 
@@ -161,6 +203,6 @@ mod tests {
     fn a_compressed_image_stating_another_size_is_refused_from_its_header() {
         let big = encode(&scene(128, 96), 128, 96, ImageEncoding::Png, 85).unwrap();
         let err = decode(&big, 64, 48, ImageEncoding::Png).unwrap_err();
-        assert!(err.contains("128x96"), "{err}");
+        assert!(matches!(err, PixelError::HeaderSize { got_width: 128, got_height: 96, .. }), "{err}");
     }
 }

@@ -4,7 +4,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{Message, MessageKind};
+use super::{Message, MessageKind, Unsound};
 use crate::config::Invalid;
 
 /// A constant-radius curve on the centre line.
@@ -115,7 +115,7 @@ impl RoadSpec {
 impl Message for RoadSpec {
     const KIND: MessageKind = MessageKind::RoadMap;
 
-    fn check(&self) -> Result<(), String> {
-        self.invalid().map_or(Ok(()), |i| Err(format!("{}: {}", i.key, i.problem)))
+    fn check(&self) -> Result<(), Unsound> {
+        self.invalid().map_or(Ok(()), |i| Err(Unsound(format!("{}: {}", i.key, i.problem))))
     }
 }

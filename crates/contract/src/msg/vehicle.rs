@@ -2,7 +2,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{Message, MessageKind, Vec3};
+use super::{Message, MessageKind, Unsound, Vec3};
 
 /// vehicle/speed: the ego's speed over ground, the 100 Hz hot path.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
@@ -80,16 +80,16 @@ impl ControlCommand {
 impl Message for ControlCommand {
     const KIND: MessageKind = MessageKind::ControlCommand;
 
-    fn check(&self) -> Result<(), String> {
+    fn check(&self) -> Result<(), Unsound> {
         let in_range = |v: f32, lo: f32, hi: f32| v.is_finite() && (lo..=hi).contains(&v);
         if !in_range(self.throttle, 0.0, 1.0) {
-            return Err(format!("throttle {} is outside 0..1", self.throttle));
+            return Err(Unsound(format!("throttle {} is outside 0..1", self.throttle)));
         }
         if !in_range(self.brake, 0.0, 1.0) {
-            return Err(format!("brake {} is outside 0..1", self.brake));
+            return Err(Unsound(format!("brake {} is outside 0..1", self.brake)));
         }
         if !in_range(self.steer, -1.0, 1.0) {
-            return Err(format!("steer {} is outside -1..1", self.steer));
+            return Err(Unsound(format!("steer {} is outside -1..1", self.steer)));
         }
         Ok(())
     }
