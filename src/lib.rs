@@ -18,15 +18,15 @@
 pub use slipstream_acc as acc;
 pub use slipstream_bench as bench;
 pub use slipstream_contract::{bus, config, msg, node, process, qos, topics};
-pub use slipstream_model::{road, vehicle};
 pub use slipstream_eval as eval;
 pub use slipstream_launch as launch;
+pub use slipstream_model::{road, vehicle};
 pub use slipstream_observe as observe;
+pub use slipstream_perception as perception;
 pub use slipstream_record as record;
 pub use slipstream_ros2 as ros2;
-pub use slipstream_view as view;
-pub use slipstream_perception as perception;
 pub use slipstream_sim as sim;
+pub use slipstream_view as view;
 
 pub mod cli;
 pub mod tools;

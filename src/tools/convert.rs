@@ -3,6 +3,7 @@
 //! made by the same translator as the live bridge. Log times are kept as recorded.
 
 use std::collections::HashMap;
+use std::ops::ControlFlow;
 use std::path::PathBuf;
 
 use anyhow::{Context as _, Result};
@@ -64,12 +65,15 @@ pub fn run(args: &ConvertArgs, topics: &TopicMap) -> Result<ConvertSummary> {
     let routes: Vec<Route> =
         config.enabled().filter(|(r, _)| r.direction() == Direction::ToRos).map(|(r, _)| r).collect();
     let types: Vec<(Route, &str)> = config.enabled().map(|(r, e)| (r, e.type_name.as_str())).collect();
-    summary.input_cut = crate::record::each_message(&args.input, |m| {
+    // The bag's failure stops the reading and is kept here: the reader's own errors are the
+    // recording's.
+    let mut failed = None;
+    summary.input_cut = crate::record::each_message_until(&args.input, |m| {
         summary.read += 1;
         let found = keys.entry(m.channel.topic.clone()).or_insert_with(|| topic_of(topics, &m.channel));
         let Some((topic, ns)) = found else {
             summary.unmapped += 1;
-            return Ok(());
+            return Ok(ControlFlow::Continue(()));
         };
         let translator = translators.entry(ns.clone()).or_insert_with(|| Translator::new(ns).with_types(types.clone()));
         let fed: Vec<Route> = routes.iter().copied().filter(|r| r.sources().contains(topic)).collect();
@@ -79,7 +83,10 @@ pub fn run(args: &ConvertArgs, topics: &TopicMap) -> Result<ConvertSummary> {
         for route in fed {
             match translator.encode(route, *topic, &m.data) {
                 Ok(Some((header, cdr))) => {
-                    bag.write(route, &header, m.log_time, &cdr)?;
+                    if let Err(e) = bag.write(route, &header, m.log_time, &cdr) {
+                        failed = Some(e);
+                        return Ok(ControlFlow::Break(()));
+                    }
                     summary.written += 1;
                 }
                 Ok(None) => {}
@@ -89,8 +96,11 @@ pub fn run(args: &ConvertArgs, topics: &TopicMap) -> Result<ConvertSummary> {
                 }
             }
         }
-        Ok(())
+        Ok(ControlFlow::Continue(()))
     })?;
+    if let Some(e) = failed {
+        return Err(e.into());
+    }
     bag.finish()?;
     Ok(summary)
 }

@@ -12,8 +12,8 @@ use anyhow::{Context, Result};
 use serde::Serialize;
 
 use slipstream_acc::PerceptionSource;
-use slipstream_observe::latency::{LatencyWatch, WHOLE_LOOP};
 use slipstream_launch::{ClockMode, LinkKind, LoopRun, LoopSpec, Network, NODE_POLL};
+use slipstream_observe::latency::{LatencyWatch, WHOLE_LOOP};
 use slipstream_sim::Scenario;
 
 /// A loop holds real time when its simulator runs at least this fast.

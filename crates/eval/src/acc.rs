@@ -16,9 +16,10 @@ use serde::Serialize;
 
 use super::metrics::{aims, Metrics};
 use super::{fmt_opt, plot};
-use slipstream_launch::{ClockMode, LinkKind, LoopRun, LoopSpec, Network, NodeInput, OwnNodeArgs, OwnNodes, NODE_POLL};
 use slipstream_acc::PerceptionSource;
 use slipstream_contract::config::{FaultArgs, FaultProfile};
+use slipstream_launch::{ClockMode, LinkKind, LoopRun, LoopSpec, Network, OwnNodeArgs, OwnNodes, NODE_POLL};
+use slipstream_observe::NodeInput;
 use slipstream_sim::{Scenario, SimTime};
 
 #[derive(Debug, Clone, clap::Args)]
@@ -328,7 +329,11 @@ pub(crate) fn run_all(
 
 /// Whether the run ended as a run should: the simulator finished within `timeout_s` and no
 /// node died before it.
-fn ended_in_time(progress: &slipstream_launch::Progress, ends: &[slipstream_launch::NodeEnd], timeout_s: f64) -> Result<()> {
+fn ended_in_time(
+    progress: &slipstream_launch::Progress,
+    ends: &[slipstream_launch::NodeEnd],
+    timeout_s: f64,
+) -> Result<()> {
     if progress.sim_ended.is_none() && progress.died.is_empty() {
         let problem = format!("did not finish within {timeout_s} s (--timeout)");
         return Err(Error::node("slipstream-sim", problem));

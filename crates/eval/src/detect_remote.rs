@@ -14,12 +14,12 @@ use std::time::{Duration, Instant};
 
 use super::frame_detector::FrameDetector;
 use crate::error::{Error, Result};
-use slipstream_launch::supervise::{State, Supervised};
-use slipstream_launch::{free_ports, last_words, ForeignNode, NODE_POLL};
 use slipstream_contract::bus::{FramePublisher, Publisher, Received, Subscriber};
 use slipstream_contract::config::DEFAULT_ZENOH_CONFIG;
 use slipstream_contract::msg::{CameraInfo, Detection, Detections};
 use slipstream_contract::{topics, Bus, TopicMap};
+use slipstream_launch::supervise::{State, Supervised};
+use slipstream_launch::{free_ports, last_words, ForeignNode, NODE_POLL};
 use slipstream_sim::Cameras;
 
 /// How long a frame waits for its detections.
@@ -51,7 +51,7 @@ impl Yours {
         static RUNS: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
         let run = RUNS.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         let namespace = format!("eval-detect-{}-{run}", std::process::id());
-        let isolated = slipstream_launch::nodes::ISOLATED_CFG;
+        let isolated = slipstream_launch::ISOLATED_CFG;
         let (bus, info, frames, answers) = rt.block_on(async {
             let mut config =
                 zenoh::Config::from_json5(DEFAULT_ZENOH_CONFIG).map_err(Error::zenoh("the built-in Zenoh config"))?;
@@ -74,7 +74,8 @@ impl Yours {
             flags.extend(["--cfg".into(), format!("{key}:{value}")]);
         }
         let cmd = node.command(&flags, logs, ["lockstep", "camera"])?;
-        let (log, out) = (slipstream_launch::log_of(logs, node.process()), logs.join(format!("{}.out", node.process())));
+        let (log, out) =
+            (slipstream_launch::log_of(logs, node.process()), logs.join(format!("{}.out", node.process())));
         let node_process = Supervised::start(node.process(), cmd, node.run.clone(), log, out)?;
         let mut yours = Yours { rt, bus: Some(bus), _info: info, frames, answers, node: node_process, unanswered: 0 };
         yours.await_ready(node)?;

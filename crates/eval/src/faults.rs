@@ -19,10 +19,10 @@ use serde::Serialize;
 
 use super::acc::{run_one, EvalAccArgs, ScenarioResult, Under};
 use super::Metrics;
-use slipstream_launch::OwnNodes;
 use slipstream_acc::PerceptionSource;
 use slipstream_contract::config::{FaultArgs, FaultProfile, GilbertElliott, Loss, TopicFaults};
 use slipstream_contract::topics::{self, Topic};
+use slipstream_launch::OwnNodes;
 use slipstream_sim::Scenario;
 
 /// More emergency braking than the fault-free run, by this many simulated seconds, fails a run.

@@ -1,4 +1,4 @@
-//! Orchestration: judging runs of the loop. What a run recorded, the figures and plots made
+//! Judging runs of the loop. What a run recorded, the figures and plots made
 //! from it, and the suites that score the detector and the ACC.
 //!
 //! One path from a run to its figures, whichever way the loop ran (`slipstream up`, `eval acc`,
@@ -27,16 +27,15 @@
 //! - [`resim`]: a recording in place of the simulator: today's detector and ACC answer the
 //!   recorded inputs, and their outputs are compared with the recorded ones (`up --from`).
 
-pub mod error;
 pub mod acc;
 pub(crate) mod bend_lateral;
 pub mod detect;
 pub(crate) mod detect_remote;
 pub mod egos;
+pub mod error;
 pub mod faults;
 pub(crate) mod frame_detector;
 pub mod judge;
-pub mod latency;
 pub mod link_codec;
 pub(crate) mod metrics;
 #[cfg(test)]
@@ -47,8 +46,8 @@ pub mod resim;
 pub mod sweep;
 pub mod trace;
 
-pub use error::{Error, Result};
 pub use bend_lateral::LateralCell;
+pub use error::{Error, Result};
 pub use metrics::{Check, Metrics};
 pub use trace::{Recorder, Trace};
 

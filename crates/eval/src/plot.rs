@@ -5,9 +5,9 @@ use std::path::Path;
 
 use crate::error::{Error, Result};
 
-use slipstream_observe::latency::{LoopLatency, HOPS};
 use super::trace::{Sample, Trace};
 use slipstream_contract::msg::AccMode;
+use slipstream_observe::latency::{LoopLatency, HOPS};
 
 /// Font files tried for the plots' text, in order (`SLIPSTREAM_PLOT_FONT` first).
 const FONT_PATHS: &[&str] = &[

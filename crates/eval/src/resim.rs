@@ -23,6 +23,7 @@
 //! `perception_stamp_pub_ns` (the publish stamp of the detections it used, new in a replay).
 
 use std::collections::BTreeMap;
+use std::ops::ControlFlow;
 use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -32,8 +33,6 @@ use crate::error::{Error, Result};
 use parking_lot::{Condvar, Mutex};
 use serde::Serialize;
 
-use slipstream_launch::{ClockMode, LoopRun, LoopSpec, Network, NodeEnd, OwnNodes};
-use slipstream_record::play::{each_message, is_viewable_copy, output_for, Output};
 use slipstream_acc::PerceptionSource;
 use slipstream_contract::bus::{Bus, Declared};
 use slipstream_contract::config::ConnectArgs;
@@ -41,6 +40,8 @@ use slipstream_contract::msg::{
     self, AccStatus, ControlCommand, Detections, MessageKind, SimClock, SimEvent, SimEventKind, SimMode,
 };
 use slipstream_contract::topics::Topic;
+use slipstream_launch::{ClockMode, LoopRun, LoopSpec, Network, NodeEnd, OwnNodes};
+use slipstream_record::{each_message, each_message_until, is_viewable_copy, output_for, Output};
 
 /// How long a step waits for the outputs the recording has for it.
 pub(crate) const OUTPUT_WAIT: Duration = Duration::from_secs(5);
@@ -444,31 +445,43 @@ fn replay(
     // Keyed by (simulated time, place in the file): time order, the file's order within a step.
     let mut window: BTreeMap<(u64, u64), Pending> = BTreeMap::new();
     let mut index = 0u64;
-    let read = each_message(path, |m| {
+    // The reader stops at the first error of today's side, kept here: the reader's own
+    // errors are the recording's.
+    let mut failed: Option<Error> = None;
+    let read = each_message_until(path, |m| {
+        let stop_with = |e: Error, failed: &mut Option<Error>| {
+            *failed = Some(e);
+            Ok(ControlFlow::Break(()))
+        };
         if stop.load(Ordering::Relaxed) {
-            return Err(Error::Interrupted);
+            return stop_with(Error::Interrupted, &mut failed);
         }
         let (channel, bytes) = (m.channel, m.data.into_owned());
-        let Ok(kind) = msg::peek_kind(&bytes) else { return Ok(()) };
+        let Ok(kind) = msg::peek_kind(&bytes) else { return Ok(ControlFlow::Continue(())) };
         if role(kind) == Role::Output {
-            return Ok(());
+            return Ok(ControlFlow::Continue(()));
         }
-        let Ok((header, _)) = msg::decode_header(&bytes, kind) else { return Ok(()) };
+        let Ok((header, _)) = msg::decode_header(&bytes, kind) else { return Ok(ControlFlow::Continue(())) };
         window.insert((header.stamp_sim_ns, index), Pending { channel, kind, seq: header.seq, bytes });
         index += 1;
         if window.len() > REORDER_WINDOW {
             if let Some(((stamp, _), p)) = window.pop_first() {
-                r.play(stamp, p, progress)?;
+                if let Err(e) = r.play(stamp, p, progress) {
+                    return stop_with(e, &mut failed);
+                }
             }
         }
-        Ok(())
+        Ok(ControlFlow::Continue(()))
     });
-    let rest = read.and_then(|_| {
-        while let Some(((stamp, _), p)) = window.pop_first() {
-            r.play(stamp, p, progress)?;
-        }
-        r.finish_step()
-    });
+    let rest = match failed {
+        Some(e) => Err(e),
+        None => read.map_err(Error::from).and_then(|_| {
+            while let Some(((stamp, _), p)) = window.pop_first() {
+                r.play(stamp, p, progress)?;
+            }
+            r.finish_step()
+        }),
+    };
     match rest {
         Err(Error::Interrupted) if r.stats.gave_up.is_some() => {}
         Err(Error::Interrupted) => r.stats.interrupted = true,

@@ -1,10 +1,11 @@
-//! What can go wrong in running the loop's nodes as processes: their binaries, logs, reports, the namespace and the ports, said for a person: one error type for the crate, so that a
-//! tool prints what failed with the cause under it and a caller can tell one failure from
-//! another. The tools above add their context with anyhow; nothing in this crate does.
+//! What can go wrong in running the loop's nodes as processes: their binaries, logs, reports, the
+//! namespace and the ports, said for a person: one error type for the crate, so that a tool prints
+//! what failed with the cause under it and a caller can tell one failure from another. The tools
+//! above add their context with anyhow; nothing in this crate does.
 
-use std::path::{Path, PathBuf};
-use slipstream_contract::bus::{BusError, zenoh_message};
+use slipstream_contract::bus::{zenoh_message, BusError};
 use slipstream_contract::config::ConfigError;
+use std::path::{Path, PathBuf};
 
 /// The crate's result.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
@@ -67,12 +68,6 @@ impl Error {
         Error::Flag { flag: flag.into(), rule: rule.into() }
     }
 
-    /// The OS refused `what`.
-    pub(crate) fn system(what: impl Into<String>) -> impl FnOnce(std::io::Error) -> Error {
-        let what = what.into();
-        move |source| Error::System { what, source }
-    }
-
     /// A node's failure.
     pub(crate) fn node(node: impl Into<String>, problem: impl Into<String>) -> Error {
         Error::Node { node: node.into(), problem: problem.into() }
@@ -88,5 +83,25 @@ impl Error {
             cause = c.source();
         }
         out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_file_error_names_the_action_and_path_and_keeps_the_cause_below() {
+        let e = Error::file("create", Path::new("/x/y"))(std::io::Error::from(std::io::ErrorKind::PermissionDenied));
+        assert_eq!(e.to_string(), "create /x/y");
+        let cause = std::error::Error::source(&e).expect("the I/O error is the cause");
+        assert!(cause.to_string().to_lowercase().contains("permission"), "{cause}");
+        assert!(e.chain().starts_with("create /x/y: "), "{}", e.chain());
+    }
+
+    #[test]
+    fn a_zenoh_error_loses_its_source_location() {
+        let e = Error::zenoh("declare a publisher on a/b")("key is bad at /root/.cargo/x/y.rs:12.");
+        assert_eq!(e.to_string(), "declare a publisher on a/b: key is bad");
     }
 }

@@ -90,7 +90,7 @@ impl OwnNodes {
     /// are injected by our nodes' bus as a message arrives; a process of someone else's has no
     /// such layer. None: every fault lands at one of our nodes (the simulator, slipstream-acc
     /// or slipstream-detect), whatever else the loop runs.
-    pub(crate) fn fault_into_foreign(&self, profile: &FaultProfile) -> Option<(Topic, &ForeignNode)> {
+    pub fn fault_into_foreign(&self, profile: &FaultProfile) -> Option<(Topic, &ForeignNode)> {
         profile.topics.iter().find_map(|(topic, f)| {
             self.foreign().find(|n| n.role.reads(*topic) && f.applies_at(n.node())).map(|n| (*topic, n))
         })
@@ -378,7 +378,7 @@ impl ForeignNode {
     }
 
     /// The command as a shell would take it back (a node started elsewhere: its name, said so).
-    pub(crate) fn command_line(&self) -> String {
+    pub fn command_line(&self) -> String {
         if self.elsewhere {
             return format!("{} (started elsewhere)", self.node());
         }

@@ -1,4 +1,4 @@
-//! Orchestration: the loop's nodes as child processes. One launch path for `slipstream up`,
+//! The loop's nodes as child processes. One launch path for `slipstream up`,
 //! `slipstream eval acc` and whatever runs the loop next: the same flags for every node, the
 //! same wait for the nodes on the bus, the same way of stopping them, the same logs.
 //!
@@ -30,8 +30,8 @@
 
 use std::time::Duration;
 
-pub mod error;
 pub mod child;
+pub mod error;
 pub(crate) mod external;
 pub mod foreign;
 pub(crate) mod hold;
@@ -39,18 +39,18 @@ pub mod loop_file;
 pub(crate) mod namespace;
 pub(crate) mod nodes;
 pub(crate) mod own_args;
-pub(crate) mod ready;
+pub mod ready;
 mod router;
-pub(crate) mod supervise;
+pub mod supervise;
 
-pub use error::{Error, Result};
 pub use child::{free_ports, sibling_binary, Child};
+pub use error::{Error, Result};
 pub use external::ExternalSim;
 pub use foreign::{ForeignNode, OwnNodes};
 pub use namespace::{nodes_alive_in, PLAYER};
 pub use nodes::{
     last_error, last_words, log_of, refuse_in_lockstep, AllNodes, ClockMode, EgoNodes, LinkKind, LoopRun, LoopSpec,
-    Network, NodeEnd, Progress,
+    Network, NodeEnd, Progress, ISOLATED_CFG,
 };
 pub use own_args::OwnNodeArgs;
 pub use router::{listening_line, LocalRouter};
@@ -62,6 +62,6 @@ pub const NODE_POLL: Duration = Duration::from_millis(20);
 /// After the simulator ends: time for its last messages to reach the observer.
 pub const SETTLE: Duration = Duration::from_millis(200);
 /// SIGINT, then this long, then SIGKILL.
-pub(crate) const STOP_GRACE: Duration = Duration::from_secs(5);
+pub const STOP_GRACE: Duration = Duration::from_secs(5);
 /// RUST_LOG for the nodes when the user set none: lifecycle at INFO, Zenoh's chatter off.
 pub(crate) const DEFAULT_RUST_LOG: &str = "info,zenoh=warn,zenoh_ext=warn";

@@ -19,8 +19,8 @@ use std::path::{Path, PathBuf};
 use std::process::{Command, ExitStatus};
 
 use crate::error::{Error, Result};
-use slipstream_observe::NodeInput;
 use serde::Serialize;
+use slipstream_observe::NodeInput;
 
 use super::child::{free_ports, sibling_binary};
 use super::foreign::{ForeignNode, NodeRun, OwnNodes, RestartPolicy, Role};
@@ -237,7 +237,7 @@ const FAULTS_FILE: &str = "faults.json5";
 /// without gossip; with gossip on, a session's open waited out Zenoh's scouting delay (500 ms)
 /// about every other time, for a peer connection gossip had made in parallel. A node whose
 /// peer is not listening yet (they start together) dials again after 20 ms, not 250.
-pub(crate) const ISOLATED_CFG: [(&str, &str); 2] = [
+pub const ISOLATED_CFG: [(&str, &str); 2] = [
     ("scouting/gossip/enabled", "false"),
     ("connect/retry", "{period_init_ms: 20, period_max_ms: 2000, period_increase_factor: 2}"),
 ];
@@ -801,7 +801,7 @@ impl LoopRun {
     }
 
     /// The ACC's statistics (its --json output), once it has been stopped.
-    pub(crate) fn acc_report(&self) -> Result<AccStats> {
+    pub fn acc_report(&self) -> Result<AccStats> {
         let path = self.logs.join(ACC_REPORT);
         let bytes = std::fs::read(&path).map_err(Error::file("read", &path))?;
         serde_json::from_slice(&bytes).map_err(|source| Error::Json { path, what: "holds no ACC statistics", source })
@@ -809,7 +809,7 @@ impl LoopRun {
 
     /// The detector's statistics (its --json output), once it has been stopped; None without
     /// camera perception.
-    pub(crate) fn detect_report(&self) -> Result<Option<DetectStats>> {
+    pub fn detect_report(&self) -> Result<Option<DetectStats>> {
         if !self.camera() || self.spec.own.detector.is_some() {
             return Ok(None);
         }

@@ -18,7 +18,7 @@ use slipstream_contract::topics::Topic;
 use slipstream_contract::Bus;
 
 /// What one node must show.
-pub(crate) struct Watch {
+pub struct Watch {
     /// Its process name (logs, errors).
     pub process: String,
     /// Its name on the bus (its token's).
@@ -31,7 +31,7 @@ pub(crate) struct Watch {
 impl Watch {
     /// Watches for `node` (started as `process`) to become ready as `ready` says: subscribes
     /// now to its sample's key, a topic of the loop (in its namespace) or a key expression.
-    pub(crate) async fn new(bus: &Bus, node: &str, process: &str, ready: &Ready) -> Result<Watch> {
+    pub async fn new(bus: &Bus, node: &str, process: &str, ready: &Ready) -> Result<Watch> {
         let sample = match &ready.sample {
             None => None,
             Some(what) => {
@@ -56,19 +56,19 @@ impl Watch {
     }
 
     /// Whether it is ready, given the names whose tokens are seen.
-    pub(crate) fn ready(&self, alive: &[String]) -> bool {
+    pub fn ready(&self, alive: &[String]) -> bool {
         match &self.sample {
             Some((_, seen, _)) => seen.load(Ordering::Relaxed),
             None => alive.contains(&self.node),
         }
     }
 
-    pub(crate) fn timeout(&self) -> Duration {
+    pub fn timeout(&self) -> Duration {
         self.timeout
     }
 
     /// What it was waited for, for a person.
-    pub(crate) fn awaited(&self) -> String {
+    pub fn awaited(&self) -> String {
         match &self.sample {
             Some((key, ..)) => format!("no sample on {key} (its ready.sample)"),
             None => {
@@ -87,7 +87,7 @@ impl Watch {
 /// `ended` fails when a node's process has ended meanwhile (one that dies at start is named at
 /// once, not after its timeout). Fails naming the first node past its own timeout, with what
 /// was seen and where the logs are (`logs`).
-pub(crate) async fn until_ready(
+pub async fn until_ready(
     waits: &[Watch],
     alive: impl Fn() -> Vec<String>,
     mut ended: impl FnMut() -> Result<()>,

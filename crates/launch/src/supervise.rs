@@ -14,7 +14,7 @@ use super::DEFAULT_RUST_LOG;
 use crate::error::{Error, Result};
 
 /// A node process, its command kept to start it again.
-pub(crate) struct Supervised {
+pub struct Supervised {
     child: Child,
     command: Command,
     pub run: NodeRun,
@@ -30,7 +30,7 @@ pub(crate) struct Supervised {
 }
 
 /// What a node is doing.
-pub(crate) enum State {
+pub enum State {
     Running,
     /// Ended on a failure; started again once the backoff has passed.
     Restarting,
@@ -42,13 +42,7 @@ impl Supervised {
     /// Starts `command` as `name` with its run's environment and directory: stderr to `log`,
     /// stdout to `out` (both created afresh), the default RUST_LOG unless the user set one,
     /// faults never inherited (a loop's come as a flag).
-    pub(crate) fn start(
-        name: &str,
-        mut command: Command,
-        run: NodeRun,
-        log: PathBuf,
-        out: PathBuf,
-    ) -> Result<Supervised> {
+    pub fn start(name: &str, mut command: Command, run: NodeRun, log: PathBuf, out: PathBuf) -> Result<Supervised> {
         run.apply(&mut command);
         if std::env::var_os("RUST_LOG").is_none() {
             command.env("RUST_LOG", DEFAULT_RUST_LOG);
@@ -58,16 +52,16 @@ impl Supervised {
         Ok(Supervised { child, command, run, log, out, restarts: 0, due: None, stopping: false })
     }
 
-    pub(crate) fn name(&self) -> &str {
+    pub fn name(&self) -> &str {
         &self.child.name
     }
 
-    pub(crate) fn pid(&self) -> u32 {
+    pub fn pid(&self) -> u32 {
         self.child.pid()
     }
 
     /// Its state now: a due restart is made here.
-    pub(crate) fn poll(&mut self) -> State {
+    pub fn poll(&mut self) -> State {
         if let Some(due) = self.due {
             if Instant::now() < due {
                 return State::Restarting;
@@ -99,7 +93,7 @@ impl Supervised {
     }
 
     /// Its exit status once it has ended for good.
-    pub(crate) fn exited(&mut self) -> Option<ExitStatus> {
+    pub fn exited(&mut self) -> Option<ExitStatus> {
         match self.poll() {
             State::Ended(s) => Some(s),
             _ => None,
@@ -107,19 +101,19 @@ impl Supervised {
     }
 
     /// Waits up to `timeout` for it to end by itself (no restart is waited for).
-    pub(crate) fn wait_for(&mut self, timeout: Duration) -> Option<ExitStatus> {
+    pub fn wait_for(&mut self, timeout: Duration) -> Option<ExitStatus> {
         self.child.wait_for(timeout)
     }
 
     /// Asks it to stop (SIGINT); no restart follows.
-    pub(crate) fn interrupt(&mut self) {
+    pub fn interrupt(&mut self) {
         self.stopping = true;
         self.due = None;
         self.child.interrupt();
     }
 
     /// SIGINT, then up to `grace`, then SIGKILL; no restart follows.
-    pub(crate) fn stop(&mut self, grace: Duration) -> Option<ExitStatus> {
+    pub fn stop(&mut self, grace: Duration) -> Option<ExitStatus> {
         self.stopping = true;
         self.due = None;
         self.child.stop(grace)

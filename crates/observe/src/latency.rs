@@ -17,8 +17,7 @@ use std::collections::HashMap;
 use serde::Serialize;
 
 /// The hops, in loop order; the constants below index them.
-pub const HOPS: [&str; 4] =
-    ["frame -> detections", "detections -> control", "control -> applied", "frame -> applied"];
+pub const HOPS: [&str; 4] = ["frame -> detections", "detections -> control", "control -> applied", "frame -> applied"];
 pub(crate) const FRAME_TO_DETECTIONS: usize = 0;
 pub(crate) const DETECTIONS_TO_CONTROL: usize = 1;
 pub(crate) const CONTROL_TO_APPLIED: usize = 2;
@@ -103,7 +102,7 @@ impl LoopLatency {
     }
 
     /// Keeps only what the live figures need ([`LatencyWatch::start_live`]).
-    pub(crate) fn live_only() -> LoopLatency {
+    pub fn live_only() -> LoopLatency {
         LoopLatency { live_only: true, ..LoopLatency::default() }
     }
 
@@ -170,7 +169,7 @@ impl LatencyWatch {
     }
 
     /// The same for live figures only: memory bounded however long it watches (the view).
-    pub(crate) async fn start_live(
+    pub async fn start_live(
         bus: &slipstream_contract::Bus,
         camera: bool,
     ) -> Result<LatencyWatch, slipstream_contract::BusError> {

@@ -1,10 +1,11 @@
-//! What can go wrong in recording and replaying: the files, the MCAP writer and reader, Zenoh, the writer's thread, said for a person: one error type for the crate, so that a
-//! tool prints what failed with the cause under it and a caller can tell one failure from
-//! another. The tools above add their context with anyhow; nothing in this crate does.
+//! What can go wrong in recording and replaying: the files, the MCAP writer and reader, Zenoh, the
+//! writer's thread, said for a person: one error type for the crate, so that a tool prints what
+//! failed with the cause under it and a caller can tell one failure from another. The tools above
+//! add their context with anyhow; nothing in this crate does.
 
-use std::path::{Path, PathBuf};
-use slipstream_contract::bus::{BusError, zenoh_message};
+use slipstream_contract::bus::{zenoh_message, BusError};
 use slipstream_contract::config::ConfigError;
+use std::path::{Path, PathBuf};
 
 /// The crate's result.
 pub type Result<T, E = Error> = std::result::Result<T, E>;
@@ -60,11 +61,5 @@ impl Error {
     /// Maps an MCAP error on `path` to [`Error::Mcap`].
     pub(crate) fn mcap<'a>(action: &'static str, path: &'a Path) -> impl FnOnce(mcap::McapError) -> Error + 'a {
         move |source| Error::Mcap { action, path: path.to_path_buf(), source }
-    }
-
-    /// The OS refused `what`.
-    pub(crate) fn system(what: impl Into<String>) -> impl FnOnce(std::io::Error) -> Error {
-        let what = what.into();
-        move |source| Error::System { what, source }
     }
 }

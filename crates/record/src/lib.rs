@@ -1,4 +1,4 @@
-//! Orchestration: recording the bus into MCAP files (`slipstream record`, `up --record`).
+//! Recording the bus into MCAP files (`slipstream record`, `up --record`).
 //!
 //! A recording keeps every payload byte for byte, on one MCAP channel per key, message type
 //! and publisher: the channel's topic is the Zenoh key, its schema is named after the message
@@ -25,7 +25,8 @@ pub(crate) mod replay;
 
 pub use error::{Error, Result};
 pub use play::{
-    each_message, each_message_until, play, play_until, recorded_publishers, Pace, PlayOptions, PlayReport,
+    each_message, each_message_until, is_viewable_copy, output_for, play, play_until, recorded_publishers, Output,
+    Pace, PlayOptions, PlayReport,
 };
 pub use recorder::{ChannelSummary, Recording, RecordingSummary};
 pub use replay::{private_bus, Replay};

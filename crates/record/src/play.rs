@@ -71,7 +71,7 @@ enum Publisher {
 }
 
 /// A key of the recording on this bus, with its publisher.
-pub(crate) struct Output {
+pub struct Output {
     publisher: Publisher,
     key: OwnedKeyExpr,
     /// The recorded publisher's name, marked as replayed.
@@ -80,7 +80,7 @@ pub(crate) struct Output {
 
 impl Output {
     /// Publishes a recorded payload as it was, naming its recorded publisher as replayed.
-    pub(crate) fn put(&self, payload: Vec<u8>) -> Result<()> {
+    pub fn put(&self, payload: Vec<u8>) -> Result<()> {
         let attachment = self.attachment.clone();
         let sent = match &self.publisher {
             Publisher::Plain(p) => p.put(payload).attachment(attachment).wait(),
@@ -91,7 +91,7 @@ impl Output {
 }
 
 /// Whether a recorded channel holds a viewer's copy (`--viewable`), not a payload of the loop.
-pub(crate) fn is_viewable_copy(channel: &mcap::Channel<'_>) -> bool {
+pub fn is_viewable_copy(channel: &mcap::Channel<'_>) -> bool {
     channel.metadata.get("viewable_copy").is_some_and(|v| v == "true")
 }
 
@@ -242,7 +242,7 @@ pub fn play_until(
 /// The publisher of a recorded channel on this bus, or None when `keys` (relative to the
 /// recording's namespace; empty: all) leave it out or the channel is a viewer's copy. `block`:
 /// congestion control "block" on every key, so that nothing is dropped.
-pub(crate) fn output_for(
+pub fn output_for(
     bus: &Bus,
     channel: &mcap::Channel<'static>,
     keys: &[OwnedKeyExpr],

@@ -16,9 +16,9 @@ use serde::Serialize;
 use zenoh::key_expr::OwnedKeyExpr;
 
 use super::{message_encoding, schema_name, FLUSH_EVERY, METADATA_NAME, QUEUE_BYTES};
-use slipstream_view::copies::{Copies, ViewableCopy};
 use slipstream_contract::bus::{Bus, Declared};
 use slipstream_contract::msg::{self, MessageKind, WIRE_VERSION};
+use slipstream_view::{Copies, ViewableCopy};
 
 /// Items the queue holds at most (besides the byte bound).
 const QUEUE_ITEMS: usize = 1 << 16;

@@ -19,9 +19,9 @@ use std::time::{Duration, Instant};
 
 use super::play::{each_message_until, output_for, Output};
 use crate::error::{Error, Result};
-use slipstream_view::{Position, Timeline};
 use parking_lot::{Condvar, Mutex};
 use slipstream_contract::bus::Bus;
+use slipstream_view::{Position, Timeline};
 
 #[derive(Debug)]
 struct Control {

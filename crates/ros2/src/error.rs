@@ -1,10 +1,12 @@
-//! What can go wrong in the ROS 2 face's operations: its files and bags, Zenoh, its threads, and the messages' own errors ([`crate::message_error::Ros2Error`]), said for a person: one error type for the crate, so that a
-//! tool prints what failed with the cause under it and a caller can tell one failure from
-//! another. The tools above add their context with anyhow; nothing in this crate does.
+//! What can go wrong in the ROS 2 face's operations: its files and bags, Zenoh, its threads, and
+//! the messages' own errors ([`crate::message_error::Ros2Error`]), said for a person: one error
+//! type for the crate, so that a tool prints what failed with the cause under it and a caller can
+//! tell one failure from another. The tools above add their context with anyhow; nothing in this
+//! crate does.
 
-use std::path::{Path, PathBuf};
-use slipstream_contract::bus::{BusError, zenoh_message};
+use slipstream_contract::bus::{zenoh_message, BusError};
 use slipstream_contract::config::ConfigError;
+use std::path::{Path, PathBuf};
 
 /// The crate's result.
 pub type Result<T, E = Error> = std::result::Result<T, E>;

@@ -15,8 +15,8 @@
 use serde::{Deserialize, Serialize};
 use zenoh::bytes::ZBytes;
 
-use crate::message_error::Ros2Error;
 use super::schema::{dds_name, Distro};
+use crate::message_error::Ros2Error;
 
 /// Reliability, durability and history depth of one endpoint: what ROS 2 matches publishers
 /// and subscriptions on.

@@ -13,13 +13,13 @@ use zenoh::liveliness::LivelinessToken;
 use zenoh::sample::Sample;
 
 use super::command::{acceleration, control, CommandGate, CommandStats};
-use crate::message_error::Ros2Error;
 use super::graph::Attachment;
 use super::lockstep::{Answer, Awaited, StepAnswers};
 use super::mapping::Entry;
 use super::messages::{from_cdr, AckermannDriveStamped};
 use super::node::RosNode;
 use super::status::StatusOut;
+use crate::message_error::Ros2Error;
 use slipstream_contract::bus::{Bus, CallbackSubscriber, Publisher, Received};
 use slipstream_contract::msg::{wall_clock_ns, ControlCommand, Speed, VehicleState};
 use slipstream_contract::topics;

@@ -38,12 +38,12 @@ pub mod schema;
 pub(crate) mod status;
 pub mod translate;
 
-pub use error::{Error, Result};
-pub use message_error::Ros2Error;
 pub use bag::Bag;
 pub use bridge::{Bridge, RouteStats};
 pub use command::CommandStats;
+pub use error::{Error, Result};
 pub use face::{FaceStats, RosFace};
 pub use mapping::{Ros2Config, Route};
+pub use message_error::Ros2Error;
 pub use outlet::Outlet;
 pub use schema::Distro;

@@ -10,9 +10,9 @@ use std::collections::BTreeMap;
 
 use serde::Deserialize;
 
-use crate::message_error::Ros2Error;
 use super::graph::{Durability, NodeId, Reliability, RosQos};
 use super::schema::Distro;
+use crate::message_error::Ros2Error;
 use slipstream_contract::config::{from_value, CameraEncoding, ConfigError, TopicMap};
 
 /// One conversion between the loop and ROS 2.
@@ -377,7 +377,7 @@ mod tests {
 
     #[test]
     fn the_shipped_config_says_what_the_defaults_are() {
-        let shipped = TopicMap::from_json5(include_str!("../../../../config/slipstream.json5"), "shipped").unwrap();
+        let shipped = TopicMap::from_json5(include_str!("../../../config/slipstream.json5"), "shipped").unwrap();
         let mut from_file = Ros2Config::from_topic_map(&shipped).unwrap();
         let mut defaults = config("{}").unwrap();
         // The domain may come from the environment in both.

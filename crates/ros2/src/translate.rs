@@ -8,9 +8,9 @@ use parking_lot::Mutex;
 use serde::Serialize;
 
 use super::convert::{self, Frames, RosImage};
-use crate::message_error::Ros2Error;
 use super::mapping::Route;
 use super::messages::{to_cdr, TfMessage, TransformStamped};
+use crate::message_error::Ros2Error;
 use slipstream_contract::msg::{
     self, AccStatus, CameraFrameRef, CameraInfo, Detections, GroundTruthObjects, Header, SimClock, VehicleState,
 };

@@ -62,7 +62,7 @@ impl Copies {
 
     /// Keys are told apart by `topics` (the bus's namespace and remapping): the narrow camera
     /// has no view, and its frames and calibration must not pass for the front camera's.
-    pub(crate) fn with_topics(self, topics: slipstream_contract::config::TopicMap) -> Copies {
+    pub fn with_topics(self, topics: slipstream_contract::config::TopicMap) -> Copies {
         Copies { topics: Some(topics), ..self }
     }
 

@@ -5,10 +5,10 @@
 //! --view` (docs/viewing.md), and as viewable copies in recordings (`record --viewable`,
 //! [`copies`]).
 
-pub mod error;
 pub(crate) mod birdseye;
 pub(crate) mod board;
 pub(crate) mod copies;
+pub mod error;
 pub(crate) mod front;
 pub(crate) mod http;
 pub(crate) mod live;
@@ -16,8 +16,8 @@ pub(crate) mod page;
 pub(crate) mod scene;
 pub(crate) mod timeline;
 
-pub use error::{Error, Result};
 pub use copies::{Copies, ViewableCopy};
+pub use error::{Error, Result};
 pub use live::{LiveView, ViewOptions, ViewStats, DEFAULT_HOST, DEFAULT_PORT, DEFAULT_RATE_HZ};
 pub use page::PageStats;
 pub use scene::SceneContext;

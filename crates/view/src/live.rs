@@ -21,13 +21,13 @@ use super::birdseye::birdseye;
 use super::board::{Board, Camera};
 use super::page::{Page, PageStats};
 use super::scene::{self, Image, SceneContext};
-use slipstream_observe::latency::LatencyWatch;
-use slipstream_observe::watch::Watcher;
 use slipstream_contract::bus::{Bus, CallbackSubscriber, FrameSample, Received};
 use slipstream_contract::msg::{
     AccStatus, CameraInfo, Detections, GroundTruthObjects, RoadSpec, SimEvent, SimEventKind, VehicleState,
 };
 use slipstream_contract::topics;
+use slipstream_observe::latency::LatencyWatch;
+use slipstream_observe::watch::Watcher;
 use slipstream_sim::Scenario;
 
 /// Where the server listens unless told otherwise: loopback only (docs/viewing.md shows the
@@ -301,7 +301,10 @@ impl LiveView {
             .message_backlog_size(BACKLOG)
             .start()
             .await
-            .map_err(|source| Error::Foxglove { what: "cannot start the Foxglove server on loopback".into(), source })?;
+            .map_err(|source| Error::Foxglove {
+                what: "cannot start the Foxglove server on loopback".into(),
+                source,
+            })?;
         let watcher = Watcher::start(bus, &bus.topics().every_key()).await?;
         let latency = LatencyWatch::start_live(bus, false).await?;
         let page = Arc::new(Page::new(board.clone(), watcher, latency, opts.timeline.clone()));

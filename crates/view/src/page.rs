@@ -277,7 +277,8 @@ fn asset(content_type: &'static str, text: &'static str) -> Response {
 fn jpeg_of(kept: &Kept, width: u32) -> Result<Vec<u8>, String> {
     let frame = kept.sample.frame();
     let f = frame.msg;
-    let rgb = slipstream_contract::msg::decode_pixels(f.data, f.width, f.height, f.encoding)?;
+    let rgb =
+        slipstream_contract::msg::decode_pixels(f.data, f.width, f.height, f.encoding).map_err(|e| e.to_string())?;
     let img = image::RgbImage::from_raw(f.width, f.height, rgb.into_owned())
         .ok_or_else(|| format!("{}x{} does not match the pixels", f.width, f.height))?;
     let height = ((f.height as u64 * width as u64 + f.width as u64 / 2) / f.width as u64).max(1) as u32;

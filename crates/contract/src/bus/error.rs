@@ -17,7 +17,7 @@ pub enum BusError {
     #[error(transparent)]
     Config(#[from] ConfigError),
     #[error("invalid frame: {0}")]
-    InvalidFrame(String),
+    InvalidFrame(#[from] crate::msg::PixelError),
     #[error("the subscription to {0} is closed")]
     Closed(String),
 }

@@ -131,9 +131,12 @@ impl FramePublisher {
     ) -> Result<Option<FrameSent>, BusError> {
         if let Some(expected) = encoding.expected_len(width, height) {
             if expected != data_len {
-                return Err(BusError::InvalidFrame(format!(
-                    "{width}x{height} {encoding:?} needs {expected} bytes, got {data_len}"
-                )));
+                return Err(BusError::InvalidFrame(crate::msg::PixelError::RawLength {
+                    width,
+                    height,
+                    needed: expected,
+                    got: data_len,
+                }));
             }
         }
         let Some(header) = self.inner.next_header(stamp_sim_ns) else {

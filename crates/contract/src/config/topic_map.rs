@@ -225,8 +225,7 @@ impl TopicMap {
 
     fn from_raw(raw: RawFile, origin: &str) -> Result<TopicMap, ConfigError> {
         let mut map = TopicMap { origin: origin.to_string(), ros2: raw.ros2, ..TopicMap::default() };
-        map.set_namespace(&raw.namespace)
-            .map_err(|e| e.at(origin, "namespace"))?;
+        map.set_namespace(&raw.namespace).map_err(|e| e.at(origin, "namespace"))?;
 
         let cam = raw.camera;
         if let Some(q) = cam.jpeg_quality {
@@ -289,8 +288,7 @@ impl TopicMap {
         };
         let entry = self.entries.get_mut(&topic).expect("every topic has an entry");
         if let Some(k) = over.key {
-            let (key, absolute) =
-                remapped_key(&k).map_err(|e| e.at(origin, format!("{key_path}.key")))?;
+            let (key, absolute) = remapped_key(&k).map_err(|e| e.at(origin, format!("{key_path}.key")))?;
             entry.key = key;
             entry.absolute = absolute;
         }
@@ -407,15 +405,13 @@ impl TopicMap {
 
     /// Liveliness key of a node: `<namespace>/nodes/<name>`.
     pub fn node_key(&self, node: &str) -> Result<OwnedKeyExpr, ConfigError> {
-        let rel =
-            key_expr(&format!("{NODES_PREFIX}/{node}")).map_err(|e| e.at("node name", ""))?;
+        let rel = key_expr(&format!("{NODES_PREFIX}/{node}")).map_err(|e| e.at("node name", ""))?;
         Ok(self.full_key(&rel))
     }
 
     /// Where a node that injects faults reports its inputs' statistics (JSON, once a second).
     pub fn node_inputs_key(&self, node: &str) -> Result<OwnedKeyExpr, ConfigError> {
-        let rel = key_expr(&format!("{NODES_PREFIX}/{node}/{INPUTS_SUFFIX}"))
-            .map_err(|e| e.at("node name", ""))?;
+        let rel = key_expr(&format!("{NODES_PREFIX}/{node}/{INPUTS_SUFFIX}")).map_err(|e| e.at("node name", ""))?;
         Ok(self.full_key(&rel))
     }
 

@@ -9,7 +9,7 @@ use serde::{Deserialize, Serialize};
 
 use super::codec::write_postcard;
 use super::image_encoding::ImageEncoding;
-use super::{DecodeError, Header, Message, MessageKind, PREAMBLE_LEN, Unsound, Vec3, WIRE_VERSION};
+use super::{DecodeError, Header, Message, MessageKind, Unsound, Vec3, PREAMBLE_LEN, WIRE_VERSION};
 
 /// camera/front: one image, owned.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

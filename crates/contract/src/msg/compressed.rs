@@ -3,7 +3,7 @@
 //! feature a JPEG or PNG frame is an error that names it.
 
 use super::image_encoding::ImageEncoding;
-use super::pixels::PixelError;
+use super::pixel_error::PixelError;
 
 /// RGB8 pixels as JPEG (`quality` 1..=100) or PNG.
 #[cfg(feature = "images")]

@@ -23,6 +23,7 @@ mod ego;
 mod image_encoding;
 pub mod layout;
 mod objects;
+mod pixel_error;
 mod pixels;
 mod road;
 mod sim;
@@ -35,9 +36,8 @@ pub use codec::{decode, decode_header, encode, encode_into, DecodeError, Stamped
 pub use ego::EgoInfo;
 pub use image_encoding::ImageEncoding;
 pub use objects::{BoundingBox2d, Detection, Detections, GroundTruthObject, GroundTruthObjects, ObjectClass};
-pub use pixels::{
-    check_size as check_frame_size, decode as decode_pixels, encode as encode_pixels, PixelError, MAX_FRAME_PIXELS,
-};
+pub use pixel_error::PixelError;
+pub use pixels::{check_size as check_frame_size, decode as decode_pixels, encode as encode_pixels, MAX_FRAME_PIXELS};
 pub use road::{Curve, LaneEnd, RoadSpec};
 pub use sim::{due, SimClock, SimEvent, SimEventKind, SimMode};
 pub use vehicle::{ControlCommand, ControlTiming, Speed, VehicleState};

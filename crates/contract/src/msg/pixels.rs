@@ -11,6 +11,7 @@
 use std::borrow::Cow;
 
 use super::image_encoding::ImageEncoding;
+use super::pixel_error::PixelError;
 
 /// The most pixels a frame may have (8192 x 8192, 192 MiB of RGB8): a frame stating more is
 /// refused before it is decoded.
@@ -20,37 +21,6 @@ pub const MAX_FRAME_PIXELS: u64 = 8192 * 8192;
 /// honest frame of that size.
 pub(super) const LZ4_MAX_RATIO: usize = 255;
 
-/// Why a frame's pixels cannot be encoded or decoded: each says the sizes and the encoding, so
-/// a reader's log names what the sender got wrong.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum PixelError {
-    #[error("frame size {width}x{height} is empty")]
-    Empty { width: u32, height: u32 },
-    #[error("{width}x{height} is more than {MAX_FRAME_PIXELS} pixels")]
-    TooLarge { width: u32, height: u32 },
-    #[error("{width}x{height} Rgb8 needs {needed} bytes, got {got}")]
-    RawLength { width: u32, height: u32, needed: usize, got: usize },
-    /// An LZ4 block too short to expand to the frame's size (at most [`LZ4_MAX_RATIO`] to 1).
-    #[error("{got} bytes of LZ4 cannot expand to {width}x{height} Rgb8 ({needed} bytes; at most {LZ4_MAX_RATIO}x)")]
-    Lz4TooShort { width: u32, height: u32, needed: usize, got: usize },
-    #[error("Lz4 block does not decode: {0}")]
-    Lz4(String),
-    #[error("Lz4 block expands to {got} bytes, {width}x{height} Rgb8 is {needed}")]
-    Lz4Length { width: u32, height: u32, needed: usize, got: usize },
-    #[error("empty {0:?} frame")]
-    EmptyCompressed(ImageEncoding),
-    /// A JPEG or PNG header that states another size than the frame.
-    #[error("{encoding:?} image is {got_width}x{got_height}, the frame says {width}x{height}")]
-    HeaderSize { encoding: ImageEncoding, width: u32, height: u32, got_width: u32, got_height: u32 },
-    /// The image codec refused the pixels or the bytes (`what`: "encoding failed", "header
-    /// does not decode", "image does not decode").
-    #[error("{encoding:?} {what}: {message}")]
-    Codec { encoding: ImageEncoding, what: &'static str, message: String },
-    /// A JPEG or PNG frame in a build without an image codec.
-    #[error("{0:?} frames need the contract crate's `images` feature (raw and Lz4 frames do not)")]
-    NoCodec(ImageEncoding),
-}
-
 /// Whether a frame's stated size and byte count are acceptable for its encoding, checked
 /// before any decoding (what a decoder needs to trust the size it allocates).
 pub fn check_size(width: u32, height: u32, encoding: ImageEncoding, len: usize) -> Result<(), PixelError> {
@@ -59,13 +29,13 @@ pub fn check_size(width: u32, height: u32, encoding: ImageEncoding, len: usize) 
     }
     let pixels = width as u64 * height as u64;
     if pixels > MAX_FRAME_PIXELS {
-        return Err(PixelError::TooLarge { width, height });
+        return Err(PixelError::TooLarge { width, height, max: MAX_FRAME_PIXELS });
     }
     let needed = pixels as usize * 3;
     match encoding {
         ImageEncoding::Rgb8 if len != needed => Err(PixelError::RawLength { width, height, needed, got: len }),
         ImageEncoding::Lz4 if len == 0 || len.saturating_mul(LZ4_MAX_RATIO) + 16 < needed => {
-            Err(PixelError::Lz4TooShort { width, height, needed, got: len })
+            Err(PixelError::Lz4TooShort { width, height, needed, got: len, max_ratio: LZ4_MAX_RATIO })
         }
         ImageEncoding::Jpeg | ImageEncoding::Png if len == 0 => Err(PixelError::EmptyCompressed(encoding)),
         _ => Ok(()),
@@ -168,7 +138,7 @@ mod tests {
         assert!(matches!(err, PixelError::Lz4TooShort { got: 100, .. }), "{err}");
         assert!(err.to_string().contains("cannot expand"), "{err}");
         let err = decode(&[0u8; 100], 9000, 9000, ImageEncoding::Lz4).unwrap_err();
-        assert_eq!(err, PixelError::TooLarge { width: 9000, height: 9000 });
+        assert_eq!(err, PixelError::TooLarge { width: 9000, height: 9000, max: MAX_FRAME_PIXELS });
     }
 
     #[test]

@@ -6,8 +6,8 @@
 //! deployment's routers show up first (a queue, a filter, a router of another build).
 
 use crate::error::{Error, Result};
-use slipstream_launch::LocalRouter;
 use slipstream_contract::config::{ConnectArgs, ModeArg};
+use slipstream_launch::LocalRouter;
 
 /// Zenoh's setting that keeps large payloads off the router: with shared memory on, processes
 /// on one machine would hand each other references and the router would carry only those.

@@ -16,16 +16,16 @@ use serde_json::Value;
 use super::figures::CarSeries;
 use super::links::Links;
 use crate::error::{Error, Result};
-use slipstream_observe::latency::{LatencyWatch, WHOLE_LOOP};
-use slipstream_launch::child::{free_ports, sibling_binary, Child};
-use slipstream_launch::foreign::Ready;
-use slipstream_launch::ready::{until_ready, Watch};
-use slipstream_launch::AllNodes;
 use slipstream_acc::PerceptionSource;
 use slipstream_contract::config::{parse_json5_value, FaultArgs};
 use slipstream_contract::msg::{GroundTruthObjects, VehicleState};
 use slipstream_contract::{topics, Bus};
+use slipstream_launch::child::{free_ports, sibling_binary, Child};
+use slipstream_launch::foreign::Ready;
+use slipstream_launch::ready::{until_ready, Watch};
+use slipstream_launch::AllNodes;
 use slipstream_model::vehicle::VehicleParams;
+use slipstream_observe::latency::{LatencyWatch, WHOLE_LOOP};
 use slipstream_sim::scenario::{ClassSpec, SEVERAL_EGOS};
 use slipstream_sim::{Scenario, SimReport};
 
@@ -205,11 +205,12 @@ async fn nodes_up(
     }
     let ended = || match nodes.iter_mut().find_map(|n| n.exited().map(|s| (n.name.clone(), s))) {
         Some((name, status)) => {
-            Err(Error::node(name, format!("exited at start ({status}); its log is in {}", dir.display())))
+            let problem = format!("exited at start ({status}); its log is in {}", dir.display());
+            Err(slipstream_launch::Error::Node { node: name, problem })
         }
         None => Ok(()),
     };
-    until_ready(&waits, || seen.names(), ended, dir).await
+    Ok(until_ready(&waits, || seen.names(), ended, dir).await?)
 }
 
 /// A node's command: in `ns`, with the connection flags `links`, its log to `log`, injecting

@@ -20,12 +20,12 @@ use crate::error::{Error, Result};
 use serde::Serialize;
 
 use super::acc::{jobs, run_all, EvalAccArgs};
-use slipstream_launch::{LinkKind, OwnNodeArgs, OwnNodes};
 use families::{nth, Family};
 use rates::{faults_of, worst, Rates, SweepRun};
 use shard::Shard;
 use slipstream_acc::PerceptionSource;
 use slipstream_contract::config::FaultArgs;
+use slipstream_launch::{LinkKind, OwnNodeArgs, OwnNodes};
 use slipstream_sim::Scenario;
 
 #[derive(Debug, Clone, clap::Args)]

@@ -58,7 +58,7 @@ pub struct AllNodes {
 
 impl AllNodes {
     /// Watches `bus`'s namespace and each of `namespaces` under it.
-    pub(crate) async fn watch(bus: &Bus, namespaces: &[String]) -> Result<AllNodes> {
+    pub async fn watch(bus: &Bus, namespaces: &[String]) -> Result<AllNodes> {
         let mut watches = vec![(String::new(), bus.watch_nodes().await?)];
         for ns in namespaces {
             watches.push((ns.clone(), bus.scoped(ns)?.watch_nodes().await?));
