@@ -22,6 +22,23 @@ pub fn exit_code(result: anyhow::Result<std::process::ExitCode>) -> std::process
     })
 }
 
+/// The exit of a node binary's `main`: as [`exit_code`], and with `json` (the node's `--json`,
+/// its report on stdout) a failure also goes to stdout as the report, a
+/// [`crate::node::Failure`], so a launcher reads why the node ended from its report.
+pub fn node_exit_code(result: anyhow::Result<()>, json: bool) -> std::process::ExitCode {
+    if let (Err(e), true) = (&result, json) {
+        let clean = |text: String| crate::bus::without_source_locations(&text);
+        let failure = crate::node::Failure {
+            error: clean(e.to_string()),
+            causes: e.chain().skip(1).map(|c| clean(c.to_string())).collect(),
+        };
+        if let Ok(text) = serde_json::to_string_pretty(&failure) {
+            println!("{text}");
+        }
+    }
+    exit_code(result.map(|()| std::process::ExitCode::SUCCESS))
+}
+
 /// An error as a person reads it: `Error: ` and what failed, then a line per cause under it.
 /// No stack trace: RUST_BACKTRACE=1, often set for panics, made every bad config key and every
 /// missed aim print sixty lines of frames; RUST_LIB_BACKTRACE=1 adds the trace where it was

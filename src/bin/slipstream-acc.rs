@@ -6,11 +6,12 @@ use clap::Parser;
 use slipstream::acc::args::AccCli;
 
 fn main() -> std::process::ExitCode {
-    slipstream::cli::exit_code(run().map(|()| std::process::ExitCode::SUCCESS))
+    let cli = AccCli::parse();
+    let json = cli.json;
+    slipstream::cli::node_exit_code(run(cli), json)
 }
 
-fn run() -> Result<()> {
-    let cli = AccCli::parse();
+fn run(cli: AccCli) -> Result<()> {
     slipstream::cli::init_tracing(slipstream::cli::LogLevel::Node);
     let settings = cli.acc.settings()?;
     slipstream::node::serve(&cli.connect, &cli.faults, &cli.acc.name, async |bus, shutdown| {

@@ -7,11 +7,12 @@ use slipstream::perception::args::DetectCli;
 use slipstream::perception::DetectSettings;
 
 fn main() -> std::process::ExitCode {
-    slipstream::cli::exit_code(run().map(|()| std::process::ExitCode::SUCCESS))
+    let cli = DetectCli::parse();
+    let json = cli.json;
+    slipstream::cli::node_exit_code(run(cli), json)
 }
 
-fn run() -> Result<()> {
-    let cli = DetectCli::parse();
+fn run(cli: DetectCli) -> Result<()> {
     slipstream::cli::init_tracing(slipstream::cli::LogLevel::Node);
     let settings = DetectSettings::resolve(cli.settings.as_deref())?;
     slipstream::node::serve(&cli.connect, &cli.faults, &cli.name, async |bus, shutdown| {

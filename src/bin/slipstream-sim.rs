@@ -6,11 +6,12 @@ use clap::Parser;
 use slipstream::sim::args::{SimArgs, SimCli};
 
 fn main() -> std::process::ExitCode {
-    slipstream::cli::exit_code(run().map(|()| std::process::ExitCode::SUCCESS))
+    let cli = SimCli::parse();
+    let json = cli.sim.json;
+    slipstream::cli::node_exit_code(run(cli), json)
 }
 
-fn run() -> Result<()> {
-    let cli = SimCli::parse();
+fn run(cli: SimCli) -> Result<()> {
     slipstream::cli::init_tracing(slipstream::cli::LogLevel::Node);
     if cli.sim.list_scenarios {
         print!("{}", SimArgs::scenario_list());

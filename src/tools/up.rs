@@ -628,7 +628,7 @@ async fn start_nodes(lp: &mut LoopRun, args: &UpArgs) -> Result<Option<crate::la
             anyhow::bail!("the simulator ended ({status}) before its first message on {key}");
         }
         if let Some(node) = progress.died.first() {
-            let why = crate::launch::last_words(&lp.log(node)).map_or(String::new(), |e| format!(": {e}"));
+            let why = lp.why_ended(node).map_or(String::new(), |e| format!(": {e}"));
             let whose = if node == "simulator" { "its" } else { "the simulator's" };
             anyhow::bail!("{node} ended before {whose} first message{why}\n(its log: {})", lp.log(node).display());
         }
@@ -734,7 +734,7 @@ pub(super) async fn written(report: UpReport, lp: LoopRun, dir: &Path) -> Result
 pub(super) fn say_who_died(lp: &mut LoopRun, stopped_by: Option<&str>) {
     for node in lp.check().died {
         let log = lp.log(&node);
-        let why = crate::launch::last_words(&log).map_or(String::new(), |e| format!(": {e}"));
+        let why = lp.why_ended(&node).map_or(String::new(), |e| format!(": {e}"));
         eprintln!("{node} ended before the run was over{why}\n(its log: {})", log.display());
     }
     if let Some(signal) = stopped_by {

@@ -480,6 +480,21 @@ fn bad_settings_fail_with_file_key_and_fix() {
     assert!(!out.status.success());
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("acc.json5") && err.contains("limits.jerk_mps3") && err.contains("fix"), "{err}");
+    assert!(out.stdout.is_empty(), "no report without --json");
+
+    // With --json (as `up` and `eval` run it), the failure is the node's report on stdout.
+    let out = run(
+        {
+            let mut c = acc_bin();
+            c.arg("--settings").arg(&file).arg("--json");
+            c
+        },
+        Duration::from_secs(30),
+    );
+    assert!(!out.status.success());
+    let failure = slipstream::node::Failure::in_report(&out.stdout)
+        .unwrap_or_else(|| panic!("no failure report: {}", String::from_utf8_lossy(&out.stdout)));
+    assert!(failure.line().contains("limits.jerk_mps3") && failure.line().contains("acc.json5"), "{failure:?}");
 
     let out = run(
         {

@@ -191,7 +191,7 @@ impl Controller {
     /// command.
     fn drive(&mut self, lead: Option<LeadBelief>, h: Option<Hypotheses>, v: f64, t_s: f64, dt: f64) -> (AccMode, f64) {
         self.decision.hard_lead = lead.filter(|_| h.is_some_and(|h| h.likely.is_some())).map(|l| l.id);
-        let now = Now { s: &self.s, v, accel_cmd: self.command.accel_cmd, t_s };
+        let now = Now { settings: &self.s, speed_mps: v, accel_cmd_mps2: self.command.accel_cmd, t_s };
         self.decision.update(h.as_ref(), &now);
         if let Some(h) = h.filter(|_| self.decision.emergency) {
             return (AccMode::Emergency, -self.decision.decel(&self.s, &h.threat(), v));

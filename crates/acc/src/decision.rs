@@ -32,10 +32,12 @@ pub(super) struct Decision {
 
 /// What a decision reads this step besides the hypotheses.
 pub(super) struct Now<'a> {
-    pub(super) s: &'a AccSettings,
-    pub(super) v: f64,
+    pub(super) settings: &'a AccSettings,
+    /// The ego's speed.
+    pub(super) speed_mps: f64,
     /// The command of the last step (negative: braking).
-    pub(super) accel_cmd: f64,
+    pub(super) accel_cmd_mps2: f64,
+    /// The ego's time (simulated).
     pub(super) t_s: f64,
 }
 
@@ -89,7 +91,7 @@ impl Decision {
                 tracing::warn!(t_s = x.t_s, ttc_s = ttc, needed_decel_mps2, hard_lead, rule, "emergency braking");
                 self.emergency = true;
             }
-        } else if x.v < x.s.tuning.low_level.standstill_mps.get() || !holds(h, x.s) {
+        } else if x.speed_mps < x.settings.tuning.low_level.standstill_mps.get() || !holds(h, x.settings) {
             tracing::info!(t_s = x.t_s, ttc_s = ttc, "emergency over");
             self.emergency = false;
         }
@@ -149,7 +151,7 @@ fn short_of_standstill(s: &AccSettings, t: &Threat) -> Threat {
 
 /// The row of the table that starts an emergency now, if any.
 fn starts(h: &Hypotheses, x: &Now) -> Option<&'static str> {
-    let (s, v, accel_cmd) = (x.s, x.v, x.accel_cmd);
+    let (s, v, accel_cmd) = (x.settings, x.speed_mps, x.accel_cmd_mps2);
     let d = &s.tuning.decision;
     let beyond = h.confirmed.is_some_and(|c| beyond_comfort(s, &c, v, accel_cmd) && !can_wait(s, &c, v, accel_cmd));
     // A short TTC alone is no emergency while the ego already brakes about as hard as the

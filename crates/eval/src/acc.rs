@@ -341,7 +341,7 @@ fn ended_in_time(
     if let Some(first) = progress.died.first() {
         let end = ends.iter().find(|e| &e.node == first);
         let code = end.and_then(|e| e.exit_code).map_or("killed by a signal".into(), |c| format!("exit code {c}"));
-        let said = end.and_then(|e| slipstream_launch::last_words(&e.log)).map_or(String::new(), |w| format!(": {w}"));
+        let said = end.and_then(slipstream_launch::NodeEnd::why).map_or(String::new(), |w| format!(": {w}"));
         return Err(Error::node(progress.died.join(", "), format!("ended before the run was over ({code}){said}")));
     }
     Ok(())

@@ -49,7 +49,7 @@ pub use external::ExternalSim;
 pub use foreign::{ForeignNode, OwnNodes};
 pub use namespace::{nodes_alive_in, PLAYER};
 pub use nodes::{
-    last_error, last_words, log_of, refuse_in_lockstep, AllNodes, ClockMode, EgoNodes, LinkKind, LoopRun, LoopSpec,
+    last_words, log_of, refuse_in_lockstep, why_it_ended, AllNodes, ClockMode, EgoNodes, LinkKind, LoopRun, LoopSpec,
     Network, NodeEnd, Progress, ISOLATED_CFG,
 };
 pub use own_args::OwnNodeArgs;

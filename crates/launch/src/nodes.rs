@@ -174,6 +174,16 @@ pub struct NodeEnd {
     #[serde(skip_serializing_if = "is_zero")]
     pub restarts: u32,
     pub log: PathBuf,
+    /// Its stdout: the report of a node run with `--json`.
+    #[serde(skip)]
+    pub out: PathBuf,
+}
+
+impl NodeEnd {
+    /// Why it ended, as [`why_it_ended`] reads it.
+    pub fn why(&self) -> Option<String> {
+        why_it_ended(&self.log, &self.out)
+    }
 }
 
 /// What [`LoopRun::check`] saw.
@@ -624,7 +634,7 @@ impl LoopRun {
         let ended = || {
             for n in nodes.iter_mut() {
                 if let State::Ended(status) = n.poll() {
-                    let why = last_words(&n.log).map_or(String::new(), |e| format!(": {e}"));
+                    let why = why_it_ended(&n.log, &n.out).map_or(String::new(), |e| format!(": {e}"));
                     let problem = format!("exited at start ({status}){why}\n(its log: {})", n.log.display());
                     return Err(Error::node(n.name(), problem));
                 }
@@ -753,6 +763,14 @@ impl LoopRun {
         self.nodes.iter().find(|n| n.name() == name).map_or_else(|| log_of(&self.logs, name), |n| n.log.clone())
     }
 
+    /// Why the node `name` ended, as [`why_it_ended`] reads it from its report and its log.
+    pub fn why_ended(&self, name: &str) -> Option<String> {
+        match self.nodes.iter().find(|n| n.name() == name) {
+            Some(n) => why_it_ended(&n.log, &n.out),
+            None => last_words(&log_of(&self.logs, name)),
+        }
+    }
+
     /// Stops the simulator first (it publishes the scenario's end), then the others, and waits
     /// [`SETTLE`] for the last messages. Returns how each node ended.
     pub async fn stop(&mut self) -> Vec<NodeEnd> {
@@ -784,6 +802,7 @@ impl LoopRun {
                 died: died.iter().any(|d| d == n.name()),
                 restarts: n.restarts,
                 log: n.log.clone(),
+                out: n.out.clone(),
             })
             .collect()
     }
@@ -851,13 +870,8 @@ pub fn log_of(logs: &Path, node: &str) -> PathBuf {
 /// How far back from its end a node's log is read for its error.
 const ERROR_TAIL_BYTES: u64 = 16 * 1024;
 
-/// The error a node printed last (after "Error: ", with its "caused by" lines, as every binary
-/// prints them: `cli::error_report`), from the end of its log; None when there is none.
-pub fn last_error(log: &Path) -> Option<String> {
-    error_in(&log_tail(log)?)
-}
-
-/// The last error printed in `tail` (see [`last_error`]).
+/// The last error printed in `tail`: after "Error: ", with its "caused by" lines, as every
+/// binary prints them (`cli::error_report`); None when there is none.
 fn error_in(tail: &str) -> Option<String> {
     let lines: Vec<&str> = tail.lines().collect();
     let at = lines.iter().rposition(|l| l.starts_with("Error: "))?;
@@ -867,7 +881,15 @@ fn error_in(tail: &str) -> Option<String> {
     Some(error.join("\n"))
 }
 
-/// What a node said last about why it stopped: its error ([`last_error`]), else the last line
+/// Why a node ended: the failure its JSON report holds (`report`, its stdout: every node of
+/// ours run with `--json` writes one, `slipstream_contract::node::Failure`), else what its log
+/// says last ([`last_words`]: a program that writes no report).
+pub fn why_it_ended(log: &Path, report: &Path) -> Option<String> {
+    let failed = std::fs::read(report).ok().and_then(|bytes| slipstream_contract::node::Failure::in_report(&bytes));
+    failed.map(|f| f.line()).or_else(|| last_words(log))
+}
+
+/// What a node said last about why it stopped: its error (`error_in`), else the last line
 /// of its log (a Python traceback ends with the exception), if any.
 pub fn last_words(log: &Path) -> Option<String> {
     let tail = log_tail(log)?;
@@ -914,4 +936,26 @@ fn user_flags(connect: &ConnectArgs) -> Vec<String> {
         base.push("--low-latency-session".into());
     }
     base
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn why_a_node_ended_is_its_reports_failure_else_its_logs_last_words() {
+        let dir = std::env::temp_dir().join(format!("slipstream-why-ended-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let (log, out) = (dir.join("acc.log"), dir.join("acc.out"));
+        std::fs::write(&log, "INFO acc up\nError: acc: run\n  caused by: the bus closed\nzenoh says goodbye\n")
+            .unwrap();
+        std::fs::write(&out, r#"{"error": "acc: run", "causes": ["settings: bad"]}"#).unwrap();
+        assert_eq!(why_it_ended(&log, &out).as_deref(), Some("acc: run: settings: bad"));
+        std::fs::write(&out, r#"{"commands": 3}"#).unwrap();
+        assert_eq!(why_it_ended(&log, &out).as_deref(), Some("acc: run\n  caused by: the bus closed"));
+        std::fs::remove_file(&out).unwrap();
+        std::fs::write(&log, "Traceback (most recent call last):\n  ...\nValueError: no speed\n").unwrap();
+        assert_eq!(why_it_ended(&log, &out).as_deref(), Some("ValueError: no speed"));
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }

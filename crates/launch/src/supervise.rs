@@ -20,7 +20,7 @@ pub struct Supervised {
     pub run: NodeRun,
     /// Its stderr; stdout goes to `out`.
     pub log: PathBuf,
-    out: PathBuf,
+    pub out: PathBuf,
     /// How often it was started again.
     pub restarts: u32,
     /// When the pending restart is due.

@@ -234,7 +234,7 @@ fn token(role: Role, started: &Result<(), slipstream_launch::Error>, kept: bool)
 /// line, an error), where its log is.
 fn died_verdict(end: &slipstream_launch::NodeEnd) -> Verdict {
     let code = end.exit_code.map_or("killed by a signal".to_string(), |c| format!("exit code {c}"));
-    let said = slipstream_launch::last_words(&end.log).map_or(String::new(), |w| format!(": {w}"));
+    let said = end.why().map_or(String::new(), |w| format!(": {w}"));
     verdict(
         "kept_running",
         false,

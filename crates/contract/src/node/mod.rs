@@ -13,9 +13,11 @@ mod args;
 pub mod controller;
 mod controller_inputs;
 pub mod detector;
+mod failure;
 mod law;
 pub mod reader_thread;
 mod shell;
 
 pub use args::{ClockArg, NodeArgs, PerceptionArg};
+pub use failure::Failure;
 pub use shell::{serve, Shutdown};
